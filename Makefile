@@ -1,0 +1,52 @@
+# shakeflow — `make demo` runs the demo study, `make test` runs every check.
+#
+# Builds go to a persistent target directory outside the clone, so a fresh clone on a machine
+# that built shakeflow before rebuilds in seconds. Override with CARGO_TARGET_DIR=... .
+CARGO_TARGET_DIR ?= $(HOME)/.cache/shakeflow-target
+export CARGO_TARGET_DIR
+CARGO ?= cargo
+PYTHON ?= python3
+# Python is only an independent reference (numpy, scipy, pyarrow, mcap, duckdb) for tests and benchmarks.
+VENV ?= $(HOME)/.cache/shakeflow/venv
+VENV_PY := $(VENV)/bin/python
+PY_STAMP := $(VENV)/.requirements-$(shell cksum < tests/reference/requirements.txt | cut -d' ' -f1)
+BIN := $(CARGO_TARGET_DIR)/release/shakeflow
+
+.PHONY: all demo test bench release schema fmt lint clean help
+
+help:
+	@echo "make demo    build (release) and run the demo study: runs/demo-archive -> runs/demo"
+	@echo "make test    build and run the whole test suite (installs the Python references it needs)"
+	@echo "make bench   load+baseline on the demo archive vs an equivalent numpy/pyarrow script"
+	@echo "make schema  regenerate schemas/pipeline.schema.json from the stage registry"
+
+release:
+	$(CARGO) build --release --locked
+
+demo: release
+	$(BIN) demo-archive runs/demo-archive
+	$(BIN) run pipelines/demo.yaml
+
+$(PY_STAMP): tests/reference/requirements.txt
+	$(PYTHON) -m venv $(VENV)
+	$(VENV_PY) -m pip install --quiet --disable-pip-version-check -r tests/reference/requirements.txt
+	touch $@
+
+test: $(PY_STAMP)
+	SHAKEFLOW_PYTHON=$(VENV_PY) $(CARGO) test --locked --no-fail-fast
+
+bench: release $(PY_STAMP)
+	$(BIN) demo-archive runs/demo-archive
+	$(VENV_PY) bench/load_baseline.py --shakeflow $(BIN) --archive runs/demo-archive
+
+schema:
+	$(CARGO) run --quiet --locked -- schema > schemas/pipeline.schema.json
+
+fmt:
+	$(CARGO) fmt
+
+lint:
+	$(CARGO) clippy --all-targets -- -D warnings
+
+clean:
+	rm -rf runs

@@ -1,0 +1,87 @@
+"""`make bench`: load + baseline on the demo archive, shakeflow vs an equivalent Python script.
+
+Both sides read every DAQ1/DAQ2 CSV of the archive, check the time column is uniform, convert g to
+m/s^2, subtract a least-squares cubic from every channel and write one zstd Parquet file per
+record (floors split into floor 4 and 5, as the demo pipeline does). shakeflow additionally
+writes MCAP twins of the corrected series, hashes everything for its cache and writes provenance,
+so the comparison does not favour it. Wall time and peak memory (max RSS of the process tree)
+are medians over --repeat runs; the ratio column is Python / shakeflow.
+"""
+import argparse
+import os
+import pathlib
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+PYTHON_SIDE = r'''
+import pathlib, sys
+import numpy as np
+import pyarrow as pa, pyarrow.csv as pcsv, pyarrow.parquet as pq
+G = 9.80665
+archive, out = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])
+def process(path, groups, dest):
+    table = pcsv.read_csv(path, read_options=pcsv.ReadOptions(skip_rows=4))
+    t = table.column("Time").to_numpy()
+    dt = (t[-1] - t[0]) / (len(t) - 1)
+    if np.max(np.abs(np.diff(t) - dt)) > 1e-3 * dt + 2e-6:
+        raise SystemExit(f"{path}: non-uniform time")
+    for key, columns in groups.items():
+        arrays = {"time_s": t[0] + dt * np.arange(len(t))}
+        for name in columns:
+            a = table.column(name).to_numpy() * G
+            arrays[name] = a - np.polyval(np.polyfit(t, a, 3), t)
+        d = dest / key
+        d.mkdir(parents=True, exist_ok=True)
+        pq.write_table(pa.table(arrays), d / "data.parquet", compression="zstd")
+for test in sorted(p for p in archive.iterdir() if p.is_dir()):
+    process(test / "DAQ1_floors.csv", {f"floor={f}": [f"A{f}_EW", f"A{f}_NS", f"A{f}_UD"] for f in (4, 5)}, out / "floors" / f"motion={test.name}")
+    process(test / "DAQ2_equipment.csv", {"": [c for c in ["UI3_TOP_EW", "MC2_TOP_EW", "PB1_TOP_EW", "PB2_TOP_EW", "PS1_TOP_EW", "PS2_TOP_EW", "WSU1_TOP_EW"]]}, out / "equipment" / f"motion={test.name}")
+'''
+
+
+def measure(cmd):
+    started = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - started
+    if status != 0:
+        sys.exit(f"{cmd[0]} failed: {proc.stderr.read().decode()}")
+    return wall, usage.ru_maxrss / 1024.0  # KiB → MiB
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--shakeflow", required=True)
+    ap.add_argument("--archive", required=True)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    archive = pathlib.Path(args.archive).resolve()
+    pipeline_src = (pathlib.Path(__file__).resolve().parents[1] / "pipelines" / "demo.yaml").read_text()
+    size = sum(p.stat().st_size for p in archive.rglob("*.csv"))
+    results = {"shakeflow": [], "python": []}
+    for _ in range(args.repeat):
+        with tempfile.TemporaryDirectory() as tmp:
+            tmp = pathlib.Path(tmp)
+            pipeline = tmp / "bench.yaml"
+            pipeline.write_text(pipeline_src.replace("../runs/demo-archive", str(archive)).replace("output_dir: ../runs/demo", f"output_dir: {tmp / 'out'}"))
+            results["shakeflow"].append(measure([args.shakeflow, "run", "--quiet", str(pipeline)]))
+            script = tmp / "py_side.py"
+            script.write_text(PYTHON_SIDE)
+            results["python"].append(measure([sys.executable, str(script), str(archive), str(tmp / "py_out")]))
+    sf_wall = statistics.median(w for w, _ in results["shakeflow"])
+    sf_mem = statistics.median(m for _, m in results["shakeflow"])
+    py_wall = statistics.median(w for w, _ in results["python"])
+    py_mem = statistics.median(m for _, m in results["python"])
+    print(f"load + baseline on {archive} ({size / 1e6:.1f} MB of CSV, {os.cpu_count()} cores), median of {args.repeat}")
+    print(f"{'':24}{'wall s':>10}{'peak MiB':>12}")
+    print(f"{'shakeflow':24}{sf_wall:>10.2f}{sf_mem:>12.1f}")
+    print(f"{'numpy/pyarrow script':24}{py_wall:>10.2f}{py_mem:>12.1f}")
+    print(f"{'ratio (python/shakeflow)':24}{py_wall / sf_wall:>10.2f}{py_mem / sf_mem:>12.2f}")
+
+
+if __name__ == "__main__":
+    main()

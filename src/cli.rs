@@ -1,0 +1,299 @@
+//! The command line: thin wrappers over the library, written to teach through `--help`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{bail, Context};
+use clap::{Parser, Subcommand};
+
+use crate::pipeline::executor::{self, Outcome, RunOptions};
+use crate::pipeline::params;
+use crate::pipeline::plan::Plan;
+use crate::pipeline::progress::Reporter;
+use crate::pipeline::sink::OutputSink;
+use crate::pipeline::spec::PipelineFile;
+use crate::pipeline::{hash, sources};
+use crate::stages::{self, InputKind, InputPart, StageContext, StageInput};
+
+#[derive(Parser)]
+#[command(
+    name = "shakeflow",
+    version,
+    about = "Turn shake-table archives into validated physics with declarative, cached YAML pipelines.",
+    long_about = "Turn shake-table archives into validated physics with declarative, cached YAML pipelines.\n\n\
+A pipeline file names record sources (`inputs:`) and processing stages (`stages:`); each stage writes \
+Parquet tables (units and provenance in the metadata) and, for time series, MCAP files that open in Foxglove. \
+A rerun recomputes only stages whose inputs, parameters or code changed (see `shakeflow.lock` in the output directory).",
+    after_help = "Start here:\n  shakeflow demo-archive runs/demo-archive   write the synthetic demo archive\n  \
+shakeflow run pipelines/demo.yaml          run the demo study (again: everything cached)\n  \
+shakeflow status pipelines/demo.yaml       what is stale, and why\n  \
+shakeflow inspect runs/demo/baseline_floors/records/motion=FB-4/floor=5/data.parquet\n  \
+shakeflow stages                           stage types, their parameters, units and defaults"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a pipeline: stale stages run (in parallel where independent), up-to-date ones are cached.
+    ///
+    /// All-or-nothing: outputs and the lockfile change only when every stage succeeded.
+    Run {
+        /// The pipeline YAML file.
+        pipeline: PathBuf,
+        /// Worker threads for stages and records (default: all cores).
+        #[arg(long, short = 'j')]
+        jobs: Option<usize>,
+        /// Rerun this stage and everything downstream of it even if cached (repeatable).
+        #[arg(long, value_name = "STAGE")]
+        force: Vec<String>,
+        /// Print nothing but errors.
+        #[arg(long, short = 'q')]
+        quiet: bool,
+    },
+    /// Show which stages are stale and why (changed params, inputs, stage version, missing outputs).
+    Status {
+        pipeline: PathBuf,
+    },
+    /// Check a pipeline file without running it: keys, stage types, parameters, inputs, cycles, source files.
+    Validate {
+        pipeline: PathBuf,
+        /// Do not check that the record sources match files (e.g. before generating an archive).
+        #[arg(long)]
+        skip_inputs: bool,
+    },
+    /// Run one stage type alone on files, without a pipeline.
+    ///
+    /// Example: shakeflow stage load --input RSN6.AT2 --output out/ ; then
+    /// shakeflow stage baseline --input out/records --output out2/ --set order=2
+    /// For `load`, --set keys are source options (unit, dt, header_lines, time_column, columns, ...).
+    Stage {
+        /// Stage type (see `shakeflow stages`).
+        name: String,
+        /// Input files (record files for `load`; Parquet files or dataset folders otherwise).
+        #[arg(long = "input", short = 'i', required = true, num_args = 1..)]
+        inputs: Vec<PathBuf>,
+        /// Output folder (replaced when the stage succeeds).
+        #[arg(long, short = 'o')]
+        output: PathBuf,
+        /// Parameter as key=value, value in YAML syntax (repeatable).
+        #[arg(long = "set", short = 's', value_name = "KEY=VALUE")]
+        set: Vec<String>,
+    },
+    /// List stage types with their inputs, outputs and parameters (units, defaults).
+    Stages {
+        /// Show only this stage type.
+        name: Option<String>,
+    },
+    /// Describe an artifact: a Parquet file (schema, units, statistics, provenance), an MCAP file, or a dataset folder.
+    Inspect {
+        artifact: PathBuf,
+        /// Rows to preview for a Parquet file.
+        #[arg(long, default_value_t = 5)]
+        rows: usize,
+    },
+    /// Write the synthetic demo archive (12 motions + 2 white-noise tests, floors 4/5, 7 units).
+    DemoArchive {
+        dir: PathBuf,
+        /// Rewrite it even when an up-to-date archive is already there.
+        #[arg(long)]
+        force: bool,
+    },
+    /// Print the JSON Schema of pipeline files (the source of schemas/pipeline.schema.json).
+    Schema,
+}
+
+pub fn main() -> anyhow::Result<ExitCode> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Run { pipeline, jobs, force, quiet } => {
+            if let Some(jobs) = jobs {
+                rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build_global().context("setting --jobs")?;
+            }
+            let plan = Plan::new(PipelineFile::read(&pipeline)?)?;
+            let reporter = Reporter::new(quiet);
+            let started = std::time::Instant::now();
+            let reports = executor::run(&plan, &RunOptions { force }, &reporter)?;
+            let ran = reports.iter().filter(|r| matches!(r.outcome, Outcome::Ran { .. })).count();
+            reporter.line(&format!(
+                "{} stage(s): {ran} ran, {} cached, in {:.2} s; artifacts in {}",
+                reports.len(),
+                reports.len() - ran,
+                started.elapsed().as_secs_f64(),
+                plan.file.output_dir().display()
+            ));
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Status { pipeline } => {
+            let plan = Plan::new(PipelineFile::read(&pipeline)?)?;
+            let lines = executor::status(&plan)?;
+            let stale = lines.iter().filter(|l| !l.reasons.is_empty()).count();
+            for line in &lines {
+                if line.reasons.is_empty() {
+                    println!("{:<18} up to date", line.name);
+                } else {
+                    println!("{:<18} stale: {}", line.name, line.reasons.join("; "));
+                }
+            }
+            println!("{stale} of {} stage(s) stale; lockfile {}", lines.len(), executor::lock_path(&plan).display());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Validate { pipeline, skip_inputs } => {
+            let plan = Plan::new(PipelineFile::read(&pipeline)?)?;
+            if !skip_inputs {
+                for (name, source) in &plan.file.spec.inputs {
+                    let files = sources::resolve(&plan.file.base_dir(), &source.path, &source.partition)
+                        .map_err(|e| plan.file.error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message)).hint(e.hint.unwrap_or_default()))?;
+                    println!("source {name:<16} {} file(s)", files.len());
+                }
+            }
+            for stage in plan.stages.values() {
+                let inputs: Vec<String> = stage.inputs.iter().map(|i| i.label()).collect();
+                println!("stage  {:<16} {:<10} ← {}", stage.name, stage.stage.info().name, inputs.join(", "));
+            }
+            println!("{}: valid ({} source(s), {} stage(s))", pipeline.display(), plan.file.spec.inputs.len(), plan.stages.len());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Stage { name, inputs, output, set } => {
+            run_single_stage(&name, &inputs, &output, &set)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Stages { name } => {
+            print!("{}", describe_stages(name.as_deref())?);
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Inspect { artifact, rows } => {
+            print!("{}", crate::inspect::describe(&artifact, rows)?);
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::DemoArchive { dir, force } => {
+            if !force && crate::demo::archive::is_current(&dir) {
+                eprintln!("{}: demo archive is up to date (use --force to rewrite it)", dir.display());
+                return Ok(ExitCode::SUCCESS);
+            }
+            let started = std::time::Instant::now();
+            let report = crate::demo::archive::write_demo_archive(&dir)
+                .with_context(|| format!("writing the demo archive to `{}`", dir.display()))?;
+            let bytes: u64 = report.files.iter().map(|f| f.bytes).sum();
+            eprintln!(
+                "{}: wrote {} tests, {} files, {:.1} MB in {:.1} s",
+                dir.display(),
+                report.test_ids.len(),
+                report.files.len(),
+                bytes as f64 / 1e6,
+                started.elapsed().as_secs_f64()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Schema => {
+            println!("{}", serde_json::to_string_pretty(&crate::schema::pipeline_schema())?);
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+fn describe_stages(only: Option<&str>) -> anyhow::Result<String> {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    if let Some(name) = only {
+        if stages::find(name).is_none() {
+            bail!("unknown stage type `{name}`; known: {}", stages::names().join(", "));
+        }
+    }
+    for stage in stages::registry().iter().filter(|s| only.is_none_or(|n| s.info().name == n)) {
+        let info = stage.info();
+        writeln!(out, "{} (version {})\n  {}", info.name, info.version, info.summary)?;
+        let reads = match info.inputs {
+            InputKind::Sources => "record sources declared under `inputs:`",
+            InputKind::Datasets => "outputs of other stages",
+        };
+        writeln!(out, "  reads: {reads}")?;
+        for o in info.outputs {
+            let kind = if o.timeseries { "Parquet + MCAP" } else { "Parquet" };
+            writeln!(out, "  output `{}` ({kind}): {}", o.name, o.description)?;
+        }
+        if info.params.is_empty() {
+            writeln!(out, "  parameters: none (a `load` is configured by its source)")?;
+        }
+        for p in info.params {
+            let default = p.default.map_or("required".to_string(), |d| format!("default {d}"));
+            let unit = if p.unit.is_empty() { String::new() } else { format!(" [{}]", p.unit) };
+            writeln!(out, "  - {}{unit}: {} ({default}) — {}", p.name, p.kind.describe(), p.description)?;
+        }
+        writeln!(out)?;
+    }
+    Ok(out)
+}
+
+/// Gathers inputs for a stage run outside a pipeline: raw files for `load`, Parquet parts otherwise.
+fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String]) -> anyhow::Result<()> {
+    let stage = stages::find(name).ok_or_else(|| {
+        crate::error::UserError::new(format!("unknown stage type `{name}`")).hint(format!("known stage types: {}", stages::names().join(", ")))
+    })?;
+    let info = stage.info();
+    let assignments: Vec<(String, serde_json::Value)> = set.iter().map(|s| params::parse_set(s)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
+    let (params, stage_inputs) = match info.inputs {
+        InputKind::Sources => {
+            let overrides: serde_json::Map<String, serde_json::Value> = assignments.into_iter().collect();
+            let mut stage_inputs = Vec::new();
+            for path in inputs {
+                let spec = stages::load::ad_hoc_source(path, &overrides)?;
+                let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+                let partition = if inputs.len() > 1 { vec![("file".to_string(), stem)] } else { Vec::new() };
+                let part = InputPart { partition, path: path.clone(), label: file_label(path), hash: hash::hash_file(path)? };
+                let base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+                stage_inputs.push(StageInput::Source { name: path.display().to_string(), spec, base_dir, files: vec![part] });
+            }
+            (params::normalize(info.params, info.name, []).map_err(|e| anyhow::anyhow!("{}", e.message))?, stage_inputs)
+        }
+        InputKind::Datasets => {
+            let given = assignments.iter().map(|(k, v)| (k.as_str(), v.clone()));
+            let params = params::normalize(info.params, info.name, given).map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;
+            let mut stage_inputs = Vec::new();
+            for path in inputs {
+                let parts = if path.is_dir() {
+                    executor::dataset_parts(path, &file_label(path))?
+                } else if path.is_file() {
+                    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+                    let partition = if inputs.len() > 1 { vec![("file".to_string(), stem)] } else { Vec::new() };
+                    vec![InputPart { partition, path: path.clone(), label: file_label(path), hash: hash::hash_file(path)? }]
+                } else {
+                    bail!("input `{}` does not exist", path.display());
+                };
+                stage_inputs.push(StageInput::Dataset { name: path.display().to_string(), parts });
+            }
+            (params, stage_inputs)
+        }
+    };
+    let input_hashes: BTreeMap<String, String> = stage_inputs
+        .iter()
+        .map(|i| (i.name().to_string(), hash::hash_bytes(i.parts().iter().map(|p| p.hash.as_str()).collect::<Vec<_>>().join("\n").as_bytes())))
+        .collect();
+    let parent = output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(parent).with_context(|| format!("cannot create `{}`", parent.display()))?;
+    let staging = crate::io::atomic::temp_sibling(output);
+    let reporter = Reporter::new(false);
+    let records: usize = stage_inputs.iter().map(|i| i.parts().len()).sum();
+    let sink = OutputSink::new(&staging, name, info, &params, &input_hashes, reporter.stage_bar(name, records as u64));
+    let ctx = StageContext { stage_name: name, params: &params, inputs: &stage_inputs, sink: &sink };
+    let result = stage.run(&ctx).and_then(|()| {
+        for o in info.outputs {
+            std::fs::create_dir_all(staging.join(o.name))?;
+        }
+        crate::io::atomic::replace_dir(&staging, output).with_context(|| format!("moving results into `{}`", output.display()))
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_dir_all(&staging);
+    }
+    result?;
+    eprintln!("{name}: {records} record(s) → {}", output.display());
+    Ok(())
+}
+
+/// A run-independent name for a file given on the command line: its file name.
+fn file_label(path: &Path) -> String {
+    path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+}

@@ -1,0 +1,3 @@
+//! Synthetic demo archive shaped like the NEES-2009-0722 UCSD BNCS test data.
+pub mod archive;
+pub mod study;

@@ -1,0 +1,90 @@
+//! Write-then-rename, so a reader (or a crash) never sees half an artifact.
+
+use std::fs::{self, File};
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+static COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// A unique sibling path for temporary output: same directory, so the final rename is atomic.
+pub fn temp_sibling(path: &Path) -> PathBuf {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    path.with_file_name(format!(".{name}.tmp-{}-{n}", std::process::id()))
+}
+
+/// Writes a file through `fill`, then renames it into place; on any error the temp file is removed.
+pub fn write_file<F>(path: &Path, fill: F) -> anyhow::Result<()>
+where
+    F: FnOnce(&mut BufWriter<File>) -> anyhow::Result<()>,
+{
+    let tmp = temp_sibling(path);
+    let result = (|| {
+        let file = File::create(&tmp)
+            .map_err(|e| anyhow::anyhow!("cannot create `{}`: {e}", tmp.display()))?;
+        let mut writer = BufWriter::new(file);
+        fill(&mut writer)?;
+        writer.flush()?;
+        writer.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+        fs::rename(&tmp, path).map_err(|e| anyhow::anyhow!("cannot move into `{}`: {e}", path.display()))
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Replaces directory `target` by the fully written directory `staged` (both on one filesystem).
+/// The old directory is first moved aside, so `target` is never a mix of old and new files.
+pub fn replace_dir(staged: &Path, target: &Path) -> std::io::Result<()> {
+    if let Some(parent) = target.parent() {
+        fs::create_dir_all(parent)?;
+    }
+    let trash = temp_sibling(target);
+    let had_old = target.exists();
+    if had_old {
+        fs::rename(target, &trash)?;
+    }
+    if let Err(e) = fs::rename(staged, target) {
+        if had_old {
+            let _ = fs::rename(&trash, target);
+        }
+        return Err(e);
+    }
+    if had_old {
+        fs::remove_dir_all(&trash)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn failed_write_leaves_nothing_behind() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out.txt");
+        let err = write_file(&target, |w| {
+            w.write_all(b"half")?;
+            anyhow::bail!("boom")
+        });
+        assert!(err.is_err());
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 0, "no temp file, no target");
+    }
+
+    #[test]
+    fn replace_dir_swaps_contents() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("data");
+        fs::create_dir(&target).unwrap();
+        fs::write(target.join("old"), "x").unwrap();
+        let staged = dir.path().join("staged");
+        fs::create_dir(&staged).unwrap();
+        fs::write(staged.join("new"), "y").unwrap();
+        replace_dir(&staged, &target).unwrap();
+        assert!(target.join("new").exists() && !target.join("old").exists());
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+}

@@ -1,0 +1,6 @@
+//! Files in and out: record readers, artifact writers, atomic file replacement.
+
+pub mod atomic;
+pub mod mcap;
+pub mod parquet;
+pub mod records;

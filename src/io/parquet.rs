@@ -1,0 +1,140 @@
+//! Tables as Parquet: units and descriptions as Arrow field metadata, provenance as file metadata.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::path::Path;
+use std::sync::Arc;
+
+use anyhow::{anyhow, Context};
+use arrow::array::{Array, ArrayRef, BooleanArray, Float64Array, Int64Array, RecordBatch, StringArray};
+use arrow::datatypes::{DataType, Field, Schema};
+use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use parquet::arrow::ArrowWriter;
+use parquet::basic::{Compression, ZstdLevel};
+use parquet::file::metadata::KeyValue;
+use parquet::file::properties::{EnabledStatistics, WriterProperties};
+
+use crate::io::atomic;
+use crate::table::{Column, ColumnData, Table};
+
+/// The Arrow schema ArrowWriter embeds for itself; not part of a table's own metadata.
+const ARROW_SCHEMA_KEY: &str = "ARROW:schema";
+
+pub fn write_table(path: &Path, table: &Table) -> anyhow::Result<()> {
+    let batch = to_record_batch(table)?;
+    let kv: Vec<KeyValue> = table.metadata.iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect();
+    let props = WriterProperties::builder()
+        .set_compression(Compression::ZSTD(ZstdLevel::try_new(3)?))
+        .set_statistics_enabled(EnabledStatistics::Chunk)
+        .set_key_value_metadata(Some(kv))
+        .build();
+    atomic::write_file(path, |w| {
+        let mut writer = ArrowWriter::try_new(w, batch.schema(), Some(props))?;
+        writer.write(&batch)?;
+        writer.close()?;
+        Ok(())
+    })
+    .with_context(|| format!("writing Parquet `{}`", path.display()))
+}
+
+fn to_record_batch(table: &Table) -> anyhow::Result<RecordBatch> {
+    let mut fields = Vec::with_capacity(table.columns.len());
+    let mut arrays: Vec<ArrayRef> = Vec::with_capacity(table.columns.len());
+    for column in &table.columns {
+        let (data_type, nullable, array): (DataType, bool, ArrayRef) = match &column.data {
+            ColumnData::F64(v) => (DataType::Float64, false, Arc::new(Float64Array::from(v.clone()))),
+            ColumnData::OptF64(v) => (DataType::Float64, true, Arc::new(Float64Array::from(v.clone()))),
+            ColumnData::I64(v) => (DataType::Int64, false, Arc::new(Int64Array::from(v.clone()))),
+            ColumnData::Bool(v) => (DataType::Boolean, false, Arc::new(BooleanArray::from(v.clone()))),
+            ColumnData::Str(v) => (DataType::Utf8, false, Arc::new(StringArray::from(v.clone()))),
+        };
+        let metadata = HashMap::from([
+            ("unit".to_string(), column.unit.clone()),
+            ("description".to_string(), column.description.clone()),
+        ]);
+        fields.push(Field::new(&column.name, data_type, nullable).with_metadata(metadata));
+        arrays.push(array);
+    }
+    let schema = Arc::new(Schema::new(fields));
+    Ok(RecordBatch::try_new(schema, arrays)?)
+}
+
+/// Reads a whole Parquet file written by any tool; units come back when the writer stored them.
+pub fn read_table(path: &Path) -> anyhow::Result<Table> {
+    let file = File::open(path).with_context(|| format!("cannot open `{}`", path.display()))?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(file)
+        .with_context(|| format!("`{}` is not a readable Parquet file", path.display()))?;
+    let mut metadata = BTreeMap::new();
+    if let Some(kv) = builder.metadata().file_metadata().key_value_metadata() {
+        for entry in kv.iter().filter(|e| e.key != ARROW_SCHEMA_KEY) {
+            metadata.insert(entry.key.clone(), entry.value.clone().unwrap_or_default());
+        }
+    }
+    let schema = builder.schema().clone();
+    let reader = builder.build()?;
+    let batches: Vec<RecordBatch> = reader.collect::<Result<_, _>>()?;
+    let mut table = Table { columns: Vec::new(), metadata };
+    for (i, field) in schema.fields().iter().enumerate() {
+        let meta = field.metadata();
+        let parts: Vec<&ArrayRef> = batches.iter().map(|b| b.column(i)).collect();
+        let data = column_data(field.data_type(), field.is_nullable(), &parts)
+            .with_context(|| format!("column `{}` of `{}`", field.name(), path.display()))?;
+        table.columns.push(Column {
+            name: field.name().clone(),
+            unit: meta.get("unit").cloned().unwrap_or_default(),
+            description: meta.get("description").cloned().unwrap_or_default(),
+            data,
+        });
+    }
+    Ok(table)
+}
+
+fn column_data(data_type: &DataType, nullable: bool, parts: &[&ArrayRef]) -> anyhow::Result<ColumnData> {
+    fn typed<'a, T: 'static>(parts: &'a [&ArrayRef]) -> impl Iterator<Item = &'a T> {
+        parts.iter().map(|a| a.as_any().downcast_ref::<T>().expect("array type matches its schema"))
+    }
+    Ok(match data_type {
+        DataType::Float64 if nullable => {
+            ColumnData::OptF64(typed::<Float64Array>(parts).flat_map(|a| a.iter()).collect())
+        }
+        DataType::Float64 => ColumnData::F64(typed::<Float64Array>(parts).flat_map(|a| a.values().iter().copied()).collect()),
+        DataType::Int64 => ColumnData::I64(typed::<Int64Array>(parts).flat_map(|a| a.values().iter().copied()).collect()),
+        DataType::Boolean => ColumnData::Bool(typed::<BooleanArray>(parts).flat_map(|a| a.iter().map(|v| v.unwrap_or(false))).collect()),
+        DataType::Utf8 => ColumnData::Str(
+            typed::<StringArray>(parts).flat_map(|a| a.iter().map(|v| v.unwrap_or_default().to_string())).collect(),
+        ),
+        other => return Err(anyhow!("unsupported column type {other}")),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_keeps_units_metadata_and_nulls() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.parquet");
+        let mut t = Table::new();
+        t.push(Column::f64("time_s", "s", "time", vec![0.0, 0.5]));
+        t.push(Column { name: "when".into(), unit: "s".into(), description: "maybe".into(), data: ColumnData::OptF64(vec![None, Some(1.5)]) });
+        t.push(Column { name: "ok".into(), unit: "".into(), description: "".into(), data: ColumnData::Bool(vec![true, false]) });
+        t.push(Column { name: "name".into(), unit: "".into(), description: "".into(), data: ColumnData::Str(vec!["a".into(), "b".into()]) });
+        t.push(Column { name: "n".into(), unit: "".into(), description: "".into(), data: ColumnData::I64(vec![1, 2]) });
+        t.metadata.insert("shakeflow.stage".into(), "x".into());
+        write_table(&path, &t).unwrap();
+        let back = read_table(&path).unwrap();
+        assert_eq!(back, t);
+    }
+
+    #[test]
+    fn identical_tables_give_identical_bytes() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut t = Table::new();
+        t.push(Column::f64("a", "m", "d", (0..1000).map(|i| (i as f64).sin()).collect()));
+        write_table(&dir.path().join("1.parquet"), &t).unwrap();
+        write_table(&dir.path().join("2.parquet"), &t).unwrap();
+        let one = std::fs::read(dir.path().join("1.parquet")).unwrap();
+        assert_eq!(one, std::fs::read(dir.path().join("2.parquet")).unwrap());
+    }
+}

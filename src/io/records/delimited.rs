@@ -1,0 +1,328 @@
+//! Delimited text (CSV, TSV, whitespace columns): optional preamble lines, an
+//! optional column-name row, then numeric rows. Every column is a channel.
+//!
+//! Built for files of tens of MB: the file is read once and cells are parsed
+//! straight from `&str` slices, with no per-cell allocation.
+
+use super::{
+    char_column, empty_file_error, load, numbered_lines, offset_in, ParseError, RawChannel,
+    RawRecord,
+};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DelimitedOptions {
+    /// None: '\t' for .tsv/.tab, else sniffed from the column-name row (or the
+    /// first data row): ',', ';', '\t', or runs of whitespace. `Some(b' ')`
+    /// also means runs of whitespace.
+    pub delimiter: Option<u8>,
+    /// Lines skipped before the column-name row.
+    pub header_lines: usize,
+    /// false: there is no column-name row and columns are named col1..colN.
+    pub has_column_names: bool,
+}
+
+impl Default for DelimitedOptions {
+    fn default() -> Self {
+        DelimitedOptions {
+            delimiter: None,
+            header_lines: 0,
+            has_column_names: true,
+        }
+    }
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum Splitter {
+    Char(char),
+    Whitespace,
+}
+
+impl Splitter {
+    fn describe(self) -> String {
+        match self {
+            Splitter::Char(',') => "comma".to_string(),
+            Splitter::Char(';') => "semicolon".to_string(),
+            Splitter::Char('\t') => "tab".to_string(),
+            Splitter::Char(c) => format!("'{c}'"),
+            Splitter::Whitespace => "whitespace".to_string(),
+        }
+    }
+
+    /// Cells of a line, trimmed and unquoted. Quoted cells holding the
+    /// delimiter are not supported: numeric tables do not need them.
+    fn cells(self, line: &str) -> Cells<'_> {
+        match self {
+            Splitter::Char(c) => Cells::Char(line.split(c)),
+            Splitter::Whitespace => Cells::Whitespace(line.split_ascii_whitespace()),
+        }
+    }
+}
+
+/// Cell iterator without boxing: one per line, on the hot path.
+enum Cells<'a> {
+    Char(std::str::Split<'a, char>),
+    Whitespace(std::str::SplitAsciiWhitespace<'a>),
+}
+
+impl<'a> Iterator for Cells<'a> {
+    type Item = &'a str;
+    fn next(&mut self) -> Option<&'a str> {
+        match self {
+            Cells::Char(it) => it.next().map(clean),
+            Cells::Whitespace(it) => it.next().map(clean),
+        }
+    }
+}
+
+fn clean(cell: &str) -> &str {
+    let cell = cell.trim();
+    cell.strip_prefix('"')
+        .and_then(|c| c.strip_suffix('"'))
+        .unwrap_or(cell)
+}
+
+pub fn read_delimited(path: &Path, opts: &DelimitedOptions) -> Result<RawRecord, ParseError> {
+    let text = load(path)?;
+    if text.trim().is_empty() {
+        return Err(empty_file_error(
+            path,
+            "rows of numbers, optionally under a column-name row",
+        ));
+    }
+    // Blank lines at the end are not rows. Cut after the last non-blank line
+    // rather than trimming it, so a trailing tab (empty last cell) survives.
+    let last_char = text.trim_end().len();
+    let end = text[last_char..]
+        .find('\n')
+        .map_or(text.len(), |i| last_char + i);
+    let body = &text[..end];
+    let last_line_number = body.bytes().filter(|&b| b == b'\n').count() + 1;
+
+    let mut lines = numbered_lines(body).peekable();
+    let mut header = BTreeMap::new();
+    for k in 1..=opts.header_lines {
+        let Some((_, line)) = lines.next() else {
+            return Err(no_data(path, last_line_number, format!(
+                "the file has {last_line_number} non-blank line(s), all inside the {} preamble line(s) to skip",
+                opts.header_lines
+            )));
+        };
+        header.insert(format!("preamble_{k}"), line.trim().to_string());
+    }
+    let Some(&(reference_number, reference)) = lines.peek() else {
+        return Err(no_data(
+            path,
+            last_line_number,
+            "no column-name row and no data after the preamble".to_string(),
+        ));
+    };
+
+    let splitter = choose_splitter(path, opts, reference)?;
+    let (names, names_line) = if opts.has_column_names {
+        lines.next();
+        let names: Vec<String> = splitter
+            .cells(reference)
+            .enumerate()
+            .map(|(i, n)| {
+                if n.is_empty() {
+                    format!("col{}", i + 1)
+                } else {
+                    n.to_string()
+                }
+            })
+            .collect();
+        (names, Some(reference_number))
+    } else {
+        let n = splitter.cells(reference).count();
+        ((1..=n).map(|i| format!("col{i}")).collect(), None)
+    };
+    let Some(&(first_data_number, first_data)) = lines.peek() else {
+        return Err(no_data(
+            path,
+            reference_number,
+            format!("only a column-name row (line {reference_number}), no data rows after it"),
+        ));
+    };
+    if names.is_empty() {
+        return Err(ParseError::new(
+            path,
+            Some(reference_number),
+            None,
+            "the first row after the preamble has no cells",
+            "set header_lines to the number of lines before the column-name row",
+        ));
+    }
+
+    let ncols = names.len();
+    // Rough row count from the first data row, to allocate once.
+    let rows_estimate = body.len() / (first_data.len() + 1).max(8) + 1;
+    let mut columns: Vec<Vec<f64>> = (0..ncols)
+        .map(|_| Vec::with_capacity(rows_estimate))
+        .collect();
+    let ctx = Context {
+        path,
+        names: &names,
+        names_line,
+        splitter,
+        opts,
+        first_data_number,
+        last_line_number,
+    };
+    for (number, line) in lines {
+        let mut count = 0;
+        for cell in splitter.cells(line) {
+            if let Some(column) = columns.get_mut(count) {
+                column
+                    .push(read_cell(cell).ok_or_else(|| ctx.bad_cell(number, line, cell, count))?);
+            }
+            count += 1;
+        }
+        if count != ncols {
+            return Err(ctx.ragged(number, count));
+        }
+    }
+
+    let rows = columns[0].len();
+    header.insert("delimiter".to_string(), splitter.describe());
+    header.insert("columns".to_string(), names.join(", "));
+    header.insert("npts".to_string(), rows.to_string());
+    let channels = names
+        .into_iter()
+        .zip(columns)
+        .map(|(name, values)| RawChannel {
+            name,
+            unit: String::new(),
+            values,
+            first_data_line: Some(first_data_number),
+        })
+        .collect();
+    Ok(RawRecord {
+        format: "delimited",
+        dt: None,
+        time: None,
+        channels,
+        header,
+    })
+}
+
+/// A number; NaN for an empty cell, "NaN"/"nan" or "NA" (gaps are the
+/// caller's business); None for anything else, infinities included.
+fn read_cell(cell: &str) -> Option<f64> {
+    match cell.parse::<f64>() {
+        Ok(v) if v.is_finite() || v.is_nan() => Some(v),
+        Ok(_) => None,
+        Err(_) if cell.is_empty() || cell.eq_ignore_ascii_case("NA") => Some(f64::NAN),
+        Err(_) => None,
+    }
+}
+
+fn choose_splitter(
+    path: &Path,
+    opts: &DelimitedOptions,
+    reference: &str,
+) -> Result<Splitter, ParseError> {
+    match opts.delimiter {
+        Some(b' ') => return Ok(Splitter::Whitespace),
+        Some(d) if d.is_ascii() => return Ok(Splitter::Char(d as char)),
+        Some(d) => {
+            return Err(ParseError::new(
+                path,
+                None,
+                None,
+                format!("the delimiter byte 0x{d:02x} is not an ASCII character"),
+                "use ',', ';', '\\t', ' ' or another ASCII character, or None to sniff it",
+            ))
+        }
+        None => {}
+    }
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    if matches!(ext.as_deref(), Some("tsv" | "tab")) {
+        return Ok(Splitter::Char('\t'));
+    }
+    // Sniff from the names row: names rarely contain the delimiter, while
+    // numbers might (decimal commas).
+    let best = [',', '\t', ';']
+        .into_iter()
+        .map(|c| (reference.matches(c).count(), c))
+        .filter(|&(n, _)| n > 0)
+        .fold(None, |best: Option<(usize, char)>, cand| match best {
+            Some(b) if b.0 >= cand.0 => Some(b),
+            _ => Some(cand),
+        });
+    Ok(best.map_or(Splitter::Whitespace, |(_, c)| Splitter::Char(c)))
+}
+
+fn no_data(path: &Path, line: usize, message: String) -> ParseError {
+    ParseError::new(
+        path,
+        Some(line),
+        None,
+        format!("no data rows: {message}"),
+        "the file holds a header but no numbers; check header_lines and that the export finished",
+    )
+}
+
+struct Context<'a> {
+    path: &'a Path,
+    names: &'a [String],
+    names_line: Option<usize>,
+    splitter: Splitter,
+    opts: &'a DelimitedOptions,
+    first_data_number: usize,
+    last_line_number: usize,
+}
+
+impl Context<'_> {
+    fn bad_cell(&self, number: usize, line: &str, cell: &str, index: usize) -> ParseError {
+        let column = char_column(line, offset_in(line, cell));
+        let name = &self.names[index];
+        let hint = if number == self.first_data_number && !self.opts.has_column_names {
+            "if this line holds column names, set has_column_names = true".to_string()
+        } else if number == self.first_data_number {
+            format!(
+                "if line {number} is still part of the file's header, raise header_lines (now {})",
+                self.opts.header_lines
+            )
+        } else if cell.contains(',') && self.splitter != Splitter::Char(',') {
+            "decimal commas are not supported: write numbers with a '.'".to_string()
+        } else {
+            "cells must be numbers; empty cells, NaN and NA are read as gaps (NaN)".to_string()
+        };
+        ParseError::new(
+            self.path,
+            Some(number),
+            Some(column),
+            format!(
+                "line {number}, column {} ({name}): cannot read '{cell}' as a number",
+                index + 1
+            ),
+            hint,
+        )
+    }
+
+    fn ragged(&self, number: usize, count: usize) -> ParseError {
+        let expected = self.names.len();
+        let reference = match self.names_line {
+            Some(l) => format!("the column-name row (line {l})"),
+            None => format!("the first data row (line {})", self.first_data_number),
+        };
+        let mut message =
+            format!("line {number} has {count} cell(s) but {reference} has {expected}");
+        let hint = if number == self.last_line_number {
+            message.push_str("; this is the last line: the file may be truncated");
+            "the last row was cut mid-row; re-export the file or delete its partial last line"
+                .to_string()
+        } else {
+            format!(
+                "every row needs one cell per column ({} delimiter); look for a missing value or a stray delimiter",
+                self.splitter.describe()
+            )
+        };
+        ParseError::new(self.path, Some(number), None, message, hint)
+    }
+}

@@ -1,0 +1,202 @@
+//! Readers for accelerogram file formats: PEER NGA `.AT2`, RENADIC Vol.1,
+//! SimCenter event JSON and delimited text (CSV/TSV/whitespace).
+//!
+//! Readers return the numbers exactly as the file states them (units
+//! included) in a [`RawRecord`]; unit conversion and gap handling are left to
+//! the caller. Every failure is a [`ParseError`] that names the file, the
+//! line and column where that makes sense, and a hint on the likely cause.
+
+mod at2;
+mod delimited;
+mod renadic;
+mod simcenter;
+#[cfg(test)]
+mod tests;
+
+pub use at2::read_at2;
+pub use delimited::{read_delimited, DelimitedOptions};
+pub use renadic::read_renadic_v1;
+pub use simcenter::read_simcenter_json;
+
+use std::collections::BTreeMap;
+use std::fmt;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+/// One file's content, before any unit conversion or gap handling.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawRecord {
+    /// "at2" | "renadic_v1" | "simcenter_json" | "delimited"
+    pub format: &'static str,
+    /// Time step in seconds, when the file states it (or, for RENADIC, when
+    /// its time column is uniform).
+    pub dt: Option<f64>,
+    /// Explicit time column, when the format has one apart from the channels
+    /// (RENADIC). Delimited files keep any time column among the channels.
+    pub time: Option<Vec<f64>>,
+    pub channels: Vec<RawChannel>,
+    /// Facts from the header: npts, dt, event, station, component, units
+    /// text, filter poles, ...
+    pub header: BTreeMap<String, String>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawChannel {
+    pub name: String,
+    /// As stated by the file, lower-cased: "g", "g/10", or "" when unknown.
+    pub unit: String,
+    pub values: Vec<f64>,
+    /// 1-based line of the first value, for formats where that is meaningful.
+    pub first_data_line: Option<usize>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParseError {
+    pub path: PathBuf,
+    /// 1-based.
+    pub line: Option<usize>,
+    /// 1-based character column.
+    pub column: Option<usize>,
+    pub message: String,
+    pub hint: String,
+}
+
+impl ParseError {
+    fn new(
+        path: &Path,
+        line: Option<usize>,
+        column: Option<usize>,
+        message: impl Into<String>,
+        hint: impl Into<String>,
+    ) -> Self {
+        ParseError {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message: message.into(),
+            hint: hint.into(),
+        }
+    }
+}
+
+impl fmt::Display for ParseError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.path.display())?;
+        if let Some(line) = self.line {
+            write!(f, ":{line}")?;
+            if let Some(col) = self.column {
+                write!(f, ":{col}")?;
+            }
+        }
+        write!(f, ": {}", self.message)?;
+        if !self.hint.is_empty() {
+            write!(f, "\n  hint: {}", self.hint)?;
+        }
+        Ok(())
+    }
+}
+
+impl std::error::Error for ParseError {}
+
+/// Guess the format from the first bytes, then from the extension: content
+/// wins because records are often renamed (an AT2 saved as `.txt`).
+pub fn sniff_format(path: &Path) -> Option<&'static str> {
+    let mut head = Vec::new();
+    if let Ok(file) = std::fs::File::open(path) {
+        // 4 KB covers the AT2 and RENADIC headers' first lines.
+        let _ = file.take(4096).read_to_end(&mut head);
+    }
+    let head = String::from_utf8_lossy(&head);
+    let head = head.strip_prefix('\u{feff}').unwrap_or(&head);
+    let first: Vec<&str> = head.lines().take(4).collect();
+    let upper = |i: usize| {
+        first
+            .get(i)
+            .map(|l| l.to_ascii_uppercase())
+            .unwrap_or_default()
+    };
+    if upper(0).starts_with("UNCORRECTED ACCELEROGRAM") {
+        return Some("renadic_v1");
+    }
+    if upper(0).contains("PEER") || (upper(2).contains("UNITS OF") && upper(3).contains("NPTS")) {
+        return Some("at2");
+    }
+    if head.trim_start().starts_with('{') {
+        return Some("simcenter_json");
+    }
+    let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+    match ext.as_str() {
+        "at2" => Some("at2"),
+        "v1" => Some("renadic_v1"),
+        "json" => Some("simcenter_json"),
+        "csv" | "tsv" | "tab" | "txt" => Some("delimited"),
+        _ => None,
+    }
+}
+
+/// Read the whole file once. Invalid UTF-8 (e.g. a Latin-1 station name) is
+/// replaced rather than rejected: only the numbers matter, and a mangled
+/// number still fails with a precise message.
+fn load(path: &Path) -> Result<String, ParseError> {
+    let bytes = std::fs::read(path).map_err(|e| {
+        let hint = match e.kind() {
+            std::io::ErrorKind::NotFound => "check the path and the current directory",
+            std::io::ErrorKind::PermissionDenied => "check the file's permissions",
+            _ => "check that the path is a readable file",
+        };
+        ParseError::new(path, None, None, format!("cannot read the file: {e}"), hint)
+    })?;
+    let mut text = match String::from_utf8(bytes) {
+        Ok(s) => s,
+        Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
+    };
+    if text.starts_with('\u{feff}') {
+        text.drain(..'\u{feff}'.len_utf8());
+    }
+    Ok(text)
+}
+
+fn empty_file_error(path: &Path, what: &str) -> ParseError {
+    ParseError::new(
+        path,
+        None,
+        None,
+        "the file is empty",
+        format!("expected {what}; the download or export probably failed"),
+    )
+}
+
+/// Lines numbered from 1, without the `\r` of CRLF endings.
+fn numbered_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.split('\n')
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)))
+}
+
+/// 1-based character column of byte offset `byte` in `line`.
+fn char_column(line: &str, byte: usize) -> usize {
+    line.get(..byte).map_or(byte, |s| s.chars().count()) + 1
+}
+
+/// Byte offset of `part` inside `whole`; `part` must be a sub-slice of it.
+fn offset_in(whole: &str, part: &str) -> usize {
+    (part.as_ptr() as usize).saturating_sub(whole.as_ptr() as usize)
+}
+
+/// A line quoted for a message, shortened so errors stay readable.
+fn quote(line: &str) -> String {
+    const MAX: usize = 90;
+    let trimmed = line.trim_end();
+    if trimmed.chars().count() <= MAX {
+        format!("'{trimmed}'")
+    } else {
+        let short: String = trimmed.chars().take(MAX).collect();
+        format!("'{short}...'")
+    }
+}
+
+/// A finite number, or None. Infinities are refused: in an accelerogram they
+/// only come from corrupt data.
+fn parse_finite(token: &str) -> Option<f64> {
+    token.parse::<f64>().ok().filter(|v| v.is_finite())
+}

@@ -1,0 +1,15 @@
+//! shakeflow: declarative, cached, reproducible pipelines from shake-table records to validated
+//! physics. See ARCHITECTURE.md for the map of this crate.
+
+pub mod cli;
+pub mod demo;
+pub mod error;
+pub mod inspect;
+pub mod io;
+pub mod pipeline;
+pub mod physics;
+pub mod schema;
+pub mod signal;
+pub mod stages;
+pub mod table;
+pub mod units;

@@ -1,0 +1,375 @@
+//! Running a plan: decide per stage whether it is cached, run what is not (in parallel where
+//! the DAG allows), and commit all results at once.
+//!
+//! A run is all-or-nothing: new outputs are staged under `<output_dir>/.staging-<pid>/` and only
+//! moved into place, together with the new lockfile, after every stage succeeded. A failed run
+//! leaves the previous artifacts and the lockfile exactly as they were.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use anyhow::{anyhow, Context};
+use rayon::prelude::*;
+use serde_json::json;
+
+use super::hash;
+use super::lock::{LockFile, OutputLock, StageLock, LOCK_FILE};
+use super::plan::{InputRef, Plan, PlannedStage};
+use super::progress::Reporter;
+use super::sink::OutputSink;
+use super::sources;
+use crate::error::UserError;
+use crate::stages::{InputPart, StageContext, StageInput};
+
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// Stages to rerun even when cached (their dependents rerun too).
+    pub force: Vec<String>,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum Outcome {
+    Cached,
+    Ran { seconds: f64, records: usize },
+}
+
+#[derive(Debug, Clone)]
+pub struct StageReport {
+    pub name: String,
+    pub outcome: Outcome,
+}
+
+/// A source resolved to files, with the hash that stands for all of them and its spec.
+struct ResolvedSource {
+    input: StageInput,
+    hash: String,
+}
+
+/// Where a stage's outputs are (final or staged) and their hashes.
+#[derive(Clone)]
+struct Produced {
+    dir: PathBuf,
+    outputs: BTreeMap<String, OutputLock>,
+}
+
+/// Why a stage must run; empty when it is up to date.
+pub struct Assessment {
+    pub key: String,
+    pub reasons: Vec<String>,
+}
+
+pub fn lock_path(plan: &Plan) -> PathBuf {
+    plan.file.output_dir().join(LOCK_FILE)
+}
+
+fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, UserError> {
+    let base = plan.file.base_dir();
+    let used: BTreeSet<&str> = plan
+        .stages
+        .values()
+        .flat_map(|s| s.inputs.iter())
+        .filter_map(|i| match i {
+            InputRef::Source(name) => Some(name.as_str()),
+            InputRef::Stage { .. } => None,
+        })
+        .collect();
+    let mut resolved = BTreeMap::new();
+    for name in used {
+        let spec = &plan.file.spec.inputs[name];
+        let files = sources::resolve(&base, &spec.path, &spec.partition).map_err(|e| {
+            let located = plan.file.error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message));
+            match e.hint {
+                Some(h) => located.hint(h),
+                None => located,
+            }
+        })?;
+        let paths: Vec<PathBuf> = files.iter().map(|f| f.path.clone()).collect();
+        let hashes = hash::hash_files(&paths).map_err(|e| UserError::new(format!("source `{name}`: {e:#}")))?;
+        let mut summary = serde_json::to_string(spec).expect("specs serialise");
+        let parts: Vec<InputPart> = files
+            .into_iter()
+            .zip(hashes)
+            .map(|(f, h)| {
+                let relative = f.path.strip_prefix(&base).unwrap_or(&f.path).to_string_lossy().replace('\\', "/");
+                summary.push_str(&format!("\n{relative}\0{}\0{h}", crate::stages::partition_path(&f.partition)));
+                InputPart { partition: f.partition, path: f.path, label: relative, hash: h }
+            })
+            .collect();
+        let input = StageInput::Source { name: name.to_string(), spec: spec.clone(), base_dir: base.clone(), files: parts };
+        resolved.insert(name.to_string(), ResolvedSource { input, hash: hash::hash_bytes(summary.as_bytes()) });
+    }
+    Ok(resolved)
+}
+
+fn cache_key(stage: &PlannedStage, input_hashes: &BTreeMap<String, String>) -> String {
+    let info = stage.stage.info();
+    let material = json!({"type": info.name, "version": info.version, "params": stage.params, "inputs": input_hashes});
+    hash::hash_bytes(material.to_string().as_bytes())
+}
+
+/// Compares a stage with its lock entry; `input_hashes` is None when an upstream stage is stale.
+fn assess(
+    stage: &PlannedStage,
+    input_hashes: Option<&BTreeMap<String, String>>,
+    lock: &LockFile,
+    output_dir: &Path,
+) -> anyhow::Result<Assessment> {
+    let info = stage.stage.info();
+    let key = input_hashes.map(|h| cache_key(stage, h)).unwrap_or_default();
+    let Some(entry) = lock.stages.get(&stage.name) else {
+        return Ok(Assessment { key, reasons: vec!["never run (not in the lockfile)".into()] });
+    };
+    let mut reasons = Vec::new();
+    if entry.stage_type != info.name {
+        reasons.push(format!("stage type changed: {} → {}", entry.stage_type, info.name));
+    } else if entry.stage_version != info.version {
+        reasons.push(format!("stage type `{}` changed: version {} → {}", info.name, entry.stage_version, info.version));
+    }
+    let params = serde_json::Value::Object(stage.params.clone());
+    if entry.params != params {
+        reasons.push(format!("params changed: {}", describe_param_changes(&entry.params, &params)));
+    }
+    match input_hashes {
+        None => reasons.push("an upstream stage will rerun".into()),
+        Some(hashes) => {
+            for (name, hash) in hashes {
+                match entry.inputs.get(name) {
+                    None => reasons.push(format!("new input `{name}`")),
+                    Some(old) if old != hash => reasons.push(format!("input `{name}` changed")),
+                    Some(_) => {}
+                }
+            }
+            for name in entry.inputs.keys().filter(|n| !hashes.contains_key(*n)) {
+                reasons.push(format!("input `{name}` removed"));
+            }
+            if reasons.is_empty() && entry.key != key {
+                reasons.push("cache key changed".into());
+            }
+        }
+    }
+    for (name, out) in &entry.outputs {
+        let dir = output_dir.join(&out.path);
+        if !dir.is_dir() {
+            reasons.push(format!("output `{name}` missing ({})", dir.display()));
+        } else if hash::hash_dir(&dir)?.0 != out.hash {
+            reasons.push(format!("output `{name}` was modified on disk"));
+        }
+    }
+    Ok(Assessment { key, reasons })
+}
+
+fn describe_param_changes(old: &serde_json::Value, new: &serde_json::Value) -> String {
+    let empty = serde_json::Map::new();
+    let old = old.as_object().unwrap_or(&empty);
+    let new = new.as_object().unwrap_or(&empty);
+    let keys: BTreeSet<&String> = old.keys().chain(new.keys()).collect();
+    let show = |v: Option<&serde_json::Value>| v.map_or("(none)".to_string(), |v| v.to_string());
+    keys.into_iter()
+        .filter(|k| old.get(*k) != new.get(*k))
+        .map(|k| format!("{k} {} → {}", show(old.get(k)), show(new.get(k))))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn input_hashes_for(
+    stage: &PlannedStage,
+    sources: &BTreeMap<String, ResolvedSource>,
+    produced: &BTreeMap<String, Produced>,
+) -> Option<BTreeMap<String, String>> {
+    stage
+        .inputs
+        .iter()
+        .map(|input| {
+            let hash = match input {
+                InputRef::Source(name) => sources[name].hash.clone(),
+                InputRef::Stage { stage, output } => produced.get(stage)?.outputs.get(*output)?.hash.clone(),
+            };
+            Some((input.label(), hash))
+        })
+        .collect()
+}
+
+fn stage_inputs(stage: &PlannedStage, sources: &BTreeMap<String, ResolvedSource>, produced: &BTreeMap<String, Produced>) -> anyhow::Result<Vec<StageInput>> {
+    stage
+        .inputs
+        .iter()
+        .map(|input| match input {
+            InputRef::Source(name) => Ok(sources[name].input.clone()),
+            InputRef::Stage { stage: upstream, output } => {
+                let dir = produced[upstream].dir.join(output);
+                Ok(StageInput::Dataset { name: input.label(), parts: dataset_parts(&dir, &input.label())? })
+            }
+        })
+        .collect()
+}
+
+/// The parts of a dataset directory: each `data.parquet` with the partition its path encodes.
+pub fn dataset_parts(dir: &Path, label: &str) -> anyhow::Result<Vec<InputPart>> {
+    let files: Vec<String> = hash::list_files(dir)?.into_iter().filter(|f| f.ends_with(super::sink::DATA_FILE)).collect();
+    let paths: Vec<PathBuf> = files.iter().map(|f| dir.join(f)).collect();
+    let hashes = hash::hash_files(&paths)?;
+    Ok(files
+        .iter()
+        .zip(paths)
+        .zip(hashes)
+        .map(|((relative, path), hash)| {
+            let partition = relative
+                .split('/')
+                .filter_map(|segment| segment.split_once('='))
+                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .collect();
+            InputPart { partition, path, label: format!("{label}/{relative}"), hash }
+        })
+        .collect())
+}
+
+pub struct StatusLine {
+    pub name: String,
+    pub stage_type: &'static str,
+    pub reasons: Vec<String>,
+}
+
+/// What `run` would do, and why, without running anything.
+pub fn status(plan: &Plan) -> Result<Vec<StatusLine>, UserError> {
+    let output_dir = plan.file.output_dir();
+    let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
+    let sources = resolve_sources(plan)?;
+    let mut produced: BTreeMap<String, Produced> = BTreeMap::new();
+    let mut lines = Vec::new();
+    for stage in plan.stages.values() {
+        let hashes = input_hashes_for(stage, &sources, &produced);
+        let assessment = assess(stage, hashes.as_ref(), &lock, &output_dir).map_err(|e| UserError::new(format!("{e:#}")))?;
+        if assessment.reasons.is_empty() {
+            let outputs = lock.stages[&stage.name].outputs.clone();
+            produced.insert(stage.name.clone(), Produced { dir: output_dir.join(&stage.name), outputs });
+        }
+        lines.push(StatusLine { name: stage.name.clone(), stage_type: stage.stage.info().name, reasons: assessment.reasons });
+    }
+    Ok(lines)
+}
+
+pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Result<Vec<StageReport>> {
+    for name in &options.force {
+        if !plan.stages.contains_key(name) {
+            let known: Vec<&str> = plan.stages.keys().map(String::as_str).collect();
+            return Err(UserError::new(format!("`--force {name}`: no stage of that name in this pipeline"))
+                .in_file(&plan.file.path)
+                .hint(format!("stages: {}", known.join(", ")))
+                .into());
+        }
+    }
+    let forced: BTreeSet<String> = options.force.iter().flat_map(|n| plan.with_dependents(n)).collect();
+    let output_dir = plan.file.output_dir();
+    let lock_file = output_dir.join(LOCK_FILE);
+    let lock = LockFile::read(&lock_file)?;
+    let sources = resolve_sources(plan)?;
+    std::fs::create_dir_all(&output_dir).map_err(|e| {
+        UserError::new(format!("cannot create the output directory `{}`: {e}", output_dir.display()))
+            .in_file(&plan.file.path)
+            .at(super::locate::key_position(&plan.file.text, &["output_dir"]))
+            .hint("choose a writable `output_dir` (relative to the pipeline file)")
+    })?;
+    let staging = output_dir.join(format!(".staging-{}", std::process::id()));
+    std::fs::create_dir(&staging).map_err(|e| {
+        UserError::new(format!("the output directory `{}` is not writable: {e}", output_dir.display()))
+            .in_file(&plan.file.path)
+            .at(super::locate::key_position(&plan.file.text, &["output_dir"]))
+            .hint("fix its permissions or choose another `output_dir`")
+    })?;
+    let result = run_stages(plan, &forced, &lock, &sources, &output_dir, &staging, reporter);
+    let committed = result.and_then(|(reports, new_lock, rerun)| {
+        for name in &rerun {
+            crate::io::atomic::replace_dir(&staging.join(name), &output_dir.join(name))
+                .with_context(|| format!("moving the new outputs of `{name}` into place"))?;
+        }
+        new_lock.write(&lock_file)?;
+        Ok(reports)
+    });
+    let _ = std::fs::remove_dir_all(&staging);
+    committed
+}
+
+type StagesResult = (Vec<StageReport>, LockFile, Vec<String>);
+
+fn run_stages(
+    plan: &Plan,
+    forced: &BTreeSet<String>,
+    lock: &LockFile,
+    sources: &BTreeMap<String, ResolvedSource>,
+    output_dir: &Path,
+    staging: &Path,
+    reporter: &Reporter,
+) -> anyhow::Result<StagesResult> {
+    let produced: Mutex<BTreeMap<String, Produced>> = Mutex::new(BTreeMap::new());
+    let entries: Mutex<BTreeMap<String, StageLock>> = Mutex::new(BTreeMap::new());
+    let reports: Mutex<BTreeMap<String, StageReport>> = Mutex::new(BTreeMap::new());
+    let mut remaining: Vec<&PlannedStage> = plan.stages.values().collect();
+    while !remaining.is_empty() {
+        // A wave: every stage whose upstream stages are all finished runs now, side by side.
+        let finished: BTreeSet<String> = produced.lock().expect("no poisoned lock").keys().cloned().collect();
+        let (ready, waiting): (Vec<&PlannedStage>, Vec<&PlannedStage>) = remaining.into_iter().partition(|s| {
+            s.inputs.iter().all(|i| match i {
+                InputRef::Source(_) => true,
+                InputRef::Stage { stage, .. } => finished.contains(stage),
+            })
+        });
+        remaining = waiting;
+        ready.par_iter().try_for_each(|stage| -> anyhow::Result<()> {
+            let snapshot = produced.lock().expect("no poisoned lock").clone();
+            let hashes = input_hashes_for(stage, sources, &snapshot).expect("upstream stages finished");
+            let assessment = assess(stage, Some(&hashes), lock, output_dir)?;
+            let info = stage.stage.info();
+            let (done, report) = if assessment.reasons.is_empty() && !forced.contains(&stage.name) {
+                reporter.line(&format!("{:<18} cached", stage.name));
+                let entry = lock.stages[&stage.name].clone();
+                entries.lock().expect("no poisoned lock").insert(stage.name.clone(), entry.clone());
+                (Produced { dir: output_dir.join(&stage.name), outputs: entry.outputs }, Outcome::Cached)
+            } else {
+                let why = if forced.contains(&stage.name) { "forced".to_string() } else { assessment.reasons.join("; ") };
+                let started = Instant::now();
+                let dir = staging.join(&stage.name);
+                let inputs = stage_inputs(stage, sources, &snapshot)?;
+                let records: usize = inputs.iter().map(|i| i.parts().len()).sum();
+                let bar = reporter.stage_bar(&stage.name, records as u64);
+                reporter.line(&format!("{:<18} running ({why})", stage.name));
+                let sink = OutputSink::new(&dir, &stage.name, info, &stage.params, &hashes, bar.clone());
+                let ctx = StageContext { stage_name: &stage.name, params: &stage.params, inputs: &inputs, sink: &sink };
+                stage
+                    .stage
+                    .run(&ctx)
+                    .with_context(|| format!("stage `{}` (type `{}`) failed; nothing was changed on disk", stage.name, info.name))?;
+                bar.finish_and_clear();
+                let mut outputs = BTreeMap::new();
+                for output in info.outputs {
+                    let out_dir = dir.join(output.name);
+                    std::fs::create_dir_all(&out_dir)?;
+                    let (hash, files) = hash::hash_dir(&out_dir)?;
+                    outputs.insert(output.name.to_string(), OutputLock { path: format!("{}/{}", stage.name, output.name), hash, files });
+                }
+                let files: usize = outputs.values().map(|o| o.files).sum();
+                let seconds = started.elapsed().as_secs_f64();
+                reporter.line(&format!("{:<18} done in {seconds:.2} s ({records} records in, {files} files out)", stage.name));
+                let entry = StageLock {
+                    stage_type: info.name.to_string(),
+                    stage_version: info.version,
+                    key: assessment.key,
+                    params: serde_json::Value::Object(stage.params.clone()),
+                    inputs: hashes,
+                    outputs: outputs.clone(),
+                };
+                entries.lock().expect("no poisoned lock").insert(stage.name.clone(), entry);
+                (Produced { dir, outputs }, Outcome::Ran { seconds, records })
+            };
+            produced.lock().expect("no poisoned lock").insert(stage.name.clone(), done);
+            reports.lock().expect("no poisoned lock").insert(stage.name.clone(), StageReport { name: stage.name.clone(), outcome: report });
+            Ok(())
+        })?;
+    }
+    let reports = reports.into_inner().map_err(|_| anyhow!("a stage panicked"))?;
+    let ordered: Vec<StageReport> = plan.stages.keys().map(|n| reports[n].clone()).collect();
+    let rerun: Vec<String> = ordered.iter().filter(|r| matches!(r.outcome, Outcome::Ran { .. })).map(|r| r.name.clone()).collect();
+    let new_lock = LockFile { version: lock.version.max(1), stages: entries.into_inner().map_err(|_| anyhow!("a stage panicked"))? };
+    Ok((ordered, new_lock, rerun))
+}

@@ -1,0 +1,283 @@
+//! From a parsed pipeline file to a checked plan: stage types known, parameters valid, inputs
+//! resolvable, no cycles; stages in an order where each comes after what it reads.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use indexmap::IndexMap;
+
+use super::params::{self, Params};
+use super::spec::{ColumnSpec, PipelineFile, SourceSpec};
+use crate::error::{did_you_mean, UserError};
+use crate::stages::{self, InputKind, Stage};
+
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+pub enum InputRef {
+    Source(String),
+    Stage { stage: String, output: &'static str },
+}
+
+impl InputRef {
+    pub fn label(&self) -> String {
+        match self {
+            InputRef::Source(name) => name.clone(),
+            InputRef::Stage { stage, output } => format!("{stage}.{output}"),
+        }
+    }
+}
+
+pub struct PlannedStage {
+    pub name: String,
+    pub stage: &'static dyn Stage,
+    pub params: Params,
+    pub inputs: Vec<InputRef>,
+}
+
+pub struct Plan {
+    pub file: PipelineFile,
+    /// Stages in dependency order (ties keep the file's order).
+    pub stages: IndexMap<String, PlannedStage>,
+}
+
+impl Plan {
+    pub fn new(file: PipelineFile) -> Result<Plan, UserError> {
+        for (name, source) in &file.spec.inputs {
+            check_source(&file, name, source)?;
+        }
+        let mut planned = IndexMap::new();
+        for (name, spec) in &file.spec.stages {
+            let stage = stages::find(&spec.stage_type).ok_or_else(|| {
+                let suggestion = did_you_mean(&spec.stage_type, stages::names())
+                    .map(|s| format!("did you mean `{s}`? "))
+                    .unwrap_or_default();
+                file.error_at(&["stages", name, "type"], format!("unknown stage type `{}`", spec.stage_type))
+                    .hint(format!("{suggestion}known stage types: {} (see `shakeflow stages`)", stages::names().join(", ")))
+            })?;
+            let info = stage.info();
+            let given = spec.params.iter().map(|(k, v)| (k.as_str(), params::yaml_to_json(v)));
+            let params = params::normalize(info.params, info.name, given).map_err(|e| {
+                let position = match &e.key {
+                    Some(key) => super::locate::key_position(&file.text, &["stages", name, "params", key]),
+                    None => super::locate::key_position(&file.text, &["stages", name]),
+                };
+                UserError::new(e.message).in_file(&file.path).at(position).hint(e.hint)
+            })?;
+            let inputs = resolve_inputs(&file, name, &spec.inputs, info.inputs)?;
+            planned.insert(name.clone(), PlannedStage { name: name.clone(), stage, params, inputs });
+        }
+        let order = topological_order(&file, &planned)?;
+        let mut sorted = IndexMap::new();
+        for name in order {
+            let stage = planned.swap_remove(&name).expect("order lists planned stages");
+            sorted.insert(name, stage);
+        }
+        Ok(Plan { file, stages: sorted })
+    }
+
+    /// The stages that read `name`'s outputs, directly or not, plus `name` itself.
+    pub fn with_dependents(&self, name: &str) -> BTreeSet<String> {
+        let mut set = BTreeSet::from([name.to_string()]);
+        for (stage_name, stage) in &self.stages {
+            let reads_set = stage.inputs.iter().any(|i| matches!(i, InputRef::Stage { stage, .. } if set.contains(stage)));
+            if reads_set {
+                set.insert(stage_name.clone());
+            }
+        }
+        set
+    }
+}
+
+fn check_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<(), UserError> {
+    let known = || format!("known units: {}", crate::units::known_units().join(", "));
+    if let Some(unit) = &source.unit {
+        if crate::units::conversion(unit).is_none() {
+            return Err(file.error_at(&["inputs", name, "unit"], format!("unknown unit `{unit}`")).hint(known()));
+        }
+    }
+    if let Some(unit) = &source.time_unit {
+        if crate::units::conversion(unit).is_none_or(|c| c.si_unit != "s") {
+            return Err(file.error_at(&["inputs", name, "time_unit"], format!("`{unit}` is not a time unit")).hint("use s or ms"));
+        }
+    }
+    for (column, spec) in &source.columns {
+        if let ColumnSpec::Full(detail) = spec {
+            if let Some(unit) = &detail.unit {
+                if crate::units::conversion(unit).is_none() {
+                    return Err(file
+                        .error_at(&["inputs", name, "columns", column, "unit"], format!("unknown unit `{unit}`"))
+                        .hint(known()));
+                }
+            }
+        }
+    }
+    if let Some(dt) = source.dt {
+        if !(dt > 0.0 && dt.is_finite()) {
+            return Err(file.error_at(&["inputs", name, "dt"], format!("`dt` must be a positive number of seconds, not {dt}")));
+        }
+    }
+    if let Some(d) = &source.delimiter {
+        if d != "whitespace" && d != "\\t" && d.chars().count() != 1 {
+            return Err(file
+                .error_at(&["inputs", name, "delimiter"], format!("delimiter `{d}` is not one character"))
+                .hint("use `,`, `;`, `\\t`, `whitespace`, or leave it out to detect it"));
+        }
+    }
+    Ok(())
+}
+
+fn resolve_inputs(file: &PipelineFile, stage_name: &str, names: &[String], kind: InputKind) -> Result<Vec<InputRef>, UserError> {
+    let key_path = ["stages", stage_name, "inputs"];
+    if names.is_empty() {
+        let what = match kind {
+            InputKind::Sources => "a source from `inputs:`",
+            InputKind::Datasets => "another stage",
+        };
+        return Err(file
+            .error_at(&["stages", stage_name], format!("stage `{stage_name}` has no inputs"))
+            .hint(format!("add `inputs: [...]` naming {what}")));
+    }
+    let mut refs = Vec::new();
+    for name in names {
+        let (head, output) = match name.split_once('.') {
+            Some((h, o)) => (h, Some(o)),
+            None => (name.as_str(), None),
+        };
+        let reference = if file.spec.inputs.contains_key(name) {
+            if kind != InputKind::Sources {
+                return Err(file.error_at_value(&key_path, name, format!("`{name}` is a record source, but this stage type reads stage outputs"))
+                    .hint(format!("load it first with a `load` stage and name that stage here instead of `{name}`")));
+            }
+            InputRef::Source(name.clone())
+        } else if let Some(upstream) = file.spec.stages.get(head) {
+            if kind != InputKind::Datasets {
+                return Err(file.error_at_value(&key_path, name, format!("`{name}` is a stage, but this stage type reads record sources"))
+                    .hint("name a source declared under `inputs:`"));
+            }
+            let outputs = stages::find(&upstream.stage_type).map(|s| s.info().outputs).unwrap_or(&[]);
+            let output = match output {
+                None => outputs.first().map(|o| o.name),
+                Some(wanted) => outputs.iter().map(|o| o.name).find(|o| *o == wanted),
+            };
+            let Some(output) = output else {
+                let names: Vec<&str> = outputs.iter().map(|o| o.name).collect();
+                return Err(file.error_at_value(&key_path, name, format!("stage `{head}` has no output `{}`", output.unwrap_or("")))
+                    .hint(format!("outputs of `{head}`: {}", names.join(", "))));
+            };
+            InputRef::Stage { stage: head.to_string(), output }
+        } else {
+            let candidates: Vec<&str> = file.spec.inputs.keys().chain(file.spec.stages.keys()).map(String::as_str).collect();
+            let suggestion = did_you_mean(name, candidates.iter().copied()).map(|s| format!("did you mean `{s}`? ")).unwrap_or_default();
+            return Err(file
+                .error_at_value(&key_path, name, format!("stage `{stage_name}` reads `{name}`, which is neither a source nor a stage"))
+                .hint(format!("{suggestion}sources: [{}]; stages: [{}]",
+                    file.spec.inputs.keys().cloned().collect::<Vec<_>>().join(", "),
+                    file.spec.stages.keys().cloned().collect::<Vec<_>>().join(", "))));
+        };
+        refs.push(reference);
+    }
+    Ok(refs)
+}
+
+fn topological_order(file: &PipelineFile, planned: &IndexMap<String, PlannedStage>) -> Result<Vec<String>, UserError> {
+    let deps: BTreeMap<&str, BTreeSet<&str>> = planned
+        .iter()
+        .map(|(name, stage)| {
+            let upstream = stage.inputs.iter().filter_map(|i| match i {
+                InputRef::Stage { stage, .. } => Some(stage.as_str()),
+                InputRef::Source(_) => None,
+            });
+            (name.as_str(), upstream.collect())
+        })
+        .collect();
+    let mut done: BTreeSet<&str> = BTreeSet::new();
+    let mut order = Vec::new();
+    while order.len() < planned.len() {
+        let next = planned.keys().find(|n| !done.contains(n.as_str()) && deps[n.as_str()].iter().all(|d| done.contains(d)));
+        match next {
+            Some(name) => {
+                done.insert(name);
+                order.push(name.clone());
+            }
+            None => {
+                let cycle = find_cycle(&deps, &done);
+                return Err(file
+                    .error_at(&["stages", cycle[0], "inputs"], format!("the stages form a cycle: {}", cycle.join(" → ")))
+                    .hint("a stage cannot read its own output, directly or through other stages; remove one of these inputs"));
+            }
+        }
+    }
+    Ok(order)
+}
+
+fn find_cycle<'a>(deps: &BTreeMap<&'a str, BTreeSet<&'a str>>, done: &BTreeSet<&str>) -> Vec<&'a str> {
+    // Every stage left has an unfinished dependency, so walking them must revisit one.
+    let start = *deps.keys().find(|n| !done.contains(*n)).expect("a cycle leaves stages undone");
+    let mut path = vec![start];
+    loop {
+        let last = *path.last().expect("path starts non-empty");
+        let next = *deps[last].iter().find(|d| !done.contains(*d)).expect("undone stages have undone deps");
+        if let Some(pos) = path.iter().position(|p| *p == next) {
+            let mut cycle = path[pos..].to_vec();
+            cycle.push(next);
+            return cycle;
+        }
+        path.push(next);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+
+    fn plan(text: &str) -> Result<Plan, UserError> {
+        Plan::new(PipelineFile::parse(Path::new("p.yaml"), text.to_string())?)
+    }
+
+    fn plan_err(text: &str) -> UserError {
+        match plan(text) {
+            Ok(_) => panic!("the plan was accepted"),
+            Err(e) => e,
+        }
+    }
+
+    const SOURCE: &str = "version: 1\noutput_dir: out\ninputs:\n  rec:\n    format: at2\n    path: a.AT2\nstages:\n";
+
+    #[test]
+    fn orders_stages_after_their_inputs() {
+        let p = plan(&format!("{SOURCE}  b:\n    type: baseline\n    inputs: [l]\n  l:\n    type: load\n    inputs: [rec]\n")).unwrap();
+        assert_eq!(p.stages.keys().collect::<Vec<_>>(), ["l", "b"]);
+    }
+
+    #[test]
+    fn cycle_is_named_with_its_path() {
+        let err = plan_err(&format!("{SOURCE}  a:\n    type: baseline\n    inputs: [b]\n  b:\n    type: baseline\n    inputs: [a]\n"));
+        assert!(err.message.contains("cycle: a → b → a"), "{err}");
+        assert_eq!(err.line, Some(10));
+    }
+
+    #[test]
+    fn unknown_stage_type_points_at_type_and_suggests() {
+        let err = plan_err(&format!("{SOURCE}  l:\n    type: lod\n    inputs: [rec]\n"));
+        assert_eq!((err.line, err.column), (Some(9), Some(5)));
+        assert!(err.hint.unwrap().contains("did you mean `load`"));
+    }
+
+    #[test]
+    fn missing_input_points_at_the_name() {
+        let err = plan_err(&format!("{SOURCE}  l:\n    type: load\n    inputs: [recc]\n"));
+        assert_eq!(err.line, Some(10), "{err}");
+        assert!(err.hint.unwrap().contains("did you mean `rec`"));
+    }
+
+    #[test]
+    fn bad_param_points_at_the_param() {
+        let err = plan_err(&format!("{SOURCE}  l:\n    type: load\n    inputs: [rec]\n  b:\n    type: baseline\n    inputs: [l]\n    params:\n      ordr: 2\n"));
+        assert_eq!(err.line, Some(15), "{err}");
+    }
+
+    #[test]
+    fn dependents_are_transitive() {
+        let p = plan(&format!("{SOURCE}  l:\n    type: load\n    inputs: [rec]\n  b:\n    type: baseline\n    inputs: [l]\n  c:\n    type: baseline\n    inputs: [b]\n")).unwrap();
+        assert_eq!(p.with_dependents("b"), BTreeSet::from(["b".to_string(), "c".to_string()]));
+    }
+}

@@ -1,0 +1,83 @@
+//! Where a running stage puts its tables: Parquet (+ MCAP for time series) in a staging
+//! directory, each file stamped with the provenance of the run that made it.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use anyhow::{anyhow, bail};
+
+use crate::io::{mcap, parquet};
+use crate::stages::{partition_path, OutputInfo, Partition, StageInfo};
+use crate::table::Table;
+
+pub const DATA_FILE: &str = "data.parquet";
+pub const MCAP_FILE: &str = "data.mcap";
+
+pub struct OutputSink {
+    root: PathBuf,
+    stage_name: String,
+    info: &'static StageInfo,
+    provenance: BTreeMap<String, String>,
+    written: Mutex<BTreeSet<String>>,
+    progress: indicatif::ProgressBar,
+}
+
+impl OutputSink {
+    /// `inputs` maps each input name to its content hash.
+    pub fn new(
+        root: &Path,
+        stage_name: &str,
+        info: &'static StageInfo,
+        params: &crate::pipeline::params::Params,
+        inputs: &BTreeMap<String, String>,
+        progress: indicatif::ProgressBar,
+    ) -> Self {
+        let provenance = BTreeMap::from([
+            ("shakeflow.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+            ("shakeflow.stage".to_string(), stage_name.to_string()),
+            ("shakeflow.stage_type".to_string(), info.name.to_string()),
+            ("shakeflow.stage_version".to_string(), info.version.to_string()),
+            ("shakeflow.params".to_string(), serde_json::to_string(params).expect("params are JSON")),
+            ("shakeflow.inputs".to_string(), serde_json::to_string(inputs).expect("hashes are JSON")),
+        ]);
+        OutputSink { root: root.to_path_buf(), stage_name: stage_name.into(), info, provenance, written: Mutex::new(BTreeSet::new()), progress }
+    }
+
+    fn output_info(&self, output: &str) -> anyhow::Result<&'static OutputInfo> {
+        self.info
+            .outputs
+            .iter()
+            .find(|o| o.name == output)
+            .ok_or_else(|| anyhow!("stage type `{}` has no output `{output}`", self.info.name))
+    }
+
+    /// Writes one record of one output. Records are independent, so stages call this in parallel.
+    pub fn write(&self, output: &str, partition: &Partition, mut table: Table) -> anyhow::Result<()> {
+        let info = self.output_info(output)?;
+        let relative = partition_path(partition);
+        if !self.written.lock().expect("no panics while holding the lock").insert(format!("{output}/{relative}")) {
+            bail!("stage `{}` wrote the record `{relative}` of `{output}` twice: two inputs share these partition keys; give the sources distinct `partition:` values", self.stage_name);
+        }
+        let dir = self.root.join(output).join(&relative);
+        std::fs::create_dir_all(&dir).map_err(|e| anyhow!("cannot create `{}`: {e}", dir.display()))?;
+        table.metadata.extend(self.provenance.clone());
+        table.metadata.insert("shakeflow.output".into(), output.into());
+        table.metadata.insert("shakeflow.partition".into(), relative.clone());
+        parquet::write_table(&dir.join(DATA_FILE), &table)?;
+        if info.timeseries {
+            let topic = if relative.is_empty() {
+                format!("/{}/{output}", self.stage_name)
+            } else {
+                format!("/{}/{output}/{relative}", self.stage_name)
+            };
+            mcap::write_timeseries(&dir.join(MCAP_FILE), &[mcap::Topic { name: topic, table: &table }], &table.metadata)?;
+        }
+        self.progress.inc(1);
+        Ok(())
+    }
+
+    pub fn set_total(&self, records: usize) {
+        self.progress.set_length(records as u64);
+    }
+}

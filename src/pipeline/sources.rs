@@ -1,0 +1,138 @@
+//! Resolving a source's `path` (file, glob or `{key}` template) to record files and partitions.
+
+use std::path::{Path, PathBuf};
+
+use crate::error::UserError;
+use crate::stages::Partition;
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct MatchedFile {
+    pub path: PathBuf,
+    pub partition: Partition,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Piece {
+    Literal(String),
+    Key(String),
+}
+
+fn parse_template(template: &str) -> Result<Vec<Piece>, String> {
+    let mut pieces = Vec::new();
+    let mut rest = template;
+    while let Some(open) = rest.find('{') {
+        if open > 0 {
+            pieces.push(Piece::Literal(rest[..open].to_string()));
+        }
+        let close = rest[open..].find('}').ok_or_else(|| format!("unclosed `{{` in `{template}`"))? + open;
+        let key = &rest[open + 1..close];
+        if key.is_empty() || !key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+            return Err(format!("`{{{key}}}` in `{template}` is not a valid partition key (letters, digits, _)"));
+        }
+        pieces.push(Piece::Key(key.to_string()));
+        rest = &rest[close + 1..];
+    }
+    if !rest.is_empty() {
+        pieces.push(Piece::Literal(rest.to_string()));
+    }
+    Ok(pieces)
+}
+
+/// Matches `text` against the pieces; a key takes one or more characters within one path segment.
+fn match_pieces(text: &str, pieces: &[Piece]) -> Option<Partition> {
+    match pieces.split_first() {
+        None => text.is_empty().then(Vec::new),
+        Some((Piece::Literal(lit), rest)) => text.strip_prefix(lit.as_str()).and_then(|t| match_pieces(t, rest)),
+        Some((Piece::Key(key), rest)) => {
+            let segment_end = text.find('/').unwrap_or(text.len());
+            (1..=segment_end).filter(|&n| text.is_char_boundary(n)).find_map(|n| {
+                let mut found = match_pieces(&text[n..], rest)?;
+                found.insert(0, (key.clone(), text[..n].to_string()));
+                Some(found)
+            })
+        }
+    }
+}
+
+/// Files of a source, sorted by path, each with its partition keys: template keys first, then
+/// the source's constant keys; a plain glob gets `file=<stem>` so records stay distinct.
+pub fn resolve(
+    base_dir: &Path,
+    pattern: &str,
+    constant: &std::collections::BTreeMap<String, String>,
+) -> Result<Vec<MatchedFile>, UserError> {
+    let pieces = parse_template(pattern).map_err(UserError::new)?;
+    let has_keys = pieces.iter().any(|p| matches!(p, Piece::Key(_)));
+    let glob_pattern: String = pieces
+        .iter()
+        .map(|p| match p {
+            Piece::Literal(l) => l.clone(),
+            Piece::Key(_) => "*".to_string(),
+        })
+        .collect();
+    let is_glob = glob_pattern.contains(['*', '?', '[']);
+    let full = base_dir.join(&glob_pattern);
+    let full_text = full.to_string_lossy().replace('\\', "/");
+    let entries = glob::glob(&full_text).map_err(|e| UserError::new(format!("invalid path pattern `{pattern}`: {e}")))?;
+    let mut files = Vec::new();
+    for entry in entries {
+        let path = entry.map_err(|e| UserError::new(format!("cannot read `{}`: {}", e.path().display(), e.error())))?;
+        if !path.is_file() {
+            continue;
+        }
+        let relative = path.strip_prefix(base_dir).unwrap_or(&path).to_string_lossy().replace('\\', "/");
+        let mut partition = if has_keys {
+            match match_pieces(&relative, &pieces) {
+                Some(p) => p,
+                None => continue,
+            }
+        } else if is_glob {
+            let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            vec![("file".to_string(), stem)]
+        } else {
+            Vec::new()
+        };
+        partition.extend(constant.iter().map(|(k, v)| (k.clone(), v.clone())));
+        files.push(MatchedFile { path, partition });
+    }
+    files.sort_by(|a, b| a.path.cmp(&b.path));
+    if files.is_empty() {
+        return Err(UserError::new(format!("no file matches `{pattern}` (looked for `{}`)", full.display())).hint(
+            "check the path (relative paths start at the pipeline file's folder); for the demo archive run `shakeflow demo-archive runs/demo-archive` or `make demo`",
+        ));
+    }
+    Ok(files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::BTreeMap;
+
+    #[test]
+    fn template_keys_become_partitions() {
+        let dir = tempfile::tempdir().unwrap();
+        for test in ["FB-4", "BI-1"] {
+            std::fs::create_dir_all(dir.path().join(test)).unwrap();
+            std::fs::write(dir.path().join(test).join("DAQ1_floors.csv"), "x").unwrap();
+        }
+        let constant = BTreeMap::from([("floor".to_string(), "5".to_string())]);
+        let files = resolve(dir.path(), "{motion}/DAQ1_floors.csv", &constant).unwrap();
+        let partitions: Vec<_> = files.iter().map(|f| crate::stages::partition_path(&f.partition)).collect();
+        assert_eq!(partitions, ["motion=BI-1/floor=5", "motion=FB-4/floor=5"]);
+    }
+
+    #[test]
+    fn keys_match_within_one_segment() {
+        let pieces = parse_template("{a}_{b}.csv").unwrap();
+        assert_eq!(match_pieces("x_y_z.csv", &pieces).unwrap(), vec![("a".into(), "x".into()), ("b".into(), "y_z".into())]);
+        assert!(match_pieces("d/x_y.csv", &parse_template("{a}.csv").unwrap()).is_none());
+    }
+
+    #[test]
+    fn no_match_is_a_clear_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let err = resolve(dir.path(), "nothing/*.AT2", &BTreeMap::new()).unwrap_err();
+        assert!(err.message.contains("no file matches `nothing/*.AT2`"), "{err}");
+    }
+}

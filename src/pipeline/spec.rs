@@ -1,0 +1,239 @@
+//! The pipeline file: what a user writes, parsed strictly (unknown keys are errors).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use indexmap::IndexMap;
+use serde::{Deserialize, Serialize};
+
+use crate::error::UserError;
+
+/// The pipeline format version this build reads.
+pub const FORMAT_VERSION: u32 = 1;
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PipelineSpec {
+    /// Format version of the file; 1.
+    pub version: u32,
+    #[serde(default)]
+    pub description: Option<String>,
+    /// Where artifacts and the lockfile go, relative to the pipeline file.
+    pub output_dir: String,
+    /// Record sources: files on disk that `load` stages read.
+    #[serde(default)]
+    pub inputs: IndexMap<String, SourceSpec>,
+    /// The processing steps, by name, in the order a reader should follow them.
+    pub stages: IndexMap<String, StageSpec>,
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct StageSpec {
+    /// The stage type (see `shakeflow stages`).
+    #[serde(rename = "type")]
+    pub stage_type: String,
+    #[serde(default)]
+    pub description: Option<String>,
+    /// Sources or other stages this stage reads: `name` or `stage.output`.
+    #[serde(default)]
+    pub inputs: Vec<String>,
+    /// Stage parameters; unknown names are errors, omitted ones take their defaults.
+    #[serde(default)]
+    pub params: BTreeMap<String, serde_yaml::Value>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RecordFormat {
+    /// Delimited text: CSV, TSV or whitespace-separated columns.
+    Delimited,
+    Csv,
+    Tsv,
+    /// PEER NGA `.AT2` (both header styles).
+    At2,
+    /// RENADIC (Universidad de Chile) Vol.1 uncorrected accelerogram.
+    RenadicV1,
+    /// SimCenter event JSON (`dT`, `data_x`, `data_y`).
+    SimcenterJson,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GapPolicy {
+    /// Missing values (empty, NaN) are an error naming the first one.
+    #[default]
+    Error,
+    /// Missing values are filled by linear interpolation between their neighbours (reported).
+    Interpolate,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NonUniformPolicy {
+    /// A time column that is not uniformly sampled is an error naming the first bad step.
+    #[default]
+    Error,
+    /// Resample linearly onto the median time step (reported in the artifact metadata).
+    Resample,
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SourceSpec {
+    pub format: RecordFormat,
+    /// A file, a glob (`*`, `?`, `**`) or a template whose `{key}` parts match one path segment
+    /// each and become partition keys (`archive/{motion}/DAQ1_floors.csv`). Relative to the pipeline file.
+    pub path: String,
+    #[serde(default)]
+    pub description: Option<String>,
+    /// Constant partition keys added to every record of this source (`floor: "4"`).
+    #[serde(default)]
+    pub partition: BTreeMap<String, String>,
+    /// Delimited text: lines before the column-name row.
+    #[serde(default)]
+    pub header_lines: usize,
+    /// Delimited text: whether a column-name row follows the header lines.
+    #[serde(default = "yes")]
+    pub column_names: bool,
+    /// Delimited text: one character (`,` `;` `\t`), `whitespace`, or absent to detect it.
+    #[serde(default)]
+    pub delimiter: Option<String>,
+    /// Delimited text: the column holding time; without one, `dt` gives the sampling.
+    #[serde(default)]
+    pub time_column: Option<String>,
+    /// Time unit of `time_column` (default s).
+    #[serde(default)]
+    pub time_unit: Option<String>,
+    /// Sample interval in seconds for files with neither a time column nor a header DT.
+    #[serde(default)]
+    pub dt: Option<f64>,
+    /// Unit of the channels in the file (default: what the file says, else an error).
+    #[serde(default)]
+    pub unit: Option<String>,
+    /// Output column name → file column (name, or a mapping with `column`, `unit`, `scale`, `description`).
+    /// Absent: every channel, named as in the file.
+    #[serde(default)]
+    pub columns: IndexMap<String, ColumnSpec>,
+    /// Factor applied to every channel after unit conversion (e.g. a sensor sensitivity).
+    #[serde(default = "one")]
+    pub scale: f64,
+    #[serde(default)]
+    pub gaps: GapPolicy,
+    #[serde(default)]
+    pub non_uniform: NonUniformPolicy,
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum ColumnSpec {
+    Name(String),
+    Full(ColumnDetail),
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ColumnDetail {
+    pub column: String,
+    #[serde(default)]
+    pub unit: Option<String>,
+    #[serde(default)]
+    pub scale: Option<f64>,
+    #[serde(default)]
+    pub description: Option<String>,
+}
+
+impl ColumnSpec {
+    pub fn file_column(&self) -> &str {
+        match self {
+            ColumnSpec::Name(name) => name,
+            ColumnSpec::Full(detail) => &detail.column,
+        }
+    }
+}
+
+fn yes() -> bool {
+    true
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+/// A parsed pipeline with what error messages need: its path and its text.
+#[derive(Debug, Clone)]
+pub struct PipelineFile {
+    pub path: PathBuf,
+    pub text: String,
+    pub spec: PipelineSpec,
+}
+
+impl PipelineFile {
+    pub fn read(path: &Path) -> Result<Self, UserError> {
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            UserError::new(format!("cannot read the pipeline file: {e}"))
+                .in_file(path)
+                .hint("give the path of a pipeline YAML file, e.g. `pipelines/demo.yaml`")
+        })?;
+        Self::parse(path, text)
+    }
+
+    pub fn parse(path: &Path, text: String) -> Result<Self, UserError> {
+        let spec: PipelineSpec = serde_yaml::from_str(&text).map_err(|e| {
+            let position = e.location().map(|l| (l.line(), l.column()));
+            let message = e.to_string();
+            // serde_yaml appends " at line L column C"; the position is already in the prefix.
+            let message = message.split(" at line ").next().unwrap_or(&message).to_string();
+            UserError::new(message).in_file(path).at(position).hint(
+                "see `schemas/pipeline.schema.json` for the format, or `shakeflow stages` for stage types and parameters",
+            )
+        })?;
+        let file = PipelineFile { path: path.to_path_buf(), text, spec };
+        if file.spec.version != FORMAT_VERSION {
+            return Err(file.error_at(&["version"], format!("pipeline format version {} is not supported", file.spec.version))
+                .hint(format!("this shakeflow reads `version: {FORMAT_VERSION}`")));
+        }
+        Ok(file)
+    }
+
+    /// The directory relative paths in the file are resolved against.
+    pub fn base_dir(&self) -> PathBuf {
+        match self.path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        }
+    }
+
+    pub fn output_dir(&self) -> PathBuf {
+        self.base_dir().join(&self.spec.output_dir)
+    }
+
+    pub fn error_at(&self, key_path: &[&str], message: impl Into<String>) -> UserError {
+        UserError::new(message).in_file(&self.path).at(super::locate::key_position(&self.text, key_path))
+    }
+
+    pub fn error_at_value(&self, key_path: &[&str], value: &str, message: impl Into<String>) -> UserError {
+        UserError::new(message).in_file(&self.path).at(super::locate::value_position(&self.text, key_path, value))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unknown_key_is_reported_with_line_and_column() {
+        let text = "version: 1\noutput_dir: out\nstages:\n  b:\n    type: baseline\n    parms: {}\n";
+        let err = PipelineFile::parse(Path::new("p.yaml"), text.into()).unwrap_err();
+        assert_eq!(err.line, Some(6), "{err}");
+        assert!(err.message.contains("unknown field `parms`"), "{err}");
+        assert!(err.message.contains("expected one of"), "{err}");
+    }
+
+    #[test]
+    fn wrong_version_points_at_it() {
+        let text = "version: 7\noutput_dir: out\nstages: {}\n";
+        let err = PipelineFile::parse(Path::new("p.yaml"), text.into()).unwrap_err();
+        assert_eq!((err.line, err.column), (Some(1), Some(1)));
+    }
+}

@@ -1,0 +1,134 @@
+//! JSON Schema of pipeline files, generated from the stage registry so it cannot drift:
+//! `schemas/pipeline.schema.json` is this output (a test compares them).
+
+use serde_json::{json, Map, Value};
+
+use crate::pipeline::params::{ParamKind, ParamSpec};
+use crate::stages;
+
+fn param_schema(p: &ParamSpec) -> Value {
+    let mut s = match p.kind {
+        ParamKind::Float => json!({"type": "number"}),
+        ParamKind::Int => json!({"type": "integer"}),
+        ParamKind::Bool => json!({"type": "boolean"}),
+        ParamKind::Str => json!({"type": "string"}),
+        ParamKind::Choice(options) => json!({"enum": options}),
+        ParamKind::StrList => json!({"type": "array", "items": {"type": "string"}}),
+    };
+    let unit = if p.unit.is_empty() { String::new() } else { format!(" [{}]", p.unit) };
+    s["description"] = Value::from(format!("{}{unit}", p.description));
+    if let Some(default) = p.default {
+        s["default"] = serde_json::from_str(default).expect("defaults are valid JSON");
+    }
+    if let (Some((lo, hi)), ParamKind::Float | ParamKind::Int) = (p.range, p.kind) {
+        s["minimum"] = json!(lo);
+        s["maximum"] = json!(hi);
+    }
+    s
+}
+
+pub fn pipeline_schema() -> Value {
+    let names = stages::names();
+    let mut conditionals = Vec::new();
+    for stage in stages::registry() {
+        let info = stage.info();
+        let properties: Map<String, Value> = info.params.iter().map(|p| (p.name.to_string(), param_schema(p))).collect();
+        let required: Vec<&str> = info.params.iter().filter(|p| p.default.is_none()).map(|p| p.name).collect();
+        conditionals.push(json!({
+            "if": {"properties": {"type": {"const": info.name}}},
+            "then": {"properties": {"params": {
+                "type": "object", "additionalProperties": false, "properties": properties, "required": required,
+                "description": format!("parameters of `{}`", info.name)
+            }}}
+        }));
+    }
+    json!({
+        "$schema": "http://json-schema.org/draft-07/schema#",
+        "title": "shakeflow pipeline",
+        "description": "A shakeflow pipeline: record sources, and stages that read them or each other. Paths are relative to the pipeline file.",
+        "type": "object",
+        "additionalProperties": false,
+        "required": ["version", "output_dir", "stages"],
+        "properties": {
+            "version": {"const": 1, "description": "pipeline format version"},
+            "description": {"type": "string"},
+            "output_dir": {"type": "string", "description": "where artifacts and shakeflow.lock are written"},
+            "inputs": {"type": "object", "description": "record sources by name", "additionalProperties": {"$ref": "#/definitions/source"}},
+            "stages": {"type": "object", "description": "processing stages by name", "additionalProperties": {"$ref": "#/definitions/stage"}}
+        },
+        "definitions": {
+            "source": {
+                "type": "object",
+                "additionalProperties": false,
+                "required": ["format", "path"],
+                "properties": {
+                    "format": {"enum": ["delimited", "csv", "tsv", "at2", "renadic_v1", "simcenter_json"], "description": "record file format"},
+                    "path": {"type": "string", "description": "file, glob, or template whose {key} parts become partition keys"},
+                    "description": {"type": "string"},
+                    "partition": {"type": "object", "additionalProperties": {"type": "string"}, "description": "constant partition keys for every record"},
+                    "header_lines": {"type": "integer", "minimum": 0, "default": 0, "description": "delimited: lines before the column-name row"},
+                    "column_names": {"type": "boolean", "default": true, "description": "delimited: a column-name row follows the header lines"},
+                    "delimiter": {"type": ["string", "null"], "description": "delimited: one character, \\t, or whitespace; absent: detected"},
+                    "time_column": {"type": ["string", "null"], "description": "delimited: the time column"},
+                    "time_unit": {"type": ["string", "null"], "description": "unit of the time column (s, ms)"},
+                    "dt": {"type": ["number", "null"], "exclusiveMinimum": 0, "description": "sample interval [s] when the file has no time"},
+                    "unit": {"type": ["string", "null"], "description": "unit of the channels (g, g/10, m/s^2, cm/s^2, ...)"},
+                    "columns": {"type": "object", "additionalProperties": {"$ref": "#/definitions/column"}, "description": "output column name → file column"},
+                    "scale": {"type": "number", "default": 1.0, "description": "factor applied after unit conversion"},
+                    "gaps": {"enum": ["error", "interpolate"], "default": "error", "description": "what to do with empty/NaN samples"},
+                    "non_uniform": {"enum": ["error", "resample"], "default": "error", "description": "what to do with a non-uniform time column"}
+                }
+            },
+            "column": {
+                "oneOf": [
+                    {"type": "string", "description": "the file's column name"},
+                    {"type": "object", "additionalProperties": false, "required": ["column"], "properties": {
+                        "column": {"type": "string"},
+                        "unit": {"type": ["string", "null"]},
+                        "scale": {"type": ["number", "null"]},
+                        "description": {"type": ["string", "null"]}
+                    }}
+                ]
+            },
+            "stage": {
+                "type": "object",
+                "additionalProperties": false,
+                "required": ["type"],
+                "properties": {
+                    "type": {"enum": names, "description": "stage type (shakeflow stages)"},
+                    "description": {"type": "string"},
+                    "inputs": {"type": "array", "items": {"type": "string"}, "description": "sources or stages (stage or stage.output)"},
+                    "params": {"type": "object"}
+                },
+                "allOf": conditionals
+            }
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::spec::SourceSpec;
+
+    #[test]
+    fn source_properties_match_the_parser() {
+        let spec: SourceSpec = serde_json::from_value(json!({"format": "at2", "path": "x"})).unwrap();
+        let parsed: Vec<String> = serde_json::to_value(spec).unwrap().as_object().unwrap().keys().cloned().collect();
+        let schema = pipeline_schema();
+        let documented: Vec<String> = schema["definitions"]["source"]["properties"].as_object().unwrap().keys().cloned().collect();
+        let mut a = parsed.clone();
+        let mut b = documented.clone();
+        a.sort();
+        b.sort();
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn committed_schema_is_current() {
+        let committed = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/schemas/pipeline.schema.json"))
+            .expect("schemas/pipeline.schema.json exists");
+        let generated = serde_json::to_string_pretty(&pipeline_schema()).unwrap() + "\n";
+        assert!(committed == generated, "schemas/pipeline.schema.json is stale: run `shakeflow schema > schemas/pipeline.schema.json`");
+    }
+}

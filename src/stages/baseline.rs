@@ -1,0 +1,95 @@
+//! `baseline`: subtract a least-squares polynomial in time (default cubic, as the study did)
+//! from each channel, keeping peaks (no filtering). Fitted coefficients go into the metadata.
+
+use rayon::prelude::*;
+use serde_json::json;
+
+use super::{InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use crate::io::parquet;
+use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
+use crate::signal::baseline::remove_polynomial;
+use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
+
+pub struct Baseline;
+
+static INFO: StageInfo = StageInfo {
+    name: "baseline",
+    version: 1,
+    summary: "Remove a least-squares polynomial trend (default cubic) from each channel; no filtering, peaks kept.",
+    inputs: InputKind::Datasets,
+    outputs: &[OutputInfo { name: "records", description: "the input tables with each selected channel baseline-corrected", timeseries: true }],
+    params: &[
+        ParamSpec { name: "order", kind: ParamKind::Int, default: Some("3"), unit: "", description: "polynomial order (3: the study's cubic; 1: linear detrend; 0: mean)", range: Some((0.0, 9.0)) },
+        ParamSpec { name: "columns", kind: ParamKind::StrList, default: Some("[]"), unit: "", description: "channels to correct; empty: every float column except time_s", range: None },
+    ],
+};
+
+impl Stage for Baseline {
+    fn info(&self) -> &'static StageInfo {
+        &INFO
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
+        let order = ctx.params.i64_of("order") as usize;
+        let wanted = ctx.params.list_of("columns");
+        let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
+        ctx.sink.set_total(parts.len());
+        parts.par_iter().try_for_each(|part| {
+            let table = parquet::read_table(&part.path)?;
+            let mut corrected = correct(&table, order, &wanted).map_err(|e| anyhow::anyhow!("{}: {e}", part.path.display()))?;
+            corrected.metadata.extend(super::record_provenance(part));
+            ctx.sink.write("records", &part.partition, corrected)
+        })
+    }
+}
+
+/// The pure part of the stage: a corrected copy of `table` with its fits in the metadata.
+pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, String> {
+    let time = table.f64_column(TIME_COLUMN).ok_or_else(|| format!("the table has no `{TIME_COLUMN}` column"))?;
+    if time.len() <= order {
+        return Err(format!("{} samples are too few for an order-{order} baseline", time.len()));
+    }
+    for name in wanted {
+        match table.column(name) {
+            Some(c) if c.as_f64().is_some() => {}
+            Some(_) => return Err(format!("column `{name}` is not a float column")),
+            None => return Err(format!("no column `{name}`; columns: {}", table.column_names().join(", "))),
+        }
+    }
+    let mut out = Table { columns: Vec::new(), metadata: table.metadata.clone() };
+    let mut fits = serde_json::Map::new();
+    for column in &table.columns {
+        let selected = column.name != TIME_COLUMN
+            && matches!(column.data, ColumnData::F64(_))
+            && (wanted.is_empty() || wanted.contains(&column.name));
+        if !selected {
+            out.push(column.clone());
+            continue;
+        }
+        let values = column.as_f64().expect("selected columns are float");
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err(format!("column `{}` has a non-finite value at sample {}; load it with `gaps: interpolate`", column.name, i + 1));
+        }
+        let (corrected, fit) = remove_polynomial(time, values, order);
+        let rms_removed = (values.iter().zip(&corrected).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / values.len() as f64).sqrt();
+        fits.insert(column.name.clone(), json!({
+            "polyfit_coefficients": fit.monomial_coefficients(),
+            "scaled_coefficients": fit.coefficients,
+            "center_s": fit.center,
+            "half_span_s": fit.half_span,
+            "rms_removed": rms_removed,
+            "unit": column.unit,
+        }));
+        out.push(Column {
+            name: column.name.clone(),
+            unit: column.unit.clone(),
+            description: format!("{} (order-{order} polynomial baseline removed)", column.description),
+            data: ColumnData::F64(corrected),
+        });
+    }
+    out.metadata.insert(
+        "shakeflow.baseline".into(),
+        json!({"order": order, "basis": "polyfit_coefficients: numpy.polyfit order (highest power first, t in s)", "fits": fits}).to_string(),
+    );
+    Ok(out)
+}

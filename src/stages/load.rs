@@ -1,0 +1,265 @@
+//! `load`: record files (delimited text, PEER AT2, RENADIC V1, SimCenter JSON) → uniform SI
+//! time-series tables, one per file, partitioned as the source's path template says.
+
+use std::collections::BTreeMap;
+
+use anyhow::Context;
+use rayon::prelude::*;
+use serde_json::json;
+
+use super::{InputKind, InputPart, OutputInfo, Stage, StageContext, StageInfo, StageInput};
+use crate::error::{did_you_mean, UserError};
+use crate::io::records::{self, DelimitedOptions, RawRecord};
+use crate::pipeline::spec::{ColumnSpec, GapPolicy, NonUniformPolicy, RecordFormat, SourceSpec};
+use crate::signal::resample;
+use crate::table::{Column, Table, TIME_COLUMN};
+use crate::units;
+
+pub struct Load;
+
+static INFO: StageInfo = StageInfo {
+    name: "load",
+    version: 1,
+    summary: "Read record files into SI time-series tables: checks sampling, gaps and point counts, converts units.",
+    inputs: InputKind::Sources,
+    outputs: &[OutputInfo { name: "records", description: "one table per record file: time_s plus each channel in SI", timeseries: false }],
+    params: &[],
+};
+
+impl Stage for Load {
+    fn info(&self) -> &'static StageInfo {
+        &INFO
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
+        let jobs: Vec<(&SourceSpec, &str, &InputPart)> = ctx
+            .inputs
+            .iter()
+            .flat_map(|input| match input {
+                StageInput::Source { name, spec, files, .. } => files.iter().map(move |f| (spec, name.as_str(), f)).collect::<Vec<_>>(),
+                StageInput::Dataset { .. } => unreachable!("the plan gives `load` sources only"),
+            })
+            .collect();
+        ctx.sink.set_total(jobs.len());
+        jobs.par_iter().try_for_each(|(spec, source, part)| {
+            let mut table = load_record(spec, part).map_err(anyhow::Error::new)?;
+            table.metadata.insert("shakeflow.source".into(), source.to_string());
+            table.metadata.extend(super::record_provenance(part));
+            ctx.sink.write("records", &part.partition, table)
+        })
+    }
+}
+
+fn parse(spec: &SourceSpec, path: &std::path::Path) -> Result<RawRecord, UserError> {
+    let as_user_error = |e: records::ParseError| UserError {
+        file: Some(e.path.clone()),
+        line: e.line,
+        column: e.column,
+        message: e.message.clone(),
+        hint: (!e.hint.is_empty()).then(|| e.hint.clone()),
+    };
+    let delimited = |delimiter: Option<u8>| DelimitedOptions { delimiter, header_lines: spec.header_lines, has_column_names: spec.column_names };
+    let delimiter = match spec.delimiter.as_deref() {
+        None => None,
+        Some("whitespace") => Some(b' '),
+        Some("\\t") => Some(b'\t'),
+        Some(d) => d.bytes().next(),
+    };
+    match spec.format {
+        RecordFormat::At2 => records::read_at2(path),
+        RecordFormat::RenadicV1 => records::read_renadic_v1(path),
+        RecordFormat::SimcenterJson => records::read_simcenter_json(path),
+        RecordFormat::Csv => records::read_delimited(path, &delimited(delimiter.or(Some(b',')))),
+        RecordFormat::Tsv => records::read_delimited(path, &delimited(delimiter.or(Some(b'\t')))),
+        RecordFormat::Delimited => records::read_delimited(path, &delimited(delimiter)),
+    }
+    .map_err(as_user_error)
+}
+
+/// Reads one file as the source spec says; every refusal names the file and, where it can, the line.
+pub fn load_record(spec: &SourceSpec, part: &InputPart) -> Result<Table, UserError> {
+    let path = part.path.as_path();
+    let mut raw = parse(spec, path)?;
+    let err = |message: String| UserError::new(message).in_file(path);
+
+    // Time: an explicit column, the file's own time (RENADIC), or a sample interval.
+    let explicit_time: Option<(Vec<f64>, Option<usize>)> = if let Some(name) = &spec.time_column {
+        let index = raw.channels.iter().position(|c| &c.name == name).ok_or_else(|| {
+            missing_column(path, name, &raw).hint(format!("set `time_column` to one of the file's columns, or drop it and give `dt`"))
+        })?;
+        let channel = raw.channels.remove(index);
+        let factor = spec.time_unit.as_deref().and_then(units::conversion).map_or(1.0, |c| c.factor);
+        Some((channel.values.iter().map(|v| v * factor).collect(), channel.first_data_line))
+    } else {
+        raw.time.take().map(|t| (t, raw.channels.first().and_then(|c| c.first_data_line)))
+    };
+    let n = raw.channels.first().map_or(0, |c| c.values.len());
+    if n < 2 {
+        return Err(err(format!("the record has {n} sample(s); at least 2 are needed")));
+    }
+    let mut metadata = BTreeMap::new();
+    let (t0, dt, resampled_from) = match &explicit_time {
+        Some((time, first_line)) => {
+            if let Some(i) = time.iter().position(|v| !v.is_finite()) {
+                return Err(err("the time column has a missing value".into()).at(first_line.map(|l| (l + i, 1))));
+            }
+            match check_uniform(time) {
+                Ok(dt) => (time[0], dt, None),
+                Err(bad) => match spec.non_uniform {
+                    NonUniformPolicy::Error => {
+                        let step = time[bad + 1] - time[bad];
+                        return Err(err(format!(
+                            "time is not uniformly sampled: the step after t = {} s is {step:.6} s, but the record's mean step is {:.6} s",
+                            time[bad],
+                            (time[n - 1] - time[0]) / (n - 1) as f64
+                        ))
+                        .at(first_line.map(|l| (l + bad + 1, 1)))
+                        .hint("fix the file, or set `non_uniform: resample` on the source to resample linearly onto the median step"));
+                    }
+                    NonUniformPolicy::Resample => {
+                        let dt = median_step(time).ok_or_else(|| err("time does not increase".into()))?;
+                        (time[0], dt, Some(time.clone()))
+                    }
+                },
+            }
+        }
+        None => {
+            let dt = spec.dt.or(raw.dt).ok_or_else(|| {
+                err("the record has no time column and no sample interval".into())
+                    .hint("give `time_column: <name>` or `dt: <seconds>` on the source")
+            })?;
+            (0.0, dt, None)
+        }
+    };
+
+    let selected: Vec<(String, &records::RawChannel, Option<&ColumnSpec>)> = if spec.columns.is_empty() {
+        raw.channels.iter().map(|c| (c.name.clone(), c, None)).collect()
+    } else {
+        spec.columns
+            .iter()
+            .map(|(out, cs)| {
+                let channel = raw.channels.iter().find(|c| c.name == cs.file_column()).ok_or_else(|| missing_column(path, cs.file_column(), &raw))?;
+                Ok((out.clone(), channel, Some(cs)))
+            })
+            .collect::<Result<_, UserError>>()?
+    };
+
+    let n_out = match &resampled_from {
+        Some(time) => ((time[n - 1] - t0) / dt).floor() as usize + 1,
+        None => n,
+    };
+    let mut table = Table::new();
+    let time: Vec<f64> = (0..n_out).map(|k| t0 + k as f64 * dt).collect();
+    table.push(Column::f64(TIME_COLUMN, "s", "time from the start of the record", time));
+    let mut conversions = serde_json::Map::new();
+    let mut gaps = serde_json::Map::new();
+    for (out_name, channel, column_spec) in selected {
+        let detail = match column_spec {
+            Some(ColumnSpec::Full(d)) => Some(d),
+            _ => None,
+        };
+        let unit_name = detail.and_then(|d| d.unit.clone()).or_else(|| spec.unit.clone()).or_else(|| {
+            (!channel.unit.is_empty()).then(|| channel.unit.clone())
+        });
+        let Some(unit_name) = unit_name else {
+            return Err(err(format!("the unit of column `{}` is not known", channel.name))
+                .hint("set `unit:` on the source (e.g. `unit: g`) or on the column"));
+        };
+        let conversion = units::conversion(&unit_name).ok_or_else(|| {
+            err(format!("unknown unit `{unit_name}` for column `{}`", channel.name)).hint(format!("known units: {}", units::known_units().join(", ")))
+        })?;
+        let factor = conversion.factor * spec.scale * detail.and_then(|d| d.scale).unwrap_or(1.0);
+        let mut values: Vec<f64> = channel.values.iter().map(|v| v * factor).collect();
+        let missing = values.iter().filter(|v| !v.is_finite()).count();
+        if missing > 0 {
+            match spec.gaps {
+                GapPolicy::Error => {
+                    let first = values.iter().position(|v| !v.is_finite()).expect("counted above");
+                    return Err(err(format!(
+                        "column `{}` has {missing} missing value(s) (empty or NaN); the first is sample {}",
+                        channel.name,
+                        first + 1
+                    ))
+                    .at(channel.first_data_line.filter(|_| explicit_time.is_some() || spec.format != RecordFormat::At2).map(|l| (l + first, 1)))
+                    .hint("repair the file, or set `gaps: interpolate` on the source to fill gaps linearly (reported in the artifact)"));
+                }
+                GapPolicy::Interpolate => {
+                    resample::fill_gaps_linear(&mut values);
+                    gaps.insert(out_name.clone(), json!(missing));
+                }
+            }
+        }
+        if let Some(time) = &resampled_from {
+            values = resample::resample_linear(time, &values, t0, dt, n_out);
+        }
+        let description = detail
+            .and_then(|d| d.description.clone())
+            .unwrap_or_else(|| format!("`{}` of {}", channel.name, path.file_name().map(|f| f.to_string_lossy()).unwrap_or_default()));
+        conversions.insert(out_name.clone(), json!({"file_column": channel.name, "file_unit": unit_name, "factor": factor}));
+        table.push(Column::f64(&out_name, conversion.si_unit, &description, values));
+    }
+    metadata.insert("shakeflow.load".to_string(), json!({
+        "format": spec.format,
+        "dt_s": dt,
+        "sample_rate_hz": 1.0 / dt,
+        "npts": n_out,
+        "t0_s": t0,
+        "columns": conversions,
+        "gaps_filled": gaps,
+        "resampled_from_non_uniform": resampled_from.is_some(),
+        "header": raw.header,
+    }).to_string());
+    table.metadata = metadata;
+    Ok(table)
+}
+
+fn missing_column(path: &std::path::Path, name: &str, raw: &RawRecord) -> UserError {
+    let available: Vec<&str> = raw.channels.iter().map(|c| c.name.as_str()).collect();
+    let suggestion = did_you_mean(name, available.iter().copied()).map(|s| format!("did you mean `{s}`? ")).unwrap_or_default();
+    UserError::new(format!("the file has no column `{name}`"))
+        .in_file(path)
+        .hint(format!("{suggestion}its columns are: {}", available.join(", ")))
+}
+
+/// The mean step when every step is within a small tolerance of it; else the index of the first bad step.
+fn check_uniform(time: &[f64]) -> Result<f64, usize> {
+    let n = time.len();
+    let dt = (time[n - 1] - time[0]) / (n - 1) as f64;
+    // Text files round time to a few decimals: allow that rounding, not a real jitter.
+    let tolerance = 1e-3 * dt + 2e-6;
+    match time.windows(2).position(|w| !(dt > 0.0 && ((w[1] - w[0]) - dt).abs() <= tolerance)) {
+        None => Ok(dt),
+        Some(i) => Err(i),
+    }
+}
+
+fn median_step(time: &[f64]) -> Option<f64> {
+    let mut steps: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).collect();
+    steps.sort_by(f64::total_cmp);
+    let median = steps[steps.len() / 2];
+    (median > 0.0 && time.windows(2).all(|w| w[1] > w[0])).then_some(median)
+}
+
+/// For `shakeflow stage load FILE…`: a source spec guessed from the file, with `--set` overrides.
+pub fn ad_hoc_source(path: &std::path::Path, overrides: &serde_json::Map<String, serde_json::Value>) -> anyhow::Result<SourceSpec> {
+    let format = records::sniff_format(path).unwrap_or("delimited");
+    let mut value = json!({"format": format, "path": path.display().to_string()});
+    for (k, v) in overrides {
+        value[k] = v.clone();
+    }
+    serde_json::from_value(value).context("the --set values do not form a valid source (see `inputs:` in schemas/pipeline.schema.json)")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn uniform_check_tolerates_rounding_but_not_jitter() {
+        let rounded: Vec<f64> = (0..1000).map(|i| ((i as f64 / 256.0) * 1e6).round() / 1e6).collect();
+        assert!((check_uniform(&rounded).unwrap() - 1.0 / 256.0).abs() < 1e-9);
+        let mut jittered = rounded.clone();
+        jittered[500] += 0.001;
+        assert_eq!(check_uniform(&jittered), Err(499));
+    }
+}

@@ -1,0 +1,114 @@
+//! Stage types: one file each, registered by the name pipelines use.
+//!
+//! A stage is a thin adapter: it reads its inputs, calls pure numerics in `signal`/`physics`,
+//! and hands tables to the [`OutputSink`]. It never decides where files go or whether to run.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use crate::pipeline::params::{ParamSpec, Params};
+use crate::pipeline::sink::OutputSink;
+use crate::pipeline::spec::SourceSpec;
+
+pub mod baseline;
+pub mod load;
+
+/// What a stage type consumes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InputKind {
+    /// Record sources declared under `inputs:` (raw files).
+    Sources,
+    /// Datasets written by other stages.
+    Datasets,
+}
+
+#[derive(Debug, Clone, Copy)]
+pub struct OutputInfo {
+    pub name: &'static str,
+    pub description: &'static str,
+    /// Time series are also written as MCAP for Foxglove.
+    pub timeseries: bool,
+}
+
+#[derive(Debug)]
+pub struct StageInfo {
+    pub name: &'static str,
+    /// Bumped whenever the stage's results change for the same inputs; part of the cache key.
+    pub version: u32,
+    pub summary: &'static str,
+    pub inputs: InputKind,
+    pub outputs: &'static [OutputInfo],
+    pub params: &'static [ParamSpec],
+}
+
+/// Partition keys of a record (`motion=FB-4/floor=5`), in order.
+pub type Partition = Vec<(String, String)>;
+
+pub fn partition_path(partition: &Partition) -> String {
+    partition.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join("/")
+}
+
+/// One file a stage reads: a raw record file or one part of an upstream dataset.
+#[derive(Debug, Clone)]
+pub struct InputPart {
+    pub partition: Partition,
+    pub path: PathBuf,
+    /// How provenance names the file: relative to the pipeline, or `stage.output/partition`,
+    /// never a machine- or run-specific path, so artifacts stay bit-identical across machines.
+    pub label: String,
+    /// Content hash (blake3, hex): provenance written into every artifact made from it.
+    pub hash: String,
+}
+
+#[derive(Debug, Clone)]
+pub enum StageInput {
+    Source { name: String, spec: SourceSpec, base_dir: PathBuf, files: Vec<InputPart> },
+    Dataset { name: String, parts: Vec<InputPart> },
+}
+
+impl StageInput {
+    pub fn name(&self) -> &str {
+        match self {
+            StageInput::Source { name, .. } | StageInput::Dataset { name, .. } => name,
+        }
+    }
+
+    pub fn parts(&self) -> &[InputPart] {
+        match self {
+            StageInput::Source { files, .. } => files,
+            StageInput::Dataset { parts, .. } => parts,
+        }
+    }
+}
+
+pub struct StageContext<'a> {
+    pub stage_name: &'a str,
+    pub params: &'a Params,
+    pub inputs: &'a [StageInput],
+    pub sink: &'a OutputSink,
+}
+
+pub trait Stage: Sync + Send {
+    fn info(&self) -> &'static StageInfo;
+    fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()>;
+}
+
+pub fn registry() -> &'static [&'static dyn Stage] {
+    &[&load::Load, &baseline::Baseline]
+}
+
+pub fn find(name: &str) -> Option<&'static dyn Stage> {
+    registry().iter().copied().find(|s| s.info().name == name)
+}
+
+pub fn names() -> Vec<&'static str> {
+    registry().iter().map(|s| s.info().name).collect()
+}
+
+/// Per-record metadata keys shared by all stages, so readers find provenance in one place.
+pub fn record_provenance(part: &InputPart) -> BTreeMap<String, String> {
+    BTreeMap::from([
+        ("shakeflow.input_file".to_string(), part.label.clone()),
+        ("shakeflow.input_hash".to_string(), part.hash.clone()),
+    ])
+}

@@ -1,0 +1,125 @@
+//! In-memory tables: what stages exchange and what artifacts store.
+//!
+//! A deliberately small columnar type instead of passing Arrow arrays around: numerics get plain
+//! slices, and every column carries its unit and description so no writer can forget them.
+
+use std::collections::BTreeMap;
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum ColumnData {
+    F64(Vec<f64>),
+    /// Floats where "missing" must stay distinguishable from NaN (e.g. an event time that never happened).
+    OptF64(Vec<Option<f64>>),
+    I64(Vec<i64>),
+    Bool(Vec<bool>),
+    Str(Vec<String>),
+}
+
+impl ColumnData {
+    pub fn len(&self) -> usize {
+        match self {
+            ColumnData::F64(v) => v.len(),
+            ColumnData::OptF64(v) => v.len(),
+            ColumnData::I64(v) => v.len(),
+            ColumnData::Bool(v) => v.len(),
+            ColumnData::Str(v) => v.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    pub fn type_name(&self) -> &'static str {
+        match self {
+            ColumnData::F64(_) => "float64",
+            ColumnData::OptF64(_) => "float64 (nullable)",
+            ColumnData::I64(_) => "int64",
+            ColumnData::Bool(_) => "bool",
+            ColumnData::Str(_) => "string",
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Column {
+    pub name: String,
+    /// SI unit text ("m/s^2", "s", "rad"); empty for dimensionless or non-numeric columns.
+    pub unit: String,
+    pub description: String,
+    pub data: ColumnData,
+}
+
+impl Column {
+    pub fn f64(name: &str, unit: &str, description: &str, values: Vec<f64>) -> Self {
+        Column { name: name.into(), unit: unit.into(), description: description.into(), data: ColumnData::F64(values) }
+    }
+
+    pub fn as_f64(&self) -> Option<&[f64]> {
+        match &self.data {
+            ColumnData::F64(v) => Some(v),
+            _ => None,
+        }
+    }
+}
+
+/// Columns of equal length plus free-form key/value metadata that travels into the artifact.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Table {
+    pub columns: Vec<Column>,
+    pub metadata: BTreeMap<String, String>,
+}
+
+impl Table {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    pub fn num_rows(&self) -> usize {
+        self.columns.first().map_or(0, |c| c.data.len())
+    }
+
+    /// Adds a column; panics on a length mismatch because that is always a bug in the stage, never bad input.
+    pub fn push(&mut self, column: Column) {
+        if let Some(first) = self.columns.first() {
+            assert_eq!(
+                first.data.len(),
+                column.data.len(),
+                "column `{}` has {} rows but the table has {}",
+                column.name,
+                column.data.len(),
+                first.data.len()
+            );
+        }
+        assert!(self.column(&column.name).is_none(), "duplicate column `{}`", column.name);
+        self.columns.push(column);
+    }
+
+    pub fn column(&self, name: &str) -> Option<&Column> {
+        self.columns.iter().find(|c| c.name == name)
+    }
+
+    pub fn f64_column(&self, name: &str) -> Option<&[f64]> {
+        self.column(name).and_then(Column::as_f64)
+    }
+
+    pub fn column_names(&self) -> Vec<&str> {
+        self.columns.iter().map(|c| c.name.as_str()).collect()
+    }
+}
+
+/// The name of the time column every time-series table starts with.
+pub const TIME_COLUMN: &str = "time_s";
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    #[should_panic(expected = "has 2 rows but the table has 3")]
+    fn push_rejects_ragged_columns() {
+        let mut t = Table::new();
+        t.push(Column::f64("a", "", "", vec![1.0, 2.0, 3.0]));
+        t.push(Column::f64("b", "", "", vec![1.0, 2.0]));
+    }
+}

@@ -1,0 +1,112 @@
+//! The engine as a user meets it: run, cache, status, force, determinism, single-stage runs.
+
+mod common;
+use common::*;
+
+#[test]
+fn second_run_is_fully_cached_and_says_so() {
+    let project = small_project();
+    let first = shakeflow(&["run", "pipeline.yaml"], project.path());
+    assert!(first.status.success(), "{}", stderr(&first));
+    assert!(stderr(&first).contains("load               running (never run"), "{}", stderr(&first));
+    assert!(project.path().join("out/shakeflow.lock").is_file());
+    let part = project.path().join("out/baseline/records/motion=FB-1/data.parquet");
+    assert!(part.is_file() && part.with_file_name("data.mcap").is_file());
+
+    let second = shakeflow(&["run", "pipeline.yaml"], project.path());
+    let log = stderr(&second);
+    assert!(second.status.success(), "{log}");
+    assert!(log.contains("load               cached") && log.contains("baseline           cached"), "{log}");
+    assert!(log.contains("2 stage(s): 0 ran, 2 cached"), "{log}");
+}
+
+#[test]
+fn changed_parameter_reruns_only_what_depends_on_it() {
+    let project = small_project();
+    assert!(shakeflow(&["run", "pipeline.yaml"], project.path()).status.success());
+    let path = project.path().join("pipeline.yaml");
+    std::fs::write(&path, PIPELINE.replace("order: 3", "order: 2")).unwrap();
+
+    let status = shakeflow(&["status", "pipeline.yaml"], project.path());
+    let text = stdout(&status);
+    assert!(text.contains("load               up to date"), "{text}");
+    assert!(text.contains("baseline           stale: params changed: order 3 → 2"), "{text}");
+
+    let rerun = shakeflow(&["run", "pipeline.yaml"], project.path());
+    let log = stderr(&rerun);
+    assert!(log.contains("load               cached") && log.contains("baseline           running (params changed"), "{log}");
+}
+
+#[test]
+fn changed_input_file_is_reported_and_recomputed() {
+    let project = small_project();
+    assert!(shakeflow(&["run", "pipeline.yaml"], project.path()).status.success());
+    write_daq_csv(&project.path().join("archive/FB-2/daq.csv"), 400, 200.0, 2.0);
+    let text = stdout(&shakeflow(&["status", "pipeline.yaml"], project.path()));
+    assert!(text.contains("load               stale: input `daq` changed"), "{text}");
+    assert!(text.contains("baseline           stale: an upstream stage will rerun"), "{text}");
+}
+
+#[test]
+fn tampered_output_is_detected() {
+    let project = small_project();
+    assert!(shakeflow(&["run", "pipeline.yaml"], project.path()).status.success());
+    std::fs::remove_file(project.path().join("out/load/records/motion=FB-1/data.parquet")).unwrap();
+    let text = stdout(&shakeflow(&["status", "pipeline.yaml"], project.path()));
+    assert!(text.contains("load               stale: output `records` was modified on disk"), "{text}");
+}
+
+#[test]
+fn force_reruns_the_stage_and_its_dependents() {
+    let project = small_project();
+    assert!(shakeflow(&["run", "pipeline.yaml"], project.path()).status.success());
+    let out = shakeflow(&["run", "pipeline.yaml", "--force", "load"], project.path());
+    let log = stderr(&out);
+    assert!(log.contains("load               running (forced)") && log.contains("baseline           running (forced)"), "{log}");
+    let unknown = shakeflow(&["run", "pipeline.yaml", "--force", "lod"], project.path());
+    assert!(!unknown.status.success());
+    assert!(stderr(&unknown).contains("`--force lod`: no stage of that name"), "{}", stderr(&unknown));
+}
+
+#[test]
+fn same_inputs_give_bit_identical_artifacts() {
+    let a = small_project();
+    let b = small_project();
+    assert!(shakeflow(&["run", "pipeline.yaml", "--jobs", "1"], a.path()).status.success());
+    assert!(shakeflow(&["run", "pipeline.yaml", "--jobs", "2"], b.path()).status.success());
+    let strip = |dir: &std::path::Path| -> Vec<(String, Vec<u8>)> {
+        snapshot(&dir.join("out"))
+            .into_iter()
+            .map(|(p, bytes)| (p.strip_prefix(dir).unwrap().display().to_string(), bytes))
+            .collect()
+    };
+    assert_eq!(strip(a.path()), strip(b.path()), "two projects, same inputs: every artifact byte-identical");
+    // A forced rerun into the same folder reproduces every byte too.
+    let before = snapshot(&a.path().join("out"));
+    assert!(shakeflow(&["run", "pipeline.yaml", "--force", "load"], a.path()).status.success());
+    assert_eq!(before, snapshot(&a.path().join("out")), "a forced rerun must reproduce every byte");
+}
+
+#[test]
+fn single_stage_runs_on_files_without_a_pipeline() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = ground_motion("RSN6_IMPVALL.I_I-ELC180.AT2");
+    let out = shakeflow(&["stage", "load", "--input", record.to_str().unwrap(), "--output", "loaded"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = shakeflow(&["stage", "baseline", "--input", "loaded/records", "--output", "corrected", "--set", "order=1"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = stdout(&shakeflow(&["inspect", "corrected/records/data.parquet"], dir.path()));
+    assert!(text.contains("5372 rows"), "{text}");
+    assert!(text.contains("m/s^2") && text.contains("order-1 polynomial baseline removed"), "{text}");
+    assert!(text.contains("\"order\": 1"), "{text}");
+    let bad = shakeflow(&["stage", "baseline", "--input", "loaded/records", "--output", "x", "--set", "ordr=1"], dir.path());
+    assert!(!bad.status.success());
+    assert!(stderr(&bad).contains("did you mean `order`"), "{}", stderr(&bad));
+    assert!(!dir.path().join("x").exists());
+}
+
+#[test]
+fn stages_lists_parameters_with_defaults() {
+    let text = stdout(&shakeflow(&["stages"], std::path::Path::new(".")));
+    assert!(text.contains("baseline (version 1)") && text.contains("- order: integer (default 3)"), "{text}");
+}
