@@ -11,8 +11,8 @@ fn fails_cleanly(break_it: impl FnOnce(&Path), expected: &[&str]) -> String {
     let root = project.path();
     let ok = shakeflow(&["run", "pipeline.yaml"], root);
     assert!(ok.status.success(), "{}", stderr(&ok));
-    let before = snapshot(&root.join("out"));
     break_it(root);
+    let before = snapshot(&root.join("out"));
     let out = shakeflow(&["run", "pipeline.yaml"], root);
     let message = stderr(&out);
     assert!(!out.status.success(), "expected a failure, got success:\n{message}");
@@ -32,7 +32,7 @@ fn edit(root: &Path, file: &str, f: impl FnOnce(String) -> String) {
 #[test]
 fn truncated_file() {
     fails_cleanly(
-        |root| edit(root, "archive/FB-2/daq.csv", |t| t[..t.len() - 9].to_string()),
+        |root| edit(root, "archive/FB-2/daq.csv", |t| t[..t.len() - 20].to_string()),
         &["archive/FB-2/daq.csv:403", "may be truncated"],
     );
 }
@@ -65,7 +65,7 @@ fn nan_without_a_gap_policy() {
 fn non_uniform_time() {
     fails_cleanly(
         |root| edit(root, "archive/FB-1/daq.csv", |t| t.replacen("\n0.100000,", "\n0.103000,", 1)),
-        &["archive/FB-1/daq.csv:23", "not uniformly sampled", "non_uniform: resample"],
+        &["archive/FB-1/daq.csv:24:1", "not uniformly sampled", "non_uniform: resample"],
     );
 }
 
@@ -107,7 +107,7 @@ fn wrong_npts_in_an_at2_record() {
 #[test]
 fn unknown_stage_type() {
     fails_cleanly(|root| edit(root, "pipeline.yaml", |t| t.replace("type: baseline", "type: baselin")), &[
-        "pipeline.yaml:17:5",
+        "pipeline.yaml:18:5",
         "unknown stage type `baselin`",
         "did you mean `baseline`",
     ]);
@@ -124,7 +124,7 @@ fn cyclic_pipeline() {
 #[test]
 fn unknown_yaml_key() {
     fails_cleanly(|root| edit(root, "pipeline.yaml", |t| t.replace("    params:\n", "    parms:\n")), &[
-        "pipeline.yaml:19:5",
+        "pipeline.yaml:20:5",
         "unknown field `parms`",
     ]);
 }
@@ -132,7 +132,7 @@ fn unknown_yaml_key() {
 #[test]
 fn missing_input_file() {
     fails_cleanly(|root| std::fs::remove_dir_all(root.join("archive")).unwrap(), &[
-        "pipeline.yaml:7:5",
+        "pipeline.yaml:6:5",
         "source `daq`: no file matches `archive/{motion}/daq.csv`",
     ]);
 }
@@ -157,7 +157,7 @@ fn validate_points_at_a_typo() {
     let out = shakeflow(&["validate", "pipeline.yaml"], project.path());
     let message = stderr(&out);
     assert!(!out.status.success());
-    assert!(message.contains("pipeline.yaml:20:7: unknown parameter `ordr`") && message.contains("did you mean `order`"), "{message}");
+    assert!(message.contains("pipeline.yaml:21:7: unknown parameter `ordr`") && message.contains("did you mean `order`"), "{message}");
 }
 
 #[test]

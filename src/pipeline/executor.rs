@@ -153,7 +153,7 @@ fn assess(
         let dir = output_dir.join(&out.path);
         if !dir.is_dir() {
             reasons.push(format!("output `{name}` missing ({})", dir.display()));
-        } else if hash::hash_dir(&dir)?.0 != out.hash {
+        } else if super::sink::output_hash(&output_dir.join(&stage.name), name)?.0 != out.hash {
             reasons.push(format!("output `{name}` was modified on disk"));
         }
     }
@@ -263,14 +263,14 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
     let forced: BTreeSet<String> = options.force.iter().flat_map(|n| plan.with_dependents(n)).collect();
     let output_dir = plan.file.output_dir();
     let lock_file = output_dir.join(LOCK_FILE);
-    let lock = LockFile::read(&lock_file)?;
-    let sources = resolve_sources(plan)?;
     std::fs::create_dir_all(&output_dir).map_err(|e| {
         UserError::new(format!("cannot create the output directory `{}`: {e}", output_dir.display()))
             .in_file(&plan.file.path)
             .at(super::locate::key_position(&plan.file.text, &["output_dir"]))
             .hint("choose a writable `output_dir` (relative to the pipeline file)")
     })?;
+    let lock = LockFile::read(&lock_file)?;
+    let sources = resolve_sources(plan)?;
     let staging = output_dir.join(format!(".staging-{}", std::process::id()));
     std::fs::create_dir(&staging).map_err(|e| {
         UserError::new(format!("the output directory `{}` is not writable: {e}", output_dir.display()))
@@ -343,9 +343,8 @@ fn run_stages(
                 bar.finish_and_clear();
                 let mut outputs = BTreeMap::new();
                 for output in info.outputs {
-                    let out_dir = dir.join(output.name);
-                    std::fs::create_dir_all(&out_dir)?;
-                    let (hash, files) = hash::hash_dir(&out_dir)?;
+                    std::fs::create_dir_all(dir.join(output.name))?;
+                    let (hash, files) = super::sink::output_hash(&dir, output.name)?;
                     outputs.insert(output.name.to_string(), OutputLock { path: format!("{}/{}", stage.name, output.name), hash, files });
                 }
                 let files: usize = outputs.values().map(|o| o.files).sum();

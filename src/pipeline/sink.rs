@@ -13,6 +13,8 @@ use crate::table::Table;
 
 pub const DATA_FILE: &str = "data.parquet";
 pub const MCAP_FILE: &str = "data.mcap";
+/// MCAP twins live under `<stage>/mcap/<output>/`, apart from the Parquet dataset `<stage>/<output>/`.
+pub const MCAP_DIR: &str = "mcap";
 
 pub struct OutputSink {
     root: PathBuf,
@@ -71,7 +73,10 @@ impl OutputSink {
             } else {
                 format!("/{}/{output}/{relative}", self.stage_name)
             };
-            mcap::write_timeseries(&dir.join(MCAP_FILE), &[mcap::Topic { name: topic, table: &table }], &table.metadata)?;
+            // A separate tree: pyarrow.dataset and friends refuse folders that mix in non-Parquet files.
+            let mcap_dir = self.root.join(MCAP_DIR).join(output).join(&relative);
+            std::fs::create_dir_all(&mcap_dir).map_err(|e| anyhow!("cannot create `{}`: {e}", mcap_dir.display()))?;
+            mcap::write_timeseries(&mcap_dir.join(MCAP_FILE), &[mcap::Topic { name: topic, table: &table }], &table.metadata)?;
         }
         self.progress.inc(1);
         Ok(())
@@ -80,4 +85,15 @@ impl OutputSink {
     pub fn set_total(&self, records: usize) {
         self.progress.set_length(records as u64);
     }
+}
+
+/// Hash and file count of one output of a stage: its Parquet tree plus its MCAP twin tree.
+pub fn output_hash(stage_dir: &Path, output: &str) -> anyhow::Result<(String, usize)> {
+    let (parquet_hash, parquet_files) = crate::pipeline::hash::hash_dir(&stage_dir.join(output))?;
+    let mcap_dir = stage_dir.join(MCAP_DIR).join(output);
+    if !mcap_dir.is_dir() {
+        return Ok((parquet_hash, parquet_files));
+    }
+    let (mcap_hash, mcap_files) = crate::pipeline::hash::hash_dir(&mcap_dir)?;
+    Ok((crate::pipeline::hash::hash_bytes(format!("{parquet_hash}\n{mcap_hash}").as_bytes()), parquet_files + mcap_files))
 }

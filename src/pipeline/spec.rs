@@ -205,7 +205,7 @@ impl PipelineFile {
     }
 
     pub fn output_dir(&self) -> PathBuf {
-        self.base_dir().join(&self.spec.output_dir)
+        lexically_normal(&self.base_dir().join(&self.spec.output_dir))
     }
 
     pub fn error_at(&self, key_path: &[&str], message: impl Into<String>) -> UserError {
@@ -217,9 +217,35 @@ impl PipelineFile {
     }
 }
 
+/// `a/b/../c` → `a/c` without touching the disk (the folder may not exist yet); for paths users read.
+pub fn lexically_normal(path: &Path) -> PathBuf {
+    use std::path::Component;
+    let mut out = PathBuf::new();
+    for component in path.components() {
+        match component {
+            Component::CurDir => {}
+            Component::ParentDir if matches!(out.components().next_back(), Some(Component::Normal(_))) => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    if out.as_os_str().is_empty() {
+        out.push(".");
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn paths_are_normalised_for_display() {
+        assert_eq!(lexically_normal(Path::new("pipelines/../runs/demo")), Path::new("runs/demo"));
+        assert_eq!(lexically_normal(Path::new("./out")), Path::new("out"));
+        assert_eq!(lexically_normal(Path::new("../x/./y")), Path::new("../x/y"));
+    }
 
     #[test]
     fn unknown_key_is_reported_with_line_and_column() {

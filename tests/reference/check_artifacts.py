@@ -3,7 +3,8 @@
 Usage: check_artifacts.py OUTPUT_DIR STAGE
 Checks that every Parquet part of OUTPUT_DIR/STAGE/records carries units and descriptions per
 column and provenance per file, that pyarrow.dataset and DuckDB scan the folder as one
-Hive-partitioned dataset, and that each MCAP file holds the same samples as its Parquet twin.
+Hive-partitioned dataset, and that each MCAP twin (OUTPUT_DIR/STAGE/mcap/records/...) holds the
+same samples as its Parquet part.
 """
 import json
 import pathlib
@@ -33,7 +34,7 @@ def main(out_dir, stage):
         assert table.schema.field("time_s").metadata[b"unit"] == b"s"
         total += table.num_rows
 
-        mcap_path = part.with_name("data.mcap")
+        mcap_path = root.parent / "mcap" / "records" / part.relative_to(root).with_name("data.mcap")
         assert mcap_path.exists(), mcap_path
         with open(mcap_path, "rb") as f:
             reader = make_reader(f)
