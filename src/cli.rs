@@ -55,9 +55,7 @@ enum Command {
         quiet: bool,
     },
     /// Show which stages are stale and why (changed params, inputs, stage version, missing outputs).
-    Status {
-        pipeline: PathBuf,
-    },
+    Status { pipeline: PathBuf },
     /// Check a pipeline file without running it: keys, stage types, parameters, inputs, cycles, source files.
     Validate {
         pipeline: PathBuf,
@@ -145,8 +143,12 @@ pub fn main() -> anyhow::Result<ExitCode> {
             let plan = Plan::new(PipelineFile::read(&pipeline)?)?;
             if !skip_inputs {
                 for (name, source) in &plan.file.spec.inputs {
-                    let files = sources::resolve(&plan.file.base_dir(), &source.path, &source.partition)
-                        .map_err(|e| plan.file.error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message)).hint(e.hint.unwrap_or_default()))?;
+                    let files =
+                        sources::resolve(&plan.file.base_dir(), &source.path, &source.partition).map_err(|e| {
+                            plan.file
+                                .error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message))
+                                .hint(e.hint.unwrap_or_default())
+                        })?;
                     println!("source {name:<16} {} file(s)", files.len());
                 }
             }
@@ -154,7 +156,12 @@ pub fn main() -> anyhow::Result<ExitCode> {
                 let inputs: Vec<String> = stage.inputs.iter().map(|i| i.label()).collect();
                 println!("stage  {:<16} {:<10} ← {}", stage.name, stage.stage.info().name, inputs.join(", "));
             }
-            println!("{}: valid ({} source(s), {} stage(s))", pipeline.display(), plan.file.spec.inputs.len(), plan.stages.len());
+            println!(
+                "{}: valid ({} source(s), {} stage(s))",
+                pipeline.display(),
+                plan.file.spec.inputs.len(),
+                plan.stages.len()
+            );
             Ok(ExitCode::SUCCESS)
         }
         Command::Stage { name, inputs, output, set } => {
@@ -231,10 +238,12 @@ fn describe_stages(only: Option<&str>) -> anyhow::Result<String> {
 /// Gathers inputs for a stage run outside a pipeline: raw files for `load`, Parquet parts otherwise.
 fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String]) -> anyhow::Result<()> {
     let stage = stages::find(name).ok_or_else(|| {
-        crate::error::UserError::new(format!("unknown stage type `{name}`")).hint(format!("known stage types: {}", stages::names().join(", ")))
+        crate::error::UserError::new(format!("unknown stage type `{name}`"))
+            .hint(format!("known stage types: {}", stages::names().join(", ")))
     })?;
     let info = stage.info();
-    let assignments: Vec<(String, serde_json::Value)> = set.iter().map(|s| params::parse_set(s)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
+    let assignments: Vec<(String, serde_json::Value)> =
+        set.iter().map(|s| params::parse_set(s)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
     let (params, stage_inputs) = match info.inputs {
         InputKind::Sources => {
             let overrides: serde_json::Map<String, serde_json::Value> = assignments.into_iter().collect();
@@ -243,15 +252,22 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
                 let spec = stages::load::ad_hoc_source(path, &overrides)?;
                 let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
                 let partition = if inputs.len() > 1 { vec![("file".to_string(), stem)] } else { Vec::new() };
-                let part = InputPart { partition, path: path.clone(), label: file_label(path), hash: hash::hash_file(path)? };
+                let part =
+                    InputPart { partition, path: path.clone(), label: file_label(path), hash: hash::hash_file(path)? };
                 let base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-                stage_inputs.push(StageInput::Source { name: path.display().to_string(), spec, base_dir, files: vec![part] });
+                stage_inputs.push(StageInput::Source {
+                    name: path.display().to_string(),
+                    spec,
+                    base_dir,
+                    files: vec![part],
+                });
             }
             (params::normalize(info.params, info.name, []).map_err(|e| anyhow::anyhow!("{}", e.message))?, stage_inputs)
         }
         InputKind::Datasets => {
             let given = assignments.iter().map(|(k, v)| (k.as_str(), v.clone()));
-            let params = params::normalize(info.params, info.name, given).map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;
+            let params = params::normalize(info.params, info.name, given)
+                .map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;
             let mut stage_inputs = Vec::new();
             for path in inputs {
                 let parts = if path.is_dir() {
@@ -259,7 +275,12 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
                 } else if path.is_file() {
                     let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
                     let partition = if inputs.len() > 1 { vec![("file".to_string(), stem)] } else { Vec::new() };
-                    vec![InputPart { partition, path: path.clone(), label: file_label(path), hash: hash::hash_file(path)? }]
+                    vec![InputPart {
+                        partition,
+                        path: path.clone(),
+                        label: file_label(path),
+                        hash: hash::hash_file(path)?,
+                    }]
                 } else {
                     bail!("input `{}` does not exist", path.display());
                 };
@@ -270,7 +291,12 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
     };
     let input_hashes: BTreeMap<String, String> = stage_inputs
         .iter()
-        .map(|i| (i.name().to_string(), hash::hash_bytes(i.parts().iter().map(|p| p.hash.as_str()).collect::<Vec<_>>().join("\n").as_bytes())))
+        .map(|i| {
+            (
+                i.name().to_string(),
+                hash::hash_bytes(i.parts().iter().map(|p| p.hash.as_str()).collect::<Vec<_>>().join("\n").as_bytes()),
+            )
+        })
         .collect();
     let parent = output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     std::fs::create_dir_all(parent).with_context(|| format!("cannot create `{}`", parent.display()))?;
@@ -283,7 +309,8 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
         for o in info.outputs {
             std::fs::create_dir_all(staging.join(o.name))?;
         }
-        crate::io::atomic::replace_dir(&staging, output).with_context(|| format!("moving results into `{}`", output.display()))
+        crate::io::atomic::replace_dir(&staging, output)
+            .with_context(|| format!("moving results into `{}`", output.display()))
     });
     if result.is_err() {
         let _ = std::fs::remove_dir_all(&staging);

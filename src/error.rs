@@ -89,7 +89,8 @@ mod tests {
 
     #[test]
     fn display_names_file_line_column_and_help() {
-        let e = UserError::new("unknown field `ordr`").in_file(Path::new("p.yaml")).at(Some((12, 5))).hint("use `order`");
+        let e =
+            UserError::new("unknown field `ordr`").in_file(Path::new("p.yaml")).at(Some((12, 5))).hint("use `order`");
         assert_eq!(e.to_string(), "p.yaml:12:5: unknown field `ordr`\n  help: use `order`");
     }
 

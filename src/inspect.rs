@@ -29,14 +29,27 @@ fn describe_parquet(path: &Path, preview_rows: usize) -> anyhow::Result<String> 
     let table = parquet::read_table(path)?;
     let mut out = String::new();
     writeln!(out, "{}: Parquet, {} rows, {} columns", path.display(), table.num_rows(), table.columns.len())?;
-    let frame = ParquetReader::new(File::open(path)?).finish().map_err(|e| anyhow::anyhow!("polars could not read `{}`: {e}", path.display()))?;
-    let float_columns: Vec<&str> = table.columns.iter().filter(|c| matches!(c.data, ColumnData::F64(_) | ColumnData::OptF64(_))).map(|c| c.name.as_str()).collect();
+    let frame = ParquetReader::new(File::open(path)?)
+        .finish()
+        .map_err(|e| anyhow::anyhow!("polars could not read `{}`: {e}", path.display()))?;
+    let float_columns: Vec<&str> = table
+        .columns
+        .iter()
+        .filter(|c| matches!(c.data, ColumnData::F64(_) | ColumnData::OptF64(_)))
+        .map(|c| c.name.as_str())
+        .collect();
     let stats = if float_columns.is_empty() {
         None
     } else {
         let exprs: Vec<Expr> = float_columns
             .iter()
-            .flat_map(|c| [col(*c).min().alias(format!("{c}:min")), col(*c).max().alias(format!("{c}:max")), col(*c).mean().alias(format!("{c}:mean"))])
+            .flat_map(|c| {
+                [
+                    col(*c).min().alias(format!("{c}:min")),
+                    col(*c).max().alias(format!("{c}:max")),
+                    col(*c).mean().alias(format!("{c}:mean")),
+                ]
+            })
             .collect();
         Some(frame.clone().lazy().select(exprs).collect()?)
     };
@@ -44,7 +57,11 @@ fn describe_parquet(path: &Path, preview_rows: usize) -> anyhow::Result<String> 
         stats.as_ref()?.column(&format!("{name}:{what}")).ok()?.f64().ok()?.get(0)
     };
     writeln!(out, "\ncolumns:")?;
-    writeln!(out, "  {:<22} {:<18} {:<10} {:>12} {:>12} {:>12}  description", "name", "type", "unit", "min", "max", "mean")?;
+    writeln!(
+        out,
+        "  {:<22} {:<18} {:<10} {:>12} {:>12} {:>12}  description",
+        "name", "type", "unit", "min", "max", "mean"
+    )?;
     for column in &table.columns {
         let fmt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.5e}"));
         writeln!(
@@ -62,7 +79,9 @@ fn describe_parquet(path: &Path, preview_rows: usize) -> anyhow::Result<String> 
     writeln!(out, "\nmetadata:")?;
     for (key, value) in &table.metadata {
         let shown = match serde_json::from_str::<serde_json::Value>(value) {
-            Ok(json @ (serde_json::Value::Object(_) | serde_json::Value::Array(_))) => serde_json::to_string_pretty(&json)?.replace('\n', "\n    "),
+            Ok(json @ (serde_json::Value::Object(_) | serde_json::Value::Array(_))) => {
+                serde_json::to_string_pretty(&json)?.replace('\n', "\n    ")
+            }
             _ => value.clone(),
         };
         writeln!(out, "  {key}: {shown}")?;
@@ -76,7 +95,14 @@ fn describe_parquet(path: &Path, preview_rows: usize) -> anyhow::Result<String> 
 fn describe_mcap(path: &Path) -> anyhow::Result<String> {
     let s = mcap::summarize(path)?;
     let mut out = String::new();
-    writeln!(out, "{}: MCAP, {} messages from {:.3} s to {:.3} s", path.display(), s.message_count, s.start_s, s.end_s)?;
+    writeln!(
+        out,
+        "{}: MCAP, {} messages from {:.3} s to {:.3} s",
+        path.display(),
+        s.message_count,
+        s.start_s,
+        s.end_s
+    )?;
     writeln!(out, "\nchannels (topic, schema, messages):")?;
     for (topic, schema, count) in &s.channels {
         writeln!(out, "  {topic}  {schema}  {count}")?;

@@ -32,7 +32,8 @@ pub fn pipeline_schema() -> Value {
     let mut conditionals = Vec::new();
     for stage in stages::registry() {
         let info = stage.info();
-        let properties: Map<String, Value> = info.params.iter().map(|p| (p.name.to_string(), param_schema(p))).collect();
+        let properties: Map<String, Value> =
+            info.params.iter().map(|p| (p.name.to_string(), param_schema(p))).collect();
         let required: Vec<&str> = info.params.iter().filter(|p| p.default.is_none()).map(|p| p.name).collect();
         conditionals.push(json!({
             "if": {"properties": {"type": {"const": info.name}}},
@@ -116,7 +117,8 @@ mod tests {
         let spec: SourceSpec = serde_json::from_value(json!({"format": "at2", "path": "x"})).unwrap();
         let parsed: Vec<String> = serde_json::to_value(spec).unwrap().as_object().unwrap().keys().cloned().collect();
         let schema = pipeline_schema();
-        let documented: Vec<String> = schema["definitions"]["source"]["properties"].as_object().unwrap().keys().cloned().collect();
+        let documented: Vec<String> =
+            schema["definitions"]["source"]["properties"].as_object().unwrap().keys().cloned().collect();
         let mut a = parsed.clone();
         let mut b = documented.clone();
         a.sort();
@@ -129,6 +131,9 @@ mod tests {
         let committed = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/schemas/pipeline.schema.json"))
             .expect("schemas/pipeline.schema.json exists");
         let generated = serde_json::to_string_pretty(&pipeline_schema()).unwrap() + "\n";
-        assert!(committed == generated, "schemas/pipeline.schema.json is stale: run `shakeflow schema > schemas/pipeline.schema.json`");
+        assert!(
+            committed == generated,
+            "schemas/pipeline.schema.json is stale: run `shakeflow schema > schemas/pipeline.schema.json`"
+        );
     }
 }

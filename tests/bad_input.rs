@@ -40,7 +40,11 @@ fn truncated_file() {
 #[test]
 fn non_numeric_cell() {
     fails_cleanly(
-        |root| edit(root, "archive/FB-1/daq.csv", |t| t.replacen("0.005000,", "0.005000,abc", 1).replacen("abc1", "abc", 1)),
+        |root| {
+            edit(root, "archive/FB-1/daq.csv", |t| {
+                t.replacen("0.005000,", "0.005000,abc", 1).replacen("abc1", "abc", 1)
+            })
+        },
         &["archive/FB-1/daq.csv:5", "(EW)", "abc"],
     );
 }
@@ -106,35 +110,34 @@ fn wrong_npts_in_an_at2_record() {
 
 #[test]
 fn unknown_stage_type() {
-    fails_cleanly(|root| edit(root, "pipeline.yaml", |t| t.replace("type: baseline", "type: baselin")), &[
-        "pipeline.yaml:18:5",
-        "unknown stage type `baselin`",
-        "did you mean `baseline`",
-    ]);
+    fails_cleanly(
+        |root| edit(root, "pipeline.yaml", |t| t.replace("type: baseline", "type: baselin")),
+        &["pipeline.yaml:18:5", "unknown stage type `baselin`", "did you mean `baseline`"],
+    );
 }
 
 #[test]
 fn cyclic_pipeline() {
-    fails_cleanly(|root| edit(root, "pipeline.yaml", |t| t.replace("inputs: [load]", "inputs: [baseline]")), &[
-        "pipeline.yaml:",
-        "cycle: baseline → baseline",
-    ]);
+    fails_cleanly(
+        |root| edit(root, "pipeline.yaml", |t| t.replace("inputs: [load]", "inputs: [baseline]")),
+        &["pipeline.yaml:", "cycle: baseline → baseline"],
+    );
 }
 
 #[test]
 fn unknown_yaml_key() {
-    fails_cleanly(|root| edit(root, "pipeline.yaml", |t| t.replace("    params:\n", "    parms:\n")), &[
-        "pipeline.yaml:20:5",
-        "unknown field `parms`",
-    ]);
+    fails_cleanly(
+        |root| edit(root, "pipeline.yaml", |t| t.replace("    params:\n", "    parms:\n")),
+        &["pipeline.yaml:20:5", "unknown field `parms`"],
+    );
 }
 
 #[test]
 fn missing_input_file() {
-    fails_cleanly(|root| std::fs::remove_dir_all(root.join("archive")).unwrap(), &[
-        "pipeline.yaml:6:5",
-        "source `daq`: no file matches `archive/{motion}/daq.csv`",
-    ]);
+    fails_cleanly(
+        |root| std::fs::remove_dir_all(root.join("archive")).unwrap(),
+        &["pipeline.yaml:6:5", "source `daq`: no file matches `archive/{motion}/daq.csv`"],
+    );
 }
 
 #[test]
@@ -147,7 +150,10 @@ fn unwritable_output_dir() {
     let out = shakeflow(&["run", "pipeline.yaml"], root);
     let message = stderr(&out);
     assert!(!out.status.success());
-    assert!(message.contains("pipeline.yaml:2:1") && message.contains("cannot create the output directory"), "{message}");
+    assert!(
+        message.contains("pipeline.yaml:2:1") && message.contains("cannot create the output directory"),
+        "{message}"
+    );
 }
 
 #[test]
@@ -157,10 +163,16 @@ fn validate_points_at_a_typo() {
     let out = shakeflow(&["validate", "pipeline.yaml"], project.path());
     let message = stderr(&out);
     assert!(!out.status.success());
-    assert!(message.contains("pipeline.yaml:21:7: unknown parameter `ordr`") && message.contains("did you mean `order`"), "{message}");
+    assert!(
+        message.contains("pipeline.yaml:21:7: unknown parameter `ordr`") && message.contains("did you mean `order`"),
+        "{message}"
+    );
 }
 
 #[test]
 fn damaged_lockfile_is_an_error_not_a_silent_reset() {
-    fails_cleanly(|root| edit(root, "out/shakeflow.lock", |t| t.replace("stages:", "stages: [")), &["shakeflow.lock", "damaged"]);
+    fails_cleanly(
+        |root| edit(root, "out/shakeflow.lock", |t| t.replace("stages:", "stages: [")),
+        &["shakeflow.lock", "damaged"],
+    );
 }

@@ -9,10 +9,14 @@ use shakeflow::stages::{baseline, load, InputPart};
 
 #[test]
 fn cubic_baseline_matches_numpy_polyfit_on_llolleo() {
-    let reference: Value = serde_json::from_str(&std::fs::read_to_string(common::reference_script("baseline_llolleo.json")).unwrap()).unwrap();
+    let reference: Value =
+        serde_json::from_str(&std::fs::read_to_string(common::reference_script("baseline_llolleo.json")).unwrap())
+            .unwrap();
     let path = common::ground_motion("llolleo1002271.v1");
-    let spec: SourceSpec = serde_json::from_value(serde_json::json!({"format": "renadic_v1", "path": "llolleo1002271.v1"})).unwrap();
-    let part = InputPart { partition: vec![], path: path.clone(), label: "llolleo1002271.v1".into(), hash: String::new() };
+    let spec: SourceSpec =
+        serde_json::from_value(serde_json::json!({"format": "renadic_v1", "path": "llolleo1002271.v1"})).unwrap();
+    let part =
+        InputPart { partition: vec![], path: path.clone(), label: "llolleo1002271.v1".into(), hash: String::new() };
     let loaded = load::load_record(&spec, &part).unwrap();
     let corrected = baseline::correct(&loaded, 3, &[]).unwrap();
     let fits: Value = serde_json::from_str(&corrected.metadata["shakeflow.baseline"]).unwrap();

@@ -1,8 +1,8 @@
 //! End-to-end checks of the synthetic archive (written under CARGO_TARGET_TMPDIR).
 
 use shakeflow::demo::archive::{
-    is_current, write_demo_archive, Manifest, DAQ1_COLUMNS, DAQ1_FILE, DAQ2_COLUMNS, DAQ2_FILE,
-    MANIFEST_FILE, README_FILE,
+    is_current, write_demo_archive, Manifest, DAQ1_COLUMNS, DAQ1_FILE, DAQ2_COLUMNS, DAQ2_FILE, MANIFEST_FILE,
+    README_FILE,
 };
 use shakeflow::demo::study::{equipment_by_id, motion_by_id};
 use std::fs;
@@ -30,27 +30,19 @@ fn primary() -> &'static Path {
             t.elapsed().as_secs_f64()
         );
         for f in &report.files {
-            assert_eq!(
-                fs::metadata(dir.join(&f.path)).unwrap().len(),
-                f.bytes,
-                "{}",
-                f.path
-            );
+            assert_eq!(fs::metadata(dir.join(&f.path)).unwrap().len(), f.bytes, "{}", f.path);
         }
         dir
     })
 }
 
 fn manifest(dir: &Path) -> Manifest {
-    serde_json::from_str(&fs::read_to_string(dir.join(MANIFEST_FILE)).unwrap())
-        .expect("manifest parses")
+    serde_json::from_str(&fs::read_to_string(dir.join(MANIFEST_FILE)).unwrap()).expect("manifest parses")
 }
 
 fn listing(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
+    let mut v: Vec<String> =
+        fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     v.sort();
     v
 }
@@ -78,10 +70,7 @@ fn generation_is_deterministic_and_replaces_atomically() {
     write_demo_archive(&b).unwrap();
     let t = Instant::now();
     write_demo_archive(&b).unwrap();
-    println!(
-        "second generation (replacing an archive) {:.2} s",
-        t.elapsed().as_secs_f64()
-    );
+    println!("second generation (replacing an archive) {:.2} s", t.elapsed().as_secs_f64());
     let fa = all_files(a);
     let fb = all_files(&b);
     assert_eq!(fa.len(), fb.len());
@@ -92,10 +81,7 @@ fn generation_is_deterministic_and_replaces_atomically() {
     // No temp or old directories left next to the archive.
     let parent = b.parent().unwrap();
     for name in listing(parent) {
-        assert!(
-            !name.contains(".tmp-") && !name.contains(".old-"),
-            "leftover {name}"
-        );
+        assert!(!name.contains(".tmp-") && !name.contains(".old-"), "leftover {name}");
     }
     assert!(is_current(&b));
     // A changed size, a missing file or another version make it stale.
@@ -106,11 +92,7 @@ fn generation_is_deterministic_and_replaces_atomically() {
     assert!(!is_current(&b));
     fs::remove_file(&victim).unwrap();
     assert!(!is_current(&b));
-    let text = fs::read_to_string(b.join(MANIFEST_FILE)).unwrap().replacen(
-        "\"version\": \"",
-        "\"version\": \"0.",
-        1,
-    );
+    let text = fs::read_to_string(b.join(MANIFEST_FILE)).unwrap().replacen("\"version\": \"", "\"version\": \"0.", 1);
     fs::write(b.join(MANIFEST_FILE), text).unwrap();
     assert!(!is_current(&b));
     assert!(!is_current(&scratch("does-not-exist")));
@@ -135,9 +117,7 @@ fn read_csv(path: &Path) -> (Vec<String>, String, Vec<Vec<f64>>, Vec<String>) {
 fn column_peak(rows: &[Vec<f64>], col: usize, from: usize, to: usize) -> f64 {
     let to = to.min(rows.len());
     let mean = rows[from..to].iter().map(|r| r[col]).sum::<f64>() / (to - from) as f64;
-    rows[from..to]
-        .iter()
-        .fold(0.0_f64, |m, r| m.max((r[col] - mean).abs()))
+    rows[from..to].iter().fold(0.0_f64, |m, r| m.max((r[col] - mean).abs()))
 }
 
 #[test]
@@ -149,8 +129,8 @@ fn layout_headers_rows_and_manifest() {
     assert_eq!(
         ids,
         [
-            "BI-1", "BI-2", "BI-3", "BI-4", "BI-5", "BI-6", "WN-1", "FB-1", "FB-2", "FB-3", "FB-4",
-            "FB-5", "WN-6", "FB-6"
+            "BI-1", "BI-2", "BI-3", "BI-4", "BI-5", "BI-6", "WN-1", "FB-1", "FB-2", "FB-3", "FB-4", "FB-5", "WN-6",
+            "FB-6"
         ]
     );
     let mut expected_top: Vec<String> = ids.iter().map(|s| s.to_string()).collect();
@@ -174,31 +154,17 @@ fn layout_headers_rows_and_manifest() {
     for t in &m.tests {
         let tdir = dir.join(&t.id);
         assert_eq!(listing(&tdir), [DAQ1_FILE, DAQ2_FILE]);
-        assert!(
-            (0.4..2.5).contains(&t.clock_offset_s),
-            "{} offset {}",
-            t.id,
-            t.clock_offset_s
-        );
+        assert!((0.4..2.5).contains(&t.clock_offset_s), "{} offset {}", t.id, t.clock_offset_s);
         for rate in [200.0, 256.0] {
             let samples = t.clock_offset_s * rate;
-            assert!(
-                (samples - samples.round()).abs() > 0.01,
-                "{} offset on the {rate} Hz grid",
-                t.id
-            );
+            assert!((samples - samples.round()).abs() > 0.01, "{} offset on the {rate} Hz grid", t.id);
         }
         match motion_by_id(&t.id) {
             Some(mo) => {
                 assert_eq!(t.kind, "earthquake");
                 assert_eq!(t.input, mo.input);
                 assert_eq!(t.base, mo.base.code());
-                assert!(
-                    (t.ground_pga_g - mo.pia_g).abs() <= 1e-6 * mo.pia_g,
-                    "{} pga {}",
-                    t.id,
-                    t.ground_pga_g
-                );
+                assert!((t.ground_pga_g - mo.pia_g).abs() <= 1e-6 * mo.pia_g, "{} pga {}", t.id, t.ground_pga_g);
             }
             None => {
                 assert_eq!(t.kind, "white_noise");
@@ -210,11 +176,7 @@ fn layout_headers_rows_and_manifest() {
         assert!((t.building_period_s - target).abs() < 0.01 * target);
         for e in &t.equipment {
             let eq = equipment_by_id(&e.unit).unwrap();
-            let f = if t.frequency_set == "before FB-1" {
-                eq.freq_before_fb1_hz
-            } else {
-                eq.freq_before_fb6_hz
-            };
+            let f = if t.frequency_set == "before FB-1" { eq.freq_before_fb1_hz } else { eq.freq_before_fb6_hz };
             assert_eq!(e.frequency_hz, f);
             assert!((0.03..=0.05).contains(&e.damping_ratio));
             assert!((0.01..=0.03).contains(&e.offset_g.abs()));
@@ -225,13 +187,13 @@ fn layout_headers_rows_and_manifest() {
         }
 
         let (c1, h1, rows1, times1) = read_csv(&tdir.join(DAQ1_FILE));
-        assert_eq!(c1[0], "# NEES-2009-0722 UCSD BNCS - SYNTHETIC demo archive written by shakeflow demo-archive (not real data)");
+        assert_eq!(
+            c1[0],
+            "# NEES-2009-0722 UCSD BNCS - SYNTHETIC demo archive written by shakeflow demo-archive (not real data)"
+        );
         assert!(c1[1].starts_with(&format!("# test: {}, input: {}, event: ", t.id, t.input)));
         assert!(c1[1].ends_with(&format!("base: {}", t.base)));
-        assert_eq!(
-            c1[2],
-            "# daq: DAQ1 floor accelerometers (floor averages), sample_rate_hz: 200, units: g"
-        );
+        assert_eq!(c1[2], "# daq: DAQ1 floor accelerometers (floor averages), sample_rate_hz: 200, units: g");
         assert!(c1[3].starts_with("# "));
         assert_eq!(h1, DAQ1_COLUMNS.join(","));
         assert_eq!(h1, "Time,A4_EW,A4_NS,A4_UD,A5_EW,A5_NS,A5_UD");
@@ -244,19 +206,13 @@ fn layout_headers_rows_and_manifest() {
         let (c2, h2, rows2, times2) = read_csv(&tdir.join(DAQ2_FILE));
         assert_eq!(c2[0], c1[0]);
         assert_eq!(c2[1], c1[1]);
-        assert_eq!(
-            c2[2],
-            "# daq: DAQ2 equipment top accelerometers (E-W), sample_rate_hz: 256, units: g"
-        );
+        assert_eq!(c2[2], "# daq: DAQ2 equipment top accelerometers (E-W), sample_rate_hz: 256, units: g");
         assert!(c2[3].starts_with("# ") && c2[3].contains("NOT synchronised"));
         assert_eq!(h2, DAQ2_COLUMNS.join(","));
-        assert_eq!(
-            h2,
-            "Time,UI3_TOP_EW,MC2_TOP_EW,PB1_TOP_EW,PB2_TOP_EW,PS1_TOP_EW,PS2_TOP_EW,WSU1_TOP_EW"
-        );
+        assert_eq!(h2, "Time,A5_EW_SYNC,UI3_TOP_EW,MC2_TOP_EW,PB1_TOP_EW,PB2_TOP_EW,PS1_TOP_EW,PS2_TOP_EW,WSU1_TOP_EW");
         assert_eq!(rows2.len(), (t.duration_s * 256.0) as usize);
         assert_eq!(rows2.len(), t.daq2_rows);
-        assert!(rows2.iter().all(|r| r.len() == 8));
+        assert!(rows2.iter().all(|r| r.len() == DAQ2_COLUMNS.len() - 1));
         assert_eq!(times2[0], "0.000000");
         assert_eq!(times2[1], "0.003906");
 
@@ -272,20 +228,11 @@ fn layout_headers_rows_and_manifest() {
             ew,
             ew / t.ground_pga_g,
             ns / ew,
-            ud / ew
-        , t.clock_offset_s);
-        assert!(
-            (0.03..0.15).contains(&(ns / ew)),
-            "{} NS/EW {}",
-            t.id,
-            ns / ew
+            ud / ew,
+            t.clock_offset_s
         );
-        assert!(
-            (0.07..0.15).contains(&(ud / ew)),
-            "{} UD/EW {}",
-            t.id,
-            ud / ew
-        );
+        assert!((0.03..0.15).contains(&(ns / ew)), "{} NS/EW {}", t.id, ns / ew);
+        assert!((0.07..0.15).contains(&(ud / ew)), "{} UD/EW {}", t.id, ud / ew);
 
         for tp in &t.toppling {
             let col = DAQ2_COLUMNS.iter().position(|c| *c == tp.channel).unwrap();
@@ -297,37 +244,16 @@ fn layout_headers_rows_and_manifest() {
                 "  topple {} at {:.2} s: spike {:.2} g, 5 s before {:.3} g, 5 s after {:.3} g",
                 tp.unit, tp.time_s, spike, before, after
             );
-            assert!(
-                spike > 3.0 && spike > 1.5 * before,
-                "spike {spike} vs before {before}"
-            );
+            assert!(spike > 3.0 && spike > 1.5 * before, "spike {spike} vs before {before}");
             assert!(after < 0.25 * before, "after {after} vs before {before}");
         }
     }
     let fb4 = m.tests.iter().find(|t| t.id == "FB-4").unwrap();
     assert_eq!(fb4.toppling.len(), 1);
     assert_eq!(
-        (
-            fb4.toppling[0].unit.as_str(),
-            fb4.toppling[0].time_s,
-            fb4.toppling[0].side.as_str()
-        ),
+        (fb4.toppling[0].unit.as_str(), fb4.toppling[0].time_s, fb4.toppling[0].side.as_str()),
         ("PS2", 30.9, "right")
     );
-    assert!(m
-        .tests
-        .iter()
-        .find(|t| t.id == "FB-5")
-        .unwrap()
-        .toppling
-        .iter()
-        .any(|p| p.unit == "PS2"));
-    assert!(m
-        .tests
-        .iter()
-        .find(|t| t.id == "FB-6")
-        .unwrap()
-        .toppling
-        .iter()
-        .any(|p| p.unit == "WSU1"));
+    assert!(m.tests.iter().find(|t| t.id == "FB-5").unwrap().toppling.iter().any(|p| p.unit == "PS2"));
+    assert!(m.tests.iter().find(|t| t.id == "FB-6").unwrap().toppling.iter().any(|p| p.unit == "WSU1"));
 }

@@ -10,12 +10,14 @@ use shakeflow::table::TIME_COLUMN;
 
 fn load(file: &str, format: &str) -> shakeflow::table::Table {
     let spec: SourceSpec = serde_json::from_value(json!({"format": format, "path": file})).unwrap();
-    let part = InputPart { partition: vec![], path: common::ground_motion(file), label: file.into(), hash: String::new() };
+    let part =
+        InputPart { partition: vec![], path: common::ground_motion(file), label: file.into(), hash: String::new() };
     load::load_record(&spec, &part).unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn check(table: &shakeflow::table::Table, channel: &str, npts: usize, dt: f64, pga_g: f64) {
-    let values = table.f64_column(channel).unwrap_or_else(|| panic!("no channel {channel}: {:?}", table.column_names()));
+    let values =
+        table.f64_column(channel).unwrap_or_else(|| panic!("no channel {channel}: {:?}", table.column_names()));
     assert_eq!(values.len(), npts, "{channel} npts");
     let time = table.f64_column(TIME_COLUMN).unwrap();
     assert!((time[1] - time[0] - dt).abs() < 1e-9, "{channel} dt {}", time[1] - time[0]);

@@ -34,7 +34,10 @@ fn changed_parameter_reruns_only_what_depends_on_it() {
 
     let rerun = shakeflow(&["run", "pipeline.yaml"], project.path());
     let log = stderr(&rerun);
-    assert!(log.contains("load               cached") && log.contains("baseline           running (params changed"), "{log}");
+    assert!(
+        log.contains("load               cached") && log.contains("baseline           running (params changed"),
+        "{log}"
+    );
 }
 
 #[test]
@@ -62,7 +65,10 @@ fn force_reruns_the_stage_and_its_dependents() {
     assert!(shakeflow(&["run", "pipeline.yaml"], project.path()).status.success());
     let out = shakeflow(&["run", "pipeline.yaml", "--force", "load"], project.path());
     let log = stderr(&out);
-    assert!(log.contains("load               running (forced)") && log.contains("baseline           running (forced)"), "{log}");
+    assert!(
+        log.contains("load               running (forced)") && log.contains("baseline           running (forced)"),
+        "{log}"
+    );
     let unknown = shakeflow(&["run", "pipeline.yaml", "--force", "lod"], project.path());
     assert!(!unknown.status.success());
     assert!(stderr(&unknown).contains("`--force lod`: no stage of that name"), "{}", stderr(&unknown));
@@ -93,13 +99,17 @@ fn single_stage_runs_on_files_without_a_pipeline() {
     let record = ground_motion("RSN6_IMPVALL.I_I-ELC180.AT2");
     let out = shakeflow(&["stage", "load", "--input", record.to_str().unwrap(), "--output", "loaded"], dir.path());
     assert!(out.status.success(), "{}", stderr(&out));
-    let out = shakeflow(&["stage", "baseline", "--input", "loaded/records", "--output", "corrected", "--set", "order=1"], dir.path());
+    let out = shakeflow(
+        &["stage", "baseline", "--input", "loaded/records", "--output", "corrected", "--set", "order=1"],
+        dir.path(),
+    );
     assert!(out.status.success(), "{}", stderr(&out));
     let text = stdout(&shakeflow(&["inspect", "corrected/records/data.parquet"], dir.path()));
     assert!(text.contains("5372 rows"), "{text}");
     assert!(text.contains("m/s^2") && text.contains("order-1 polynomial baseline removed"), "{text}");
     assert!(text.contains("\"order\": 1"), "{text}");
-    let bad = shakeflow(&["stage", "baseline", "--input", "loaded/records", "--output", "x", "--set", "ordr=1"], dir.path());
+    let bad =
+        shakeflow(&["stage", "baseline", "--input", "loaded/records", "--output", "x", "--set", "ordr=1"], dir.path());
     assert!(!bad.status.success());
     assert!(stderr(&bad).contains("did you mean `order`"), "{}", stderr(&bad));
     assert!(!dir.path().join("x").exists());
@@ -109,4 +119,21 @@ fn single_stage_runs_on_files_without_a_pipeline() {
 fn stages_lists_parameters_with_defaults() {
     let text = stdout(&shakeflow(&["stages"], std::path::Path::new(".")));
     assert!(text.contains("baseline (version 1)") && text.contains("- order: integer (default 3)"), "{text}");
+}
+
+#[test]
+fn inspect_describes_mcap_files_and_datasets() {
+    let project = small_project();
+    assert!(shakeflow(&["run", "pipeline.yaml"], project.path()).status.success());
+    let mcap = stdout(&shakeflow(&["inspect", "out/baseline/mcap/records/motion=FB-2/data.mcap"], project.path()));
+    assert!(mcap.contains("MCAP, 400 messages from 0.000 s to 1.995 s"), "{mcap}");
+    assert!(mcap.contains("/baseline/records/motion=FB-2"), "{mcap}");
+    let dataset = stdout(&shakeflow(&["inspect", "out/load/records"], project.path()));
+    assert!(dataset.contains("dataset of 2 Parquet part(s)") && dataset.contains("total rows: 800"), "{dataset}");
+    let missing = shakeflow(&["inspect", "out/nothing.parquet"], project.path());
+    assert!(
+        !missing.status.success() && stderr(&missing).contains("cannot open `out/nothing.parquet`"),
+        "{}",
+        stderr(&missing)
+    );
 }

@@ -5,7 +5,7 @@
 //! DIR/README.txt
 //! DIR/manifest.json
 //! DIR/<test>/DAQ1_floors.csv      200 Hz, g: Time,A4_EW,A4_NS,A4_UD,A5_EW,A5_NS,A5_UD
-//! DIR/<test>/DAQ2_equipment.csv   256 Hz, g: Time,UI3_TOP_EW,...,WSU1_TOP_EW
+//! DIR/<test>/DAQ2_equipment.csv   256 Hz, g: Time,A5_EW_SYNC,UI3_TOP_EW,...,WSU1_TOP_EW
 //! ```
 //! Physics runs on a 1 kHz grid in DAQ1 time; each DAQ samples it by cubic interpolation
 //! (all signals are band-limited below 30 Hz). DAQ2 time τ is DAQ1 time τ + clock_offset_s.
@@ -29,7 +29,7 @@ use std::path::{Path, PathBuf};
 
 pub const GENERATOR_NAME: &str = "shakeflow demo-archive";
 /// Bump whenever the bytes written change, so `is_current` rejects older archives.
-pub const GENERATOR_VERSION: &str = "1.0.0";
+pub const GENERATOR_VERSION: &str = "1.1.0";
 pub const README_FILE: &str = "README.txt";
 pub const MANIFEST_FILE: &str = "manifest.json";
 pub const DAQ1_FILE: &str = "DAQ1_floors.csv";
@@ -37,8 +37,9 @@ pub const DAQ2_FILE: &str = "DAQ2_equipment.csv";
 pub const DAQ1_RATE_HZ: u32 = 200;
 pub const DAQ2_RATE_HZ: u32 = 256;
 pub const DAQ1_COLUMNS: [&str; 7] = ["Time", "A4_EW", "A4_NS", "A4_UD", "A5_EW", "A5_NS", "A5_UD"];
-pub const DAQ2_COLUMNS: [&str; 8] = [
+pub const DAQ2_COLUMNS: [&str; 9] = [
     "Time",
+    "A5_EW_SYNC",
     "UI3_TOP_EW",
     "MC2_TOP_EW",
     "PB1_TOP_EW",
@@ -50,12 +51,10 @@ pub const DAQ2_COLUMNS: [&str; 8] = [
 
 const HEADER_LINE_1: &str =
     "# NEES-2009-0722 UCSD BNCS - SYNTHETIC demo archive written by shakeflow demo-archive (not real data)";
-const DAQ1_LINE_3: &str =
-    "# daq: DAQ1 floor accelerometers (floor averages), sample_rate_hz: 200, units: g";
+const DAQ1_LINE_3: &str = "# daq: DAQ1 floor accelerometers (floor averages), sample_rate_hz: 200, units: g";
 const DAQ1_LINE_4: &str = "# channels: A4_* = floor 4, A5_* = floor 5; EW = X (shaking direction), NS = Y, UD = Z (vertical); Time = DAQ1 time (s); sensor offsets not removed";
-const DAQ2_LINE_3: &str =
-    "# daq: DAQ2 equipment top accelerometers (E-W), sample_rate_hz: 256, units: g";
-const DAQ2_LINE_4: &str = "# note: DAQ2 clock is NOT synchronised with DAQ1 (Time = DAQ2 time); each <unit>_TOP_EW sensor carries a constant offset, slow drift and noise";
+const DAQ2_LINE_3: &str = "# daq: DAQ2 equipment top accelerometers (E-W), sample_rate_hz: 256, units: g";
+const DAQ2_LINE_4: &str = "# note: DAQ2 clock is NOT synchronised with DAQ1 (Time = DAQ2 time); A5_EW_SYNC = DAQ2's copy of floor-5 E-W for synchronisation; each <unit>_TOP_EW sensor carries a constant offset, slow drift and noise";
 
 /// Physics grid (Hz): fine enough for accurate cubic interpolation to 200 and 256 Hz.
 const SIM_RATE_HZ: f64 = 1000.0;
@@ -75,11 +74,8 @@ const WHITE_NOISE_PEAK_G: f64 = 0.04;
 const FLOOR_NOISE_RMS_G: f64 = 0.0002;
 const EQUIPMENT_NOISE_RMS_G: f64 = 0.0005;
 /// Toppling impacts: test, unit, DAQ1 time (s), side. FB-4 PS2 at 30.9 s is the observed one.
-const TOPPLES: [(&str, &str, f64, &str); 3] = [
-    ("FB-4", "PS2", 30.9, "right"),
-    ("FB-5", "PS2", 26.4, "right"),
-    ("FB-6", "WSU1", 22.7, "left"),
-];
+const TOPPLES: [(&str, &str, f64, &str); 3] =
+    [("FB-4", "PS2", 30.9, "right"), ("FB-5", "PS2", 26.4, "right"), ("FB-6", "WSU1", 22.7, "left")];
 /// Impact spike: peak (g) and rise time (s) of an alpha pulse (t/τ)e^(1-t/τ); < 5 % after 70 ms.
 const SPIKE_PEAK_G: f64 = 6.0;
 const SPIKE_TAU_S: f64 = 0.012;
@@ -192,18 +188,10 @@ pub struct DemoArchiveReport {
 pub fn write_demo_archive(dir: &Path) -> io::Result<DemoArchiveReport> {
     let name = dir
         .file_name()
-        .ok_or_else(|| {
-            io::Error::new(
-                io::ErrorKind::InvalidInput,
-                "archive path has no final component",
-            )
-        })?
+        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "archive path has no final component"))?
         .to_string_lossy()
         .into_owned();
-    let parent = dir
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
+    let parent = dir.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     fs::create_dir_all(parent)?;
     let pid = std::process::id();
     let tmp = parent.join(format!("{name}.tmp-{pid}"));
@@ -250,32 +238,20 @@ pub fn is_current(dir: &Path) -> bool {
     let Ok(manifest) = serde_json::from_str::<Manifest>(&text) else {
         return false;
     };
-    if manifest.generator.name != GENERATOR_NAME || manifest.generator.version != GENERATOR_VERSION
-    {
+    if manifest.generator.name != GENERATOR_NAME || manifest.generator.version != GENERATOR_VERSION {
         return false;
     }
     let ids: Vec<&str> = plans().iter().map(|p| p.id).collect();
-    if manifest
-        .tests
-        .iter()
-        .map(|t| t.id.as_str())
-        .ne(ids.iter().copied())
-    {
+    if manifest.tests.iter().map(|t| t.id.as_str()).ne(ids.iter().copied()) {
         return false;
     }
-    if manifest
+    if manifest.files.iter().map(|f| f.path.clone()).ne(expected_files(&ids)) {
+        return false;
+    }
+    manifest
         .files
         .iter()
-        .map(|f| f.path.clone())
-        .ne(expected_files(&ids))
-    {
-        return false;
-    }
-    manifest.files.iter().all(|f| {
-        fs::metadata(dir.join(&f.path))
-            .map(|m| m.is_file() && m.len() == f.bytes)
-            .unwrap_or(false)
-    })
+        .all(|f| fs::metadata(dir.join(&f.path)).map(|m| m.is_file() && m.len() == f.bytes).unwrap_or(false))
 }
 
 fn expected_files(ids: &[&str]) -> Vec<String> {
@@ -322,17 +298,8 @@ fn plans() -> Vec<TestPlan> {
             });
         }
         let late = matches!(m.id, "FB-4" | "FB-5" | "FB-6");
-        let frequency_set = if late {
-            FrequencySet::BeforeFb6
-        } else {
-            FrequencySet::BeforeFb1
-        };
-        out.push(TestPlan {
-            id: m.id,
-            kind: Kind::Earthquake(m),
-            base: m.base,
-            frequency_set,
-        });
+        let frequency_set = if late { FrequencySet::BeforeFb6 } else { FrequencySet::BeforeFb1 };
+        out.push(TestPlan { id: m.id, kind: Kind::Earthquake(m), base: m.base, frequency_set });
     }
     out
 }
@@ -347,14 +314,7 @@ struct Shape {
 }
 
 fn ground_filter(fg_hz: f64, zeta_g: f64) -> GroundFilter {
-    GroundFilter {
-        fg_hz,
-        zeta_g,
-        fc_hz: 0.2,
-        zeta_c: 0.7,
-        f_pass_hz: 20.0,
-        f_stop_hz: 25.0,
-    }
+    GroundFilter { fg_hz, zeta_g, fc_hz: 0.2, zeta_c: 0.7, f_pass_hz: 20.0, f_stop_hz: 25.0 }
 }
 
 fn shape(kind: Kind) -> Shape {
@@ -366,11 +326,7 @@ fn shape(kind: Kind) -> Shape {
         end_s,
         end_taper_s: 3.0,
     };
-    let quake = |duration_s, envelope, fg, zg| Shape {
-        duration_s,
-        envelope,
-        filter: Some(ground_filter(fg, zg)),
-    };
+    let quake = |duration_s, envelope, fg, zg| Shape { duration_s, envelope, filter: Some(ground_filter(fg, zg)) };
     match kind {
         Kind::WhiteNoise => Shape {
             duration_s: 120,
@@ -404,17 +360,10 @@ fn floor_dof(base: Base, floor: u8) -> usize {
 }
 
 fn building(base: Base) -> ShearBuilding {
-    let fb = ShearBuilding::fixed_base(
-        &FLOOR_MASSES,
-        &STOREY_STIFFNESS_SHAPE,
-        FIXED_BASE_PERIOD_S,
-        FIXED_BASE_DAMPING,
-    );
+    let fb = ShearBuilding::fixed_base(&FLOOR_MASSES, &STOREY_STIFFNESS_SHAPE, FIXED_BASE_PERIOD_S, FIXED_BASE_DAMPING);
     match base {
         Base::Fixed => fb,
-        Base::Isolated => {
-            ShearBuilding::base_isolated(BASE_SLAB_MASS, &fb, ISOLATOR_DAMPING, ISOLATED_PERIOD_S)
-        }
+        Base::Isolated => ShearBuilding::base_isolated(BASE_SLAB_MASS, &fb, ISOLATOR_DAMPING, ISOLATED_PERIOD_S),
     }
 }
 
@@ -473,39 +422,21 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
             &sh.envelope,
             m.pia_g,
         ),
-        _ => band_limited_white_noise(
-            stream("ground"),
-            n_sim,
-            dt,
-            0.5,
-            25.0,
-            &sh.envelope,
-            WHITE_NOISE_PEAK_G,
-        ),
+        _ => band_limited_white_noise(stream("ground"), n_sim, dt, 0.5, 25.0, &sh.envelope, WHITE_NOISE_PEAK_G),
     };
     let model = building(plan.base);
     let response = model.absolute_accelerations(&ground, dt);
 
     // Floor channels (physical, 1 kHz): EW from the model, NS small cross-talk, UD ~1/10 of EW
     // (one vertical record with a higher-frequency Kanai–Tajimi shape, scaled per floor).
-    let mut vertical = filtered_noise(
-        stream("vertical"),
-        n_sim,
-        dt,
-        &ground_filter(8.0, 0.5),
-        &sh.envelope,
-    );
+    let mut vertical = filtered_noise(stream("vertical"), n_sim, dt, &ground_filter(8.0, 0.5), &sh.envelope);
     scale_to_peak(&mut vertical, 1.0);
     let mut floors: Vec<[Vec<f64>; 3]> = Vec::new();
     for floor in [4u8, 5] {
         let ew = response[floor_dof(plan.base, floor)].clone();
         let p = peak(&ew);
         let ns_extra = shaped_noise(stream(&format!("ns{floor}")));
-        let ns: Vec<f64> = ew
-            .iter()
-            .zip(&ns_extra)
-            .map(|(e, x)| 0.05 * e + 0.04 * p * x)
-            .collect();
+        let ns: Vec<f64> = ew.iter().zip(&ns_extra).map(|(e, x)| 0.05 * e + 0.04 * p * x).collect();
         let ud: Vec<f64> = vertical.iter().map(|v| 0.1 * p * v).collect();
         floors.push([ew, ns, ud]);
     }
@@ -516,16 +447,10 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
     let mut tops: Vec<Vec<f64>> = Vec::new();
     for (eq, &zeta) in EQUIPMENT.iter().zip(&EQUIPMENT_DAMPING) {
         let fl = floor_of(eq.floor);
-        let mut top =
-            Sdof::new(eq.frequency_hz(plan.frequency_set), zeta).absolute_acceleration(&fl[0], dt);
+        let mut top = Sdof::new(eq.frequency_hz(plan.frequency_set), zeta).absolute_acceleration(&fl[0], dt);
         if let Some(&(_, _, t0, side)) = TOPPLES.iter().find(|t| t.0 == id && t.1 == eq.id) {
             apply_topple(&mut top, &fl[2], dt, t0, side);
-            topples.push(Toppling {
-                unit: eq.id.into(),
-                channel: channel_name(eq),
-                time_s: t0,
-                side: side.into(),
-            });
+            topples.push(Toppling { unit: eq.id.into(), channel: channel_name(eq), time_s: t0, side: side.into() });
         }
         // Keeps the impact spike (and the switch to vertical motion) below 30 Hz.
         low_pass(&mut top, dt, 25.0, 30.0);
@@ -543,8 +468,7 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
         for (ci, dir) in ["EW", "NS", "UD"].iter().enumerate() {
             let offset = quantize(sensor_rng.sign() * sensor_rng.uniform(0.0005, 0.002), 6);
             let mut col = resample(&floors[fi][ci], dt, 0.0, f64::from(DAQ1_RATE_HZ), n1);
-            col.iter_mut()
-                .for_each(|v| *v += offset + FLOOR_NOISE_RMS_G * noise_rng.normal());
+            col.iter_mut().for_each(|v| *v += offset + FLOOR_NOISE_RMS_G * noise_rng.normal());
             daq1_cols.push(col);
             floor_channels.push(FloorChannel {
                 channel: format!("A{floor}_{dir}"),
@@ -558,7 +482,11 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
     let clock_offset = clock_offset_us(&mut sensor_rng) as f64 * 1e-6;
     let n2 = (sh.duration_s * DAQ2_RATE_HZ) as usize;
     let mut equipment = Vec::new();
-    let mut daq2_cols: Vec<Vec<f64>> = Vec::new();
+    // As on the real test, DAQ2 also records a copy of a floor channel, so the two clocks can be
+    // aligned without relying on the equipment's own (resonant, phase-shifted) response.
+    let mut sync = resample(&floors[1][0], dt, clock_offset, f64::from(DAQ2_RATE_HZ), n2);
+    sync.iter_mut().for_each(|v| *v += FLOOR_NOISE_RMS_G * noise_rng.normal());
+    let mut daq2_cols: Vec<Vec<f64>> = vec![sync];
     for ((eq, &zeta), top) in EQUIPMENT.iter().zip(&EQUIPMENT_DAMPING).zip(&tops) {
         let offset = quantize(sensor_rng.sign() * sensor_rng.uniform(0.01, 0.03), 6);
         let drift_end = sensor_rng.sign() * sensor_rng.uniform(0.01, 0.02);
@@ -585,38 +513,19 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
     }
 
     let (kind, input, event, motion) = match plan.kind {
-        Kind::Earthquake(m) => (
-            "earthquake",
-            m.input.to_string(),
-            format!("{} ({} %)", m.event_site, m.scale_percent),
-            Some(m),
-        ),
+        Kind::Earthquake(m) => {
+            ("earthquake", m.input.to_string(), format!("{} ({} %)", m.event_site, m.scale_percent), Some(m))
+        }
         Kind::WhiteNoise => (
             "white_noise",
             "WN".to_string(),
-            format!(
-                "band-limited white noise 0.5-25 Hz, {WHITE_NOISE_PEAK_G} g peak ({})",
-                plan.frequency_set.label()
-            ),
+            format!("band-limited white noise 0.5-25 Hz, {WHITE_NOISE_PEAK_G} g peak ({})", plan.frequency_set.label()),
             None,
         ),
     };
-    let line2 = format!(
-        "# test: {id}, input: {input}, event: {event}, base: {}",
-        plan.base.code()
-    );
-    let daq1_csv = csv(
-        &[HEADER_LINE_1, &line2, DAQ1_LINE_3, DAQ1_LINE_4],
-        &DAQ1_COLUMNS,
-        DAQ1_RATE_HZ,
-        &daq1_cols,
-    );
-    let daq2_csv = csv(
-        &[HEADER_LINE_1, &line2, DAQ2_LINE_3, DAQ2_LINE_4],
-        &DAQ2_COLUMNS,
-        DAQ2_RATE_HZ,
-        &daq2_cols,
-    );
+    let line2 = format!("# test: {id}, input: {input}, event: {event}, base: {}", plan.base.code());
+    let daq1_csv = csv(&[HEADER_LINE_1, &line2, DAQ1_LINE_3, DAQ1_LINE_4], &DAQ1_COLUMNS, DAQ1_RATE_HZ, &daq1_cols);
+    let daq2_csv = csv(&[HEADER_LINE_1, &line2, DAQ2_LINE_3, DAQ2_LINE_4], &DAQ2_COLUMNS, DAQ2_RATE_HZ, &daq2_cols);
 
     let entry = TestEntry {
         id: id.into(),
@@ -641,11 +550,7 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
         equipment,
         toppling: topples,
     };
-    GeneratedTest {
-        entry,
-        daq1_csv,
-        daq2_csv,
-    }
+    GeneratedTest { entry, daq1_csv, daq2_csv }
 }
 
 fn channel_name(eq: &Equipment) -> String {
@@ -686,10 +591,7 @@ fn csv(comments: &[&str], columns: &[&str], rate_hz: u32, cols: &[Vec<f64>]) -> 
 fn readme(tests: &[TestEntry]) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "NEES-2009-0722 UCSD BNCS - SYNTHETIC demo archive");
-    let _ = writeln!(
-        s,
-        "Written by {GENERATOR_NAME} {GENERATOR_VERSION}. THIS IS NOT REAL DATA."
-    );
+    let _ = writeln!(s, "Written by {GENERATOR_NAME} {GENERATOR_VERSION}. THIS IS NOT REAL DATA.");
     s.push_str(
         "\nIt imitates the layout of the 2012 UCSD five-story building test (base-isolated BI-*, then
 fixed-base FB-*; hospital equipment on floors 4 and 5) so shakeflow's pipeline can be run end to
@@ -704,7 +606,8 @@ Layout
   <test>/DAQ1_floors.csv     floor accelerometers, 200 Hz, g
                              Time,A4_EW,A4_NS,A4_UD,A5_EW,A5_NS,A5_UD
   <test>/DAQ2_equipment.csv  equipment top accelerometers (E-W), 256 Hz, g
-                             Time,UI3_TOP_EW,MC2_TOP_EW,PB1_TOP_EW,PB2_TOP_EW,PS1_TOP_EW,PS2_TOP_EW,WSU1_TOP_EW
+                             Time,A5_EW_SYNC,UI3_TOP_EW,MC2_TOP_EW,PB1_TOP_EW,PB2_TOP_EW,PS1_TOP_EW,PS2_TOP_EW,WSU1_TOP_EW
+                             (A5_EW_SYNC: DAQ2's own copy of floor-5 E-W, for clock synchronisation)
 
 Each CSV has 4 comment lines starting with '# ', a column row, then data rows; Time in seconds
 (6 decimals) from 0, values in g as {:.6e}. EW = X (shaking direction), NS = Y, UD = Z (vertical).
@@ -720,11 +623,7 @@ Tests (chronological)
 ",
     );
     for t in tests {
-        let _ = writeln!(
-            s,
-            "  {:<5} {:<7} {} {:>4} s  {}",
-            t.id, t.input, t.base, t.duration_s, t.event
-        );
+        let _ = writeln!(s, "  {:<5} {:<7} {} {:>4} s  {}", t.id, t.input, t.base, t.duration_s, t.event);
     }
     s
 }
@@ -742,18 +641,12 @@ fn write_contents(dir: &Path) -> io::Result<Vec<FileEntry>> {
     }
     let readme_text = readme(&tests);
     fs::write(dir.join(README_FILE), &readme_text)?;
-    files.push(FileEntry {
-        path: README_FILE.into(),
-        bytes: readme_text.len() as u64,
-    });
+    files.push(FileEntry { path: README_FILE.into(), bytes: readme_text.len() as u64 });
     for (id, daq1, daq2) in csvs {
         fs::create_dir(dir.join(id))?;
         for (name, text) in [(DAQ1_FILE, daq1), (DAQ2_FILE, daq2)] {
             fs::write(dir.join(id).join(name), &text)?;
-            files.push(FileEntry {
-                path: format!("{id}/{name}"),
-                bytes: text.len() as u64,
-            });
+            files.push(FileEntry { path: format!("{id}/{name}"), bytes: text.len() as u64 });
         }
     }
     let manifest = Manifest {
@@ -770,10 +663,7 @@ fn write_contents(dir: &Path) -> io::Result<Vec<FileEntry>> {
     let mut text = serde_json::to_string_pretty(&manifest).map_err(io::Error::other)?;
     text.push('\n');
     fs::write(dir.join(MANIFEST_FILE), &text)?;
-    files.push(FileEntry {
-        path: MANIFEST_FILE.into(),
-        bytes: text.len() as u64,
-    });
+    files.push(FileEntry { path: MANIFEST_FILE.into(), bytes: text.len() as u64 });
     Ok(files)
 }
 
@@ -788,8 +678,8 @@ mod tests {
         assert_eq!(
             ids,
             [
-                "BI-1", "BI-2", "BI-3", "BI-4", "BI-5", "BI-6", "WN-1", "FB-1", "FB-2", "FB-3",
-                "FB-4", "FB-5", "WN-6", "FB-6"
+                "BI-1", "BI-2", "BI-3", "BI-4", "BI-5", "BI-6", "WN-1", "FB-1", "FB-2", "FB-3", "FB-4", "FB-5", "WN-6",
+                "FB-6"
             ]
         );
         for t in &p {

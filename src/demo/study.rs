@@ -340,21 +340,13 @@ mod tests {
 
     #[test]
     fn tables_are_consistent() {
-        assert_eq!(
-            MOTIONS.iter().filter(|m| m.base == Base::Isolated).count(),
-            6
-        );
+        assert_eq!(MOTIONS.iter().filter(|m| m.base == Base::Isolated).count(), 6);
         for m in &MOTIONS {
             assert!(m.id.starts_with(m.base.code()));
             assert_eq!(m.input, format!("{}{}", m.record, m.scale_percent as u32));
         }
         assert_eq!(motion_by_id("FB-4").unwrap().pia_g, 0.26);
-        assert_eq!(
-            equipment_by_id("PS2")
-                .unwrap()
-                .frequency_hz(FrequencySet::BeforeFb6),
-            2.70
-        );
+        assert_eq!(equipment_by_id("PS2").unwrap().frequency_hz(FrequencySet::BeforeFb6), 2.70);
         assert_eq!(EQUIPMENT.iter().filter(|e| e.floor == 4).count(), 4);
     }
 }

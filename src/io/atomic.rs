@@ -21,8 +21,7 @@ where
 {
     let tmp = temp_sibling(path);
     let result = (|| {
-        let file = File::create(&tmp)
-            .map_err(|e| anyhow::anyhow!("cannot create `{}`: {e}", tmp.display()))?;
+        let file = File::create(&tmp).map_err(|e| anyhow::anyhow!("cannot create `{}`: {e}", tmp.display()))?;
         let mut writer = BufWriter::new(file);
         fill(&mut writer)?;
         writer.flush()?;

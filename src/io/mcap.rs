@@ -47,7 +47,12 @@ pub fn write_timeseries(path: &Path, topics: &[Topic<'_>], metadata: &BTreeMap<S
         let mut sequence = vec![0u32; topics.len()];
         for (nanos, t, row) in order {
             let message = message_json(topics[t].table, row);
-            let header = mcap::records::MessageHeader { channel_id: channels[t], sequence: sequence[t], log_time: nanos, publish_time: nanos };
+            let header = mcap::records::MessageHeader {
+                channel_id: channels[t],
+                sequence: sequence[t],
+                log_time: nanos,
+                publish_time: nanos,
+            };
             sequence[t] += 1;
             writer.write_to_known_channel(&header, &serde_json::to_vec(&message)?)?;
         }

@@ -97,9 +97,15 @@ fn column_data(data_type: &DataType, nullable: bool, parts: &[&ArrayRef]) -> any
         DataType::Float64 if nullable => {
             ColumnData::OptF64(typed::<Float64Array>(parts).flat_map(|a| a.iter()).collect())
         }
-        DataType::Float64 => ColumnData::F64(typed::<Float64Array>(parts).flat_map(|a| a.values().iter().copied()).collect()),
-        DataType::Int64 => ColumnData::I64(typed::<Int64Array>(parts).flat_map(|a| a.values().iter().copied()).collect()),
-        DataType::Boolean => ColumnData::Bool(typed::<BooleanArray>(parts).flat_map(|a| a.iter().map(|v| v.unwrap_or(false))).collect()),
+        DataType::Float64 => {
+            ColumnData::F64(typed::<Float64Array>(parts).flat_map(|a| a.values().iter().copied()).collect())
+        }
+        DataType::Int64 => {
+            ColumnData::I64(typed::<Int64Array>(parts).flat_map(|a| a.values().iter().copied()).collect())
+        }
+        DataType::Boolean => {
+            ColumnData::Bool(typed::<BooleanArray>(parts).flat_map(|a| a.iter().map(|v| v.unwrap_or(false))).collect())
+        }
         DataType::Utf8 => ColumnData::Str(
             typed::<StringArray>(parts).flat_map(|a| a.iter().map(|v| v.unwrap_or_default().to_string())).collect(),
         ),
@@ -117,9 +123,24 @@ mod tests {
         let path = dir.path().join("t.parquet");
         let mut t = Table::new();
         t.push(Column::f64("time_s", "s", "time", vec![0.0, 0.5]));
-        t.push(Column { name: "when".into(), unit: "s".into(), description: "maybe".into(), data: ColumnData::OptF64(vec![None, Some(1.5)]) });
-        t.push(Column { name: "ok".into(), unit: "".into(), description: "".into(), data: ColumnData::Bool(vec![true, false]) });
-        t.push(Column { name: "name".into(), unit: "".into(), description: "".into(), data: ColumnData::Str(vec!["a".into(), "b".into()]) });
+        t.push(Column {
+            name: "when".into(),
+            unit: "s".into(),
+            description: "maybe".into(),
+            data: ColumnData::OptF64(vec![None, Some(1.5)]),
+        });
+        t.push(Column {
+            name: "ok".into(),
+            unit: "".into(),
+            description: "".into(),
+            data: ColumnData::Bool(vec![true, false]),
+        });
+        t.push(Column {
+            name: "name".into(),
+            unit: "".into(),
+            description: "".into(),
+            data: ColumnData::Str(vec!["a".into(), "b".into()]),
+        });
         t.push(Column { name: "n".into(), unit: "".into(), description: "".into(), data: ColumnData::I64(vec![1, 2]) });
         t.metadata.insert("shakeflow.stage".into(), "x".into());
         write_table(&path, &t).unwrap();

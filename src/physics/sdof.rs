@@ -20,14 +20,8 @@ pub struct Sdof {
 impl Sdof {
     pub fn new(frequency_hz: f64, damping_ratio: f64) -> Self {
         assert!(frequency_hz > 0.0, "frequency must be positive");
-        assert!(
-            (0.0..1.0).contains(&damping_ratio),
-            "underdamped oscillator expected"
-        );
-        Self {
-            frequency_hz,
-            damping_ratio,
-        }
+        assert!((0.0..1.0).contains(&damping_ratio), "underdamped oscillator expected");
+        Self { frequency_hz, damping_ratio }
     }
 
     /// Absolute acceleration of the mass for base acceleration `base_acc` sampled at `dt`,
@@ -44,12 +38,9 @@ impl Sdof {
         let a = e * (z / sq * s + c);
         let b = e * s / wd;
         let cc = (2.0 * z / (w * dt)
-            + e * (((1.0 - 2.0 * z * z) / (wd * dt) - z / sq) * s
-                - (1.0 + 2.0 * z / (w * dt)) * c))
+            + e * (((1.0 - 2.0 * z * z) / (wd * dt) - z / sq) * s - (1.0 + 2.0 * z / (w * dt)) * c))
             / k;
-        let d = (1.0 - 2.0 * z / (w * dt)
-            + e * ((2.0 * z * z - 1.0) / (wd * dt) * s + 2.0 * z / (w * dt) * c))
-            / k;
+        let d = (1.0 - 2.0 * z / (w * dt) + e * ((2.0 * z * z - 1.0) / (wd * dt) * s + 2.0 * z / (w * dt) * c)) / k;
         let a_v = -e * w / sq * s;
         let b_v = e * (c - z / sq * s);
         let c_v = (-1.0 / dt + e * ((w / sq + z / (dt * sq)) * s + c / dt)) / k;
@@ -93,25 +84,9 @@ mod tests {
                 let n = 60_000;
                 let ag: Vec<f64> = (0..n).map(|i| (omega * i as f64 * dt).sin()).collect();
                 let y = osc.absolute_acceleration(&ag, dt);
-                let (mut ss, mut sc, mut cc, mut ys, mut yc) = (0.0, 0.0, 0.0, 0.0, 0.0);
-                for (i, &v) in y.iter().enumerate().skip(40_000) {
-                    let (s, c) = (omega * i as f64 * dt).sin_cos();
-                    ss += s * s;
-                    sc += s * c;
-                    cc += c * c;
-                    ys += v * s;
-                    yc += v * c;
-                }
-                let det = ss * cc - sc * sc;
-                let (ca, cb) = ((ys * cc - yc * sc) / det, (yc * ss - ys * sc) / det);
-                let (amp, phase) = (ca.hypot(cb), cb.atan2(ca));
-                let h = Complex64::new(1.0, 2.0 * zeta * r)
-                    / Complex64::new(1.0 - r * r, 2.0 * zeta * r);
-                println!(
-                    "f={f} ζ={zeta} r={r}: amp {amp:.6} vs {:.6}; phase {phase:.6} vs {:.6}",
-                    h.norm(),
-                    h.arg()
-                );
+                let (amp, phase) = crate::physics::fit_harmonic(&y, dt, omega, 40_000);
+                let h = Complex64::new(1.0, 2.0 * zeta * r) / Complex64::new(1.0 - r * r, 2.0 * zeta * r);
+                println!("f={f} ζ={zeta} r={r}: amp {amp:.6} vs {:.6}; phase {phase:.6} vs {:.6}", h.norm(), h.arg());
                 assert!((amp - h.norm()).abs() < 0.01 * h.norm());
                 assert!((phase - h.arg()).abs() < 0.01 * h.arg().abs().max(0.1));
             }

@@ -31,44 +31,26 @@ impl ShearBuilding {
         target_period_s: f64,
         damping_ratio: f64,
     ) -> Self {
-        assert_eq!(
-            masses.len(),
-            storey_stiffness_shape.len(),
-            "one storey stiffness per mass"
-        );
+        assert_eq!(masses.len(), storey_stiffness_shape.len(), "one storey stiffness per mass");
         assert!(!masses.is_empty(), "at least one storey");
         let k0 = chain_stiffness(storey_stiffness_shape);
         let w1 = natural_frequencies(masses, &k0)[0];
         let w_target = 2.0 * PI / target_period_s;
         // Eigenvalues ω² are linear in a uniform stiffness scale.
         let scale = (w_target / w1).powi(2);
-        let stiffness: Vec<Vec<f64>> = k0
-            .iter()
-            .map(|r| r.iter().map(|v| v * scale).collect())
-            .collect();
+        let stiffness: Vec<Vec<f64>> = k0.iter().map(|r| r.iter().map(|v| v * scale).collect()).collect();
         let w = natural_frequencies(masses, &stiffness);
         let (a0, a1) = if w.len() >= 2 {
             let (wi, wj) = (w[0], w[1]);
-            (
-                2.0 * damping_ratio * wi * wj / (wi + wj),
-                2.0 * damping_ratio / (wi + wj),
-            )
+            (2.0 * damping_ratio * wi * wj / (wi + wj), 2.0 * damping_ratio / (wi + wj))
         } else {
             (0.0, 2.0 * damping_ratio / w[0])
         };
         let n = masses.len();
         let damping = (0..n)
-            .map(|i| {
-                (0..n)
-                    .map(|j| a1 * stiffness[i][j] + if i == j { a0 * masses[i] } else { 0.0 })
-                    .collect()
-            })
+            .map(|i| (0..n).map(|j| a1 * stiffness[i][j] + if i == j { a0 * masses[i] } else { 0.0 }).collect())
             .collect();
-        Self {
-            mass: masses.to_vec(),
-            stiffness,
-            damping,
-        }
+        Self { mass: masses.to_vec(), stiffness, damping }
     }
 
     /// Base-isolated building: `superstructure` (a fixed-base model) on a base slab of mass
@@ -134,10 +116,7 @@ impl ShearBuilding {
 
     /// Undamped natural periods, longest first.
     pub fn natural_periods(&self) -> Vec<f64> {
-        natural_frequencies(&self.mass, &self.stiffness)
-            .iter()
-            .map(|w| 2.0 * PI / w)
-            .collect()
+        natural_frequencies(&self.mass, &self.stiffness).iter().map(|w| 2.0 * PI / w).collect()
     }
 
     pub fn fundamental_period(&self) -> f64 {
@@ -154,32 +133,23 @@ impl ShearBuilding {
         let c2 = gamma / (beta * dt);
         // Effective stiffness K + γ/(βdt) C + 1/(βdt²) M, factorised once.
         let k_hat: Vec<Vec<f64>> = (0..n)
-            .map(|i| {
-                (0..n)
-                    .map(|j| k[i][j] + c2 * c[i][j] + if i == j { c1 * m[i] } else { 0.0 })
-                    .collect()
-            })
+            .map(|i| (0..n).map(|j| k[i][j] + c2 * c[i][j] + if i == j { c1 * m[i] } else { 0.0 }).collect())
             .collect();
         let chol = cholesky(&k_hat);
         let mut u = vec![0.0; n];
         let mut v = vec![0.0; n];
         // At rest: M a0 = -M 1 ag(0).
         let mut a = vec![-ground_acc.first().copied().unwrap_or(0.0); n];
-        let mut out: Vec<Vec<f64>> = (0..n)
-            .map(|_| Vec::with_capacity(ground_acc.len()))
-            .collect();
+        let mut out: Vec<Vec<f64>> = (0..n).map(|_| Vec::with_capacity(ground_acc.len())).collect();
         let mut rhs = vec![0.0; n];
         for (step, &ag) in ground_acc.iter().enumerate() {
             if step > 0 {
                 // p̂ = -M 1 ag + M(c1 u + v/(βdt) + (1/(2β) - 1) a) + C(c2 u + (γ/β - 1) v + dt(γ/(2β) - 1) a)
                 for i in 0..n {
-                    let mut r =
-                        m[i] * (-ag + c1 * u[i] + v[i] / (beta * dt) + (0.5 / beta - 1.0) * a[i]);
+                    let mut r = m[i] * (-ag + c1 * u[i] + v[i] / (beta * dt) + (0.5 / beta - 1.0) * a[i]);
                     for j in 0..n {
                         r += c[i][j]
-                            * (c2 * u[j]
-                                + (gamma / beta - 1.0) * v[j]
-                                + dt * (0.5 * gamma / beta - 1.0) * a[j]);
+                            * (c2 * u[j] + (gamma / beta - 1.0) * v[j] + dt * (0.5 * gamma / beta - 1.0) * a[j]);
                     }
                     rhs[i] = r;
                 }
@@ -236,17 +206,8 @@ fn embed_on_base(x: &[Vec<f64>]) -> Vec<Vec<f64>> {
 /// Natural circular frequencies (ascending) of K φ = ω² M φ with diagonal M.
 fn natural_frequencies(mass: &[f64], k: &[Vec<f64>]) -> Vec<f64> {
     let n = mass.len();
-    let a: Vec<Vec<f64>> = (0..n)
-        .map(|i| {
-            (0..n)
-                .map(|j| k[i][j] / (mass[i] * mass[j]).sqrt())
-                .collect()
-        })
-        .collect();
-    let mut w: Vec<f64> = symmetric_eigenvalues(a)
-        .into_iter()
-        .map(|l| l.max(0.0).sqrt())
-        .collect();
+    let a: Vec<Vec<f64>> = (0..n).map(|i| (0..n).map(|j| k[i][j] / (mass[i] * mass[j]).sqrt()).collect()).collect();
+    let mut w: Vec<f64> = symmetric_eigenvalues(a).into_iter().map(|l| l.max(0.0).sqrt()).collect();
     w.sort_by(f64::total_cmp);
     w
 }
@@ -329,24 +290,6 @@ mod tests {
     const MASSES: [f64; 5] = [1.0, 1.0, 1.0, 1.0, 0.9];
     const SHAPE: [f64; 5] = [1.5, 1.35, 1.2, 1.05, 0.9];
 
-    /// Least-squares fit of x(t) ≈ s sin(Ωt) + c cos(Ωt) over the samples from `start`;
-    /// returns (amplitude, phase) with x ≈ A sin(Ωt + φ).
-    fn fit_harmonic(x: &[f64], dt: f64, omega: f64, start: usize) -> (f64, f64) {
-        let (mut ss, mut sc, mut cc, mut xs, mut xc) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for (i, &v) in x.iter().enumerate().skip(start) {
-            let (s, c) = (omega * i as f64 * dt).sin_cos();
-            ss += s * s;
-            sc += s * c;
-            cc += c * c;
-            xs += v * s;
-            xc += v * c;
-        }
-        let det = ss * cc - sc * sc;
-        let a = (xs * cc - xc * sc) / det;
-        let b = (xc * ss - xs * sc) / det;
-        (a.hypot(b), b.atan2(a))
-    }
-
     #[test]
     fn fixed_base_period_hits_target() {
         let b = ShearBuilding::fixed_base(&MASSES, &SHAPE, 1.0, 0.03);
@@ -367,10 +310,7 @@ mod tests {
         // superstructure translation relative to the base (only the isolator damping is left).
         let c = bi.damping_matrix();
         let row0: f64 = c[0].iter().sum();
-        assert!(
-            (row0 - 2.0 * 0.12 * (2.0 * PI / 2.8) * bi.masses().iter().sum::<f64>()).abs()
-                < 1e-9 * row0.abs()
-        );
+        assert!((row0 - 2.0 * 0.12 * (2.0 * PI / 2.8) * bi.masses().iter().sum::<f64>()).abs() < 1e-9 * row0.abs());
     }
 
     #[test]
@@ -392,27 +332,15 @@ mod tests {
             let ag: Vec<f64> = (0..n).map(|i| (omega * i as f64 * dt).sin()).collect();
             let acc = b.absolute_accelerations(&ag, dt);
             // Transient decays as exp(-ζω t): after 20 s it is e^-12.6 ≈ 3e-6 of its start.
-            let (amp, phase) = fit_harmonic(&acc[0], dt, omega, 20_000);
+            let (amp, phase) = crate::physics::fit_harmonic(&acc[0], dt, omega, 20_000);
             let h = {
                 let num = rustfft::num_complex::Complex64::new(1.0, 2.0 * zeta * r);
                 let den = rustfft::num_complex::Complex64::new(1.0 - r * r, 2.0 * zeta * r);
                 num / den
             };
-            println!(
-                "r={r}: amp {amp:.5} vs {:.5}, phase {phase:.5} vs {:.5}",
-                h.norm(),
-                h.arg()
-            );
-            assert!(
-                (amp - h.norm()).abs() < 0.01 * h.norm(),
-                "r={r} amp {amp} vs {}",
-                h.norm()
-            );
-            assert!(
-                (phase - h.arg()).abs() < 0.01 * h.arg().abs().max(0.1),
-                "r={r} phase {phase} vs {}",
-                h.arg()
-            );
+            println!("r={r}: amp {amp:.5} vs {:.5}, phase {phase:.5} vs {:.5}", h.norm(), h.arg());
+            assert!((amp - h.norm()).abs() < 0.01 * h.norm(), "r={r} amp {amp} vs {}", h.norm());
+            assert!((phase - h.arg()).abs() < 0.01 * h.arg().abs().max(0.1), "r={r} phase {phase} vs {}", h.arg());
         }
     }
 }

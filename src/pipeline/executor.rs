@@ -97,7 +97,8 @@ fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, User
                 InputPart { partition: f.partition, path: f.path, label: relative, hash: h }
             })
             .collect();
-        let input = StageInput::Source { name: name.to_string(), spec: spec.clone(), base_dir: base.clone(), files: parts };
+        let input =
+            StageInput::Source { name: name.to_string(), spec: spec.clone(), base_dir: base.clone(), files: parts };
         resolved.insert(name.to_string(), ResolvedSource { input, hash: hash::hash_bytes(summary.as_bytes()) });
     }
     Ok(resolved)
@@ -191,7 +192,11 @@ fn input_hashes_for(
         .collect()
 }
 
-fn stage_inputs(stage: &PlannedStage, sources: &BTreeMap<String, ResolvedSource>, produced: &BTreeMap<String, Produced>) -> anyhow::Result<Vec<StageInput>> {
+fn stage_inputs(
+    stage: &PlannedStage,
+    sources: &BTreeMap<String, ResolvedSource>,
+    produced: &BTreeMap<String, Produced>,
+) -> anyhow::Result<Vec<StageInput>> {
     stage
         .inputs
         .iter()
@@ -207,7 +212,8 @@ fn stage_inputs(stage: &PlannedStage, sources: &BTreeMap<String, ResolvedSource>
 
 /// The parts of a dataset directory: each `data.parquet` with the partition its path encodes.
 pub fn dataset_parts(dir: &Path, label: &str) -> anyhow::Result<Vec<InputPart>> {
-    let files: Vec<String> = hash::list_files(dir)?.into_iter().filter(|f| f.ends_with(super::sink::DATA_FILE)).collect();
+    let files: Vec<String> =
+        hash::list_files(dir)?.into_iter().filter(|f| f.ends_with(super::sink::DATA_FILE)).collect();
     let paths: Vec<PathBuf> = files.iter().map(|f| dir.join(f)).collect();
     let hashes = hash::hash_files(&paths)?;
     Ok(files
@@ -240,12 +246,17 @@ pub fn status(plan: &Plan) -> Result<Vec<StatusLine>, UserError> {
     let mut lines = Vec::new();
     for stage in plan.stages.values() {
         let hashes = input_hashes_for(stage, &sources, &produced);
-        let assessment = assess(stage, hashes.as_ref(), &lock, &output_dir).map_err(|e| UserError::new(format!("{e:#}")))?;
+        let assessment =
+            assess(stage, hashes.as_ref(), &lock, &output_dir).map_err(|e| UserError::new(format!("{e:#}")))?;
         if assessment.reasons.is_empty() {
             let outputs = lock.stages[&stage.name].outputs.clone();
             produced.insert(stage.name.clone(), Produced { dir: output_dir.join(&stage.name), outputs });
         }
-        lines.push(StatusLine { name: stage.name.clone(), stage_type: stage.stage.info().name, reasons: assessment.reasons });
+        lines.push(StatusLine {
+            name: stage.name.clone(),
+            stage_type: stage.stage.info().name,
+            reasons: assessment.reasons,
+        });
     }
     Ok(lines)
 }
@@ -263,20 +274,26 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
     let forced: BTreeSet<String> = options.force.iter().flat_map(|n| plan.with_dependents(n)).collect();
     let output_dir = plan.file.output_dir();
     let lock_file = output_dir.join(LOCK_FILE);
-    std::fs::create_dir_all(&output_dir).map_err(|e| {
-        UserError::new(format!("cannot create the output directory `{}`: {e}", output_dir.display()))
+    let output_dir_error = |problem: String, hint: &str| {
+        UserError::new(problem)
             .in_file(&plan.file.path)
             .at(super::locate::key_position(&plan.file.text, &["output_dir"]))
-            .hint("choose a writable `output_dir` (relative to the pipeline file)")
+            .hint(hint)
+    };
+    std::fs::create_dir_all(&output_dir).map_err(|e| {
+        output_dir_error(
+            format!("cannot create the output directory `{}`: {e}", output_dir.display()),
+            "choose a writable `output_dir` (relative to the pipeline file)",
+        )
     })?;
     let lock = LockFile::read(&lock_file)?;
     let sources = resolve_sources(plan)?;
     let staging = output_dir.join(format!(".staging-{}", std::process::id()));
     std::fs::create_dir(&staging).map_err(|e| {
-        UserError::new(format!("the output directory `{}` is not writable: {e}", output_dir.display()))
-            .in_file(&plan.file.path)
-            .at(super::locate::key_position(&plan.file.text, &["output_dir"]))
-            .hint("fix its permissions or choose another `output_dir`")
+        output_dir_error(
+            format!("the output directory `{}` is not writable: {e}", output_dir.display()),
+            "fix its permissions or choose another `output_dir`",
+        )
     })?;
     let result = run_stages(plan, &forced, &lock, &sources, &output_dir, &staging, reporter);
     let committed = result.and_then(|(reports, new_lock, rerun)| {
@@ -327,7 +344,8 @@ fn run_stages(
                 entries.lock().expect("no poisoned lock").insert(stage.name.clone(), entry.clone());
                 (Produced { dir: output_dir.join(&stage.name), outputs: entry.outputs }, Outcome::Cached)
             } else {
-                let why = if forced.contains(&stage.name) { "forced".to_string() } else { assessment.reasons.join("; ") };
+                let why =
+                    if forced.contains(&stage.name) { "forced".to_string() } else { assessment.reasons.join("; ") };
                 let started = Instant::now();
                 let dir = staging.join(&stage.name);
                 let inputs = stage_inputs(stage, sources, &snapshot)?;
@@ -336,20 +354,25 @@ fn run_stages(
                 reporter.line(&format!("{:<18} running ({why})", stage.name));
                 let sink = OutputSink::new(&dir, &stage.name, info, &stage.params, &hashes, bar.clone());
                 let ctx = StageContext { stage_name: &stage.name, params: &stage.params, inputs: &inputs, sink: &sink };
-                stage
-                    .stage
-                    .run(&ctx)
-                    .with_context(|| format!("stage `{}` (type `{}`) failed; nothing was changed on disk", stage.name, info.name))?;
+                stage.stage.run(&ctx).with_context(|| {
+                    format!("stage `{}` (type `{}`) failed; nothing was changed on disk", stage.name, info.name)
+                })?;
                 bar.finish_and_clear();
                 let mut outputs = BTreeMap::new();
                 for output in info.outputs {
                     std::fs::create_dir_all(dir.join(output.name))?;
                     let (hash, files) = super::sink::output_hash(&dir, output.name)?;
-                    outputs.insert(output.name.to_string(), OutputLock { path: format!("{}/{}", stage.name, output.name), hash, files });
+                    outputs.insert(
+                        output.name.to_string(),
+                        OutputLock { path: format!("{}/{}", stage.name, output.name), hash, files },
+                    );
                 }
                 let files: usize = outputs.values().map(|o| o.files).sum();
                 let seconds = started.elapsed().as_secs_f64();
-                reporter.line(&format!("{:<18} done in {seconds:.2} s ({records} records in, {files} files out)", stage.name));
+                reporter.line(&format!(
+                    "{:<18} done in {seconds:.2} s ({records} records in, {files} files out)",
+                    stage.name
+                ));
                 let entry = StageLock {
                     stage_type: info.name.to_string(),
                     stage_version: info.version,
@@ -362,13 +385,20 @@ fn run_stages(
                 (Produced { dir, outputs }, Outcome::Ran { seconds, records })
             };
             produced.lock().expect("no poisoned lock").insert(stage.name.clone(), done);
-            reports.lock().expect("no poisoned lock").insert(stage.name.clone(), StageReport { name: stage.name.clone(), outcome: report });
+            reports
+                .lock()
+                .expect("no poisoned lock")
+                .insert(stage.name.clone(), StageReport { name: stage.name.clone(), outcome: report });
             Ok(())
         })?;
     }
     let reports = reports.into_inner().map_err(|_| anyhow!("a stage panicked"))?;
     let ordered: Vec<StageReport> = plan.stages.keys().map(|n| reports[n].clone()).collect();
-    let rerun: Vec<String> = ordered.iter().filter(|r| matches!(r.outcome, Outcome::Ran { .. })).map(|r| r.name.clone()).collect();
-    let new_lock = LockFile { version: lock.version.max(1), stages: entries.into_inner().map_err(|_| anyhow!("a stage panicked"))? };
+    let rerun: Vec<String> =
+        ordered.iter().filter(|r| matches!(r.outcome, Outcome::Ran { .. })).map(|r| r.name.clone()).collect();
+    let new_lock = LockFile {
+        version: lock.version.max(1),
+        stages: entries.into_inner().map_err(|_| anyhow!("a stage panicked"))?,
+    };
     Ok((ordered, new_lock, rerun))
 }

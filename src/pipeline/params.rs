@@ -94,7 +94,12 @@ pub fn normalize<'v>(
                 return Err(ParamError {
                     key: None,
                     message: format!("stage type `{stage_type}` needs parameter `{}`", spec.name),
-                    hint: format!("add `{}: <{}>` under `params` — {}", spec.name, spec.kind.describe(), spec.description),
+                    hint: format!(
+                        "add `{}: <{}>` under `params` — {}",
+                        spec.name,
+                        spec.kind.describe(),
+                        spec.description
+                    ),
                 })
             }
         }
@@ -137,9 +142,8 @@ pub fn yaml_to_json(value: &serde_yaml::Value) -> Value {
 
 /// Parses a `--set key=value` string the way YAML would (`3` is a number, `[a, b]` a list).
 pub fn parse_set(assignment: &str) -> Result<(String, Value), String> {
-    let (key, raw) = assignment
-        .split_once('=')
-        .ok_or_else(|| format!("`--set {assignment}` must look like key=value"))?;
+    let (key, raw) =
+        assignment.split_once('=').ok_or_else(|| format!("`--set {assignment}` must look like key=value"))?;
     let yaml: serde_yaml::Value = serde_yaml::from_str(raw).map_err(|e| format!("`--set {assignment}`: {e}"))?;
     Ok((key.trim().to_string(), yaml_to_json(&yaml)))
 }
@@ -167,7 +171,10 @@ impl ParamsExt for Params {
         self[key].as_str().unwrap_or_else(|| panic!("parameter `{key}` was normalised as text"))
     }
     fn list_of(&self, key: &str) -> Vec<String> {
-        self[key].as_array().map(|a| a.iter().filter_map(|v| v.as_str().map(String::from)).collect()).unwrap_or_default()
+        self[key]
+            .as_array()
+            .map(|a| a.iter().filter_map(|v| v.as_str().map(String::from)).collect())
+            .unwrap_or_default()
     }
 }
 
@@ -177,8 +184,22 @@ mod tests {
     use serde_json::json;
 
     const SPECS: &[ParamSpec] = &[
-        ParamSpec { name: "order", kind: ParamKind::Int, default: Some("3"), unit: "", description: "polynomial order", range: Some((0.0, 10.0)) },
-        ParamSpec { name: "columns", kind: ParamKind::StrList, default: Some("[]"), unit: "", description: "channels", range: None },
+        ParamSpec {
+            name: "order",
+            kind: ParamKind::Int,
+            default: Some("3"),
+            unit: "",
+            description: "polynomial order",
+            range: Some((0.0, 10.0)),
+        },
+        ParamSpec {
+            name: "columns",
+            kind: ParamKind::StrList,
+            default: Some("[]"),
+            unit: "",
+            description: "channels",
+            range: None,
+        },
     ];
 
     #[test]

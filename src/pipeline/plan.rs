@@ -49,8 +49,9 @@ impl Plan {
                 let suggestion = did_you_mean(&spec.stage_type, stages::names())
                     .map(|s| format!("did you mean `{s}`? "))
                     .unwrap_or_default();
-                file.error_at(&["stages", name, "type"], format!("unknown stage type `{}`", spec.stage_type))
-                    .hint(format!("{suggestion}known stage types: {} (see `shakeflow stages`)", stages::names().join(", ")))
+                file.error_at(&["stages", name, "type"], format!("unknown stage type `{}`", spec.stage_type)).hint(
+                    format!("{suggestion}known stage types: {} (see `shakeflow stages`)", stages::names().join(", ")),
+                )
             })?;
             let info = stage.info();
             let given = spec.params.iter().map(|(k, v)| (k.as_str(), params::yaml_to_json(v)));
@@ -77,7 +78,8 @@ impl Plan {
     pub fn with_dependents(&self, name: &str) -> BTreeSet<String> {
         let mut set = BTreeSet::from([name.to_string()]);
         for (stage_name, stage) in &self.stages {
-            let reads_set = stage.inputs.iter().any(|i| matches!(i, InputRef::Stage { stage, .. } if set.contains(stage)));
+            let reads_set =
+                stage.inputs.iter().any(|i| matches!(i, InputRef::Stage { stage, .. } if set.contains(stage)));
             if reads_set {
                 set.insert(stage_name.clone());
             }
@@ -95,7 +97,9 @@ fn check_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<
     }
     if let Some(unit) = &source.time_unit {
         if crate::units::conversion(unit).is_none_or(|c| c.si_unit != "s") {
-            return Err(file.error_at(&["inputs", name, "time_unit"], format!("`{unit}` is not a time unit")).hint("use s or ms"));
+            return Err(file
+                .error_at(&["inputs", name, "time_unit"], format!("`{unit}` is not a time unit"))
+                .hint("use s or ms"));
         }
     }
     for (column, spec) in &source.columns {
@@ -111,7 +115,9 @@ fn check_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<
     }
     if let Some(dt) = source.dt {
         if !(dt > 0.0 && dt.is_finite()) {
-            return Err(file.error_at(&["inputs", name, "dt"], format!("`dt` must be a positive number of seconds, not {dt}")));
+            return Err(
+                file.error_at(&["inputs", name, "dt"], format!("`dt` must be a positive number of seconds, not {dt}"))
+            );
         }
     }
     if let Some(d) = &source.delimiter {
@@ -124,7 +130,12 @@ fn check_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<
     Ok(())
 }
 
-fn resolve_inputs(file: &PipelineFile, stage_name: &str, names: &[String], kind: InputKind) -> Result<Vec<InputRef>, UserError> {
+fn resolve_inputs(
+    file: &PipelineFile,
+    stage_name: &str,
+    names: &[String],
+    kind: InputKind,
+) -> Result<Vec<InputRef>, UserError> {
     let key_path = ["stages", stage_name, "inputs"];
     if names.is_empty() {
         let what = match kind {
@@ -143,13 +154,23 @@ fn resolve_inputs(file: &PipelineFile, stage_name: &str, names: &[String], kind:
         };
         let reference = if file.spec.inputs.contains_key(name) {
             if kind != InputKind::Sources {
-                return Err(file.error_at_value(&key_path, name, format!("`{name}` is a record source, but this stage type reads stage outputs"))
+                return Err(file
+                    .error_at_value(
+                        &key_path,
+                        name,
+                        format!("`{name}` is a record source, but this stage type reads stage outputs"),
+                    )
                     .hint(format!("load it first with a `load` stage and name that stage here instead of `{name}`")));
             }
             InputRef::Source(name.clone())
         } else if let Some(upstream) = file.spec.stages.get(head) {
             if kind != InputKind::Datasets {
-                return Err(file.error_at_value(&key_path, name, format!("`{name}` is a stage, but this stage type reads record sources"))
+                return Err(file
+                    .error_at_value(
+                        &key_path,
+                        name,
+                        format!("`{name}` is a stage, but this stage type reads record sources"),
+                    )
                     .hint("name a source declared under `inputs:`"));
             }
             let outputs = stages::find(&upstream.stage_type).map(|s| s.info().outputs).unwrap_or(&[]);
@@ -159,18 +180,28 @@ fn resolve_inputs(file: &PipelineFile, stage_name: &str, names: &[String], kind:
             };
             let Some(output) = output else {
                 let names: Vec<&str> = outputs.iter().map(|o| o.name).collect();
-                return Err(file.error_at_value(&key_path, name, format!("stage `{head}` has no output `{}`", output.unwrap_or("")))
+                return Err(file
+                    .error_at_value(&key_path, name, format!("stage `{head}` has no output `{}`", output.unwrap_or("")))
                     .hint(format!("outputs of `{head}`: {}", names.join(", "))));
             };
             InputRef::Stage { stage: head.to_string(), output }
         } else {
-            let candidates: Vec<&str> = file.spec.inputs.keys().chain(file.spec.stages.keys()).map(String::as_str).collect();
-            let suggestion = did_you_mean(name, candidates.iter().copied()).map(|s| format!("did you mean `{s}`? ")).unwrap_or_default();
+            let candidates: Vec<&str> =
+                file.spec.inputs.keys().chain(file.spec.stages.keys()).map(String::as_str).collect();
+            let suggestion = did_you_mean(name, candidates.iter().copied())
+                .map(|s| format!("did you mean `{s}`? "))
+                .unwrap_or_default();
             return Err(file
-                .error_at_value(&key_path, name, format!("stage `{stage_name}` reads `{name}`, which is neither a source nor a stage"))
-                .hint(format!("{suggestion}sources: [{}]; stages: [{}]",
+                .error_at_value(
+                    &key_path,
+                    name,
+                    format!("stage `{stage_name}` reads `{name}`, which is neither a source nor a stage"),
+                )
+                .hint(format!(
+                    "{suggestion}sources: [{}]; stages: [{}]",
                     file.spec.inputs.keys().cloned().collect::<Vec<_>>().join(", "),
-                    file.spec.stages.keys().cloned().collect::<Vec<_>>().join(", "))));
+                    file.spec.stages.keys().cloned().collect::<Vec<_>>().join(", ")
+                )));
         };
         refs.push(reference);
     }
@@ -191,7 +222,8 @@ fn topological_order(file: &PipelineFile, planned: &IndexMap<String, PlannedStag
     let mut done: BTreeSet<&str> = BTreeSet::new();
     let mut order = Vec::new();
     while order.len() < planned.len() {
-        let next = planned.keys().find(|n| !done.contains(n.as_str()) && deps[n.as_str()].iter().all(|d| done.contains(d)));
+        let next =
+            planned.keys().find(|n| !done.contains(n.as_str()) && deps[n.as_str()].iter().all(|d| done.contains(d)));
         match next {
             Some(name) => {
                 done.insert(name);
@@ -244,13 +276,18 @@ mod tests {
 
     #[test]
     fn orders_stages_after_their_inputs() {
-        let p = plan(&format!("{SOURCE}  b:\n    type: baseline\n    inputs: [l]\n  l:\n    type: load\n    inputs: [rec]\n")).unwrap();
+        let p = plan(&format!(
+            "{SOURCE}  b:\n    type: baseline\n    inputs: [l]\n  l:\n    type: load\n    inputs: [rec]\n"
+        ))
+        .unwrap();
         assert_eq!(p.stages.keys().collect::<Vec<_>>(), ["l", "b"]);
     }
 
     #[test]
     fn cycle_is_named_with_its_path() {
-        let err = plan_err(&format!("{SOURCE}  a:\n    type: baseline\n    inputs: [b]\n  b:\n    type: baseline\n    inputs: [a]\n"));
+        let err = plan_err(&format!(
+            "{SOURCE}  a:\n    type: baseline\n    inputs: [b]\n  b:\n    type: baseline\n    inputs: [a]\n"
+        ));
         assert!(err.message.contains("cycle: a → b → a"), "{err}");
         assert_eq!(err.line, Some(10));
     }

@@ -43,7 +43,14 @@ impl OutputSink {
             ("shakeflow.params".to_string(), serde_json::to_string(params).expect("params are JSON")),
             ("shakeflow.inputs".to_string(), serde_json::to_string(inputs).expect("hashes are JSON")),
         ]);
-        OutputSink { root: root.to_path_buf(), stage_name: stage_name.into(), info, provenance, written: Mutex::new(BTreeSet::new()), progress }
+        OutputSink {
+            root: root.to_path_buf(),
+            stage_name: stage_name.into(),
+            info,
+            provenance,
+            written: Mutex::new(BTreeSet::new()),
+            progress,
+        }
     }
 
     fn output_info(&self, output: &str) -> anyhow::Result<&'static OutputInfo> {
@@ -76,7 +83,11 @@ impl OutputSink {
             // A separate tree: pyarrow.dataset and friends refuse folders that mix in non-Parquet files.
             let mcap_dir = self.root.join(MCAP_DIR).join(output).join(&relative);
             std::fs::create_dir_all(&mcap_dir).map_err(|e| anyhow!("cannot create `{}`: {e}", mcap_dir.display()))?;
-            mcap::write_timeseries(&mcap_dir.join(MCAP_FILE), &[mcap::Topic { name: topic, table: &table }], &table.metadata)?;
+            mcap::write_timeseries(
+                &mcap_dir.join(MCAP_FILE),
+                &[mcap::Topic { name: topic, table: &table }],
+                &table.metadata,
+            )?;
         }
         self.progress.inc(1);
         Ok(())
@@ -95,5 +106,8 @@ pub fn output_hash(stage_dir: &Path, output: &str) -> anyhow::Result<(String, us
         return Ok((parquet_hash, parquet_files));
     }
     let (mcap_hash, mcap_files) = crate::pipeline::hash::hash_dir(&mcap_dir)?;
-    Ok((crate::pipeline::hash::hash_bytes(format!("{parquet_hash}\n{mcap_hash}").as_bytes()), parquet_files + mcap_files))
+    Ok((
+        crate::pipeline::hash::hash_bytes(format!("{parquet_hash}\n{mcap_hash}").as_bytes()),
+        parquet_files + mcap_files,
+    ))
 }

@@ -73,7 +73,8 @@ pub fn resolve(
     let is_glob = glob_pattern.contains(['*', '?', '[']);
     let full = base_dir.join(&glob_pattern);
     let full_text = full.to_string_lossy().replace('\\', "/");
-    let entries = glob::glob(&full_text).map_err(|e| UserError::new(format!("invalid path pattern `{pattern}`: {e}")))?;
+    let entries =
+        glob::glob(&full_text).map_err(|e| UserError::new(format!("invalid path pattern `{pattern}`: {e}")))?;
     let mut files = Vec::new();
     for entry in entries {
         let path = entry.map_err(|e| UserError::new(format!("cannot read `{}`: {}", e.path().display(), e.error())))?;
@@ -125,7 +126,10 @@ mod tests {
     #[test]
     fn keys_match_within_one_segment() {
         let pieces = parse_template("{a}_{b}.csv").unwrap();
-        assert_eq!(match_pieces("x_y_z.csv", &pieces).unwrap(), vec![("a".into(), "x".into()), ("b".into(), "y_z".into())]);
+        assert_eq!(
+            match_pieces("x_y_z.csv", &pieces).unwrap(),
+            vec![("a".into(), "x".into()), ("b".into(), "y_z".into())]
+        );
         assert!(match_pieces("d/x_y.csv", &parse_template("{a}.csv").unwrap()).is_none());
     }
 

@@ -190,7 +190,8 @@ impl PipelineFile {
         })?;
         let file = PipelineFile { path: path.to_path_buf(), text, spec };
         if file.spec.version != FORMAT_VERSION {
-            return Err(file.error_at(&["version"], format!("pipeline format version {} is not supported", file.spec.version))
+            return Err(file
+                .error_at(&["version"], format!("pipeline format version {} is not supported", file.spec.version))
                 .hint(format!("this shakeflow reads `version: {FORMAT_VERSION}`")));
         }
         Ok(file)

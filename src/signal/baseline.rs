@@ -47,9 +47,8 @@ pub fn fit_polynomial(t: &[f64], y: &[f64], order: usize) -> ScaledPolynomial {
     let center = 0.5 * (lo + hi);
     let half_span = if hi > lo { 0.5 * (hi - lo) } else { 1.0 };
     // Column-major design matrix of scaled monomials.
-    let mut a: Vec<Vec<f64>> = (0..m)
-        .map(|k| t.iter().map(|&ti| ((ti - center) / half_span).powi(k as i32)).collect())
-        .collect();
+    let mut a: Vec<Vec<f64>> =
+        (0..m).map(|k| t.iter().map(|&ti| ((ti - center) / half_span).powi(k as i32)).collect()).collect();
     let mut b = y.to_vec();
     let coefficients = householder_least_squares(&mut a, &mut b);
     ScaledPolynomial { center, half_span, coefficients }

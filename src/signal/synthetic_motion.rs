@@ -23,10 +23,7 @@ pub struct SplitMix64 {
 
 impl SplitMix64 {
     pub fn new(seed: u64) -> Self {
-        Self {
-            state: seed,
-            spare_normal: None,
-        }
+        Self { state: seed, spare_normal: None }
     }
 
     pub fn next_u64(&mut self) -> u64 {
@@ -135,8 +132,7 @@ impl GroundFilter {
         let wg = 2.0 * PI * self.fg_hz;
         let wc = 2.0 * PI * self.fc_hz;
         let i = Complex64::new(0.0, 1.0);
-        let kt = (wg * wg + 2.0 * self.zeta_g * wg * w * i)
-            / (wg * wg - w * w + 2.0 * self.zeta_g * wg * w * i);
+        let kt = (wg * wg + 2.0 * self.zeta_g * wg * w * i) / (wg * wg - w * w + 2.0 * self.zeta_g * wg * w * i);
         // Clough–Penzien: ω² / (ωc² − ω² + 2iζcωcω) → zero at DC, so no drift in velocity.
         let cp = Complex64::new(w * w, 0.0) / (wc * wc - w * w + 2.0 * self.zeta_c * wc * w * i);
         kt * cp * low_pass_gain(f_hz.abs(), self.f_pass_hz, self.f_stop_hz)
@@ -156,11 +152,7 @@ fn low_pass_gain(f: f64, f_pass: f64, f_stop: f64) -> f64 {
 
 /// Frequency (Hz, signed) of FFT bin `k` of an `n`-point transform at sample step `dt`.
 fn bin_frequency(k: usize, n: usize, dt: f64) -> f64 {
-    let k = if k <= n / 2 {
-        k as f64
-    } else {
-        k as f64 - n as f64
-    };
+    let k = if k <= n / 2 { k as f64 } else { k as f64 - n as f64 };
     k / (n as f64 * dt)
 }
 
@@ -186,9 +178,7 @@ pub fn apply_frequency_response(x: &mut [f64], dt: f64, h: impl Fn(f64) -> Compl
 
 /// Zero-phase raised-cosine low-pass (pass below `f_pass_hz`, nothing above `f_stop_hz`).
 pub fn low_pass(x: &mut [f64], dt: f64, f_pass_hz: f64, f_stop_hz: f64) {
-    apply_frequency_response(x, dt, |f| {
-        Complex64::new(low_pass_gain(f.abs(), f_pass_hz, f_stop_hz), 0.0)
-    });
+    apply_frequency_response(x, dt, |f| Complex64::new(low_pass_gain(f.abs(), f_pass_hz, f_stop_hz), 0.0));
 }
 
 /// Scale `x` so that max |x| equals `peak` (no-op on an all-zero signal).
@@ -201,18 +191,10 @@ pub fn scale_to_peak(x: &mut [f64], peak: f64) {
 }
 
 /// Enveloped white noise through `filter`, unscaled. `n` samples at step `dt`.
-pub fn filtered_noise(
-    seed: u64,
-    n: usize,
-    dt: f64,
-    filter: &GroundFilter,
-    envelope: &Envelope,
-) -> Vec<f64> {
+pub fn filtered_noise(seed: u64, n: usize, dt: f64, filter: &GroundFilter, envelope: &Envelope) -> Vec<f64> {
     let mut rng = SplitMix64::new(seed);
     // Envelope before filtering: the filter then zeroes the DC of the final signal exactly.
-    let mut x: Vec<f64> = (0..n)
-        .map(|i| rng.normal() * envelope.value(i as f64 * dt))
-        .collect();
+    let mut x: Vec<f64> = (0..n).map(|i| rng.normal() * envelope.value(i as f64 * dt)).collect();
     apply_frequency_response(&mut x, dt, |f| filter.response(f));
     x
 }
@@ -243,9 +225,7 @@ pub fn band_limited_white_noise(
     peak: f64,
 ) -> Vec<f64> {
     let mut rng = SplitMix64::new(seed);
-    let mut x: Vec<f64> = (0..n)
-        .map(|i| rng.normal() * envelope.value(i as f64 * dt))
-        .collect();
+    let mut x: Vec<f64> = (0..n).map(|i| rng.normal() * envelope.value(i as f64 * dt)).collect();
     let edge_lo = 0.2_f64.min(f_lo_hz);
     apply_frequency_response(&mut x, dt, |f| {
         let f = f.abs();
@@ -280,9 +260,7 @@ pub fn cubic_interpolate(x: &[f64], dt: f64, t: f64) -> f64 {
 
 /// Sample `x` (step `dt`) at times `t0 + k / rate_hz`, k = 0..n_out.
 pub fn resample(x: &[f64], dt: f64, t0: f64, rate_hz: f64, n_out: usize) -> Vec<f64> {
-    (0..n_out)
-        .map(|k| cubic_interpolate(x, dt, t0 + k as f64 / rate_hz))
-        .collect()
+    (0..n_out).map(|k| cubic_interpolate(x, dt, t0 + k as f64 / rate_hz)).collect()
 }
 
 #[cfg(test)]
@@ -290,25 +268,11 @@ mod tests {
     use super::*;
 
     fn test_envelope() -> Envelope {
-        Envelope {
-            start_s: 2.0,
-            rise_end_s: 6.0,
-            strong_end_s: 20.0,
-            decay_tau_s: 4.0,
-            end_s: 35.0,
-            end_taper_s: 3.0,
-        }
+        Envelope { start_s: 2.0, rise_end_s: 6.0, strong_end_s: 20.0, decay_tau_s: 4.0, end_s: 35.0, end_taper_s: 3.0 }
     }
 
     fn test_filter() -> GroundFilter {
-        GroundFilter {
-            fg_hz: 2.5,
-            zeta_g: 0.6,
-            fc_hz: 0.2,
-            zeta_c: 0.7,
-            f_pass_hz: 20.0,
-            f_stop_hz: 25.0,
-        }
+        GroundFilter { fg_hz: 2.5, zeta_g: 0.6, fc_hz: 0.2, zeta_c: 0.7, f_pass_hz: 20.0, f_stop_hz: 25.0 }
     }
 
     #[test]
@@ -369,9 +333,7 @@ mod tests {
         let peak = x.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         assert!((peak - 0.04).abs() < 1e-12);
         let mut buf: Vec<Complex64> = x.iter().map(|&v| Complex64::new(v, 0.0)).collect();
-        FftPlannerScalar::<f64>::new()
-            .plan_fft_forward(n)
-            .process(&mut buf);
+        FftPlannerScalar::<f64>::new().plan_fft_forward(n).process(&mut buf);
         let (mut inside, mut above) = (0.0, 0.0);
         for (k, c) in buf.iter().enumerate().take(n / 2) {
             let f = bin_frequency(k, n, dt);
@@ -381,19 +343,14 @@ mod tests {
                 above += c.norm_sqr();
             }
         }
-        assert!(
-            above < 1e-20 * inside,
-            "energy above 27 Hz {above} vs band {inside}"
-        );
+        assert!(above < 1e-20 * inside, "energy above 27 Hz {above} vs band {inside}");
     }
 
     #[test]
     fn cubic_interpolation_is_accurate_for_band_limited_signals() {
         let dt = 0.001;
         let f = 25.0;
-        let x: Vec<f64> = (0..2000)
-            .map(|i| (2.0 * PI * f * i as f64 * dt).sin())
-            .collect();
+        let x: Vec<f64> = (0..2000).map(|i| (2.0 * PI * f * i as f64 * dt).sin()).collect();
         let mut worst = 0.0_f64;
         for k in 0..300 {
             let t = 0.1 + k as f64 * 0.003_217;

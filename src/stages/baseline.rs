@@ -17,10 +17,28 @@ static INFO: StageInfo = StageInfo {
     version: 1,
     summary: "Remove a least-squares polynomial trend (default cubic) from each channel; no filtering, peaks kept.",
     inputs: InputKind::Datasets,
-    outputs: &[OutputInfo { name: "records", description: "the input tables with each selected channel baseline-corrected", timeseries: true }],
+    outputs: &[OutputInfo {
+        name: "records",
+        description: "the input tables with each selected channel baseline-corrected",
+        timeseries: true,
+    }],
     params: &[
-        ParamSpec { name: "order", kind: ParamKind::Int, default: Some("3"), unit: "", description: "polynomial order (3: the study's cubic; 1: linear detrend; 0: mean)", range: Some((0.0, 9.0)) },
-        ParamSpec { name: "columns", kind: ParamKind::StrList, default: Some("[]"), unit: "", description: "channels to correct; empty: every float column except time_s", range: None },
+        ParamSpec {
+            name: "order",
+            kind: ParamKind::Int,
+            default: Some("3"),
+            unit: "",
+            description: "polynomial order (3: the study's cubic; 1: linear detrend; 0: mean)",
+            range: Some((0.0, 9.0)),
+        },
+        ParamSpec {
+            name: "columns",
+            kind: ParamKind::StrList,
+            default: Some("[]"),
+            unit: "",
+            description: "channels to correct; empty: every float column except time_s",
+            range: None,
+        },
     ],
 };
 
@@ -36,7 +54,8 @@ impl Stage for Baseline {
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
             let table = parquet::read_table(&part.path)?;
-            let mut corrected = correct(&table, order, &wanted).map_err(|e| anyhow::anyhow!("{}: {e}", part.path.display()))?;
+            let mut corrected =
+                correct(&table, order, &wanted).map_err(|e| anyhow::anyhow!("{}: {e}", part.path.display()))?;
             corrected.metadata.extend(super::record_provenance(part));
             ctx.sink.write("records", &part.partition, corrected)
         })
@@ -68,18 +87,26 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
         }
         let values = column.as_f64().expect("selected columns are float");
         if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-            return Err(format!("column `{}` has a non-finite value at sample {}; load it with `gaps: interpolate`", column.name, i + 1));
+            return Err(format!(
+                "column `{}` has a non-finite value at sample {}; load it with `gaps: interpolate`",
+                column.name,
+                i + 1
+            ));
         }
         let (corrected, fit) = remove_polynomial(time, values, order);
-        let rms_removed = (values.iter().zip(&corrected).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / values.len() as f64).sqrt();
-        fits.insert(column.name.clone(), json!({
-            "polyfit_coefficients": fit.monomial_coefficients(),
-            "scaled_coefficients": fit.coefficients,
-            "center_s": fit.center,
-            "half_span_s": fit.half_span,
-            "rms_removed": rms_removed,
-            "unit": column.unit,
-        }));
+        let rms_removed =
+            (values.iter().zip(&corrected).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / values.len() as f64).sqrt();
+        fits.insert(
+            column.name.clone(),
+            json!({
+                "polyfit_coefficients": fit.monomial_coefficients(),
+                "scaled_coefficients": fit.coefficients,
+                "center_s": fit.center,
+                "half_span_s": fit.half_span,
+                "rms_removed": rms_removed,
+                "unit": column.unit,
+            }),
+        );
         out.push(Column {
             name: column.name.clone(),
             unit: column.unit.clone(),

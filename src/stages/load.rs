@@ -22,7 +22,11 @@ static INFO: StageInfo = StageInfo {
     version: 1,
     summary: "Read record files into SI time-series tables: checks sampling, gaps and point counts, converts units.",
     inputs: InputKind::Sources,
-    outputs: &[OutputInfo { name: "records", description: "one table per record file: time_s plus each channel in SI", timeseries: false }],
+    outputs: &[OutputInfo {
+        name: "records",
+        description: "one table per record file: time_s plus each channel in SI",
+        timeseries: false,
+    }],
     params: &[],
 };
 
@@ -36,7 +40,9 @@ impl Stage for Load {
             .inputs
             .iter()
             .flat_map(|input| match input {
-                StageInput::Source { name, spec, files, .. } => files.iter().map(move |f| (spec, name.as_str(), f)).collect::<Vec<_>>(),
+                StageInput::Source { name, spec, files, .. } => {
+                    files.iter().map(move |f| (spec, name.as_str(), f)).collect::<Vec<_>>()
+                }
                 StageInput::Dataset { .. } => unreachable!("the plan gives `load` sources only"),
             })
             .collect();
@@ -58,7 +64,11 @@ fn parse(spec: &SourceSpec, path: &std::path::Path) -> Result<RawRecord, UserErr
         message: e.message.clone(),
         hint: (!e.hint.is_empty()).then(|| e.hint.clone()),
     };
-    let delimited = |delimiter: Option<u8>| DelimitedOptions { delimiter, header_lines: spec.header_lines, has_column_names: spec.column_names };
+    let delimited = |delimiter: Option<u8>| DelimitedOptions {
+        delimiter,
+        header_lines: spec.header_lines,
+        has_column_names: spec.column_names,
+    };
     let delimiter = match spec.delimiter.as_deref() {
         None => None,
         Some("whitespace") => Some(b' '),
@@ -85,7 +95,8 @@ pub fn load_record(spec: &SourceSpec, part: &InputPart) -> Result<Table, UserErr
     // Time: an explicit column, the file's own time (RENADIC), or a sample interval.
     let explicit_time: Option<(Vec<f64>, Option<usize>)> = if let Some(name) = &spec.time_column {
         let index = raw.channels.iter().position(|c| &c.name == name).ok_or_else(|| {
-            missing_column(path, name, &raw).hint(format!("set `time_column` to one of the file's columns, or drop it and give `dt`"))
+            missing_column(path, name, &raw)
+                .hint(format!("set `time_column` to one of the file's columns, or drop it and give `dt`"))
         })?;
         let channel = raw.channels.remove(index);
         let factor = spec.time_unit.as_deref().and_then(units::conversion).map_or(1.0, |c| c.factor);
@@ -138,7 +149,11 @@ pub fn load_record(spec: &SourceSpec, part: &InputPart) -> Result<Table, UserErr
         spec.columns
             .iter()
             .map(|(out, cs)| {
-                let channel = raw.channels.iter().find(|c| c.name == cs.file_column()).ok_or_else(|| missing_column(path, cs.file_column(), &raw))?;
+                let channel = raw
+                    .channels
+                    .iter()
+                    .find(|c| c.name == cs.file_column())
+                    .ok_or_else(|| missing_column(path, cs.file_column(), &raw))?;
                 Ok((out.clone(), channel, Some(cs)))
             })
             .collect::<Result<_, UserError>>()?
@@ -158,15 +173,17 @@ pub fn load_record(spec: &SourceSpec, part: &InputPart) -> Result<Table, UserErr
             Some(ColumnSpec::Full(d)) => Some(d),
             _ => None,
         };
-        let unit_name = detail.and_then(|d| d.unit.clone()).or_else(|| spec.unit.clone()).or_else(|| {
-            (!channel.unit.is_empty()).then(|| channel.unit.clone())
-        });
+        let unit_name = detail
+            .and_then(|d| d.unit.clone())
+            .or_else(|| spec.unit.clone())
+            .or_else(|| (!channel.unit.is_empty()).then(|| channel.unit.clone()));
         let Some(unit_name) = unit_name else {
             return Err(err(format!("the unit of column `{}` is not known", channel.name))
                 .hint("set `unit:` on the source (e.g. `unit: g`) or on the column"));
         };
         let conversion = units::conversion(&unit_name).ok_or_else(|| {
-            err(format!("unknown unit `{unit_name}` for column `{}`", channel.name)).hint(format!("known units: {}", units::known_units().join(", ")))
+            err(format!("unknown unit `{unit_name}` for column `{}`", channel.name))
+                .hint(format!("known units: {}", units::known_units().join(", ")))
         })?;
         let factor = conversion.factor * spec.scale * detail.and_then(|d| d.scale).unwrap_or(1.0);
         let mut values: Vec<f64> = channel.values.iter().map(|v| v * factor).collect();
@@ -192,30 +209,36 @@ pub fn load_record(spec: &SourceSpec, part: &InputPart) -> Result<Table, UserErr
         if let Some(time) = &resampled_from {
             values = resample::resample_linear(time, &values, t0, dt, n_out);
         }
-        let description = detail
-            .and_then(|d| d.description.clone())
-            .unwrap_or_else(|| format!("`{}` of {}", channel.name, path.file_name().map(|f| f.to_string_lossy()).unwrap_or_default()));
-        conversions.insert(out_name.clone(), json!({"file_column": channel.name, "file_unit": unit_name, "factor": factor}));
+        let description = detail.and_then(|d| d.description.clone()).unwrap_or_else(|| {
+            format!("`{}` of {}", channel.name, path.file_name().map(|f| f.to_string_lossy()).unwrap_or_default())
+        });
+        conversions
+            .insert(out_name.clone(), json!({"file_column": channel.name, "file_unit": unit_name, "factor": factor}));
         table.push(Column::f64(&out_name, conversion.si_unit, &description, values));
     }
-    metadata.insert("shakeflow.load".to_string(), json!({
-        "format": spec.format,
-        "dt_s": dt,
-        "sample_rate_hz": 1.0 / dt,
-        "npts": n_out,
-        "t0_s": t0,
-        "columns": conversions,
-        "gaps_filled": gaps,
-        "resampled_from_non_uniform": resampled_from.is_some(),
-        "header": raw.header,
-    }).to_string());
+    metadata.insert(
+        "shakeflow.load".to_string(),
+        json!({
+            "format": spec.format,
+            "dt_s": dt,
+            "sample_rate_hz": 1.0 / dt,
+            "npts": n_out,
+            "t0_s": t0,
+            "columns": conversions,
+            "gaps_filled": gaps,
+            "resampled_from_non_uniform": resampled_from.is_some(),
+            "header": raw.header,
+        })
+        .to_string(),
+    );
     table.metadata = metadata;
     Ok(table)
 }
 
 fn missing_column(path: &std::path::Path, name: &str, raw: &RawRecord) -> UserError {
     let available: Vec<&str> = raw.channels.iter().map(|c| c.name.as_str()).collect();
-    let suggestion = did_you_mean(name, available.iter().copied()).map(|s| format!("did you mean `{s}`? ")).unwrap_or_default();
+    let suggestion =
+        did_you_mean(name, available.iter().copied()).map(|s| format!("did you mean `{s}`? ")).unwrap_or_default();
     UserError::new(format!("the file has no column `{name}`"))
         .in_file(path)
         .hint(format!("{suggestion}its columns are: {}", available.join(", ")))
@@ -241,13 +264,17 @@ fn median_step(time: &[f64]) -> Option<f64> {
 }
 
 /// For `shakeflow stage load FILE…`: a source spec guessed from the file, with `--set` overrides.
-pub fn ad_hoc_source(path: &std::path::Path, overrides: &serde_json::Map<String, serde_json::Value>) -> anyhow::Result<SourceSpec> {
+pub fn ad_hoc_source(
+    path: &std::path::Path,
+    overrides: &serde_json::Map<String, serde_json::Value>,
+) -> anyhow::Result<SourceSpec> {
     let format = records::sniff_format(path).unwrap_or("delimited");
     let mut value = json!({"format": format, "path": path.display().to_string()});
     for (k, v) in overrides {
         value[k] = v.clone();
     }
-    serde_json::from_value(value).context("the --set values do not form a valid source (see `inputs:` in schemas/pipeline.schema.json)")
+    serde_json::from_value(value)
+        .context("the --set values do not form a valid source (see `inputs:` in schemas/pipeline.schema.json)")
 }
 
 #[cfg(test)]

@@ -5,7 +5,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 pub fn shakeflow(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_shakeflow")).args(args).current_dir(cwd).output().expect("the shakeflow binary runs")
+    Command::new(env!("CARGO_BIN_EXE_shakeflow"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("the shakeflow binary runs")
 }
 
 pub fn stderr(out: &Output) -> String {
@@ -38,7 +42,11 @@ pub fn python() -> String {
 
 /// Runs a reference script; its failure (including a missing package) fails the test.
 pub fn run_python(script: &Path, args: &[&str]) -> String {
-    let out = Command::new(python()).arg(script).args(args).output().unwrap_or_else(|e| panic!("cannot start {}: {e}; run the tests through `make test`", python()));
+    let out = Command::new(python())
+        .arg(script)
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot start {}: {e}; run the tests through `make test`", python()));
     assert!(
         out.status.success(),
         "{} failed (run the tests through `make test`, which installs numpy/scipy/pyarrow/mcap/duckdb):\n{}\n{}",

@@ -2,8 +2,8 @@
 //! values, any number per line.
 
 use super::{
-    char_column, empty_file_error, load, numbered_lines, offset_in, parse_finite, quote,
-    ParseError, RawChannel, RawRecord,
+    char_column, empty_file_error, load, numbered_lines, offset_in, parse_finite, quote, ParseError, RawChannel,
+    RawRecord,
 };
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -15,10 +15,7 @@ const HEADER_FORMS: &str =
 pub fn read_at2(path: &Path) -> Result<RawRecord, ParseError> {
     let text = load(path)?;
     if text.trim().is_empty() {
-        return Err(empty_file_error(
-            path,
-            "a PEER AT2 record (4 header lines, then values)",
-        ));
+        return Err(empty_file_error(path, "a PEER AT2 record (4 header lines, then values)"));
     }
     let mut lines = numbered_lines(&text);
     let mut head: Vec<&str> = Vec::with_capacity(HEADER_LINES);
@@ -30,10 +27,7 @@ pub fn read_at2(path: &Path) -> Result<RawRecord, ParseError> {
             path,
             Some(head.len()),
             None,
-            format!(
-                "the file ends after {} line(s), inside the 4-line AT2 header",
-                head.len()
-            ),
+            format!("the file ends after {} line(s), inside the 4-line AT2 header", head.len()),
             "an AT2 file starts with a title, an event line, a units line and an NPTS/DT line",
         ));
     }
@@ -69,10 +63,7 @@ pub fn read_at2(path: &Path) -> Result<RawRecord, ParseError> {
                     path,
                     Some(number),
                     Some(col),
-                    format!(
-                        "cannot read '{token}' as a number (value {} of {npts})",
-                        values.len() + 1
-                    ),
+                    format!("cannot read '{token}' as a number (value {} of {npts})", values.len() + 1),
                     "AT2 data lines hold only numbers separated by spaces; the file may be \
                      corrupt or two files may have been joined",
                 ));
@@ -178,30 +169,15 @@ fn parse_npts_dt(line: &str) -> Result<(usize, f64, String), (Option<usize>, Str
             let dt = parse_dt(line, d)?;
             // Filter description follows "SEC," after the DT value.
             let after_dt = d.1;
-            let rest = upper[after_dt..]
-                .find("SEC")
-                .map_or(after_dt, |i| after_dt + i + 3);
+            let rest = upper[after_dt..].find("SEC").map_or(after_dt, |i| after_dt + i + 3);
             (npts, dt, rest)
         }
-        (Some(_), None) => {
-            return Err((
-                None,
-                "found NPTS= but no DT= on the AT2 header line".to_string(),
-            ))
-        }
-        (None, Some(_)) => {
-            return Err((
-                None,
-                "found DT= but no NPTS= on the AT2 header line".to_string(),
-            ))
-        }
+        (Some(_), None) => return Err((None, "found NPTS= but no DT= on the AT2 header line".to_string())),
+        (None, Some(_)) => return Err((None, "found DT= but no NPTS= on the AT2 header line".to_string())),
         (None, None) => {
             let mut tokens = line.split_ascii_whitespace();
             let (Some(n), Some(d)) = (tokens.next(), tokens.next()) else {
-                return Err((
-                    None,
-                    "cannot find NPTS and DT on the AT2 header line".to_string(),
-                ));
+                return Err((None, "cannot find NPTS and DT on the AT2 header line".to_string()));
             };
             let n_start = offset_in(line, n);
             let d_start = offset_in(line, d);
@@ -213,11 +189,7 @@ fn parse_npts_dt(line: &str) -> Result<(usize, f64, String), (Option<usize>, Str
     let rest = line.get(rest_at..).unwrap_or("");
     let filter = rest.trim().trim_start_matches(',').trim();
     // The older form ends in the labels "NPTS, DT", which are not a filter.
-    let filter = if filter.eq_ignore_ascii_case("NPTS, DT") {
-        ""
-    } else {
-        filter
-    };
+    let filter = if filter.eq_ignore_ascii_case("NPTS, DT") { "" } else { filter };
     Ok((npts, dt, filter.to_string()))
 }
 

@@ -4,10 +4,7 @@
 //! Built for files of tens of MB: the file is read once and cells are parsed
 //! straight from `&str` slices, with no per-cell allocation.
 
-use super::{
-    char_column, empty_file_error, load, numbered_lines, offset_in, ParseError, RawChannel,
-    RawRecord,
-};
+use super::{char_column, empty_file_error, load, numbered_lines, offset_in, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -25,11 +22,7 @@ pub struct DelimitedOptions {
 
 impl Default for DelimitedOptions {
     fn default() -> Self {
-        DelimitedOptions {
-            delimiter: None,
-            header_lines: 0,
-            has_column_names: true,
-        }
+        DelimitedOptions { delimiter: None, header_lines: 0, has_column_names: true }
     }
 }
 
@@ -78,25 +71,18 @@ impl<'a> Iterator for Cells<'a> {
 
 fn clean(cell: &str) -> &str {
     let cell = cell.trim();
-    cell.strip_prefix('"')
-        .and_then(|c| c.strip_suffix('"'))
-        .unwrap_or(cell)
+    cell.strip_prefix('"').and_then(|c| c.strip_suffix('"')).unwrap_or(cell)
 }
 
 pub fn read_delimited(path: &Path, opts: &DelimitedOptions) -> Result<RawRecord, ParseError> {
     let text = load(path)?;
     if text.trim().is_empty() {
-        return Err(empty_file_error(
-            path,
-            "rows of numbers, optionally under a column-name row",
-        ));
+        return Err(empty_file_error(path, "rows of numbers, optionally under a column-name row"));
     }
     // Blank lines at the end are not rows. Cut after the last non-blank line
     // rather than trimming it, so a trailing tab (empty last cell) survives.
     let last_char = text.trim_end().len();
-    let end = text[last_char..]
-        .find('\n')
-        .map_or(text.len(), |i| last_char + i);
+    let end = text[last_char..].find('\n').map_or(text.len(), |i| last_char + i);
     let body = &text[..end];
     let last_line_number = body.bytes().filter(|&b| b == b'\n').count() + 1;
 
@@ -104,19 +90,19 @@ pub fn read_delimited(path: &Path, opts: &DelimitedOptions) -> Result<RawRecord,
     let mut header = BTreeMap::new();
     for k in 1..=opts.header_lines {
         let Some((_, line)) = lines.next() else {
-            return Err(no_data(path, last_line_number, format!(
-                "the file has {last_line_number} non-blank line(s), all inside the {} preamble line(s) to skip",
-                opts.header_lines
-            )));
+            return Err(no_data(
+                path,
+                last_line_number,
+                format!(
+                    "the file has {last_line_number} non-blank line(s), all inside the {} preamble line(s) to skip",
+                    opts.header_lines
+                ),
+            ));
         };
         header.insert(format!("preamble_{k}"), line.trim().to_string());
     }
     let Some(&(reference_number, reference)) = lines.peek() else {
-        return Err(no_data(
-            path,
-            last_line_number,
-            "no column-name row and no data after the preamble".to_string(),
-        ));
+        return Err(no_data(path, last_line_number, "no column-name row and no data after the preamble".to_string()));
     };
 
     let splitter = choose_splitter(path, opts, reference)?;
@@ -125,13 +111,7 @@ pub fn read_delimited(path: &Path, opts: &DelimitedOptions) -> Result<RawRecord,
         let names: Vec<String> = splitter
             .cells(reference)
             .enumerate()
-            .map(|(i, n)| {
-                if n.is_empty() {
-                    format!("col{}", i + 1)
-                } else {
-                    n.to_string()
-                }
-            })
+            .map(|(i, n)| if n.is_empty() { format!("col{}", i + 1) } else { n.to_string() })
             .collect();
         (names, Some(reference_number))
     } else {
@@ -158,24 +138,13 @@ pub fn read_delimited(path: &Path, opts: &DelimitedOptions) -> Result<RawRecord,
     let ncols = names.len();
     // Rough row count from the first data row, to allocate once.
     let rows_estimate = body.len() / (first_data.len() + 1).max(8) + 1;
-    let mut columns: Vec<Vec<f64>> = (0..ncols)
-        .map(|_| Vec::with_capacity(rows_estimate))
-        .collect();
-    let ctx = Context {
-        path,
-        names: &names,
-        names_line,
-        splitter,
-        opts,
-        first_data_number,
-        last_line_number,
-    };
+    let mut columns: Vec<Vec<f64>> = (0..ncols).map(|_| Vec::with_capacity(rows_estimate)).collect();
+    let ctx = Context { path, names: &names, names_line, splitter, opts, first_data_number, last_line_number };
     for (number, line) in lines {
         let mut count = 0;
         for cell in splitter.cells(line) {
             if let Some(column) = columns.get_mut(count) {
-                column
-                    .push(read_cell(cell).ok_or_else(|| ctx.bad_cell(number, line, cell, count))?);
+                column.push(read_cell(cell).ok_or_else(|| ctx.bad_cell(number, line, cell, count))?);
             }
             count += 1;
         }
@@ -198,13 +167,7 @@ pub fn read_delimited(path: &Path, opts: &DelimitedOptions) -> Result<RawRecord,
             first_data_line: Some(first_data_number),
         })
         .collect();
-    Ok(RawRecord {
-        format: "delimited",
-        dt: None,
-        time: None,
-        channels,
-        header,
-    })
+    Ok(RawRecord { format: "delimited", dt: None, time: None, channels, header })
 }
 
 /// A number; NaN for an empty cell, "NaN"/"nan" or "NA" (gaps are the
@@ -218,11 +181,7 @@ fn read_cell(cell: &str) -> Option<f64> {
     }
 }
 
-fn choose_splitter(
-    path: &Path,
-    opts: &DelimitedOptions,
-    reference: &str,
-) -> Result<Splitter, ParseError> {
+fn choose_splitter(path: &Path, opts: &DelimitedOptions, reference: &str) -> Result<Splitter, ParseError> {
     match opts.delimiter {
         Some(b' ') => return Ok(Splitter::Whitespace),
         Some(d) if d.is_ascii() => return Ok(Splitter::Char(d as char)),
@@ -237,23 +196,19 @@ fn choose_splitter(
         }
         None => {}
     }
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     if matches!(ext.as_deref(), Some("tsv" | "tab")) {
         return Ok(Splitter::Char('\t'));
     }
     // Sniff from the names row: names rarely contain the delimiter, while
     // numbers might (decimal commas).
-    let best = [',', '\t', ';']
-        .into_iter()
-        .map(|c| (reference.matches(c).count(), c))
-        .filter(|&(n, _)| n > 0)
-        .fold(None, |best: Option<(usize, char)>, cand| match best {
+    let best = [',', '\t', ';'].into_iter().map(|c| (reference.matches(c).count(), c)).filter(|&(n, _)| n > 0).fold(
+        None,
+        |best: Option<(usize, char)>, cand| match best {
             Some(b) if b.0 >= cand.0 => Some(b),
             _ => Some(cand),
-        });
+        },
+    );
     Ok(best.map_or(Splitter::Whitespace, |(_, c)| Splitter::Char(c)))
 }
 
@@ -297,10 +252,7 @@ impl Context<'_> {
             self.path,
             Some(number),
             Some(column),
-            format!(
-                "line {number}, column {} ({name}): cannot read '{cell}' as a number",
-                index + 1
-            ),
+            format!("line {number}, column {} ({name}): cannot read '{cell}' as a number", index + 1),
             hint,
         )
     }
@@ -311,12 +263,10 @@ impl Context<'_> {
             Some(l) => format!("the column-name row (line {l})"),
             None => format!("the first data row (line {})", self.first_data_number),
         };
-        let mut message =
-            format!("line {number} has {count} cell(s) but {reference} has {expected}");
+        let mut message = format!("line {number} has {count} cell(s) but {reference} has {expected}");
         let hint = if number == self.last_line_number {
             message.push_str("; this is the last line: the file may be truncated");
-            "the last row was cut mid-row; re-export the file or delete its partial last line"
-                .to_string()
+            "the last row was cut mid-row; re-export the file or delete its partial last line".to_string()
         } else {
             format!(
                 "every row needs one cell per column ({} delimiter); look for a missing value or a stray delimiter",

@@ -69,13 +69,7 @@ impl ParseError {
         message: impl Into<String>,
         hint: impl Into<String>,
     ) -> Self {
-        ParseError {
-            path: path.to_path_buf(),
-            line,
-            column,
-            message: message.into(),
-            hint: hint.into(),
-        }
+        ParseError { path: path.to_path_buf(), line, column, message: message.into(), hint: hint.into() }
     }
 }
 
@@ -109,12 +103,7 @@ pub fn sniff_format(path: &Path) -> Option<&'static str> {
     let head = String::from_utf8_lossy(&head);
     let head = head.strip_prefix('\u{feff}').unwrap_or(&head);
     let first: Vec<&str> = head.lines().take(4).collect();
-    let upper = |i: usize| {
-        first
-            .get(i)
-            .map(|l| l.to_ascii_uppercase())
-            .unwrap_or_default()
-    };
+    let upper = |i: usize| first.get(i).map(|l| l.to_ascii_uppercase()).unwrap_or_default();
     if upper(0).starts_with("UNCORRECTED ACCELEROGRAM") {
         return Some("renadic_v1");
     }
@@ -168,9 +157,7 @@ fn empty_file_error(path: &Path, what: &str) -> ParseError {
 
 /// Lines numbered from 1, without the `\r` of CRLF endings.
 fn numbered_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
-    text.split('\n')
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)))
+    text.split('\n').enumerate().map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)))
 }
 
 /// 1-based character column of byte offset `byte` in `line`.

@@ -7,8 +7,7 @@
 //! are cut by fixed width, never split on whitespace.
 
 use super::{
-    char_column, empty_file_error, load, numbered_lines, parse_finite, quote, ParseError,
-    RawChannel, RawRecord,
+    char_column, empty_file_error, load, numbered_lines, parse_finite, quote, ParseError, RawChannel, RawRecord,
 };
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -36,22 +35,15 @@ struct Channel {
 
 impl Channel {
     fn line_of_point(&self, point: usize) -> Option<usize> {
-        let i = self
-            .data_lines
-            .partition_point(|&(_, first)| first <= point);
-        self.data_lines
-            .get(i.checked_sub(1)?)
-            .map(|&(line, _)| line)
+        let i = self.data_lines.partition_point(|&(_, first)| first <= point);
+        self.data_lines.get(i.checked_sub(1)?).map(|&(line, _)| line)
     }
 }
 
 pub fn read_renadic_v1(path: &Path) -> Result<RawRecord, ParseError> {
     let text = load(path)?;
     if text.trim().is_empty() {
-        return Err(empty_file_error(
-            path,
-            "a RENADIC Vol.1 file (27 header lines per channel, then data)",
-        ));
+        return Err(empty_file_error(path, "a RENADIC Vol.1 file (27 header lines per channel, then data)"));
     }
     // Trailing blank lines are not a channel.
     let lines: Vec<(usize, &str)> = numbered_lines(text.trim_end()).collect();
@@ -83,13 +75,7 @@ pub fn read_renadic_v1(path: &Path) -> Result<RawRecord, ParseError> {
             values: c.accel,
         })
         .collect();
-    Ok(RawRecord {
-        format: "renadic_v1",
-        dt,
-        time: Some(time),
-        channels: raw_channels,
-        header,
-    })
+    Ok(RawRecord { format: "renadic_v1", dt, time: Some(time), channels: raw_channels, header })
 }
 
 fn read_channel(
@@ -155,14 +141,8 @@ fn read_channel(
         header.insert("station".to_string(), text[5].1.trim().to_string());
         header.insert("agency".to_string(), text[7].1.trim().to_string());
         if let Some((_, rest)) = find_after(text, "RECORD LENGTH") {
-            let value = rest
-                .trim_start_matches([' ', '='])
-                .split_ascii_whitespace()
-                .next();
-            header.insert(
-                "record_length_s".to_string(),
-                value.unwrap_or("").to_string(),
-            );
+            let value = rest.trim_start_matches([' ', '=']).split_ascii_whitespace().next();
+            header.insert("record_length_s".to_string(), value.unwrap_or("").to_string());
         }
     }
     let key = |what: &str| format!("ch{index}_{what}");
@@ -175,13 +155,9 @@ fn read_channel(
     }
 
     let ints = &lines[start + TEXT_LINES..start + TEXT_LINES + INT_LINES];
-    check_fixed_numbers(path, ints, INT_WIDTH, index, "integer", |s| {
-        s.parse::<i64>().is_ok()
-    })?;
+    check_fixed_numbers(path, ints, INT_WIDTH, index, "integer", |s| s.parse::<i64>().is_ok())?;
     let floats = &lines[start + TEXT_LINES + INT_LINES..start + header_len];
-    check_fixed_numbers(path, floats, FLOAT_WIDTH, index, "real", |s| {
-        parse_finite(s).is_some()
-    })?;
+    check_fixed_numbers(path, floats, FLOAT_WIDTH, index, "real", |s| parse_finite(s).is_some())?;
 
     *pos = start + header_len;
     let mut channel = Channel {
@@ -248,11 +224,7 @@ fn check_fixed_numbers(
         let fields = fixed_fields(line, width).ok_or_else(|| non_ascii(path, number, line))?;
         for (col, field) in fields {
             if !ok(field.trim()) {
-                let found = if field.trim().is_empty() {
-                    "a blank field".to_string()
-                } else {
-                    quote(field.trim())
-                };
+                let found = if field.trim().is_empty() { "a blank field".to_string() } else { quote(field.trim()) };
                 return Err(ParseError::new(
                     path,
                     Some(number),
@@ -282,19 +254,11 @@ fn fixed_fields(line: &str, width: usize) -> Option<Vec<(usize, &str)>> {
     if !line.is_ascii() {
         return None;
     }
-    Some(
-        (0..line.len())
-            .step_by(width)
-            .map(|a| (a + 1, &line[a..line.len().min(a + width)]))
-            .collect(),
-    )
+    Some((0..line.len()).step_by(width).map(|a| (a + 1, &line[a..line.len().min(a + width)])).collect())
 }
 
 fn non_ascii(path: &Path, number: usize, line: &str) -> ParseError {
-    let col = line
-        .char_indices()
-        .find(|(_, c)| !c.is_ascii())
-        .map(|(i, _)| char_column(line, i));
+    let col = line.char_indices().find(|(_, c)| !c.is_ascii()).map(|(i, _)| char_column(line, i));
     ParseError::new(
         path,
         Some(number),
@@ -366,19 +330,14 @@ fn data_value(
             path,
             Some(number),
             Some(col),
-            format!(
-                "channel {index} ({}): cannot read '{token}' as a number in line {}",
-                channel.name,
-                quote(line)
-            ),
+            format!("channel {index} ({}): cannot read '{token}' as a number in line {}", channel.name, quote(line)),
             hint,
         )
     })
 }
 
 fn looks_like_data(line: &str) -> bool {
-    fixed_fields(line, FIELD)
-        .is_some_and(|f| !f.is_empty() && f.iter().all(|(_, s)| parse_finite(s.trim()).is_some()))
+    fixed_fields(line, FIELD).is_some_and(|f| !f.is_empty() && f.iter().all(|(_, s)| parse_finite(s.trim()).is_some()))
 }
 
 fn count_mismatch(
@@ -430,9 +389,7 @@ fn time_gap(time: &[f64]) -> Option<(usize, f64)> {
         return None;
     }
     let step = time[1] - time[0];
-    let i = time
-        .windows(2)
-        .position(|w| ((w[1] - w[0]) - step).abs() > 0.0015)?;
+    let i = time.windows(2).position(|w| ((w[1] - w[0]) - step).abs() > 0.0015)?;
     Some((i + 1, step))
 }
 
@@ -477,9 +434,7 @@ fn check_time_base(path: &Path, channels: &[Channel]) -> Result<(), ParseError> 
                     c.time[k],
                     first.name,
                     first.time[k],
-                    first
-                        .line_of_point(k)
-                        .map_or("?".to_string(), |l| l.to_string())
+                    first.line_of_point(k).map_or("?".to_string(), |l| l.to_string())
                 ),
                 "the channels of one record must share one time base; the file may be corrupt",
             ));

@@ -7,11 +7,8 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
 
-const KEYS: [&str; 8] = [
-    "dT", "data_x", "data_y", "data_z", "PGA_x", "PGA_y", "PGA_z", "name",
-];
-const LAYOUT: &str =
-    "a SimCenter record is one object like {\"dT\": 0.005, \"data_x\": [...], \"data_y\": [...]}";
+const KEYS: [&str; 8] = ["dT", "data_x", "data_y", "data_z", "PGA_x", "PGA_y", "PGA_z", "name"];
+const LAYOUT: &str = "a SimCenter record is one object like {\"dT\": 0.005, \"data_x\": [...], \"data_y\": [...]}";
 
 #[derive(Deserialize)]
 struct Event {
@@ -58,10 +55,7 @@ pub fn read_simcenter_json(path: &Path) -> Result<RawRecord, ParseError> {
 
     let mut header = BTreeMap::new();
     header.insert("dt".to_string(), dt.to_string());
-    header.insert(
-        "units".to_string(),
-        "g (SimCenter convention; not stated in the file)".to_string(),
-    );
+    header.insert("units".to_string(), "g (SimCenter convention; not stated in the file)".to_string());
     match &event.name {
         Some(serde_json::Value::String(s)) => {
             header.insert("name".to_string(), s.clone());
@@ -71,22 +65,14 @@ pub fn read_simcenter_json(path: &Path) -> Result<RawRecord, ParseError> {
         }
         None => {}
     }
-    for (key, pga) in [
-        ("PGA_x", event.pga_x),
-        ("PGA_y", event.pga_y),
-        ("PGA_z", event.pga_z),
-    ] {
+    for (key, pga) in [("PGA_x", event.pga_x), ("PGA_y", event.pga_y), ("PGA_z", event.pga_z)] {
         if let Some(v) = pga {
             header.insert(key.to_string(), v.to_string());
         }
     }
 
     let mut channels = Vec::new();
-    for (name, data) in [
-        ("x", event.data_x),
-        ("y", event.data_y),
-        ("z", event.data_z),
-    ] {
+    for (name, data) in [("x", event.data_x), ("y", event.data_y), ("z", event.data_z)] {
         let Some(values) = data else { continue };
         if values.is_empty() {
             return Err(ParseError::new(
@@ -98,12 +84,7 @@ pub fn read_simcenter_json(path: &Path) -> Result<RawRecord, ParseError> {
             ));
         }
         header.insert(format!("npts_{name}"), values.len().to_string());
-        channels.push(RawChannel {
-            name: name.to_string(),
-            unit: "g".to_string(),
-            values,
-            first_data_line: None,
-        });
+        channels.push(RawChannel { name: name.to_string(), unit: "g".to_string(), values, first_data_line: None });
     }
     if channels.is_empty() {
         return Err(ParseError::new(
@@ -114,13 +95,7 @@ pub fn read_simcenter_json(path: &Path) -> Result<RawRecord, ParseError> {
             format!("{LAYOUT}; {}", keys_present(&text)),
         ));
     }
-    Ok(RawRecord {
-        format: "simcenter_json",
-        dt: Some(dt),
-        time: None,
-        channels,
-        header,
-    })
+    Ok(RawRecord { format: "simcenter_json", dt: Some(dt), time: None, channels, header })
 }
 
 /// The top-level keys, to show what the file holds instead (e.g. "dt" for "dT").
@@ -129,10 +104,7 @@ fn keys_present(text: &str) -> String {
         Ok(map) if map.is_empty() => "the object is empty".to_string(),
         Ok(map) => {
             let keys: Vec<String> = map.keys().map(|k| format!("\"{k}\"")).collect();
-            format!(
-                "this file has the keys {} (keys are case-sensitive)",
-                keys.join(", ")
-            )
+            format!("this file has the keys {} (keys are case-sensitive)", keys.join(", "))
         }
         Err(_) => "the top-level value is not an object".to_string(),
     }
@@ -141,10 +113,7 @@ fn keys_present(text: &str) -> String {
 fn json_error(path: &Path, text: &str, e: &serde_json::Error) -> ParseError {
     use serde_json::error::Category;
     // serde_json counts columns in bytes; report characters.
-    let line_text = text
-        .split('\n')
-        .nth(e.line().saturating_sub(1))
-        .unwrap_or("");
+    let line_text = text.split('\n').nth(e.line().saturating_sub(1)).unwrap_or("");
     let col = (e.column() > 0).then(|| char_column(line_text, e.column() - 1));
     let line = (e.line() > 0).then_some(e.line());
     // serde_json's Display appends " at line L column C", which we print ourselves.
@@ -156,14 +125,8 @@ fn json_error(path: &Path, text: &str, e: &serde_json::Error) -> ParseError {
             "the file looks truncated (an unclosed array or object); get a fresh copy".to_string(),
         ),
         Category::Syntax => {
-            let at = line_text
-                .get(e.column().saturating_sub(1)..)
-                .unwrap_or("")
-                .trim_start();
-            let hint = if ["NaN", "Infinity", "-Infinity"]
-                .iter()
-                .any(|w| at.starts_with(w))
-            {
+            let at = line_text.get(e.column().saturating_sub(1)..).unwrap_or("").trim_start();
+            let hint = if ["NaN", "Infinity", "-Infinity"].iter().any(|w| at.starts_with(w)) {
                 "NaN and Infinity are not valid JSON (Python's json.dump writes them); replace them or fix the source"
                     .to_string()
             } else {
@@ -180,20 +143,13 @@ fn json_error(path: &Path, text: &str, e: &serde_json::Error) -> ParseError {
                     .to_string(),
             )
         }
-        Category::Io => (
-            format!("cannot read the JSON: {bare}"),
-            "check the file".to_string(),
-        ),
+        Category::Io => (format!("cannot read the JSON: {bare}"), "check the file".to_string()),
     };
     ParseError::new(path, line, col, message, hint)
 }
 
 fn byte_offset(text: &str, line: usize, column: usize) -> usize {
-    let start: usize = text
-        .split('\n')
-        .take(line.saturating_sub(1))
-        .map(|l| l.len() + 1)
-        .sum();
+    let start: usize = text.split('\n').take(line.saturating_sub(1)).map(|l| l.len() + 1).sum();
     (start + column).min(text.len())
 }
 
@@ -202,17 +158,11 @@ fn byte_offset(text: &str, line: usize, column: usize) -> usize {
 /// the index, but data arrays hold only numbers.
 fn locate(text: &str, offset: usize) -> String {
     let before = text.get(..offset).unwrap_or(text);
-    let found = KEYS
-        .iter()
-        .filter_map(|k| before.rfind(&format!("\"{k}\"")).map(|i| (i, *k)))
-        .max();
+    let found = KEYS.iter().filter_map(|k| before.rfind(&format!("\"{k}\"")).map(|i| (i, *k))).max();
     let Some((at, key)) = found else {
         return "the top-level value".to_string();
     };
-    let value = before[at + key.len() + 2..]
-        .trim_start()
-        .trim_start_matches(':')
-        .trim_start();
+    let value = before[at + key.len() + 2..].trim_start().trim_start_matches(':').trim_start();
     if let Some(items) = value.strip_prefix('[') {
         let index = items.bytes().filter(|&b| b == b',').count();
         format!("\"{key}\"[{index}]")

@@ -18,11 +18,7 @@ fn data(name: &str) -> PathBuf {
          these tests need the real ground-motion records"
     );
     let path = dir.join(name);
-    assert!(
-        path.is_file(),
-        "shared record {} is missing",
-        path.display()
-    );
+    assert!(path.is_file(), "shared record {} is missing", path.display());
     path
 }
 
@@ -36,9 +32,7 @@ struct Scratch(PathBuf);
 impl Scratch {
     fn new() -> Self {
         static COUNTER: AtomicUsize = AtomicUsize::new(0);
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos());
+        let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
         let dir = std::env::temp_dir().join(format!(
             "shakeflow-records-{}-{}-{nanos}",
             std::process::id(),
@@ -68,10 +62,7 @@ fn pga(values: &[f64]) -> f64 {
 /// PGA equals SOURCES.md's value to its 4 decimals.
 fn assert_pga(values: &[f64], scale_to_g: f64, expected: f64, what: &str) {
     let got = pga(values) * scale_to_g;
-    assert!(
-        (got - expected).abs() <= 0.5e-4,
-        "{what}: PGA {got} g, SOURCES.md says {expected} g"
-    );
+    assert!((got - expected).abs() <= 0.5e-4, "{what}: PGA {got} g, SOURCES.md says {expected} g");
 }
 
 fn err_text(e: &ParseError) -> String {
@@ -84,87 +75,15 @@ fn err_text(e: &ParseError) -> String {
 fn at2_files_match_sources_md() {
     // file, npts, dt, PGA (g), first value, last value, channel name
     let table: [(&str, usize, f64, f64, f64, f64, &str); 9] = [
-        (
-            "Rinaldi228.AT2",
-            1991,
-            0.01,
-            0.8741,
-            -0.2556093E-02,
-            0.5856269E-02,
-            "228",
-        ),
-        (
-            "Rinaldi318.AT2",
-            1991,
-            0.01,
-            0.4723,
-            -0.1492479E-02,
-            0.5608213E-02,
-            "318",
-        ),
-        (
-            "RinaldiUP.AT2",
-            1991,
-            0.01,
-            0.9582,
-            -0.8777599E-05,
-            0.6243671E-05,
-            "UP",
-        ),
-        (
-            "RSN1084_NORTHR_SCS052.AT2",
-            8773,
-            0.005,
-            0.6230,
-            -0.4981725E-02,
-            0.1139843E-02,
-            "52",
-        ),
-        (
-            "RSN2110_DENALI_FAIGO360.AT2",
-            46800,
-            0.005,
-            0.0706,
-            0.4664905E-05,
-            -0.1449223E-05,
-            "360",
-        ),
-        (
-            "RSN6_IMPVALL.I_I-ELC180.AT2",
-            5372,
-            0.01,
-            0.2808,
-            0.9984852E-03,
-            -0.1790158E-03,
-            "180",
-        ),
-        (
-            "NIS090.AT2",
-            4096,
-            0.01,
-            0.5027,
-            0.233833E-06,
-            0.496963E-04,
-            "090 (CUE)",
-        ),
-        (
-            "RSN1512_CHICHI_TCU078-E.AT2",
-            18000,
-            0.005,
-            0.4473,
-            -0.1316978E-03,
-            -0.1757745E-05,
-            "E",
-        ),
-        (
-            "RSN763_LOMAP_GIL067.AT2",
-            7999,
-            0.005,
-            0.3585,
-            -0.8075668E-03,
-            0.3362115E-03,
-            "67",
-        ),
+        ("Rinaldi228.AT2", 1991, 0.01, 0.8741, -0.2556093E-02, 0.5856269E-02, "228"),
+        ("Rinaldi318.AT2", 1991, 0.01, 0.4723, -0.1492479E-02, 0.5608213E-02, "318"),
+        ("RinaldiUP.AT2", 1991, 0.01, 0.9582, -0.8777599E-05, 0.6243671E-05, "UP"),
+        ("RSN1084_NORTHR_SCS052.AT2", 8773, 0.005, 0.6230, -0.4981725E-02, 0.1139843E-02, "52"),
+        ("RSN2110_DENALI_FAIGO360.AT2", 46800, 0.005, 0.0706, 0.4664905E-05, -0.1449223E-05, "360"),
+        ("RSN6_IMPVALL.I_I-ELC180.AT2", 5372, 0.01, 0.2808, 0.9984852E-03, -0.1790158E-03, "180"),
+        ("NIS090.AT2", 4096, 0.01, 0.5027, 0.233833E-06, 0.496963E-04, "090 (CUE)"),
+        ("RSN1512_CHICHI_TCU078-E.AT2", 18000, 0.005, 0.4473, -0.1316978E-03, -0.1757745E-05, "E"),
+        ("RSN763_LOMAP_GIL067.AT2", 7999, 0.005, 0.3585, -0.8075668E-03, 0.3362115E-03, "67"),
     ];
     for (file, npts, dt, expected_pga, first, last, name) in table {
         let rec = read_at2(&data(file)).unwrap_or_else(|e| panic!("{e}"));
@@ -186,19 +105,13 @@ fn at2_files_match_sources_md() {
 #[test]
 fn at2_header_facts() {
     let rec = read_at2(&data("Rinaldi228.AT2")).unwrap();
-    assert_eq!(
-        rec.header["filter"],
-        "0 POLE @    30.00000 HZ,  -5 POLE @      .05000"
-    );
+    assert_eq!(rec.header["filter"], "0 POLE @    30.00000 HZ,  -5 POLE @      .05000");
     assert_eq!(rec.header["station"], "Rinaldi Receiving Sta");
     assert_eq!(rec.header["event"], "Northridge-01");
     assert_eq!(rec.header["date"], "1/17/1994");
     let old = read_at2(&data("NIS090.AT2")).unwrap();
     assert_eq!(old.header["station"], "NISHI-AKASHI");
-    assert!(
-        !old.header.contains_key("filter"),
-        "the 'NPTS, DT' labels are not a filter"
-    );
+    assert!(!old.header.contains_key("filter"), "the 'NPTS, DT' labels are not a filter");
 }
 
 #[test]
@@ -211,15 +124,10 @@ fn renadic_file_matches_sources_md() {
     assert_eq!(time.len(), 24923);
     assert_eq!((time[0], time[24922]), (0.0, 124.61));
     // name, PGA (g), first, last, first data line
-    let expected = [
-        ("L", 0.3192, 0.0, 0.087, 28),
-        ("V", 0.7019, -0.099, -0.031, 5041),
-        ("T", 0.5644, 0.051, -0.020, 10054),
-    ];
+    let expected =
+        [("L", 0.3192, 0.0, 0.087, 28), ("V", 0.7019, -0.099, -0.031, 5041), ("T", 0.5644, 0.051, -0.020, 10054)];
     assert_eq!(rec.channels.len(), 3);
-    for (i, (ch, (name, expected_pga, first, last, line))) in
-        rec.channels.iter().zip(expected).enumerate()
-    {
+    for (i, (ch, (name, expected_pga, first, last, line))) in rec.channels.iter().zip(expected).enumerate() {
         assert_eq!(ch.name, name);
         assert_eq!(ch.unit, "g/10");
         assert_eq!(ch.values.len(), 24923, "{name}");
@@ -238,10 +146,7 @@ fn simcenter_file_matches_sources_md() {
     assert_eq!(rec.format, "simcenter_json");
     assert_eq!(rec.dt, Some(0.005));
     assert_eq!(rec.header["name"], "RSN2113");
-    let expected = [
-        ("x", 0.0557, -8.713661e-07, 6.704674e-07),
-        ("y", 0.0746, -2.688774e-07, 4.673708e-07),
-    ];
+    let expected = [("x", 0.0557, -8.713661e-07, 6.704674e-07), ("y", 0.0746, -2.688774e-07, 4.673708e-07)];
     assert_eq!(rec.channels.len(), 2);
     for (ch, (name, expected_pga, first, last)) in rec.channels.iter().zip(expected) {
         assert_eq!(ch.name, name);
@@ -251,10 +156,7 @@ fn simcenter_file_matches_sources_md() {
         assert_pga(&ch.values, 1.0, expected_pga, name);
     }
     // The file's own PGA fields agree with the data.
-    assert_eq!(
-        rec.header["PGA_x"].parse::<f64>().unwrap(),
-        pga(&rec.channels[0].values)
-    );
+    assert_eq!(rec.header["PGA_x"].parse::<f64>().unwrap(), pga(&rec.channels[0].values));
 }
 
 #[test]
@@ -264,18 +166,9 @@ fn sniffing_real_and_renamed_files() {
     assert_eq!(sniff_format(&data("RSN2113.json")), Some("simcenter_json"));
     let tmp = Scratch::new();
     // Content wins over a misleading extension.
-    assert_eq!(
-        sniff_format(&tmp.write("renamed.txt", data_text("Rinaldi228.AT2"))),
-        Some("at2")
-    );
-    assert_eq!(
-        sniff_format(&tmp.write("a.csv", "t,a\n0,1\n")),
-        Some("delimited")
-    );
-    assert_eq!(
-        sniff_format(&tmp.write("a.tsv", "t\ta\n0\t1\n")),
-        Some("delimited")
-    );
+    assert_eq!(sniff_format(&tmp.write("renamed.txt", data_text("Rinaldi228.AT2"))), Some("at2"));
+    assert_eq!(sniff_format(&tmp.write("a.csv", "t,a\n0,1\n")), Some("delimited"));
+    assert_eq!(sniff_format(&tmp.write("a.tsv", "t\ta\n0\t1\n")), Some("delimited"));
     assert_eq!(sniff_format(&tmp.write("a.bin", "t,a\n0,1\n")), None);
     assert_eq!(sniff_format(&tmp.0.join("absent.xyz")), None);
 }
@@ -293,18 +186,9 @@ fn truncated_at2_names_both_counts() {
     let e = read_at2(&path).unwrap_err();
     let shown = err_text(&e);
     assert_eq!(e.line, Some(lines.len() - 3));
-    assert!(
-        shown.starts_with(&format!("{}:{}: ", path.display(), lines.len() - 3)),
-        "{shown}"
-    );
-    assert!(
-        shown.contains("NPTS = 8773 (line 4) but only 8760 values were found"),
-        "{shown}"
-    );
-    assert!(
-        e.hint.contains("13 values are missing") && e.hint.contains("truncated"),
-        "{shown}"
-    );
+    assert!(shown.starts_with(&format!("{}:{}: ", path.display(), lines.len() - 3)), "{shown}");
+    assert!(shown.contains("NPTS = 8773 (line 4) but only 8760 values were found"), "{shown}");
+    assert!(e.hint.contains("13 values are missing") && e.hint.contains("truncated"), "{shown}");
 }
 
 #[test]
@@ -313,11 +197,7 @@ fn at2_npts_smaller_than_data() {
     let tmp = Scratch::new();
     let e = read_at2(&tmp.write("npts.AT2", text)).unwrap_err();
     assert_eq!(e.line, Some(4));
-    assert!(
-        e.message
-            .contains("NPTS = 1990 (line 4) but 1991 values were found"),
-        "{e}"
-    );
+    assert!(e.message.contains("NPTS = 1990 (line 4) but 1991 values were found"), "{e}");
 }
 
 #[test]
@@ -327,16 +207,12 @@ fn at2_unreadable_npts_shows_the_line() {
     let e = read_at2(&tmp.write("npts.AT2", text)).unwrap_err();
     assert_eq!((e.line, e.column), (Some(4), Some(9)));
     assert!(e.message.contains("NPTS '19x1'"), "{e}");
-    assert!(
-        e.hint.contains("line 4 is 'NPTS=   19x1, DT=   .0100 SEC"),
-        "{e}"
-    );
+    assert!(e.hint.contains("line 4 is 'NPTS=   19x1, DT=   .0100 SEC"), "{e}");
 }
 
 #[test]
 fn at2_missing_dt() {
-    let text =
-        data_text("NIS090.AT2").replacen("4096    0.0100    NPTS, DT", "4096    NPTS, DT", 1);
+    let text = data_text("NIS090.AT2").replacen("4096    0.0100    NPTS, DT", "4096    NPTS, DT", 1);
     let tmp = Scratch::new();
     let e = read_at2(&tmp.write("dt.AT2", text)).unwrap_err();
     assert_eq!((e.line, e.column), (Some(4), Some(9)));
@@ -370,17 +246,9 @@ fn at2_empty_and_header_only() {
     let tmp = Scratch::new();
     let e = read_at2(&tmp.write("empty.AT2", "")).unwrap_err();
     assert!(e.message.contains("the file is empty"), "{e}");
-    let head: String = data_text("Rinaldi228.AT2")
-        .lines()
-        .take(4)
-        .map(|l| format!("{l}\n"))
-        .collect();
+    let head: String = data_text("Rinaldi228.AT2").lines().take(4).map(|l| format!("{l}\n")).collect();
     let e = read_at2(&tmp.write("head.AT2", head)).unwrap_err();
-    assert!(
-        e.message
-            .contains("no data values after the header (NPTS = 1991)"),
-        "{e}"
-    );
+    assert!(e.message.contains("no data values after the header (NPTS = 1991)"), "{e}");
     let e = read_at2(&tmp.write("short.AT2", "PEER\nline 2\n")).unwrap_err();
     assert!(e.message.contains("inside the 4-line AT2 header"), "{e}");
 }
@@ -388,10 +256,7 @@ fn at2_empty_and_header_only() {
 // ---------------------------------------------------------------- bad RENADIC
 
 fn renadic_lines() -> Vec<String> {
-    data_text("llolleo1002271.v1")
-        .split('\n')
-        .map(str::to_string)
-        .collect()
+    data_text("llolleo1002271.v1").split('\n').map(str::to_string).collect()
 }
 
 #[test]
@@ -410,9 +275,7 @@ fn renadic_missing_data_line_points_at_the_gap() {
         "{shown}"
     );
     assert!(
-        e.hint
-            .contains("jumps from 23.970 to 24.000 here (step 0.005 elsewhere)")
-            && e.hint.contains("missing"),
+        e.hint.contains("jumps from 23.970 to 24.000 here (step 0.005 elsewhere)") && e.hint.contains("missing"),
         "{shown}"
     );
 }
@@ -424,10 +287,7 @@ fn renadic_missing_last_data_line() {
     let tmp = Scratch::new();
     let e = read_renadic_v1(&tmp.write("end.v1", lines.join("\n"))).unwrap_err();
     assert_eq!(e.line, Some(5012), "{e}");
-    assert!(
-        e.message.contains("channel 1 (L)") && e.message.contains("holds 24920 points"),
-        "{e}"
-    );
+    assert!(e.message.contains("channel 1 (L)") && e.message.contains("holds 24920 points"), "{e}");
     assert!(e.hint.contains("ends early"), "{e}");
 }
 
@@ -438,7 +298,12 @@ fn renadic_missing_header_line() {
     let tmp = Scratch::new();
     let e = read_renadic_v1(&tmp.write("hdr.v1", lines.join("\n"))).unwrap_err();
     assert_eq!((e.line, e.column), (Some(5033), Some(1)), "{e}");
-    assert!(e.message.contains("channel 2: integer header line 7 of 7 should hold 5-character number fields, found a blank field"), "{e}");
+    assert!(
+        e.message.contains(
+            "channel 2: integer header line 7 of 7 should hold 5-character number fields, found a blank field"
+        ),
+        "{e}"
+    );
 }
 
 #[test]
@@ -448,11 +313,7 @@ fn renadic_time_base_mismatch() {
     let tmp = Scratch::new();
     let e = read_renadic_v1(&tmp.write("tb.v1", lines.join("\n"))).unwrap_err();
     assert_eq!(e.line, Some(10054), "{e}");
-    assert!(
-        e.message
-            .contains("channel 3 (T) point 2 has time 0.006 but channel 1 (L) has 0.005 (line 28)"),
-        "{e}"
-    );
+    assert!(e.message.contains("channel 3 (T) point 2 has time 0.006 but channel 1 (L) has 0.005 (line 28)"), "{e}");
 }
 
 #[test]
@@ -473,15 +334,9 @@ fn renadic_empty_header_only_and_truncated() {
     assert!(e.message.contains("the file is empty"), "{e}");
     let lines = renadic_lines();
     let e = read_renadic_v1(&tmp.write("h.v1", lines[..27].join("\n"))).unwrap_err();
-    assert!(
-        e.message.contains("holds 0 points") && e.hint.contains("truncated"),
-        "{e}"
-    );
+    assert!(e.message.contains("holds 0 points") && e.hint.contains("truncated"), "{e}");
     let e = read_renadic_v1(&tmp.write("t.v1", lines[..8000].join("\n"))).unwrap_err();
-    assert!(
-        e.message.contains("channel 2 (V)") && e.hint.contains("truncated"),
-        "{e}"
-    );
+    assert!(e.message.contains("channel 2 (V)") && e.hint.contains("truncated"), "{e}");
     let e = read_renadic_v1(&tmp.write("t2.v1", lines[..5020].join("\n"))).unwrap_err();
     assert!(e.message.contains("inside the header of channel 2"), "{e}");
 }
@@ -491,8 +346,7 @@ fn renadic_empty_header_only_and_truncated() {
 #[test]
 fn simcenter_missing_dt_lists_keys() {
     let tmp = Scratch::new();
-    let e = read_simcenter_json(&tmp.write("a.json", r#"{"dt": 0.01, "data_x": [0.1, 0.2]}"#))
-        .unwrap_err();
+    let e = read_simcenter_json(&tmp.write("a.json", r#"{"dt": 0.01, "data_x": [0.1, 0.2]}"#)).unwrap_err();
     assert_eq!((e.line, e.column), (None, None));
     assert!(e.message.contains("no \"dT\""), "{e}");
     assert!(e.hint.contains("\"dt\", \"data_x\""), "{e}"); // in file order
@@ -502,11 +356,7 @@ fn simcenter_missing_dt_lists_keys() {
 fn simcenter_missing_data() {
     let tmp = Scratch::new();
     let e = read_simcenter_json(&tmp.write("a.json", r#"{"dT": 0.01, "name": "x"}"#)).unwrap_err();
-    assert!(
-        e.message
-            .contains("no \"data_x\", \"data_y\" or \"data_z\""),
-        "{e}"
-    );
+    assert!(e.message.contains("no \"data_x\", \"data_y\" or \"data_z\""), "{e}");
     let e = read_simcenter_json(&tmp.write("b.json", r#"{"dT": 0.01, "data_x": []}"#)).unwrap_err();
     assert!(e.message.contains("\"data_x\" is an empty array"), "{e}");
 }
@@ -522,10 +372,7 @@ fn simcenter_syntax_error_has_line_and_column() {
     let e = read_simcenter_json(&path).unwrap_err();
     assert_eq!((e.line, e.column), (Some(7), Some(23)), "{e}");
     assert!(
-        err_text(&e).starts_with(&format!(
-            "{}:7:23: JSON syntax error: expected `,` or `]`",
-            path.display()
-        )),
+        err_text(&e).starts_with(&format!("{}:7:23: JSON syntax error: expected `,` or `]`", path.display())),
         "{e}"
     );
 }
@@ -533,19 +380,12 @@ fn simcenter_syntax_error_has_line_and_column() {
 #[test]
 fn simcenter_nan_and_truncation() {
     let tmp = Scratch::new();
-    let e = read_simcenter_json(&tmp.write("nan.json", "{\"dT\": 0.01,\n \"data_x\": [0.1, NaN]}"))
-        .unwrap_err();
+    let e = read_simcenter_json(&tmp.write("nan.json", "{\"dT\": 0.01,\n \"data_x\": [0.1, NaN]}")).unwrap_err();
     assert_eq!(e.line, Some(2));
-    assert!(
-        e.hint.contains("NaN and Infinity are not valid JSON"),
-        "{e}"
-    );
+    assert!(e.hint.contains("NaN and Infinity are not valid JSON"), "{e}");
     let text = data_text("RSN2113.json");
     let e = read_simcenter_json(&tmp.write("cut.json", &text[..text.len() / 2])).unwrap_err();
-    assert!(
-        e.message.starts_with("the JSON ends early") && e.hint.contains("truncated"),
-        "{e}"
-    );
+    assert!(e.message.starts_with("the JSON ends early") && e.hint.contains("truncated"), "{e}");
 }
 
 #[test]
@@ -554,19 +394,10 @@ fn simcenter_non_numeric_entry_is_located() {
     let text = "{\"dT\": 0.01,\n\"data_x\": [0.1, 0.2],\n\"data_y\": [0.1, 0.2, \"abc\", 0.4]}";
     let e = read_simcenter_json(&tmp.write("s.json", text)).unwrap_err();
     assert_eq!(e.line, Some(3));
-    assert!(
-        e.message
-            .starts_with("\"data_y\"[2]: invalid type: string \"abc\", expected f64"),
-        "{e}"
-    );
-    let e = read_simcenter_json(&tmp.write("n.json", "{\"dT\": 0.01, \"data_x\": [0.1, null]}"))
-        .unwrap_err();
-    assert!(
-        e.message.starts_with("\"data_x\"[1]: invalid type: null"),
-        "{e}"
-    );
-    let e = read_simcenter_json(&tmp.write("d.json", "{\"dT\": \"0.01\", \"data_x\": [0.1]}"))
-        .unwrap_err();
+    assert!(e.message.starts_with("\"data_y\"[2]: invalid type: string \"abc\", expected f64"), "{e}");
+    let e = read_simcenter_json(&tmp.write("n.json", "{\"dT\": 0.01, \"data_x\": [0.1, null]}")).unwrap_err();
+    assert!(e.message.starts_with("\"data_x\"[1]: invalid type: null"), "{e}");
+    let e = read_simcenter_json(&tmp.write("d.json", "{\"dT\": \"0.01\", \"data_x\": [0.1]}")).unwrap_err();
     assert!(e.message.starts_with("\"dT\": invalid type: string"), "{e}");
     let e = read_simcenter_json(&tmp.write("e.json", "  \n")).unwrap_err();
     assert!(e.message.contains("the file is empty"), "{e}");
@@ -578,12 +409,7 @@ fn simcenter_non_numeric_entry_is_located() {
 fn csv(rows: usize) -> String {
     let mut s = String::from("time,A4_NS,A4_UD\n");
     for i in 0..rows {
-        s.push_str(&format!(
-            "{},{},{}\n",
-            i as f64 * 0.01,
-            (i as f64).sin() * 0.1,
-            (i as f64).cos() * 0.05
-        ));
+        s.push_str(&format!("{},{},{}\n", i as f64 * 0.01, (i as f64).sin() * 0.1, (i as f64).cos() * 0.05));
     }
     s
 }
@@ -599,10 +425,7 @@ fn csv_reads_columns() {
     assert_eq!(rec.format, "delimited");
     let names: Vec<&str> = rec.channels.iter().map(|c| c.name.as_str()).collect();
     assert_eq!(names, ["time", "A4_NS", "A4_UD"]);
-    assert!(rec
-        .channels
-        .iter()
-        .all(|c| c.values.len() == 100 && c.unit.is_empty()));
+    assert!(rec.channels.iter().all(|c| c.values.len() == 100 && c.unit.is_empty()));
     assert_eq!(rec.channels[0].values[99], 99.0 * 0.01);
     assert_eq!(rec.channels[0].first_data_line, Some(2));
     assert_eq!(rec.header["delimiter"], "comma");
@@ -616,10 +439,7 @@ fn csv_non_numeric_cell_names_line_column_and_name() {
     let path = tmp.write("bad.csv", lines.join("\n"));
     let e = read_delimited(&path, &csv_opts()).unwrap_err();
     assert_eq!((e.line, e.column), (Some(57), Some(10)));
-    assert_eq!(
-        e.message,
-        "line 57, column 3 (A4_UD): cannot read 'abc' as a number"
-    );
+    assert_eq!(e.message, "line 57, column 3 (A4_UD): cannot read 'abc' as a number");
     assert!(err_text(&e).starts_with(&format!("{}:57:10: line 57", path.display())));
 }
 
@@ -630,10 +450,7 @@ fn csv_ragged_row_in_the_middle() {
     let tmp = Scratch::new();
     let e = read_delimited(&tmp.write("r.csv", lines.join("\n")), &csv_opts()).unwrap_err();
     assert_eq!(e.line, Some(20));
-    assert_eq!(
-        e.message,
-        "line 20 has 2 cell(s) but the column-name row (line 1) has 3"
-    );
+    assert_eq!(e.message, "line 20 has 2 cell(s) but the column-name row (line 1) has 3");
     assert!(!e.message.contains("truncated"));
 }
 
@@ -644,22 +461,18 @@ fn csv_truncated_last_row() {
     let tmp = Scratch::new();
     let e = read_delimited(&tmp.write("t.csv", text), &csv_opts()).unwrap_err();
     assert_eq!(e.line, Some(102));
-    assert!(
-        e.message
-            .ends_with("this is the last line: the file may be truncated"),
-        "{e}"
-    );
+    assert!(e.message.ends_with("this is the last line: the file may be truncated"), "{e}");
     // Without names, the first data row sets the count.
     let tmp2 = Scratch::new();
     let e = read_delimited(
         &tmp2.write("n.txt", "0 1 2\n3 4 5\n6 7\n\n\n"),
-        &DelimitedOptions {
-            has_column_names: false,
-            ..csv_opts()
-        },
+        &DelimitedOptions { has_column_names: false, ..csv_opts() },
     )
     .unwrap_err();
-    assert_eq!(e.message, "line 3 has 2 cell(s) but the first data row (line 1) has 3; this is the last line: the file may be truncated");
+    assert_eq!(
+        e.message,
+        "line 3 has 2 cell(s) but the first data row (line 1) has 3; this is the last line: the file may be truncated"
+    );
 }
 
 #[test]
@@ -668,16 +481,10 @@ fn csv_empty_and_header_only() {
     let e = read_delimited(&tmp.write("e.csv", ""), &csv_opts()).unwrap_err();
     assert!(e.message.contains("the file is empty"), "{e}");
     let e = read_delimited(&tmp.write("h.csv", "\u{feff}time,a\r\n\r\n"), &csv_opts()).unwrap_err();
-    assert_eq!(
-        e.message,
-        "no data rows: only a column-name row (line 1), no data rows after it"
-    );
+    assert_eq!(e.message, "no data rows: only a column-name row (line 1), no data rows after it");
     let e = read_delimited(
         &tmp.write("p.csv", "station X\nunits g\n"),
-        &DelimitedOptions {
-            header_lines: 2,
-            ..csv_opts()
-        },
+        &DelimitedOptions { header_lines: 2, ..csv_opts() },
     )
     .unwrap_err();
     assert!(e.message.contains("no column-name row and no data"), "{e}");
@@ -693,20 +500,13 @@ fn csv_gaps_become_nan() {
     assert!(v(1)[1].is_nan() && v(2)[0].is_nan() && v(2)[1].is_nan() && v(3)[0].is_nan());
     assert_eq!((v(1)[0], v(3)[1], v(3)[2]), (1.0, 2.0, 5.0));
     let e = read_delimited(&tmp.write("i.csv", "t,a\n0,inf\n"), &csv_opts()).unwrap_err();
-    assert_eq!(
-        e.message,
-        "line 2, column 2 (a): cannot read 'inf' as a number"
-    );
+    assert_eq!(e.message, "line 2, column 2 (a): cannot read 'inf' as a number");
 }
 
 #[test]
 fn bom_crlf_tsv_whitespace_and_preamble() {
     let tmp = Scratch::new();
-    let rec = read_delimited(
-        &tmp.write("b.csv", "\u{feff}t;a\r\n0;1.5\r\n1;-2e-3\r\n"),
-        &csv_opts(),
-    )
-    .unwrap();
+    let rec = read_delimited(&tmp.write("b.csv", "\u{feff}t;a\r\n0;1.5\r\n1;-2e-3\r\n"), &csv_opts()).unwrap();
     assert_eq!(rec.channels[0].name, "t");
     assert_eq!(rec.channels[1].values, [1.5, -2e-3]);
     assert_eq!(rec.header["delimiter"], "semicolon");
@@ -715,23 +515,12 @@ fn bom_crlf_tsv_whitespace_and_preamble() {
     assert_eq!(rec.channels[1].name, "a,b");
     assert!(rec.channels[2].values[0].is_nan());
     let text = "Station: LLO\nunits: g\n  time    acc\n  0.00   0.1\n  0.01  -0.2\n";
-    let rec = read_delimited(
-        &tmp.write("w.txt", text),
-        &DelimitedOptions {
-            header_lines: 2,
-            ..csv_opts()
-        },
-    )
-    .unwrap();
+    let rec = read_delimited(&tmp.write("w.txt", text), &DelimitedOptions { header_lines: 2, ..csv_opts() }).unwrap();
     assert_eq!(rec.header["delimiter"], "whitespace");
     assert_eq!(rec.header["preamble_1"], "Station: LLO");
     assert_eq!(rec.channels[1].values, [0.1, -0.2]);
     assert_eq!(rec.channels[1].first_data_line, Some(4));
-    let e = read_delimited(
-        &tmp.write("d.csv", "t;a\n0;1,5\n1;2,5\n0;3,5\n"),
-        &csv_opts(),
-    )
-    .unwrap_err();
+    let e = read_delimited(&tmp.write("d.csv", "t;a\n0;1,5\n1;2,5\n0;3,5\n"), &csv_opts()).unwrap_err();
     assert_eq!(e.line, Some(2));
     let e = read_delimited(&tmp.write("d2.csv", "t;a\n0;1.5\n1;2,5\n"), &csv_opts()).unwrap_err();
     assert!(e.hint.contains("decimal commas"), "{e}");
@@ -741,10 +530,7 @@ fn bom_crlf_tsv_whitespace_and_preamble() {
 fn missing_file_is_an_error() {
     let tmp = Scratch::new();
     let e = read_at2(&tmp.0.join("nope.AT2")).unwrap_err();
-    assert!(
-        e.message.starts_with("cannot read the file") && e.hint.contains("check the path"),
-        "{e}"
-    );
+    assert!(e.message.starts_with("cannot read the file") && e.hint.contains("check the path"), "{e}");
 }
 
 /// Damaged prefixes and byte flips of every real file through every reader:
@@ -752,12 +538,7 @@ fn missing_file_is_an_error() {
 #[test]
 fn no_panics_on_damaged_input() {
     let tmp = Scratch::new();
-    let files = [
-        "Rinaldi228.AT2",
-        "NIS090.AT2",
-        "llolleo1002271.v1",
-        "RSN2113.json",
-    ];
+    let files = ["Rinaldi228.AT2", "NIS090.AT2", "llolleo1002271.v1", "RSN2113.json"];
     for file in files {
         let bytes = fs::read(data(file)).unwrap();
         let mut seed = 0x9e37_79b9_u64;
@@ -804,8 +585,5 @@ fn csv_throughput() {
     let secs = start.elapsed().as_secs_f64();
     assert_eq!(rec.channels[0].values.len() as u64, i);
     let mb = text.len() as f64 / 1e6;
-    eprintln!(
-        "read_delimited: {mb:.1} MB, {i} rows x 4 columns in {secs:.3} s = {:.0} MB/s",
-        mb / secs
-    );
+    eprintln!("read_delimited: {mb:.1} MB, {i} rows x 4 columns in {secs:.3} s = {:.0} MB/s", mb / secs);
 }
