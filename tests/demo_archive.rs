@@ -212,7 +212,7 @@ fn layout_headers_rows_and_manifest() {
         assert_eq!(h2, "Time,A5_EW_SYNC,UI3_TOP_EW,MC2_TOP_EW,PB1_TOP_EW,PB2_TOP_EW,PS1_TOP_EW,PS2_TOP_EW,WSU1_TOP_EW");
         assert_eq!(rows2.len(), (t.duration_s * 256.0) as usize);
         assert_eq!(rows2.len(), t.daq2_rows);
-        assert!(rows2.iter().all(|r| r.len() == DAQ2_COLUMNS.len() - 1));
+        assert!(rows2.iter().all(|r| r.len() == DAQ2_COLUMNS.len()));
         assert_eq!(times2[0], "0.000000");
         assert_eq!(times2[1], "0.003906");
 
