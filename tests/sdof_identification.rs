@@ -14,10 +14,8 @@
 //! * damping: |ζ − 0.03| ≤ 12 % per record, ≤ 5 % for the mean of 12
 //!   records; budget in `sdof_identification`.
 
+use shakeflow::signal::welch::{csd, identify_peak, transfer_function, welch, Detrend, WelchOptions, Window};
 use std::time::Instant;
-use shakeflow::signal::welch::{
-    csd, identify_peak, transfer_function, welch, Detrend, Window, WelchOptions,
-};
 
 const FS: f64 = 200.0;
 const FN: f64 = 3.1;
@@ -75,10 +73,7 @@ fn matmul(a: &M4, b: &M4) -> M4 {
 
 /// Matrix exponential by scaling and squaring with a 24-term Taylor series.
 fn expm(m: &M4) -> M4 {
-    let norm = m
-        .iter()
-        .map(|r| r.iter().map(|v| v.abs()).sum::<f64>())
-        .fold(0.0, f64::max);
+    let norm = m.iter().map(|r| r.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
     let mut s = 0;
     while norm / 2f64.powi(s) > 0.25 {
         s += 1;
@@ -112,12 +107,8 @@ fn sdof_abs_accel(ag: &[f64], fs: f64, f_n: f64, zeta: f64) -> Vec<f64> {
     let w = 2.0 * std::f64::consts::PI * f_n;
     let dt = 1.0 / fs;
     // augmented state [u, v, p, q], p = a_g, p' = q, q' = 0
-    let m: M4 = [
-        [0.0, dt, 0.0, 0.0],
-        [-w * w * dt, -2.0 * zeta * w * dt, -dt, 0.0],
-        [0.0, 0.0, 0.0, dt],
-        [0.0, 0.0, 0.0, 0.0],
-    ];
+    let m: M4 =
+        [[0.0, dt, 0.0, 0.0], [-w * w * dt, -2.0 * zeta * w * dt, -dt, 0.0], [0.0, 0.0, 0.0, dt], [0.0, 0.0, 0.0, 0.0]];
     let e = expm(&m);
     let (mut u, mut v) = (0.0, 0.0);
     let mut out = Vec::with_capacity(ag.len());
@@ -224,10 +215,14 @@ fn low_coherence_is_flagged() {
     let y: Vec<f64> = acc.iter().map(|a| 0.05 * a + 10.0 * g.normal()).collect();
     // (1) Hann, 2048-sample segments, 50 % overlap: 57 averages, so the
     // estimator's bias for zero coherence (~1/57) is well below 0.5.
-    let opts = WelchOptions { window: Window::Hann, segment_len: 2048, overlap: 1024, detrend: Detrend::Constant, nfft: None };
+    let opts =
+        WelchOptions { window: Window::Hann, segment_len: 2048, overlap: 1024, detrend: Detrend::Constant, nfft: None };
     let tf = transfer_function(&ag, &y, FS, &opts).unwrap();
     let p = identify_peak(&tf, (1.0, 10.0), 0.5).expect("a peak is always reported");
-    println!("low-coherence, Hann 2048 ({} segments): f = {:.4} Hz, coherence {:.4}, flagged {}", tf.segments, p.frequency_hz, p.coherence, p.low_coherence);
+    println!(
+        "low-coherence, Hann 2048 ({} segments): f = {:.4} Hz, coherence {:.4}, flagged {}",
+        tf.segments, p.frequency_hz, p.coherence, p.low_coherence
+    );
     assert!(p.low_coherence);
     assert!(p.coherence < 0.2);
     // (2) MATLAB defaults: only 7 averages, so the coherence estimate of an
@@ -235,14 +230,18 @@ fn low_coherence_is_flagged() {
     let opts = WelchOptions::matlab_default(n);
     let tf = transfer_function(&ag, &y, FS, &opts).unwrap();
     let p = identify_peak(&tf, (1.0, 10.0), 0.5).unwrap();
-    println!("low-coherence, MATLAB defaults ({} segments): f = {:.4} Hz, coherence {:.4}, flagged {}", tf.segments, p.frequency_hz, p.coherence, p.low_coherence);
+    println!(
+        "low-coherence, MATLAB defaults ({} segments): f = {:.4} Hz, coherence {:.4}, flagged {}",
+        tf.segments, p.frequency_hz, p.coherence, p.low_coherence
+    );
     assert!(p.low_coherence);
 }
 
 #[test]
 fn edge_cases_are_errors_not_panics() {
     let x = Gauss::new(3).vec(100);
-    let hann512 = WelchOptions { window: Window::Hann, segment_len: 512, overlap: 256, detrend: Detrend::Constant, nfft: None };
+    let hann512 =
+        WelchOptions { window: Window::Hann, segment_len: 512, overlap: 256, detrend: Detrend::Constant, nfft: None };
     // input shorter than a segment
     let e = welch(&x, FS, &hann512).unwrap_err();
     assert!(e.contains("fewer than one segment"), "{e}");
@@ -277,7 +276,8 @@ fn constant_input_does_not_panic() {
     let c = vec![3.0; n];
     // Constant detrend removes everything: Pxx ≡ 0, so H1 = 0/0 = NaN and
     // coherence = NaN (as in scipy); identify_peak finds no finite bin.
-    let opts = WelchOptions { window: Window::Hann, segment_len: 512, overlap: 256, detrend: Detrend::Constant, nfft: None };
+    let opts =
+        WelchOptions { window: Window::Hann, segment_len: 512, overlap: 256, detrend: Detrend::Constant, nfft: None };
     let tf = transfer_function(&c, &y, FS, &opts).unwrap();
     assert!(tf.pxx.iter().all(|&p| p == 0.0));
     assert!(tf.coherence.iter().all(|v| v.is_nan()));
@@ -286,7 +286,7 @@ fn constant_input_does_not_panic() {
     let tf = transfer_function(&c, &y, FS, &WelchOptions::matlab_default(n)).unwrap();
     assert!(tf.pxx.iter().all(|p| p.is_finite()));
     let _ = identify_peak(&tf, (1.0, 10.0), 0.5); // no panic; value irrelevant
-    // All-zero input and output.
+                                                  // All-zero input and output.
     let z = vec![0.0; n];
     let tf = transfer_function(&z, &z, FS, &WelchOptions::matlab_default(n)).unwrap();
     assert!(tf.coherence.iter().all(|v| v.is_nan()));

@@ -5,8 +5,8 @@
 mod common;
 
 use common::*;
-use std::path::{Path, PathBuf};
 use shakeflow::signal::toppling::{detect_toppling, DetectOptions};
+use std::path::{Path, PathBuf};
 
 /// The demo archive, written by the library into the test scratch folder when not current.
 fn archive_dir() -> PathBuf {
@@ -21,11 +21,7 @@ fn archive_dir() -> PathBuf {
 fn interp(t: &[f64], y: &[f64], at: f64) -> f64 {
     let i = t.partition_point(|&v| v < at);
     if i == 0 || i >= t.len() {
-        return if i < t.len() && t[i] == at {
-            y[i]
-        } else {
-            f64::NAN
-        };
+        return if i < t.len() && t[i] == at { y[i] } else { f64::NAN };
     }
     let (t0, t1) = (t[i - 1], t[i]);
     y[i - 1] + (y[i] - y[i - 1]) * (at - t0) / (t1 - t0)
@@ -34,16 +30,12 @@ fn interp(t: &[f64], y: &[f64], at: f64) -> f64 {
 #[test]
 fn demo_archive_toppling_and_no_false_alarms() {
     let dir = archive_dir();
-    let manifest =
-        Json::parse(&std::fs::read_to_string(dir.join("manifest.json")).expect("manifest"));
+    let manifest = Json::parse(&std::fs::read_to_string(dir.join("manifest.json")).expect("manifest"));
     let tests = manifest.get("tests").arr();
     assert!(!tests.is_empty(), "manifest has no tests");
     // Default options, then a more sensitive trigger (sqrt(STA/LTA) ≥ 5) so that the shaking-onset
     // triggers of FB-1..FB-6 reach the confirmation stage: the drop test alone must reject them.
-    let sensitive = DetectOptions {
-        sta_lta_on: 5.0,
-        ..DetectOptions::default()
-    };
+    let sensitive = DetectOptions { sta_lta_on: 5.0, ..DetectOptions::default() };
     let mut rows = Vec::new();
     let mut failures = Vec::new();
     let (mut n_channels, mut n_topples) = (0, 0);
@@ -58,12 +50,7 @@ fn demo_archive_toppling_and_no_false_alarms() {
             .get("toppling")
             .arr()
             .iter()
-            .map(|e| {
-                (
-                    e.get("unit").str().to_string(),
-                    e.get("time_s").num() - offset,
-                )
-            })
+            .map(|e| (e.get("unit").str().to_string(), e.get("time_s").num() - offset))
             .collect();
         for eq in test.get("equipment").arr() {
             let unit = eq.get("unit").str();
@@ -72,17 +59,12 @@ fn demo_archive_toppling_and_no_false_alarms() {
             let ax: Vec<f64> = daq2.col(channel).iter().map(|v| v * G).collect();
             // Floor vertical of the unit's floor, on the DAQ2 clock (DAQ1 time = tau + offset).
             let ud = daq1.col(&format!("A{floor}_UD"));
-            let fv: Vec<f64> = t2
-                .iter()
-                .map(|&tau| interp(t1, ud, tau + offset) * G)
-                .collect();
+            let fv: Vec<f64> = t2.iter().map(|&tau| interp(t1, ud, tau + offset) * G).collect();
             let truth = topples.iter().find(|(u, _)| u == unit).map(|(_, t)| *t);
             let default = DetectOptions::default();
-            for (label, floor_v, opts) in [
-                ("", Some(&fv[..]), &default),
-                (" nofl", None, &default),
-                (" sta5", None, &sensitive),
-            ] {
+            for (label, floor_v, opts) in
+                [("", Some(&fv[..]), &default), (" nofl", None, &default), (" sta5", None, &sensitive)]
+            {
                 let ev = detect_toppling(t2, &ax, floor_v, opts);
                 let ok = match truth {
                     Some(tt) => ev.toppled && (ev.impact_time_s.unwrap() - tt).abs() <= 0.05,
@@ -110,17 +92,9 @@ fn demo_archive_toppling_and_no_false_alarms() {
         }
     }
     print_table(
-        &format!(
-            "demo archive {} ({n_channels} channels, {n_topples} topplings; truth in DAQ2 time)",
-            dir.display()
-        ),
+        &format!("demo archive {} ({n_channels} channels, {n_topples} topplings; truth in DAQ2 time)", dir.display()),
         &rows,
     );
     assert_eq!(n_channels, tests.len() * 7, "expected 7 units per test");
-    assert!(
-        failures.is_empty(),
-        "{} archive failures:\n{}",
-        failures.len(),
-        failures.join("\n")
-    );
+    assert!(failures.is_empty(), "{} archive failures:\n{}", failures.len(), failures.join("\n"));
 }

@@ -20,25 +20,18 @@ pub fn load_demo(id: &str) -> DemoCase {
     let acc = Csv::read(&dir.join(id).join("observed_accel.csv"));
     let floor = Csv::read(&dir.join(id).join("floor.csv"));
     let truth_path = dir.join("truth").join(format!("{id}.yaml"));
-    let truth = std::fs::read_to_string(&truth_path)
-        .unwrap_or_else(|e| panic!("cannot read {}: {e}", truth_path.display()));
+    let truth =
+        std::fs::read_to_string(&truth_path).unwrap_or_else(|e| panic!("cannot read {}: {e}", truth_path.display()));
     let overturned = match yaml_top(&truth, "overturned").as_deref() {
         Some("true") => true,
         Some("false") => false,
         other => panic!("{id}: top-level `overturned:` missing or not a bool: {other:?}"),
     };
     let overturn_time_s = yaml_top(&truth, "overturn_time_s").and_then(|v| v.parse::<f64>().ok());
-    assert!(
-        !overturned || overturn_time_s.is_some(),
-        "{id}: overturned but no overturn_time_s"
-    );
+    assert!(!overturned || overturn_time_s.is_some(), "{id}: overturned but no overturn_time_s");
     let t = acc.col("time_s").to_vec();
     let ft = floor.col("time_s");
-    assert_eq!(
-        ft.len(),
-        t.len(),
-        "{id}: floor.csv and observed_accel.csv lengths differ"
-    );
+    assert_eq!(ft.len(), t.len(), "{id}: floor.csv and observed_accel.csv lengths differ");
     DemoCase {
         id: id.into(),
         ax: acc.col("top_ax_mps2").to_vec(),
@@ -81,18 +74,11 @@ fn demo_cases_match_truth() {
                 !ev.toppled
             };
             if !ok {
-                failures.push(format!(
-                    "{id}{label}: truth {:?}, got {ev:?}",
-                    c.overturn_time_s
-                ));
+                failures.push(format!("{id}{label}: truth {:?}, got {ev:?}", c.overturn_time_s));
             }
             rows.push(Row {
                 case: format!("{id}{label}"),
-                truth: if c.overturned {
-                    c.overturn_time_s
-                } else {
-                    None
-                },
+                truth: if c.overturned { c.overturn_time_s } else { None },
                 detected: ev.impact_time_s,
                 confidence: ev.confidence,
                 ok,
@@ -101,9 +87,5 @@ fn demo_cases_match_truth() {
         }
     }
     print_table("demo cases (truth = overturn_time_s)", &rows);
-    assert!(
-        failures.is_empty(),
-        "demo failures:\n{}",
-        failures.join("\n")
-    );
+    assert!(failures.is_empty(), "demo failures:\n{}", failures.join("\n"));
 }

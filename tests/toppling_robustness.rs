@@ -17,16 +17,9 @@ fn load(id: &str) -> Case {
     let dir = require_shared();
     let acc = Csv::read(&dir.join(id).join("observed_accel.csv"));
     let floor = Csv::read(&dir.join(id).join("floor.csv"));
-    let truth_text =
-        std::fs::read_to_string(dir.join("truth").join(format!("{id}.yaml"))).expect("truth yaml");
-    assert_eq!(
-        yaml_top(&truth_text, "overturned").as_deref(),
-        Some("true"),
-        "{id} expected to overturn"
-    );
-    let truth = yaml_top(&truth_text, "overturn_time_s")
-        .and_then(|v| v.parse().ok())
-        .expect("overturn_time_s");
+    let truth_text = std::fs::read_to_string(dir.join("truth").join(format!("{id}.yaml"))).expect("truth yaml");
+    assert_eq!(yaml_top(&truth_text, "overturned").as_deref(), Some("true"), "{id} expected to overturn");
+    let truth = yaml_top(&truth_text, "overturn_time_s").and_then(|v| v.parse().ok()).expect("overturn_time_s");
     Case {
         t: acc.col("time_s").to_vec(),
         ax: acc.col("top_ax_mps2").to_vec(),
@@ -85,9 +78,7 @@ fn robustness_on_modified_demo_data() {
         let c = load(id);
         let n03 = c.t.partition_point(|&v| v <= c.truth + 0.3);
         let ev = detect_toppling(&c.t[..n03], &c.ax[..n03], Some(&c.az[..n03]), &opts);
-        let ok = !ev.toppled
-            && (ev.confidence - 0.5).abs() < 1e-9
-            && ev.explanation.contains("cannot be confirmed");
+        let ok = !ev.toppled && (ev.confidence - 0.5).abs() < 1e-9 && ev.explanation.contains("cannot be confirmed");
         check(&format!("{id} ends +0.3 s"), None, ev, ok);
         let n16 = c.t.partition_point(|&v| v <= c.truth + 1.6);
         let ev = detect_toppling(&c.t[..n16], &c.ax[..n16], Some(&c.az[..n16]), &opts);
@@ -121,10 +112,7 @@ fn robustness_on_modified_demo_data() {
         let c = load(id);
         let dur = c.t[c.t.len() - 1];
         let x: Vec<f64> =
-            c.t.iter()
-                .zip(&c.ax)
-                .map(|(&t, &v)| v + 0.5 * G + 2.0 * t / dur + 1.0 * (t / dur).powi(2))
-                .collect();
+            c.t.iter().zip(&c.ax).map(|(&t, &v)| v + 0.5 * G + 2.0 * t / dur + 1.0 * (t / dur).powi(2)).collect();
         let ev = detect_toppling(&c.t, &x, Some(&c.az), &opts);
         let ok = found_at(&ev, c.truth);
         check(&format!("{id} offset+drift"), Some(c.truth), ev, ok);
@@ -147,13 +135,7 @@ fn robustness_on_modified_demo_data() {
         let ok = found_at(&ev, c.truth);
         check(&format!("{id} 1000 Hz"), Some(c.truth), ev, ok);
         for phase in 0..2 {
-            let pick = |y: &[f64]| {
-                y.iter()
-                    .skip(phase)
-                    .step_by(2)
-                    .copied()
-                    .collect::<Vec<f64>>()
-            };
+            let pick = |y: &[f64]| y.iter().skip(phase).step_by(2).copied().collect::<Vec<f64>>();
             let ev = detect_toppling(&pick(&c.t), &pick(&c.ax), Some(&pick(&c.az)), &opts);
             let ok = found_at(&ev, c.truth);
             check(&format!("{id} 100 Hz phase {phase}"), Some(c.truth), ev, ok);
@@ -161,9 +143,5 @@ fn robustness_on_modified_demo_data() {
     }
 
     print_table("robustness (modified demo data)", &rows);
-    assert!(
-        fails.is_empty(),
-        "robustness failures:\n{}",
-        fails.join("\n")
-    );
+    assert!(fails.is_empty(), "robustness failures:\n{}", fails.join("\n"));
 }

@@ -12,7 +12,7 @@
 
 use rustfft::num_complex::Complex64;
 use serde_json::Value;
-use shakeflow::signal::welch::{csd, transfer_function, welch, Detrend, Window, WelchOptions};
+use shakeflow::signal::welch::{csd, transfer_function, welch, Detrend, WelchOptions, Window};
 
 const TOL: f64 = 1e-6;
 
@@ -26,11 +26,7 @@ fn arr(v: &Value, key: &str) -> Vec<f64> {
 }
 
 fn carr(v: &Value, re: &str, im: &str) -> Vec<Complex64> {
-    arr(v, re)
-        .into_iter()
-        .zip(arr(v, im))
-        .map(|(a, b)| Complex64::new(a, b))
-        .collect()
+    arr(v, re).into_iter().zip(arr(v, im)).map(|(a, b)| Complex64::new(a, b)).collect()
 }
 
 /// Max relative difference over bins where |reference| > 1e-12·max and
@@ -59,17 +55,13 @@ fn real(v: &[f64]) -> Vec<Complex64> {
 #[test]
 fn matches_scipy_reference() {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/reference/welch_scipy.json");
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| {
-        panic!("reference JSON {path} missing ({e}); run tests/reference/welch_scipy.py")
-    });
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("reference JSON {path} missing ({e}); run tests/reference/welch_scipy.py"));
     let doc: Value = serde_json::from_str(&text).expect("valid JSON");
     let fs = doc["fs"].as_f64().unwrap();
     let x = arr(&doc, "x");
     let y = arr(&doc, "y");
-    println!(
-        "reference: numpy {} scipy {}, n = {}",
-        doc["numpy"], doc["scipy"], x.len()
-    );
+    println!("reference: numpy {} scipy {}, n = {}", doc["numpy"], doc["scipy"], x.len());
     let cases = doc["cases"].as_array().unwrap();
     assert_eq!(cases.len(), 4);
     for c in cases {
@@ -121,11 +113,7 @@ fn matches_scipy_reference() {
         let pmax = |v: &[f64]| v.iter().cloned().fold(0.0, f64::max);
         let (mx, my) = (pmax(&pxx_ref), pmax(&pyy_ref));
         let den_x: Vec<bool> = pxx_ref.iter().map(|&p| p > 1e-10 * mx).collect();
-        let den_xy: Vec<bool> = pxx_ref
-            .iter()
-            .zip(&pyy_ref)
-            .map(|(&p, &q)| p > 1e-10 * mx && q > 1e-10 * my)
-            .collect();
+        let den_xy: Vec<bool> = pxx_ref.iter().zip(&pyy_ref).map(|(&p, &q)| p > 1e-10 * mx && q > 1e-10 * my).collect();
 
         let pxy_abs_ref: Vec<Complex64> = real(&pxy_ref.iter().map(|c| c.norm()).collect::<Vec<_>>());
         let pxy_abs: Vec<Complex64> = real(&pxy_c.iter().map(|c| c.norm()).collect::<Vec<_>>());
@@ -140,7 +128,13 @@ fn matches_scipy_reference() {
             ("H2 complex", max_rel(&tf.h2, &h2_ref, &den_xy)),
             ("coherence", max_rel(&real(&tf.coherence), &real(&coh_ref), &den_xy)),
         ];
-        println!("case {name} (nperseg {}, noverlap {}, nfft {}, segments {}):", opts.segment_len, opts.overlap, opts.nfft(), tf.segments);
+        println!(
+            "case {name} (nperseg {}, noverlap {}, nfft {}, segments {}):",
+            opts.segment_len,
+            opts.overlap,
+            opts.nfft(),
+            tf.segments
+        );
         for (q, (d, n)) in results {
             println!("  {q:<26} max rel diff {d:.3e} over {n} bins");
             assert!(n > f_ref.len() / 2, "{name} {q}: too few bins compared ({n})");

@@ -24,7 +24,8 @@ pub fn write_table(path: &Path, table: &Table) -> anyhow::Result<()> {
     let batch = to_record_batch(table)?;
     let kv: Vec<KeyValue> = table.metadata.iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect();
     let props = WriterProperties::builder()
-        .set_compression(Compression::ZSTD(ZstdLevel::try_new(3)?))
+        // zstd level 1 (pyarrow's default too): float samples gain little from harder levels.
+        .set_compression(Compression::ZSTD(ZstdLevel::try_new(1)?))
         .set_statistics_enabled(EnabledStatistics::Chunk)
         .set_key_value_metadata(Some(kv))
         .build();

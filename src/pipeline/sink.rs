@@ -23,6 +23,8 @@ pub struct OutputSink {
     provenance: BTreeMap<String, String>,
     written: Mutex<BTreeSet<String>>,
     progress: indicatif::ProgressBar,
+    /// Whether time-series outputs also get MCAP twins (the `mcap` parameter, default on).
+    mcap: bool,
 }
 
 impl OutputSink {
@@ -50,6 +52,7 @@ impl OutputSink {
             provenance,
             written: Mutex::new(BTreeSet::new()),
             progress,
+            mcap: params.get("mcap").and_then(|v| v.as_bool()).unwrap_or(true),
         }
     }
 
@@ -74,7 +77,7 @@ impl OutputSink {
         table.metadata.insert("shakeflow.output".into(), output.into());
         table.metadata.insert("shakeflow.partition".into(), relative.clone());
         parquet::write_table(&dir.join(DATA_FILE), &table)?;
-        if info.timeseries {
+        if info.timeseries && self.mcap {
             let topic = if relative.is_empty() {
                 format!("/{}/{output}", self.stage_name)
             } else {

@@ -144,11 +144,7 @@ impl Kernel {
         let c = (2.0 * f_c / fs_in).min(1.0);
         let dw = 2.0 * PI * (f_stop - f_pass) / fs_in; // rad / input sample
         let a = spec.atten_db;
-        let beta = if a > 50.0 {
-            0.1102 * (a - 8.7)
-        } else {
-            0.5842 * (a - 21.0).powf(0.4) + 0.07886 * (a - 21.0)
-        };
+        let beta = if a > 50.0 { 0.1102 * (a - 8.7) } else { 0.5842 * (a - 21.0).powf(0.4) + 0.07886 * (a - 21.0) };
         let taps = (a - 8.0) / (2.285 * dw) + 1.0;
         let half = (0.5 * taps).ceil().max(2.0);
         let i0b = bessel_i0(beta);

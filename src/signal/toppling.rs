@@ -158,11 +158,7 @@ pub fn detect_toppling(
         explanation: format!("not analysed: {why}"),
     };
     if time_s.len() != top_ax_mps2.len() {
-        return invalid(format!(
-            "time has {} samples, acceleration {}",
-            time_s.len(),
-            top_ax_mps2.len()
-        ));
+        return invalid(format!("time has {} samples, acceleration {}", time_s.len(), top_ax_mps2.len()));
     }
     let Some(t) = fill_time(time_s) else {
         return invalid("time is not nondecreasing or has fewer than two finite values".into());
@@ -170,13 +166,7 @@ pub fn detect_toppling(
     let x: Vec<f64> = top_ax_mps2
         .iter()
         .zip(time_s)
-        .map(|(&v, &ts)| {
-            if v.is_finite() && ts.is_finite() {
-                v
-            } else {
-                f64::NAN
-            }
-        })
+        .map(|(&v, &ts)| if v.is_finite() && ts.is_finite() { v } else { f64::NAN })
         .collect();
     let n = x.len();
     let Some(dt) = median_step(&t) else {
@@ -188,11 +178,7 @@ pub fn detect_toppling(
     }
 
     // Detrended copy for the record's peak and RMS.
-    let base = running_median(
-        &x,
-        (1.0 / dt).round().max(3.0) as usize,
-        (0.05 / dt).round().max(1.0) as usize,
-    );
+    let base = running_median(&x, (1.0 / dt).round().max(3.0) as usize, (0.05 / dt).round().max(1.0) as usize);
     let (mut record_peak, mut ss, mut cnt) = (0.0_f64, 0.0, 0usize);
     for (v, b) in x.iter().zip(&base) {
         let r = v - b;
@@ -202,23 +188,11 @@ pub fn detect_toppling(
             cnt += 1;
         }
     }
-    let record_rms = if cnt > 0 {
-        (ss / cnt as f64).sqrt()
-    } else {
-        0.0
-    };
+    let record_rms = if cnt > 0 { (ss / cnt as f64).sqrt() } else { 0.0 };
 
     // STA/LTA on the lag difference.
     let lag = ((opts.diff_lag_s / dt).round() as usize).max(1);
-    let d: Vec<f64> = (0..n)
-        .map(|i| {
-            if i >= lag {
-                x[i] - x[i - lag]
-            } else {
-                f64::NAN
-            }
-        })
-        .collect();
+    let d: Vec<f64> = (0..n).map(|i| if i >= lag { x[i] - x[i - lag] } else { f64::NAN }).collect();
     let ratio = sta_lta(&d, dt, opts);
 
     // Trigger runs -> candidate impacts.
@@ -236,12 +210,7 @@ pub fn detect_toppling(
             let end = i;
             let mut j_best = None;
             let mut d_best = 0.0;
-            for (j, dj) in d
-                .iter()
-                .enumerate()
-                .take(end + 1)
-                .skip(start.saturating_sub(n_sta))
-            {
+            for (j, dj) in d.iter().enumerate().take(end + 1).skip(start.saturating_sub(n_sta)) {
                 if dj.is_finite() && dj.abs() > d_best {
                     d_best = dj.abs();
                     j_best = Some(j);
@@ -278,17 +247,13 @@ pub fn detect_toppling(
     merged.truncate(opts.max_candidates);
 
     let t_end = last_valid_time(&t, &x);
-    let evals: Vec<Evaluation> = merged
-        .iter()
-        .map(|c| evaluate(&t, &x, floor_vertical_mps2, c, t_end, opts))
-        .collect();
+    let evals: Vec<Evaluation> = merged.iter().map(|c| evaluate(&t, &x, floor_vertical_mps2, c, t_end, opts)).collect();
 
     // Confirmed: highest confidence, then earliest.
-    let best_confirmed = evals.iter().filter(|e| e.confirmed).max_by(|a, b| {
-        a.confidence
-            .total_cmp(&b.confidence)
-            .then(b.cand.t_imp.total_cmp(&a.cand.t_imp))
-    });
+    let best_confirmed = evals
+        .iter()
+        .filter(|e| e.confirmed)
+        .max_by(|a, b| a.confidence.total_cmp(&b.confidence).then(b.cand.t_imp.total_cmp(&a.cand.t_imp)));
     if let Some(e) = best_confirmed {
         return TopplingEvent {
             toppled: true,
@@ -366,14 +331,9 @@ fn make_candidate(
     // Steepest step near the trigger, then the earliest step of the spike's leading edge: the
     // first step, at most 60 ms earlier, reaching EDGE_FRACTION of the steepest one.
     let steep = |a: usize, b: usize| {
-        (a..b.min(d.len()))
-            .filter(|&i| d[i].is_finite())
-            .max_by(|&i, &k| d[i].abs().total_cmp(&d[k].abs()))
+        (a..b.min(d.len())).filter(|&i| d[i].is_finite()).max_by(|&i, &k| d[i].abs().total_cmp(&d[k].abs()))
     };
-    let jmax = steep(
-        idx_at(t, t[j0] - 0.06).max(lag),
-        idx_at(t, t[j0] + 0.06).max(j0 + 1),
-    )?;
+    let jmax = steep(idx_at(t, t[j0] - 0.06).max(lag), idx_at(t, t[j0] + 0.06).max(j0 + 1))?;
     let dmax = d[jmax].abs();
     if dmax <= 0.0 {
         return None;
@@ -388,46 +348,22 @@ fn make_candidate(
     }
     let level = median(&mut lv)?;
     let (a, b) = (j - lag, idx_at(t, t_imp + 0.06).max(j + 1).min(x.len()));
-    let peak_amp = x[a..b]
-        .iter()
-        .filter(|v| v.is_finite())
-        .map(|v| (v - level).abs())
-        .fold(0.0, f64::max);
-    let (pre_ss, pre_n) = detrended_ss(
-        t,
-        x,
-        t_imp - o.pre_gap_s - o.pre_window_s,
-        t_imp - o.pre_gap_s,
-    );
+    let peak_amp = x[a..b].iter().filter(|v| v.is_finite()).map(|v| (v - level).abs()).fold(0.0, f64::max);
+    let (pre_ss, pre_n) = detrended_ss(t, x, t_imp - o.pre_gap_s - o.pre_window_s, t_imp - o.pre_gap_s);
     let dt_pre = (t_imp - o.pre_gap_s - t[0]).min(o.pre_window_s);
     // Need at least 0.25 s of pre-impact data.
     if pre_n < 3 || dt_pre < 0.25 || (pre_n as f64) < 0.25 / median_step(t).unwrap_or(1.0) {
         return None;
     }
-    Some(Candidate {
-        t_imp,
-        sta_lta,
-        peak_amp,
-        pre_rms: (pre_ss / pre_n as f64).sqrt(),
-    })
+    Some(Candidate { t_imp, sta_lta, peak_amp, pre_rms: (pre_ss / pre_n as f64).sqrt() })
 }
 
-fn evaluate(
-    t: &[f64],
-    x: &[f64],
-    floor_v: Option<&[f64]>,
-    c: &Candidate,
-    t_end: f64,
-    o: &DetectOptions,
-) -> Evaluation {
+fn evaluate(t: &[f64], x: &[f64], floor_v: Option<&[f64]>, c: &Candidate, t_end: f64, o: &DetectOptions) -> Evaluation {
     let pre = c.pre_rms.max(1e-12);
     let spike_r = c.peak_amp / pre;
     // Weakest of amplitude and impulsiveness, so that "score >= 0.5" matches the thresholds.
-    let spike_score = score(spike_r, o.spike_ratio, 4.0 * o.spike_ratio).min(score(
-        c.sta_lta,
-        o.sta_lta_on,
-        4.0 * o.sta_lta_on,
-    ));
+    let spike_score =
+        score(spike_r, o.spike_ratio, 4.0 * o.spike_ratio).min(score(c.sta_lta, o.sta_lta_on, 4.0 * o.sta_lta_on));
     let t0 = c.t_imp + o.skip_s;
     let avail = t_end - t0;
     let head = format!(
@@ -455,16 +391,10 @@ fn evaluate(
     let drop = post_rms / pre;
     let (persist, reached_end) = persistence(t, x, t0, t_end, o.block_s, o.drop_ratio * pre);
     let drop_score = score(1.0 / drop.max(1e-12), 1.0 / o.drop_ratio, 10.0);
-    let persist_thr = if reached_end {
-        o.min_tail_s.min(o.min_drop_s)
-    } else {
-        o.min_drop_s
-    };
+    let persist_thr = if reached_end { o.min_tail_s.min(o.min_drop_s) } else { o.min_drop_s };
     let persist_score = score(persist, persist_thr, 2.5 * o.min_drop_s);
-    let confirmed = spike_r >= o.spike_ratio
-        && c.sta_lta >= o.sta_lta_on
-        && drop <= o.drop_ratio
-        && persist >= persist_thr;
+    let confirmed =
+        spike_r >= o.spike_ratio && c.sta_lta >= o.sta_lta_on && drop <= o.drop_ratio && persist >= persist_thr;
     let mut confidence = (spike_score * drop_score * persist_score).cbrt();
     let weakest = spike_score.min(drop_score).min(persist_score);
     let mut text = format!(
@@ -493,25 +423,14 @@ fn evaluate(
                     "; floor vertical RMS {:.3} m/s² (post/floor {:.2}{})",
                     f_rms,
                     q,
-                    if agree > 0.0 {
-                        ", consistent with lying on its side"
-                    } else {
-                        ", not consistent"
-                    }
+                    if agree > 0.0 { ", consistent with lying on its side" } else { ", not consistent" }
                 ));
             }
         } else {
             text.push_str("; floor vertical ignored (length differs from time)");
         }
     }
-    Evaluation {
-        cand: c.clone(),
-        confirmed,
-        confidence: confidence.clamp(0.0, 1.0),
-        weakest,
-        post_rms,
-        text,
-    }
+    Evaluation { cand: c.clone(), confirmed, confidence: confidence.clamp(0.0, 1.0), weakest, post_rms, text }
 }
 
 /// 0.5 at `thr`, 1 at `clear`, 0 at thr²/clear, log-linear in between.
@@ -579,11 +498,7 @@ fn detrended_ss(t: &[f64], x: &[f64], a: f64, b: f64) -> (f64, usize) {
             sxx += v * v;
         }
     }
-    let ss = if n >= 3 && stt > 0.0 {
-        (sxx - stx * stx / stt).max(0.0)
-    } else {
-        sxx
-    };
+    let ss = if n >= 3 && stt > 0.0 { (sxx - stx * stx / stt).max(0.0) } else { sxx };
     (ss, n)
 }
 
@@ -601,11 +516,7 @@ fn sta_lta(d: &[f64], dt: f64, o: &DetectOptions) -> Vec<f64> {
         s[i + 1] = s[i] + if ok { d[i] * d[i] } else { 0.0 };
         c[i + 1] = c[i] + usize::from(ok);
     }
-    let eps = if c[n] > 0 {
-        1e-6 * s[n] / c[n] as f64
-    } else {
-        0.0
-    } + 1e-300;
+    let eps = if c[n] > 0 { 1e-6 * s[n] / c[n] as f64 } else { 0.0 } + 1e-300;
     let mut r = vec![0.0; n];
     for i in 0..n {
         if !d[i].is_finite() || i + 1 < n_sta + min_lta {
@@ -633,12 +544,7 @@ fn running_median(x: &[f64], win: usize, step: usize) -> Vec<f64> {
     let mut c = 0;
     while c < n {
         buf.clear();
-        buf.extend(
-            x[c.saturating_sub(h)..(c + h + 1).min(n)]
-                .iter()
-                .copied()
-                .filter(|v| v.is_finite()),
-        );
+        buf.extend(x[c.saturating_sub(h)..(c + h + 1).min(n)].iter().copied().filter(|v| v.is_finite()));
         if let Some(m) = median(&mut buf) {
             knots.push((c, m));
         }
@@ -677,11 +583,7 @@ fn median(v: &mut [f64]) -> Option<f64> {
 }
 
 fn values_in(t: &[f64], x: &[f64], a: f64, b: f64) -> Vec<f64> {
-    x[idx_at(t, a)..idx_at(t, b)]
-        .iter()
-        .copied()
-        .filter(|v| v.is_finite())
-        .collect()
+    x[idx_at(t, a)..idx_at(t, b)].iter().copied().filter(|v| v.is_finite()).collect()
 }
 
 /// First index with t[i] >= time.
@@ -694,11 +596,7 @@ fn last_valid_time(t: &[f64], x: &[f64]) -> f64 {
 }
 
 fn median_step(t: &[f64]) -> Option<f64> {
-    let mut d: Vec<f64> = t
-        .windows(2)
-        .map(|w| w[1] - w[0])
-        .filter(|v| *v > 0.0)
-        .collect();
+    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).filter(|v| *v > 0.0).collect();
     median(&mut d)
 }
 
@@ -752,16 +650,12 @@ mod tests {
     /// Strong "equipment" shaking: a few 1.5-6 Hz sines with a 2-20 s envelope, RMS ≈ `rms`.
     fn shaking(t: &[f64], rms: f64, seed: u64) -> Vec<f64> {
         let mut r = Rng(seed);
-        let comps: Vec<(f64, f64)> = (0..6)
-            .map(|_| (1.5 + 4.5 * r.uniform(), std::f64::consts::TAU * r.uniform()))
-            .collect();
+        let comps: Vec<(f64, f64)> =
+            (0..6).map(|_| (1.5 + 4.5 * r.uniform(), std::f64::consts::TAU * r.uniform())).collect();
         t.iter()
             .map(|&s| {
                 let env = ((s - 1.0) / 2.0).clamp(0.0, 1.0);
-                let v: f64 = comps
-                    .iter()
-                    .map(|(f, p)| (std::f64::consts::TAU * f * s + p).sin())
-                    .sum();
+                let v: f64 = comps.iter().map(|(f, p)| (std::f64::consts::TAU * f * s + p).sin()).sum();
                 rms * env * v / 3f64.sqrt() + 0.01 * r.normal()
             })
             .collect()
@@ -792,9 +686,7 @@ mod tests {
                 if s < t0 {
                     v
                 } else {
-                    -9.80665
-                        + 0.1 * v * (std::f64::consts::TAU * 10.0 * s).sin()
-                        + alpha(s, t0, 50.0)
+                    -9.80665 + 0.1 * v * (std::f64::consts::TAU * 10.0 * s).sin() + alpha(s, t0, 50.0)
                 }
             })
             .collect();
@@ -809,12 +701,13 @@ mod tests {
             let ev = detect_toppling(&t, &x, None, &DetectOptions::default());
             assert!(ev.toppled, "{fs} Hz: {ev:?}");
             let err = ev.impact_time_s.unwrap() - t0;
-            println!("synthetic {fs:>6} Hz: impact {:.4} s (truth {t0}), error {err:+.4} s, confidence {:.3}", ev.impact_time_s.unwrap(), ev.confidence);
-            assert!(err.abs() <= 0.012, "{fs} Hz: error {err} s ({ev:?})");
-            assert!(
-                ev.confidence > 0.8 && ev.confidence <= 1.0,
-                "{fs} Hz: {ev:?}"
+            println!(
+                "synthetic {fs:>6} Hz: impact {:.4} s (truth {t0}), error {err:+.4} s, confidence {:.3}",
+                ev.impact_time_s.unwrap(),
+                ev.confidence
             );
+            assert!(err.abs() <= 0.012, "{fs} Hz: error {err} s ({ev:?})");
+            assert!(ev.confidence > 0.8 && ev.confidence <= 1.0, "{fs} Hz: {ev:?}");
             assert!(ev.post_rms_mps2 < 0.35 * ev.pre_rms_mps2);
         }
     }
@@ -830,25 +723,15 @@ mod tests {
         assert!(!ev.toppled, "{ev:?}");
         assert!(ev.impact_time_s.is_none());
         assert!(ev.confidence >= 0.5, "{ev:?}");
-        assert!(
-            ev.explanation.contains("15.0"),
-            "the spike should be named: {}",
-            ev.explanation
-        );
-        assert!(
-            ev.peak_mps2 > 50.0,
-            "record peak includes the spike: {ev:?}"
-        );
+        assert!(ev.explanation.contains("15.0"), "the spike should be named: {}", ev.explanation);
+        assert!(ev.peak_mps2 > 50.0, "record peak includes the spike: {ev:?}");
     }
 
     #[test]
     fn shaking_that_stops_abruptly_without_impact_is_not_toppling() {
         let t = times(200.0, 30.0);
-        let x: Vec<f64> = shaking(&t, 5.0, 4)
-            .iter()
-            .zip(&t)
-            .map(|(&v, &s)| if s < 15.0 { v } else { 0.05 * v })
-            .collect();
+        let x: Vec<f64> =
+            shaking(&t, 5.0, 4).iter().zip(&t).map(|(&v, &s)| if s < 15.0 { v } else { 0.05 * v }).collect();
         let ev = detect_toppling(&t, &x, None, &DetectOptions::default());
         assert!(!ev.toppled, "{ev:?}");
     }
@@ -860,11 +743,7 @@ mod tests {
         let ev = detect_toppling(&t[..n], &x[..n], None, &DetectOptions::default());
         assert!(!ev.toppled && ev.impact_time_s.is_none(), "{ev:?}");
         assert!((ev.confidence - 0.5).abs() < 1e-12, "{ev:?}");
-        assert!(
-            ev.explanation.contains("cannot be confirmed"),
-            "{}",
-            ev.explanation
-        );
+        assert!(ev.explanation.contains("cannot be confirmed"), "{}", ev.explanation);
     }
 
     #[test]
@@ -878,31 +757,15 @@ mod tests {
         }
         // Floor vertical: the same 10 Hz motion the toppled sensor sees.
         let sh = shaking(&t, 3.0, 6);
-        let fv: Vec<f64> = t
-            .iter()
-            .zip(&sh)
-            .map(|(&s, &v)| 0.1 * v * (std::f64::consts::TAU * 10.0 * s).sin())
-            .collect();
+        let fv: Vec<f64> =
+            t.iter().zip(&sh).map(|(&s, &v)| 0.1 * v * (std::f64::consts::TAU * 10.0 * s).sin()).collect();
         let without = detect_toppling(&t, &x, None, &DetectOptions::default());
         let with = detect_toppling(&t, &x, Some(&fv), &DetectOptions::default());
         for ev in [&without, &with] {
-            assert!(
-                ev.toppled && (ev.impact_time_s.unwrap() - 14.0).abs() < 0.01,
-                "{ev:?}"
-            );
+            assert!(ev.toppled && (ev.impact_time_s.unwrap() - 14.0).abs() < 0.01, "{ev:?}");
         }
-        assert!(
-            with.confidence >= without.confidence,
-            "{} < {}",
-            with.confidence,
-            without.confidence
-        );
-        assert!(
-            with.explanation
-                .contains("consistent with lying on its side"),
-            "{}",
-            with.explanation
-        );
+        assert!(with.confidence >= without.confidence, "{} < {}", with.confidence, without.confidence);
+        assert!(with.explanation.contains("consistent with lying on its side"), "{}", with.explanation);
     }
 
     #[test]
@@ -914,21 +777,12 @@ mod tests {
         assert!(!ev.toppled && ev.confidence > 0.9, "{ev:?}");
         let nans = vec![f64::NAN; t.len()];
         let ev = detect_toppling(&t, &nans, None, &o);
-        assert!(
-            !ev.toppled && ev.confidence == 0.0 && ev.explanation.starts_with("not analysed"),
-            "{ev:?}"
-        );
+        assert!(!ev.toppled && ev.confidence == 0.0 && ev.explanation.starts_with("not analysed"), "{ev:?}");
         let ev = detect_toppling(&t[..10], &zeros, None, &o);
-        assert!(
-            !ev.toppled && ev.explanation.starts_with("not analysed"),
-            "{ev:?}"
-        );
+        assert!(!ev.toppled && ev.explanation.starts_with("not analysed"), "{ev:?}");
         let back: Vec<f64> = t.iter().rev().copied().collect();
         let ev = detect_toppling(&back, &zeros, None, &o);
-        assert!(
-            !ev.toppled && ev.explanation.starts_with("not analysed"),
-            "{ev:?}"
-        );
+        assert!(!ev.toppled && ev.explanation.starts_with("not analysed"), "{ev:?}");
         let ev = detect_toppling(&[], &[], None, &o);
         assert!(!ev.toppled, "{ev:?}");
     }

@@ -120,9 +120,7 @@ impl WelchOptions {
 pub fn window_samples(window: Window, len: usize) -> Vec<f64> {
     use std::f64::consts::PI;
     let cosine = |a0: f64, a1: f64, denom: f64| -> Vec<f64> {
-        (0..len)
-            .map(|n| a0 - a1 * (2.0 * PI * n as f64 / denom).cos())
-            .collect()
+        (0..len).map(|n| a0 - a1 * (2.0 * PI * n as f64 / denom).cos()).collect()
     };
     match window {
         Window::Boxcar => vec![1.0; len],
@@ -209,19 +207,14 @@ impl Engine {
             return Err(format!("segment_len must be >= 2, got {nperseg}"));
         }
         if opts.overlap >= nperseg {
-            return Err(format!(
-                "overlap ({}) must be smaller than segment_len ({nperseg})",
-                opts.overlap
-            ));
+            return Err(format!("overlap ({}) must be smaller than segment_len ({nperseg})", opts.overlap));
         }
         let nfft = opts.nfft();
         if nfft < nperseg {
             return Err(format!("nfft ({nfft}) must be >= segment_len ({nperseg})"));
         }
         if n < nperseg {
-            return Err(format!(
-                "input has {n} samples, fewer than one segment ({nperseg} samples)"
-            ));
+            return Err(format!("input has {n} samples, fewer than one segment ({nperseg} samples)"));
         }
         let step = nperseg - opts.overlap;
         let nseg = (n - opts.overlap) / step;
@@ -367,11 +360,7 @@ fn cross_spectra(
     opts: &WelchOptions,
 ) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>, Vec<Complex64>, usize), String> {
     if x.len() != y.len() {
-        return Err(format!(
-            "x and y must have the same length ({} != {})",
-            x.len(),
-            y.len()
-        ));
+        return Err(format!("x and y must have the same length ({} != {})", x.len(), y.len()));
     }
     check_finite("x", x)?;
     check_finite("y", y)?;
@@ -402,12 +391,7 @@ fn cross_spectra(
 ///
 /// Errors on mismatched lengths, non-finite samples, `n < segment_len`,
 /// `overlap >= segment_len`, `nfft < segment_len`, `segment_len < 2`, bad `fs`.
-pub fn csd(
-    x: &[f64],
-    y: &[f64],
-    fs: f64,
-    opts: &WelchOptions,
-) -> Result<(Vec<f64>, Vec<Complex64>), String> {
+pub fn csd(x: &[f64], y: &[f64], fs: f64, opts: &WelchOptions) -> Result<(Vec<f64>, Vec<Complex64>), String> {
     let (f, _, _, pxy, _) = cross_spectra(x, y, fs, opts)?;
     Ok((f, pxy))
 }
@@ -435,12 +419,7 @@ pub fn welch(x: &[f64], fs: f64, opts: &WelchOptions) -> Result<(Vec<f64>, Vec<f
 
 /// Transfer function from input `x` to output `y` (MATLAB `tfestimate`,
 /// both estimators) plus coherence, from a single pass over the data.
-pub fn transfer_function(
-    x: &[f64],
-    y: &[f64],
-    fs: f64,
-    opts: &WelchOptions,
-) -> Result<TransferFunction, String> {
+pub fn transfer_function(x: &[f64], y: &[f64], fs: f64, opts: &WelchOptions) -> Result<TransferFunction, String> {
     let (freqs_hz, pxx, pyy, pxy, segments) = cross_spectra(x, y, fs, opts)?;
     let n = freqs_hz.len();
     let mut h1 = Vec::with_capacity(n);
@@ -452,16 +431,7 @@ pub fn transfer_function(
         h2.push(Complex64::new(pyy[k], 0.0) / pxy[k].conj());
         coherence.push(pxy[k].norm_sqr() / pxx[k] / pyy[k]);
     }
-    Ok(TransferFunction {
-        freqs_hz,
-        h1,
-        h2,
-        coherence,
-        pxx,
-        pyy,
-        pxy,
-        segments,
-    })
+    Ok(TransferFunction { freqs_hz, h1, h2, coherence, pxx, pyy, pxy, segments })
 }
 
 /// Fraction of the peak magnitude defining the bins used by the quadratic
@@ -520,8 +490,7 @@ fn refine_peak(f: &[f64], mag: &[f64], k: usize, first: usize, last: usize) -> (
         }
     }
     let det3 = |m: &[[f64; 3]; 3]| {
-        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
             + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
     };
     let d = det3(&a);
@@ -582,11 +551,7 @@ fn refine_peak(f: &[f64], mag: &[f64], k: usize, first: usize, last: usize) -> (
 ///
 /// Returns `None` if the band contains no bin with finite `|H1|` or the band
 /// is invalid.
-pub fn identify_peak(
-    tf: &TransferFunction,
-    band: (f64, f64),
-    coherence_threshold: f64,
-) -> Option<PeakEstimate> {
+pub fn identify_peak(tf: &TransferFunction, band: (f64, f64), coherence_threshold: f64) -> Option<PeakEstimate> {
     let (lo, hi) = band;
     if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
         return None;

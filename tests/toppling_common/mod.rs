@@ -27,11 +27,8 @@ pub struct Csv {
 
 impl Csv {
     pub fn read(path: &Path) -> Csv {
-        let text = std::fs::read_to_string(path)
-            .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
-        let mut lines = text
-            .lines()
-            .filter(|l| !l.starts_with('#') && !l.trim().is_empty());
+        let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+        let mut lines = text.lines().filter(|l| !l.starts_with('#') && !l.trim().is_empty());
         let header: Vec<String> = lines
             .next()
             .unwrap_or_else(|| panic!("{} has no header", path.display()))
@@ -59,13 +56,9 @@ impl Csv {
 /// Value of a top-level (unindented) `key: value` line of a YAML file.
 pub fn yaml_top(text: &str, key: &str) -> Option<String> {
     let prefix = format!("{key}:");
-    text.lines().find(|l| l.starts_with(&prefix)).map(|l| {
-        l[prefix.len()..]
-            .trim()
-            .trim_matches('\'')
-            .trim_matches('"')
-            .to_string()
-    })
+    text.lines()
+        .find(|l| l.starts_with(&prefix))
+        .map(|l| l[prefix.len()..].trim().trim_matches('\'').trim_matches('"').to_string())
 }
 
 /// Minimal JSON value and parser (enough for manifest.json).
@@ -129,9 +122,7 @@ fn parse_value(b: &[u8], i: &mut usize) -> Json {
                     *i += 1;
                     break;
                 }
-                let Json::Str(k) = parse_value(b, i) else {
-                    panic!("bad key at {i}")
-                };
+                let Json::Str(k) = parse_value(b, i) else { panic!("bad key at {i}") };
                 ws(b, i);
                 assert_eq!(b[*i], b':');
                 *i += 1;
@@ -172,9 +163,7 @@ fn parse_value(b: &[u8], i: &mut usize) -> Json {
                         b't' => s.push('\t'),
                         b'u' => {
                             let h = std::str::from_utf8(&b[*i + 1..*i + 5]).unwrap();
-                            s.push(
-                                char::from_u32(u32::from_str_radix(h, 16).unwrap()).unwrap_or('?'),
-                            );
+                            s.push(char::from_u32(u32::from_str_radix(h, 16).unwrap()).unwrap_or('?'));
                             *i += 4;
                         }
                         c => s.push(c as char),
@@ -229,10 +218,7 @@ pub fn fmt_opt(v: Option<f64>) -> String {
 
 pub fn print_table(title: &str, rows: &[Row]) {
     println!("\n== {title}");
-    println!(
-        "{:<28} {:>10} {:>10} {:>9} {:>6} {:>4}  note",
-        "case", "truth", "detected", "error_s", "conf", "ok"
-    );
+    println!("{:<28} {:>10} {:>10} {:>9} {:>6} {:>4}  note", "case", "truth", "detected", "error_s", "conf", "ok");
     for r in rows {
         let err = match (r.truth, r.detected) {
             (Some(a), Some(b)) => format!("{:+.4}", b - a),

@@ -173,7 +173,7 @@ pub fn read_delimited(path: &Path, opts: &DelimitedOptions) -> Result<RawRecord,
 /// A number; NaN for an empty cell, "NaN"/"nan" or "NA" (gaps are the
 /// caller's business); None for anything else, infinities included.
 fn read_cell(cell: &str) -> Option<f64> {
-    match cell.parse::<f64>() {
+    match fast_float2::parse::<f64, _>(cell) {
         Ok(v) if v.is_finite() || v.is_nan() => Some(v),
         Ok(_) => None,
         Err(_) if cell.is_empty() || cell.eq_ignore_ascii_case("NA") => Some(f64::NAN),

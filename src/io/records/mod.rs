@@ -185,5 +185,5 @@ fn quote(line: &str) -> String {
 /// A finite number, or None. Infinities are refused: in an accelerogram they
 /// only come from corrupt data.
 fn parse_finite(token: &str) -> Option<f64> {
-    token.parse::<f64>().ok().filter(|v| v.is_finite())
+    fast_float2::parse::<f64, _>(token).ok().filter(|v| v.is_finite())
 }
