@@ -99,7 +99,8 @@ pub fn pipeline_schema() -> Value {
                     "type": {"enum": names, "description": "stage type (shakeflow stages)"},
                     "description": {"type": "string"},
                     "inputs": {"type": "array", "items": {"type": "string"}, "description": "sources or stages (stage or stage.output)"},
-                    "params": {"type": "object"}
+                    "params": {"type": "object"},
+                    "select": {"type": "object", "additionalProperties": {"type": "array", "items": {"type": "string"}}, "description": "only input records whose partition keys take these values"}
                 },
                 "allOf": conditionals
             }

@@ -106,7 +106,7 @@ fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, User
 
 fn cache_key(stage: &PlannedStage, input_hashes: &BTreeMap<String, String>) -> String {
     let info = stage.stage.info();
-    let material = json!({"type": info.name, "version": info.version, "params": stage.params, "inputs": input_hashes});
+    let material = json!({"type": info.name, "version": info.version, "params": stage.params, "inputs": input_hashes, "select": stage.select});
     hash::hash_bytes(material.to_string().as_bytes())
 }
 
@@ -131,6 +131,9 @@ fn assess(
     let params = serde_json::Value::Object(stage.params.clone());
     if entry.params != params {
         reasons.push(format!("params changed: {}", describe_param_changes(&entry.params, &params)));
+    }
+    if entry.select != stage.select {
+        reasons.push(format!("select changed: {:?} → {:?}", entry.select, stage.select));
     }
     match input_hashes {
         None => reasons.push("an upstream stage will rerun".into()),
@@ -201,10 +204,18 @@ fn stage_inputs(
         .inputs
         .iter()
         .map(|input| match input {
-            InputRef::Source(name) => Ok(sources[name].input.clone()),
+            InputRef::Source(name) => {
+                let mut input = sources[name].input.clone();
+                if let StageInput::Source { files, .. } = &mut input {
+                    files.retain(|f| stage.selects(&f.partition));
+                }
+                Ok(input)
+            }
             InputRef::Stage { stage: upstream, output } => {
                 let dir = produced[upstream].dir.join(output);
-                Ok(StageInput::Dataset { name: input.label(), parts: dataset_parts(&dir, &input.label())? })
+                let mut parts = dataset_parts(&dir, &input.label())?;
+                parts.retain(|p| stage.selects(&p.partition));
+                Ok(StageInput::Dataset { name: input.label(), parts })
             }
         })
         .collect()
@@ -378,6 +389,7 @@ fn run_stages(
                     stage_version: info.version,
                     key: assessment.key,
                     params: serde_json::Value::Object(stage.params.clone()),
+                    select: stage.select.clone(),
                     inputs: hashes,
                     outputs: outputs.clone(),
                 };

@@ -27,6 +27,9 @@ pub struct StageLock {
     /// blake3 of type, version, normalised params and input hashes: equal key, equal result.
     pub key: String,
     pub params: serde_json::Value,
+    /// The stage's `select:` filter, when it has one.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub select: BTreeMap<String, Vec<String>>,
     pub inputs: BTreeMap<String, String>,
     pub outputs: BTreeMap<String, OutputLock>,
 }

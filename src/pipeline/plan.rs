@@ -30,6 +30,14 @@ pub struct PlannedStage {
     pub stage: &'static dyn Stage,
     pub params: Params,
     pub inputs: Vec<InputRef>,
+    /// Partition filter on every input: key → accepted values.
+    pub select: BTreeMap<String, Vec<String>>,
+}
+
+impl PlannedStage {
+    pub fn selects(&self, partition: &crate::stages::Partition) -> bool {
+        self.select.iter().all(|(key, values)| partition.iter().any(|(k, v)| k == key && values.contains(v)))
+    }
 }
 
 pub struct Plan {
@@ -63,7 +71,10 @@ impl Plan {
                 UserError::new(e.message).in_file(&file.path).at(position).hint(e.hint)
             })?;
             let inputs = resolve_inputs(&file, name, &spec.inputs, info.inputs)?;
-            planned.insert(name.clone(), PlannedStage { name: name.clone(), stage, params, inputs });
+            planned.insert(
+                name.clone(),
+                PlannedStage { name: name.clone(), stage, params, inputs, select: spec.select.clone() },
+            );
         }
         let order = topological_order(&file, &planned)?;
         let mut sorted = IndexMap::new();

@@ -41,6 +41,9 @@ pub struct StageSpec {
     /// Stage parameters; unknown names are errors, omitted ones take their defaults.
     #[serde(default)]
     pub params: BTreeMap<String, serde_yaml::Value>,
+    /// Only the input records whose partition keys take these values (`motion: [WN-1, WN-6]`).
+    #[serde(default)]
+    pub select: BTreeMap<String, Vec<String>>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]

@@ -11,7 +11,10 @@ use crate::pipeline::sink::OutputSink;
 use crate::pipeline::spec::SourceSpec;
 
 pub mod baseline;
+pub mod detect_toppling;
 pub mod load;
+pub mod synchronize;
+pub mod transfer_function;
 
 /// What a stage type consumes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -94,7 +97,13 @@ pub trait Stage: Sync + Send {
 }
 
 pub fn registry() -> &'static [&'static dyn Stage] {
-    &[&load::Load, &baseline::Baseline]
+    &[
+        &load::Load,
+        &baseline::Baseline,
+        &synchronize::Synchronize,
+        &transfer_function::TransferFunction,
+        &detect_toppling::DetectToppling,
+    ]
 }
 
 pub fn find(name: &str) -> Option<&'static dyn Stage> {
@@ -111,4 +120,12 @@ pub fn record_provenance(part: &InputPart) -> BTreeMap<String, String> {
         ("shakeflow.input_file".to_string(), part.label.clone()),
         ("shakeflow.input_hash".to_string(), part.hash.clone()),
     ])
+}
+
+/// `a -> b` → (a, Some(b)); `a` → (a, None). Pairs of columns in stage parameters.
+pub fn split_pair(text: &str) -> (String, Option<String>) {
+    match text.split_once("->") {
+        Some((a, b)) => (a.trim().to_string(), Some(b.trim().to_string())),
+        None => (text.trim().to_string(), None),
+    }
 }

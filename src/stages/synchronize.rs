@@ -1,0 +1,234 @@
+//! `synchronize`: put a second DAQ's records on the reference DAQ's clock.
+//!
+//! Per target record (e.g. one test's equipment DAQ), the reference records sharing its `join`
+//! key (e.g. the same motion's floor records) are gathered; the target is resampled to the
+//! reference rate (band-limited, anti-aliased), its lag against the reference channel found by
+//! FFT cross-correlation refined to sub-sample precision (or taken as `known_lag_s`), and all its
+//! channels shifted onto the reference time base. The output record holds the reference channels
+//! (prefixed by their partition, e.g. `floor4_ax_mps2`) and the aligned target channels over the
+//! time both cover.
+
+use rayon::prelude::*;
+
+use super::{partition_path, InputKind, InputPart, OutputInfo, Stage, StageContext, StageInfo};
+use crate::io::parquet;
+use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
+use crate::signal::resample_bandlimited::resample_to_rate;
+use crate::signal::sync::{estimate_lag, shift};
+use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
+
+pub struct Synchronize;
+
+static INFO: StageInfo = StageInfo {
+    name: "synchronize",
+    version: 1,
+    summary: "Align a second DAQ with the reference DAQ: band-limited resampling, FFT cross-correlation lag (sub-sample), shift onto the reference clock.",
+    inputs: InputKind::Datasets,
+    outputs: &[
+        OutputInfo { name: "records", description: "reference channels and aligned target channels on the reference time base", timeseries: true },
+        OutputInfo { name: "lags", description: "estimated (or given) lag per target record: channel, lag_s, lag_uncertainty_s, correlation", timeseries: false },
+    ],
+    params: &[
+        ParamSpec { name: "reference_channel", kind: ParamKind::Str, default: Some("\"ax_mps2\""), unit: "", description: "channel of the reference records the lag is measured against", range: None },
+        ParamSpec { name: "reference_select", kind: ParamKind::Str, default: Some("\"\""), unit: "", description: "which reference record is the clock reference when several share the join key, as key=value (e.g. floor=5)", range: None },
+        ParamSpec { name: "target_channel", kind: ParamKind::Str, default: None, unit: "", description: "channel of the target records that sees the same motion as the reference channel (e.g. a DAQ2 copy of a floor channel)", range: None },
+        ParamSpec { name: "join", kind: ParamKind::Str, default: Some("\"motion\""), unit: "", description: "partition key that pairs target and reference records", range: None },
+        ParamSpec { name: "known_lag_s", kind: ParamKind::Float, default: Some("null"), unit: "s", description: "use this lag instead of estimating it (positive: target lags reference)", range: Some((-3600.0, 3600.0)) },
+        ParamSpec { name: "max_lag_s", kind: ParamKind::Float, default: Some("5.0"), unit: "s", description: "largest lag searched, either sign", range: Some((0.0, 3600.0)) },
+        ParamSpec { name: "mcap", kind: ParamKind::Bool, default: Some("true"), unit: "", description: "also write the aligned records as MCAP for Foxglove", range: None },
+    ],
+};
+
+impl Stage for Synchronize {
+    fn info(&self) -> &'static StageInfo {
+        &INFO
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
+        let [reference, target] = ctx.inputs else {
+            anyhow::bail!("`synchronize` reads exactly two inputs: [reference, target] (e.g. [baseline_floors, baseline_equipment])");
+        };
+        let join = ctx.params.str_of("join");
+        let select = ctx.params.str_of("reference_select");
+        let select = if select.is_empty() {
+            None
+        } else {
+            Some(
+                select
+                    .split_once('=')
+                    .ok_or_else(|| anyhow::anyhow!("`reference_select` must look like key=value, not `{select}`"))?,
+            )
+        };
+        let known_lag = ctx.params.get("known_lag_s").and_then(|v| v.as_f64());
+        ctx.sink.set_total(target.parts().len());
+        target.parts().par_iter().try_for_each(|part| {
+            let key = partition_value(part, join).ok_or_else(|| {
+                anyhow::anyhow!("target record `{}` has no partition key `{join}` (set `join`)", partition_path(&part.partition))
+            })?;
+            let group: Vec<&InputPart> = reference.parts().iter().filter(|r| partition_value(r, join) == Some(key)).collect();
+            let clock: Vec<&&InputPart> = group
+                .iter()
+                .filter(|r| select.is_none_or(|(k, v)| partition_value(r, k) == Some(v)))
+                .collect();
+            let [clock] = clock.as_slice() else {
+                anyhow::bail!(
+                    "{} reference records match `{join}={key}`{}; exactly one must be the clock reference (set `reference_select`)",
+                    clock.len(),
+                    select.map(|(k, v)| format!(" and `{k}={v}`")).unwrap_or_default()
+                );
+            };
+            let references: Vec<(String, Table)> = group
+                .iter()
+                .map(|r| Ok((prefix(r, join), parquet::read_table(&r.path)?)))
+                .collect::<anyhow::Result<_>>()?;
+            let clock_table = &references[group.iter().position(|r| std::ptr::eq(*r, **clock)).expect("clock is in the group")].1;
+            let target_table = parquet::read_table(&part.path)?;
+            let (aligned, lag) = align(clock_table, &references, &target_table, ctx.params, known_lag)
+                .map_err(|e| anyhow::anyhow!("{} (`{join}={key}`): {e}", part.label))?;
+            let mut aligned = aligned;
+            aligned.metadata.extend(super::record_provenance(part));
+            ctx.sink.write("lags", &part.partition, lag)?;
+            ctx.sink.write("records", &part.partition, aligned)
+        })
+    }
+}
+
+fn partition_value<'a>(part: &'a InputPart, key: &str) -> Option<&'a str> {
+    part.partition.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str())
+}
+
+/// Column prefix for a reference record: its partition minus the join key (`floor=4` → `floor4`).
+fn prefix(part: &InputPart, join: &str) -> String {
+    part.partition.iter().filter(|(k, _)| k != join).map(|(k, v)| format!("{k}{v}")).collect::<Vec<_>>().join("_")
+}
+
+fn sample_rate(table: &Table) -> Result<(f64, f64), String> {
+    let time = table.f64_column(TIME_COLUMN).ok_or("no time_s column")?;
+    if time.len() < 2 {
+        return Err("fewer than 2 samples".into());
+    }
+    Ok((time[0], (time.len() - 1) as f64 / (time[time.len() - 1] - time[0])))
+}
+
+/// The pure part: aligned record and its one-row lag table.
+fn align(
+    clock: &Table,
+    references: &[(String, Table)],
+    target: &Table,
+    params: &crate::pipeline::params::Params,
+    known_lag: Option<f64>,
+) -> Result<(Table, Table), String> {
+    let reference_channel = params.str_of("reference_channel");
+    let target_channel = params.str_of("target_channel");
+    let (t0, fs) = sample_rate(clock)?;
+    let (_, fs_target) = sample_rate(target)?;
+    let reference = clock.f64_column(reference_channel).ok_or_else(|| {
+        format!(
+            "the clock reference has no float column `{reference_channel}`; columns: {}",
+            clock.column_names().join(", ")
+        )
+    })?;
+    let to_reference_rate = |x: &[f64]| resample_to_rate(x, fs_target, fs);
+    let sync = target.f64_column(target_channel).ok_or_else(|| {
+        format!("the target has no float column `{target_channel}`; columns: {}", target.column_names().join(", "))
+    })?;
+    let sync = to_reference_rate(sync);
+    let (lag_s, uncertainty, correlation, method) = match known_lag {
+        Some(lag) => (lag, 0.0, None, "known"),
+        None => {
+            let e = estimate_lag(reference, &sync, fs, Some(params.f64_of("max_lag_s")))?;
+            (e.lag_s, e.uncertainty_s, Some(e.correlation), "estimated")
+        }
+    };
+    // Aligned target on the reference grid: target value at reference time t is target(t + lag).
+    let target_columns: Vec<(&Column, Vec<f64>)> = target
+        .columns
+        .iter()
+        .filter(|c| c.name != TIME_COLUMN)
+        .filter_map(|c| c.as_f64().map(|v| (c, shift(&to_reference_rate(v), fs, lag_s))))
+        .collect();
+    let n_reference = references.iter().map(|(_, t)| t.num_rows()).min().unwrap_or(0);
+    let valid = |k: usize| target_columns.iter().all(|(_, v)| k < v.len() && v[k].is_finite());
+    let first =
+        (0..n_reference).find(|&k| valid(k)).ok_or("the target and reference records do not overlap in time")?;
+    let last = (first..n_reference).take_while(|&k| valid(k)).last().expect("first is valid");
+    let range = first..last + 1;
+
+    let mut out = Table::new();
+    out.push(Column::f64(
+        TIME_COLUMN,
+        "s",
+        "time on the reference clock",
+        range.clone().map(|k| t0 + k as f64 / fs).collect(),
+    ));
+    for (prefix, table) in references {
+        for c in table.columns.iter().filter(|c| c.name != TIME_COLUMN) {
+            if let ColumnData::F64(v) = &c.data {
+                let name = if prefix.is_empty() { c.name.clone() } else { format!("{prefix}_{}", c.name) };
+                out.push(Column {
+                    name,
+                    unit: c.unit.clone(),
+                    description: c.description.clone(),
+                    data: ColumnData::F64(v[range.clone()].to_vec()),
+                });
+            }
+        }
+    }
+    for (c, v) in target_columns {
+        let description =
+            format!("{} (on the reference clock: resampled to {fs} Hz, shifted by the lag)", c.description);
+        out.push(Column {
+            name: c.name.clone(),
+            unit: c.unit.clone(),
+            description,
+            data: ColumnData::F64(v[range.clone()].to_vec()),
+        });
+    }
+    out.metadata = target.metadata.clone();
+    out.metadata.insert(
+        "shakeflow.synchronize".into(),
+        serde_json::json!({"lag_s": lag_s, "method": method, "reference_rate_hz": fs, "target_rate_hz": fs_target})
+            .to_string(),
+    );
+
+    let mut lags = Table::new();
+    lags.push(Column {
+        name: "channel".into(),
+        unit: String::new(),
+        description: "target channel the lag was measured on".into(),
+        data: ColumnData::Str(vec![target_channel.into()]),
+    });
+    lags.push(Column {
+        name: "reference_channel".into(),
+        unit: String::new(),
+        description: "reference channel".into(),
+        data: ColumnData::Str(vec![reference_channel.into()]),
+    });
+    lags.push(Column::f64(
+        "lag_s",
+        "s",
+        "lag of the target behind the reference: target(t) = reference(t - lag)",
+        vec![lag_s],
+    ));
+    lags.push(Column::f64(
+        "lag_uncertainty_s",
+        "s",
+        "one-sigma uncertainty of lag_s (0 when given)",
+        vec![uncertainty],
+    ));
+    lags.push(Column {
+        name: "correlation".into(),
+        unit: String::new(),
+        description: "normalised cross-correlation at the lag (null when the lag was given)".into(),
+        data: ColumnData::OptF64(vec![correlation]),
+    });
+    lags.push(Column {
+        name: "method".into(),
+        unit: String::new(),
+        description: "estimated or known".into(),
+        data: ColumnData::Str(vec![method.into()]),
+    });
+    lags.push(Column::f64("target_rate_hz", "Hz", "sample rate of the target before resampling", vec![fs_target]));
+    lags.push(Column::f64("reference_rate_hz", "Hz", "sample rate of the common time base", vec![fs]));
+    Ok((out, lags))
+}

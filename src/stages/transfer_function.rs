@@ -1,0 +1,189 @@
+//! `transfer_function`: floor → equipment transfer functions (Welch H1, H2, coherence, as
+//! MATLAB `tfestimate` computes them) and the fundamental frequency picked from |H1| with a
+//! half-power damping estimate, like Table 3 of the study.
+
+use rayon::prelude::*;
+
+use super::{split_pair, InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use crate::io::parquet;
+use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
+use crate::signal::welch::{identify_peak, transfer_function, Detrend, WelchOptions, Window};
+use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
+
+pub struct TransferFunction;
+
+static INFO: StageInfo = StageInfo {
+    name: "transfer_function",
+    version: 1,
+    summary: "Welch transfer functions H1, H2 and coherence (MATLAB tfestimate defaults) and the identified fundamental frequency with half-power damping.",
+    inputs: InputKind::Datasets,
+    outputs: &[
+        OutputInfo { name: "identified", description: "per pair: frequency_hz, damping_ratio, peak_gain, coherence, low_coherence, note", timeseries: false },
+        OutputInfo { name: "spectra", description: "per pair and frequency: |H1|, phase, |H2|, coherence", timeseries: false },
+    ],
+    params: &[
+        ParamSpec { name: "pairs", kind: ParamKind::StrList, default: None, unit: "", description: "input -> output column pairs, e.g. `floor4_ax_mps2 -> PB1_top_ax_mps2`", range: None },
+        ParamSpec { name: "band_min_hz", kind: ParamKind::Float, default: Some("1.0"), unit: "Hz", description: "lower end of the band searched for the peak", range: Some((0.0, 1e6)) },
+        ParamSpec { name: "band_max_hz", kind: ParamKind::Float, default: Some("20.0"), unit: "Hz", description: "upper end of the band searched for the peak", range: Some((0.0, 1e6)) },
+        ParamSpec { name: "window", kind: ParamKind::Choice(&["hamming", "hann", "boxcar"]), default: Some("\"hamming\""), unit: "", description: "segment window (hamming: MATLAB's symmetric hamming(L); hann: scipy's periodic hann)", range: None },
+        ParamSpec { name: "segment_s", kind: ParamKind::Float, default: Some("null"), unit: "s", description: "segment length; null: MATLAB's default of 8 segments with 50 % overlap", range: Some((0.0, 1e6)) },
+        ParamSpec { name: "overlap", kind: ParamKind::Float, default: Some("0.5"), unit: "", description: "segment overlap as a fraction (with segment_s)", range: Some((0.0, 0.95)) },
+        ParamSpec { name: "detrend", kind: ParamKind::Choice(&["none", "constant", "linear"]), default: Some("\"none\""), unit: "", description: "per-segment detrending (MATLAB tfestimate: none)", range: None },
+        ParamSpec { name: "coherence_threshold", kind: ParamKind::Float, default: Some("0.5"), unit: "", description: "peaks with lower coherence are flagged low_coherence", range: Some((0.0, 1.0)) },
+    ],
+};
+
+impl Stage for TransferFunction {
+    fn info(&self) -> &'static StageInfo {
+        &INFO
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
+        let pairs: Vec<(String, String)> = ctx
+            .params
+            .list_of("pairs")
+            .iter()
+            .map(|p| match split_pair(p) {
+                (input, Some(output)) => Ok((input, output)),
+                _ => Err(anyhow::anyhow!("pair `{p}` must look like `input_column -> output_column`")),
+            })
+            .collect::<anyhow::Result<_>>()?;
+        let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
+        ctx.sink.set_total(parts.len());
+        parts.par_iter().try_for_each(|part| {
+            let table = parquet::read_table(&part.path)?;
+            let (mut identified, mut spectra) =
+                analyse(&table, &pairs, ctx.params).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
+            identified.metadata.extend(super::record_provenance(part));
+            spectra.metadata.extend(super::record_provenance(part));
+            ctx.sink.write("spectra", &part.partition, spectra)?;
+            ctx.sink.write("identified", &part.partition, identified)
+        })
+    }
+}
+
+fn options(params: &Params, n: usize, fs: f64) -> Result<WelchOptions, String> {
+    let window = match params.str_of("window") {
+        "hann" => Window::Hann,
+        "boxcar" => Window::Boxcar,
+        _ => Window::HammingSymmetric,
+    };
+    let detrend = match params.str_of("detrend") {
+        "constant" => Detrend::Constant,
+        "linear" => Detrend::Linear,
+        _ => Detrend::None,
+    };
+    let mut opts = match params.get("segment_s").and_then(|v| v.as_f64()) {
+        None => WelchOptions::matlab_default(n),
+        Some(seconds) => {
+            let segment_len = (seconds * fs).round() as usize;
+            if segment_len < 8 || segment_len > n {
+                return Err(format!("segment_s = {seconds} s gives {segment_len} samples; the record has {n}"));
+            }
+            let overlap = ((params.f64_of("overlap") * segment_len as f64).floor() as usize).min(segment_len - 1);
+            WelchOptions { window, segment_len, overlap, detrend, nfft: None }
+        }
+    };
+    opts.window = window;
+    opts.detrend = detrend;
+    Ok(opts)
+}
+
+fn analyse(table: &Table, pairs: &[(String, String)], params: &Params) -> Result<(Table, Table), String> {
+    let time = table.f64_column(TIME_COLUMN).ok_or("no time_s column")?;
+    let n = time.len();
+    if n < 16 {
+        return Err(format!("{n} samples are too few for a transfer function"));
+    }
+    let fs = (n - 1) as f64 / (time[n - 1] - time[0]);
+    let opts = options(params, n, fs)?;
+    let band = (params.f64_of("band_min_hz"), params.f64_of("band_max_hz"));
+    let column = |name: &str| {
+        table
+            .f64_column(name)
+            .ok_or_else(|| format!("no float column `{name}`; columns: {}", table.column_names().join(", ")))
+    };
+    let (mut outputs, mut inputs, mut freq, mut damping, mut gain, mut coh, mut low, mut notes) =
+        (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
+    let (mut s_out, mut s_freq, mut s_h1, mut s_phase, mut s_h2, mut s_coh) =
+        (vec![], vec![], vec![], vec![], vec![], vec![]);
+    for (input, output) in pairs {
+        let tf = transfer_function(column(input)?, column(output)?, fs, &opts)
+            .map_err(|e| format!("{input} -> {output}: {e}"))?;
+        for (k, &f) in tf.freqs_hz.iter().enumerate() {
+            s_out.push(output.clone());
+            s_freq.push(f);
+            s_h1.push(tf.h1[k].norm());
+            s_phase.push(tf.h1[k].arg());
+            s_h2.push(tf.h2[k].norm());
+            s_coh.push(tf.coherence[k]);
+        }
+        let peak = identify_peak(&tf, band, params.f64_of("coherence_threshold"));
+        outputs.push(output.clone());
+        inputs.push(input.clone());
+        match peak {
+            Some(p) => {
+                freq.push(Some(p.frequency_hz));
+                damping.push(p.damping_ratio);
+                gain.push(Some(p.peak_gain));
+                coh.push(Some(p.coherence));
+                low.push(p.low_coherence);
+                notes.push(match (p.low_coherence, p.damping_ratio) {
+                    (true, _) => format!("low coherence ({:.2}) at the peak: the output is not mainly driven by the input there; treat the frequency with care", p.coherence),
+                    (false, None) => "peak at the band edge or half-power points outside the band: no damping estimate".to_string(),
+                    (false, Some(_)) => String::new(),
+                });
+            }
+            None => {
+                freq.push(None);
+                damping.push(None);
+                gain.push(None);
+                coh.push(None);
+                low.push(true);
+                notes.push(format!("no peak found in {:.2}-{:.2} Hz", band.0, band.1));
+            }
+        }
+    }
+    let text = |name: &str, description: &str, v: Vec<String>| Column {
+        name: name.into(),
+        unit: String::new(),
+        description: description.into(),
+        data: ColumnData::Str(v),
+    };
+    let opt = |name: &str, unit: &str, description: &str, v: Vec<Option<f64>>| Column {
+        name: name.into(),
+        unit: unit.into(),
+        description: description.into(),
+        data: ColumnData::OptF64(v),
+    };
+    let mut identified = Table::new();
+    identified.push(text("output", "output (response) channel", outputs));
+    identified.push(text("input", "input (excitation) channel", inputs));
+    identified.push(opt(
+        "frequency_hz",
+        "Hz",
+        "fundamental frequency: peak of |H1| in the band (least-squares refined)",
+        freq,
+    ));
+    identified.push(opt("damping_ratio", "", "half-power bandwidth damping estimate", damping));
+    identified.push(opt("peak_gain", "", "|H1| at the peak", gain));
+    identified.push(opt("coherence", "", "magnitude-squared coherence at the peak", coh));
+    identified.push(Column {
+        name: "low_coherence".into(),
+        unit: String::new(),
+        description: "coherence at the peak below the threshold".into(),
+        data: ColumnData::Bool(low),
+    });
+    identified.push(text("note", "confidence note for a test engineer", notes));
+    let mut spectra = Table::new();
+    spectra.push(text("output", "output (response) channel", s_out));
+    spectra.push(Column::f64("frequency_hz", "Hz", "frequency", s_freq));
+    spectra.push(Column::f64("h1_gain", "", "|H1| = |Pxy/Pxx|", s_h1));
+    spectra.push(Column::f64("h1_phase_rad", "rad", "phase of H1", s_phase));
+    spectra.push(Column::f64("h2_gain", "", "|H2| = |Pyy/Pyx|", s_h2));
+    spectra.push(Column::f64("coherence", "", "magnitude-squared coherence", s_coh));
+    let welch = serde_json::json!({"window": params.str_of("window"), "segment_len": opts.segment_len, "overlap": opts.overlap, "nfft": opts.nfft(), "detrend": params.str_of("detrend"), "fs_hz": fs});
+    identified.metadata.insert("shakeflow.welch".into(), welch.to_string());
+    spectra.metadata.insert("shakeflow.welch".into(), welch.to_string());
+    Ok((identified, spectra))
+}
