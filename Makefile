@@ -26,6 +26,8 @@ release:
 demo: release
 	$(BIN) demo-archive runs/demo-archive
 	$(BIN) run pipelines/demo.yaml
+	@echo "Study summary (runs/demo/report/summary/data.parquet):"
+	@$(BIN) show runs/demo/report/summary/data.parquet
 
 $(PY_STAMP): tests/reference/requirements.txt
 	$(PYTHON) -m venv $(VENV)

@@ -93,6 +93,13 @@ enum Command {
         #[arg(long, default_value_t = 5)]
         rows: usize,
     },
+    /// Print a (small) Parquet table, e.g. a study summary.
+    Show {
+        table: PathBuf,
+        /// Rows to print at most.
+        #[arg(long, default_value_t = 100)]
+        rows: usize,
+    },
     /// Write the synthetic demo archive (12 motions + 2 white-noise tests, floors 4/5, 7 units).
     DemoArchive {
         dir: PathBuf,
@@ -174,6 +181,10 @@ pub fn main() -> anyhow::Result<ExitCode> {
         }
         Command::Inspect { artifact, rows } => {
             print!("{}", crate::inspect::describe(&artifact, rows)?);
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Show { table, rows } => {
+            print!("{}", crate::inspect::show(&table, rows)?);
             Ok(ExitCode::SUCCESS)
         }
         Command::DemoArchive { dir, force } => {

@@ -92,6 +92,20 @@ fn describe_parquet(path: &Path, preview_rows: usize) -> anyhow::Result<String> 
     Ok(out)
 }
 
+/// A whole (small) Parquet table as aligned text, for summaries printed at the end of a run.
+pub fn show(path: &Path, max_rows: usize) -> anyhow::Result<String> {
+    let file = File::open(path).map_err(|e| anyhow::anyhow!("cannot open `{}`: {e}", path.display()))?;
+    let frame = ParquetReader::new(file)
+        .finish()
+        .map_err(|e| anyhow::anyhow!("polars could not read `{}`: {e}", path.display()))?;
+    // polars reads its display limits from the environment; set them for this process only.
+    std::env::set_var("POLARS_FMT_MAX_ROWS", max_rows.to_string());
+    std::env::set_var("POLARS_FMT_MAX_COLS", "30");
+    std::env::set_var("POLARS_FMT_STR_LEN", "40");
+    std::env::set_var("POLARS_FMT_TABLE_HIDE_DATAFRAME_SHAPE_INFORMATION", "1");
+    Ok(format!("{frame}\n"))
+}
+
 fn describe_mcap(path: &Path) -> anyhow::Result<String> {
     let s = mcap::summarize(path)?;
     let mut out = String::new();

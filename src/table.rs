@@ -13,6 +13,8 @@ pub enum ColumnData {
     I64(Vec<i64>),
     Bool(Vec<bool>),
     Str(Vec<String>),
+    /// Text where "none" must stay distinguishable from an empty string.
+    OptStr(Vec<Option<String>>),
 }
 
 impl ColumnData {
@@ -23,6 +25,7 @@ impl ColumnData {
             ColumnData::I64(v) => v.len(),
             ColumnData::Bool(v) => v.len(),
             ColumnData::Str(v) => v.len(),
+            ColumnData::OptStr(v) => v.len(),
         }
     }
 
@@ -37,6 +40,7 @@ impl ColumnData {
             ColumnData::I64(_) => "int64",
             ColumnData::Bool(_) => "bool",
             ColumnData::Str(_) => "string",
+            ColumnData::OptStr(_) => "string (nullable)",
         }
     }
 }

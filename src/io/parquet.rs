@@ -48,6 +48,7 @@ fn to_record_batch(table: &Table) -> anyhow::Result<RecordBatch> {
             ColumnData::I64(v) => (DataType::Int64, false, Arc::new(Int64Array::from(v.clone()))),
             ColumnData::Bool(v) => (DataType::Boolean, false, Arc::new(BooleanArray::from(v.clone()))),
             ColumnData::Str(v) => (DataType::Utf8, false, Arc::new(StringArray::from(v.clone()))),
+            ColumnData::OptStr(v) => (DataType::Utf8, true, Arc::new(StringArray::from(v.clone()))),
         };
         let metadata = HashMap::from([
             ("unit".to_string(), column.unit.clone()),
@@ -107,6 +108,9 @@ fn column_data(data_type: &DataType, nullable: bool, parts: &[&ArrayRef]) -> any
         DataType::Boolean => {
             ColumnData::Bool(typed::<BooleanArray>(parts).flat_map(|a| a.iter().map(|v| v.unwrap_or(false))).collect())
         }
+        DataType::Utf8 if nullable => ColumnData::OptStr(
+            typed::<StringArray>(parts).flat_map(|a| a.iter().map(|v| v.map(str::to_string))).collect(),
+        ),
         DataType::Utf8 => ColumnData::Str(
             typed::<StringArray>(parts).flat_map(|a| a.iter().map(|v| v.unwrap_or_default().to_string())).collect(),
         ),
@@ -141,6 +145,12 @@ mod tests {
             unit: "".into(),
             description: "".into(),
             data: ColumnData::Str(vec!["a".into(), "b".into()]),
+        });
+        t.push(Column {
+            name: "maybe_text".into(),
+            unit: "".into(),
+            description: "".into(),
+            data: ColumnData::OptStr(vec![None, Some("x".into())]),
         });
         t.push(Column { name: "n".into(), unit: "".into(), description: "".into(), data: ColumnData::I64(vec![1, 2]) });
         t.metadata.insert("shakeflow.stage".into(), "x".into());

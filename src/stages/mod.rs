@@ -13,6 +13,7 @@ use crate::pipeline::spec::SourceSpec;
 pub mod baseline;
 pub mod detect_toppling;
 pub mod load;
+pub mod report;
 pub mod synchronize;
 pub mod transfer_function;
 
@@ -103,6 +104,7 @@ pub fn registry() -> &'static [&'static dyn Stage] {
         &synchronize::Synchronize,
         &transfer_function::TransferFunction,
         &detect_toppling::DetectToppling,
+        &report::Report,
     ]
 }
 
