@@ -8,6 +8,7 @@ pub mod inspect;
 pub mod io;
 pub mod physics;
 pub mod pipeline;
+pub mod plot;
 pub mod schema;
 pub mod signal;
 pub mod stages;

@@ -96,6 +96,17 @@ impl OutputSink {
         Ok(())
     }
 
+    /// Writes a non-table file (a figure) under an output: `<stage>/<output>/<name>`.
+    pub fn write_file(&self, output: &str, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
+        self.output_info(output)?;
+        let dir = self.root.join(output);
+        std::fs::create_dir_all(&dir).map_err(|e| anyhow!("cannot create `{}`: {e}", dir.display()))?;
+        crate::io::atomic::write_file(&dir.join(name), |w| {
+            std::io::Write::write_all(w, bytes)?;
+            Ok(())
+        })
+    }
+
     pub fn set_total(&self, records: usize) {
         self.progress.set_length(records as u64);
     }

@@ -1,5 +1,6 @@
 //! `report`: the study's summary per unit — identified frequencies per white-noise test and the
-//! toppling events — as one small table (and, per unit, a figure).
+//! toppling events — as one small table, and per unit a PNG: floor vs top acceleration in one
+//! motion (toppling impacts marked) over the transfer functions with their picked peaks.
 
 use std::collections::BTreeMap;
 
@@ -15,15 +16,28 @@ static INFO: StageInfo = StageInfo {
     version: 1,
     summary: "Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time, confidence).",
     inputs: InputKind::Datasets,
-    outputs: &[OutputInfo { name: "summary", description: "one row per unit and toppling event (or one row when none)", timeseries: false }],
-    params: &[ParamSpec {
-        name: "unit_suffix",
-        kind: ParamKind::Str,
-        default: Some("\"_top_ax_mps2\""),
-        unit: "",
-        description: "channel suffix removed to name the unit (PS2_top_ax_mps2 → PS2)",
-        range: None,
-    }],
+    outputs: &[
+        OutputInfo { name: "summary", description: "one row per unit and toppling event (or one row when none)", timeseries: false },
+        OutputInfo { name: "figures", description: "<unit>.png: floor vs top acceleration, transfer functions with picked peaks", timeseries: false },
+    ],
+    params: &[
+        ParamSpec {
+            name: "unit_suffix",
+            kind: ParamKind::Str,
+            default: Some("\"_top_ax_mps2\""),
+            unit: "",
+            description: "channel suffix removed to name the unit (PS2_top_ax_mps2 → PS2)",
+            range: None,
+        },
+        ParamSpec {
+            name: "figure_motion",
+            kind: ParamKind::Str,
+            default: Some("\"FB-4\""),
+            unit: "",
+            description: "motion whose time histories the figures show (with the optional 3rd and 4th inputs)",
+            range: None,
+        },
+    ],
 };
 
 impl Stage for Report {
@@ -32,13 +46,115 @@ impl Stage for Report {
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let [identified, events] = ctx.inputs else {
-            anyhow::bail!("`report` reads two inputs: [transfer_function.identified, detect_toppling.events]");
+        let (identified, events, figure_inputs) = match ctx.inputs {
+            [identified, events] => (identified, events, None),
+            [identified, events, spectra, records] => (identified, events, Some((spectra, records))),
+            _ => anyhow::bail!(
+                "`report` reads [transfer_function.identified, detect_toppling.events] and, for figures, also [transfer_function.spectra, synchronize.records]"
+            ),
         };
         ctx.sink.set_total(1);
-        let summary = summarize(read_all(identified)?, read_all(events)?, ctx.params.str_of("unit_suffix"))?;
+        let (identified, events) = (read_all(identified)?, read_all(events)?);
+        let suffix = ctx.params.str_of("unit_suffix");
+        if let Some((spectra, records)) = figure_inputs {
+            let motion = ctx.params.str_of("figure_motion");
+            let spectra = read_all(spectra)?;
+            let record = records.parts().iter().find(|p| motion_of(p) == motion).ok_or_else(|| {
+                anyhow::anyhow!("no record of motion `{motion}` for the figures (set `figure_motion`)")
+            })?;
+            let record = parquet::read_table(&record.path)?;
+            for (unit, png) in figures(&identified, &events, &spectra, &record, motion, suffix)? {
+                ctx.sink.write_file("figures", &format!("{unit}.png"), &png)?;
+            }
+        }
+        let summary = summarize(identified, events, suffix)?;
         ctx.sink.write("summary", &Vec::new(), summary)
     }
+}
+
+/// Equipment modes sit at 2-5 Hz: spectra are drawn up to here, not to Nyquist.
+const FIGURE_MAX_HZ: f64 = 20.0;
+
+/// One PNG per unit of the identified tables.
+fn figures(
+    identified: &[(String, Table)],
+    events: &[(String, Table)],
+    spectra: &[(String, Table)],
+    record: &Table,
+    motion: &str,
+    suffix: &str,
+) -> anyhow::Result<Vec<(String, Vec<u8>)>> {
+    use crate::plot::{render_png, Marker, Panel, Series};
+    let Some((_, first)) = identified.first() else { return Ok(Vec::new()) };
+    let time =
+        record.f64_column(crate::table::TIME_COLUMN).ok_or_else(|| anyhow::anyhow!("the record has no time_s"))?;
+    let mut out = Vec::new();
+    for (channel, input) in strings(first, "output")?.iter().zip(strings(first, "input")?) {
+        let unit = channel.strip_suffix(suffix).unwrap_or(channel).to_string();
+        let (Some(floor), Some(top)) = (record.f64_column(input), record.f64_column(channel)) else { continue };
+        let mut impacts = Vec::new();
+        for (m, table) in events.iter().filter(|(m, _)| m == motion) {
+            let toppled = match table.column("toppled").map(|c| &c.data) {
+                Some(ColumnData::Bool(v)) => v.clone(),
+                _ => Vec::new(),
+            };
+            let times = optionals(table, "impact_time_s")?;
+            for (i, c) in strings(table, "channel")?.iter().enumerate() {
+                if c == channel && toppled.get(i).copied().unwrap_or(false) {
+                    impacts.push(Marker { x: times[i].unwrap_or(f64::NAN), label: format!("toppled ({m})") });
+                }
+            }
+        }
+        let mut spectrum_series = Vec::new();
+        let mut peaks = Vec::new();
+        let selected: Vec<(String, Vec<f64>, Vec<f64>)> = spectra
+            .iter()
+            .map(|(m, t)| {
+                let outputs = strings(t, "output")?;
+                let f = t.f64_column("frequency_hz").unwrap_or_default();
+                let g = t.f64_column("h1_gain").unwrap_or_default();
+                let rows: Vec<usize> =
+                    (0..outputs.len()).filter(|&i| outputs[i] == *channel && f[i] <= FIGURE_MAX_HZ).collect();
+                Ok((m.clone(), rows.iter().map(|&i| f[i]).collect(), rows.iter().map(|&i| g[i]).collect()))
+            })
+            .collect::<anyhow::Result<_>>()?;
+        for (m, f, g) in &selected {
+            spectrum_series.push(Series { label: format!("|H1| {m}"), x: f, y: g });
+        }
+        for (m, t) in identified {
+            let outputs = strings(t, "output")?;
+            let frequencies = optionals(t, "frequency_hz")?;
+            if let Some(i) = outputs.iter().position(|o| o == channel) {
+                if let Some(f) = frequencies[i] {
+                    peaks.push(Marker { x: f, label: format!("{m}: {f:.2} Hz") });
+                }
+            }
+        }
+        let panels = [
+            Panel {
+                title: format!("{motion}: floor and top acceleration"),
+                x_label: "time [s]".into(),
+                y_label: "acceleration [m/s^2]".into(),
+                series: vec![
+                    Series { label: input.clone(), x: time, y: floor },
+                    Series { label: channel.clone(), x: time, y: top },
+                ],
+                markers: impacts,
+                log_y: false,
+            },
+            Panel {
+                title: format!("transfer function {input} -> {channel}"),
+                x_label: "frequency [Hz]".into(),
+                y_label: "|H1|".into(),
+                series: spectrum_series,
+                markers: peaks,
+                log_y: true,
+            },
+        ];
+        let png = render_png(&unit, &panels, 1200, 900).map_err(anyhow::Error::msg)?;
+        out.push((unit, png));
+    }
+    Ok(out)
 }
 
 /// Every part of a dataset with the partition path that names it (`motion=WN-1`).

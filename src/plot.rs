@@ -1,0 +1,418 @@
+//! Small PNG figure renderer: vertically stacked line-plot panels.
+//!
+//! Uses plotters' bitmap backend with an embedded DejaVu Sans font (ab_glyph),
+//! and encodes the RGB buffer with the `png` crate. Output is deterministic.
+
+use std::sync::Once;
+
+use plotters::coord::ranged1d::{AsRangedCoord, Ranged, ValueFormatter};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use plotters::style::register_font;
+
+static FONT_BYTES: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+static FONT_INIT: Once = Once::new();
+
+fn ensure_font() {
+    FONT_INIT.call_once(|| {
+        // The embedded font is known-good; a failure here would surface as
+        // text rendering errors later, so ignoring the result is safe.
+        let _ = register_font("sans-serif", FontStyle::Normal, FONT_BYTES);
+    });
+}
+
+/// One line series. `x` and `y` must have equal length. Non-finite values
+/// (NaN, ±inf) break the line.
+pub struct Series<'a> {
+    pub label: String,
+    pub x: &'a [f64],
+    pub y: &'a [f64],
+}
+
+/// A vertical dashed line at `x` with a text label.
+pub struct Marker {
+    pub x: f64,
+    pub label: String,
+}
+
+/// One plot panel (one set of axes).
+pub struct Panel<'a> {
+    pub title: String,
+    pub x_label: String,
+    pub y_label: String,
+    pub series: Vec<Series<'a>>,
+    pub markers: Vec<Marker>,
+    /// Logarithmic y axis; non-positive y values are skipped (break the line).
+    pub log_y: bool,
+}
+
+const PALETTE: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),  // blue
+    RGBColor(214, 39, 40),   // red
+    RGBColor(44, 160, 44),   // green
+    RGBColor(255, 127, 14),  // orange
+    RGBColor(148, 103, 189), // purple
+    RGBColor(140, 86, 75),   // brown
+    RGBColor(227, 119, 194), // pink
+    RGBColor(23, 190, 207),  // cyan
+];
+const MARKER_COLOR: RGBColor = RGBColor(90, 90, 90);
+
+/// Render `panels` stacked vertically under an overall `title` into a PNG
+/// (RGB, 8 bit) of `width` x `height` pixels.
+pub fn render_png(title: &str, panels: &[Panel<'_>], width: u32, height: u32) -> Result<Vec<u8>, String> {
+    if width < 16 || height < 16 {
+        return Err(format!("figure size {width}x{height} is too small"));
+    }
+    for (pi, p) in panels.iter().enumerate() {
+        for s in &p.series {
+            if s.x.len() != s.y.len() {
+                return Err(format!(
+                    "panel {pi} series '{}': x has {} points but y has {}",
+                    s.label,
+                    s.x.len(),
+                    s.y.len()
+                ));
+            }
+        }
+    }
+    ensure_font();
+
+    let mut buf = vec![0u8; width as usize * height as usize * 3];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (width, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        let body = if title.is_empty() {
+            root.clone()
+        } else {
+            root.titled(title, ("sans-serif", 24).into_font().color(&BLACK)).map_err(err)?
+        };
+        if !panels.is_empty() {
+            let areas = body.split_evenly((panels.len(), 1));
+            for (panel, area) in panels.iter().zip(areas.iter()) {
+                draw_panel(&root, area, panel)?;
+            }
+        }
+        root.present().map_err(err)?;
+    }
+    encode_png(&buf, width, height)
+}
+
+fn err<E: std::fmt::Debug>(e: E) -> String {
+    format!("plot error: {e:?}")
+}
+
+fn encode_png(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>, String> {
+    let mut out = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut out, width, height);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut w = enc.write_header().map_err(|e| format!("png: {e}"))?;
+        w.write_image_data(rgb).map_err(|e| format!("png: {e}"))?;
+        w.finish().map_err(|e| format!("png: {e}"))?;
+    }
+    Ok(out)
+}
+
+/// Finite (and, for log axes, positive) value usable on the y axis.
+fn y_ok(y: f64, log_y: bool) -> bool {
+    y.is_finite() && (!log_y || y > 0.0)
+}
+
+/// Data ranges over the usable points of a panel.
+fn panel_ranges(p: &Panel<'_>) -> ((f64, f64), (f64, f64)) {
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    for s in &p.series {
+        for (&x, &y) in s.x.iter().zip(s.y) {
+            if x.is_finite() && y_ok(y, p.log_y) {
+                x0 = x0.min(x);
+                x1 = x1.max(x);
+                y0 = y0.min(y);
+                y1 = y1.max(y);
+            }
+        }
+    }
+    if x0 > x1 {
+        // No usable data: fall back to marker positions or a unit range.
+        for m in &p.markers {
+            if m.x.is_finite() {
+                x0 = x0.min(m.x);
+                x1 = x1.max(m.x);
+            }
+        }
+        if x0 > x1 {
+            x0 = 0.0;
+            x1 = 1.0;
+        }
+    }
+    if x0 == x1 {
+        let d = if x0 == 0.0 { 1.0 } else { x0.abs() * 0.5 };
+        x0 -= d;
+        x1 += d;
+    }
+    if y0 > y1 {
+        if p.log_y {
+            y0 = 1.0;
+            y1 = 10.0;
+        } else {
+            y0 = 0.0;
+            y1 = 1.0;
+        }
+    } else if p.log_y {
+        // Pad by a factor in log space.
+        let (l0, l1) = (y0.log10(), y1.log10());
+        let pad = ((l1 - l0) * 0.05).max(0.1);
+        y0 = 10f64.powf(l0 - pad);
+        y1 = 10f64.powf(l1 + pad);
+    } else if y0 == y1 {
+        let d = if y0 == 0.0 { 1.0 } else { y0.abs() * 0.5 };
+        y0 -= d;
+        y1 += d;
+    } else {
+        let pad = (y1 - y0) * 0.05;
+        y0 -= pad;
+        y1 += pad;
+    }
+    ((x0, x1), (y0, y1))
+}
+
+/// Compact tick label.
+fn fmt_num(v: f64) -> String {
+    if v == 0.0 {
+        return "0".to_string();
+    }
+    let a = v.abs();
+    if !(1e-3..1e5).contains(&a) {
+        let s = format!("{v:.1e}");
+        return s.replace(".0e", "e");
+    }
+    let s = format!("{v:.3}");
+    let s = s.trim_end_matches('0').trim_end_matches('.');
+    if s == "-0" {
+        "0".to_string()
+    } else {
+        s.to_string()
+    }
+}
+
+type Root<'b> = DrawingArea<BitMapBackend<'b>, Shift>;
+
+fn draw_panel<'b>(root: &Root<'b>, area: &Root<'b>, p: &Panel<'_>) -> Result<(), String> {
+    let ((x0, x1), (y0, y1)) = panel_ranges(p);
+    if p.log_y {
+        draw_panel_with(root, area, p, x0..x1, (y0..y1).log_scale())
+    } else {
+        draw_panel_with(root, area, p, x0..x1, y0..y1)
+    }
+}
+
+fn draw_panel_with<'b, YR>(
+    root: &Root<'b>,
+    area: &Root<'b>,
+    p: &Panel<'_>,
+    xr: std::ops::Range<f64>,
+    yr: YR,
+) -> Result<(), String>
+where
+    YR: AsRangedCoord<Value = f64>,
+    YR::CoordDescType: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    let mut chart = ChartBuilder::on(area)
+        .caption(&p.title, ("sans-serif", 18).into_font().color(&BLACK))
+        .margin(8)
+        .margin_right(20)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(xr.clone(), yr)
+        .map_err(err)?;
+
+    chart
+        .configure_mesh()
+        .light_line_style(RGBColor(235, 235, 235))
+        .bold_line_style(RGBColor(210, 210, 210))
+        .axis_style(BLACK)
+        .x_desc(p.x_label.as_str())
+        .y_desc(p.y_label.as_str())
+        .x_labels(10)
+        .y_labels(8)
+        .x_label_formatter(&|v| fmt_num(*v))
+        .y_label_formatter(&|v| fmt_num(*v))
+        .label_style(("sans-serif", 13).into_font().color(&BLACK))
+        .axis_desc_style(("sans-serif", 15).into_font().color(&BLACK))
+        .draw()
+        .map_err(err)?;
+
+    let log_y = p.log_y;
+    for (si, s) in p.series.iter().enumerate() {
+        let color = PALETTE[si % PALETTE.len()];
+        let style = color.stroke_width(2);
+        // Split into runs of usable points so NaNs (and non-positive values
+        // on a log axis) break the line.
+        let mut segments: Vec<Vec<(f64, f64)>> = Vec::new();
+        let mut cur: Vec<(f64, f64)> = Vec::new();
+        for (&x, &y) in s.x.iter().zip(s.y) {
+            if x.is_finite() && y_ok(y, log_y) {
+                cur.push((x, y));
+            } else if !cur.is_empty() {
+                segments.push(std::mem::take(&mut cur));
+            }
+        }
+        if !cur.is_empty() {
+            segments.push(cur);
+        }
+        for seg in segments {
+            if seg.len() == 1 {
+                chart.draw_series(std::iter::once(Circle::new(seg[0], 2, color.filled()))).map_err(err)?;
+            } else {
+                // Very dense lines look jagged with a 2 px stroke (plotters draws
+                // wide polylines as separate quads); use 1 px for those.
+                let plot_w = (chart.plotting_area().dim_in_pixel().0).max(1) as usize;
+                let w = if seg.len() > 2 * plot_w { 1 } else { 2 };
+                chart.draw_series(LineSeries::new(seg, color.stroke_width(w))).map_err(err)?;
+            }
+        }
+        // Legend entry (drawn as an empty series so it exists even without data).
+        if !s.label.is_empty() {
+            chart
+                .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())
+                .map_err(err)?
+                .label(s.label.as_str())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+        }
+    }
+
+    // Markers: vertical dashed lines drawn in pixel space on the root area.
+    let (_, py) = chart.plotting_area().get_pixel_range();
+    let label_font = ("sans-serif", 13).into_font().color(&MARKER_COLOR);
+    for (mi, m) in p.markers.iter().enumerate() {
+        if !(m.x.is_finite() && m.x >= xr.start && m.x <= xr.end) {
+            continue;
+        }
+        let (mx, _) = chart.backend_coord(&(m.x, 1.0)); // y is irrelevant for the x pixel
+        let (dash, gap) = (6, 4);
+        let mut y = py.start;
+        while y < py.end {
+            let ye = (y + dash).min(py.end - 1);
+            root.draw(&PathElement::new(vec![(mx, y), (mx, ye)], MARKER_COLOR.stroke_width(1))).map_err(err)?;
+            y += dash + gap;
+        }
+        if !m.label.is_empty() {
+            // Stagger labels of successive markers so they overlap less.
+            let ty = py.start + 4 + (mi as i32 % 3) * 16;
+            root.draw(&Text::new(m.label.clone(), (mx + 4, ty), label_font.clone())).map_err(err)?;
+        }
+    }
+
+    if p.series.iter().any(|s| !s.label.is_empty()) {
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(160, 160, 160))
+            .label_font(("sans-serif", 13).into_font().color(&BLACK))
+            .draw()
+            .map_err(err)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn figure_bytes() -> Vec<u8> {
+        let fs = 200.0;
+        let n = (60.0 * fs) as usize;
+        let t: Vec<f64> = (0..n).map(|i| i as f64 / fs).collect();
+        let a: Vec<f64> = t
+            .iter()
+            .map(|&t| (2.0 * std::f64::consts::PI * 0.2 * t).sin() + 0.3 * (2.0 * std::f64::consts::PI * 3.1 * t).sin())
+            .collect();
+        let mut b: Vec<f64> = t.iter().map(|&t| 0.7 * (2.0 * std::f64::consts::PI * 0.5 * t + 1.0).cos()).collect();
+        // A NaN gap to exercise line breaking.
+        for v in &mut b[4000..4200] {
+            *v = f64::NAN;
+        }
+        let f: Vec<f64> = (0..=400).map(|i| i as f64 * 0.05).collect();
+        let spec: Vec<f64> =
+            f.iter().map(|&f| 1e-4 + 1.0 / (1.0 + ((f - 3.1) / 0.15).powi(2)) + 0.1 / (1.0 + f * f)).collect();
+        let mut spec2: Vec<f64> = spec.iter().map(|v| v * 0.3).collect();
+        spec2[0] = 0.0; // non-positive: skipped on log axis
+        let panels = vec![
+            Panel {
+                title: "Time history".into(),
+                x_label: "time [s]".into(),
+                y_label: "amplitude [m]".into(),
+                series: vec![
+                    Series { label: "heave".into(), x: &t, y: &a },
+                    Series { label: "pitch".into(), x: &t, y: &b },
+                ],
+                markers: vec![],
+                log_y: false,
+            },
+            Panel {
+                title: "Spectrum".into(),
+                x_label: "frequency [Hz]".into(),
+                y_label: "PSD [m²/Hz]".into(),
+                series: vec![
+                    Series { label: "heave PSD".into(), x: &f, y: &spec },
+                    Series { label: "pitch PSD".into(), x: &f, y: &spec2 },
+                ],
+                markers: vec![Marker { x: 3.1, label: "f₀ = 3.1 Hz".into() }],
+                log_y: true,
+            },
+        ];
+        render_png("Test figure", &panels, 1000, 800).expect("render")
+    }
+
+    #[test]
+    fn renders_deterministic_nonblank_png() {
+        let png1 = figure_bytes();
+        let png2 = figure_bytes();
+        assert_eq!(png1, png2, "output not deterministic");
+        std::fs::write("/tmp/plot-test.png", &png1).unwrap();
+
+        let dec = png::Decoder::new(png1.as_slice());
+        let mut reader = dec.read_info().unwrap();
+        let mut img = vec![0; reader.output_buffer_size()];
+        let info = reader.next_frame(&mut img).unwrap();
+        assert_eq!((info.width, info.height), (1000, 800));
+        assert_eq!(info.color_type, png::ColorType::Rgb);
+        let px = &img[..info.buffer_size()];
+        let mut colors = std::collections::BTreeSet::new();
+        for c in px.chunks_exact(3) {
+            colors.insert((c[0], c[1], c[2]));
+        }
+        assert!(colors.len() > 10, "only {} colours", colors.len());
+        for c in [PALETTE[0], PALETTE[1]] {
+            assert!(colors.contains(&(c.0, c.1, c.2)), "series colour {c:?} missing");
+        }
+    }
+
+    #[test]
+    fn rejects_mismatched_lengths_and_handles_empty() {
+        let x = [1.0, 2.0];
+        let y = [1.0];
+        let p = Panel {
+            title: "bad".into(),
+            x_label: String::new(),
+            y_label: String::new(),
+            series: vec![Series { label: "s".into(), x: &x, y: &y }],
+            markers: vec![],
+            log_y: false,
+        };
+        assert!(render_png("t", &[p], 200, 200).is_err());
+        let nan = [f64::NAN, f64::NAN];
+        let p = Panel {
+            title: "all nan".into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            series: vec![Series { label: "s".into(), x: &x, y: &nan }],
+            markers: vec![Marker { x: 1.5, label: "m".into() }],
+            log_y: true,
+        };
+        assert!(render_png("t", &[p], 300, 200).is_ok());
+        assert!(render_png("", &[], 100, 100).is_ok());
+    }
+}
