@@ -39,6 +39,16 @@ fn demo_pipeline_recovers_the_archive_truth() {
         serde_json::from_str(&std::fs::read_to_string(archive.join("manifest.json")).unwrap()).unwrap();
     let runs = work.path().join("runs/demo");
 
+    // The report: one summary row per unit (two for PS2, toppled twice) and a PNG per unit.
+    let summary = read_table(&runs.join("report/summary/data.parquet")).unwrap();
+    assert_eq!(str_column(&summary, "unit"), ["UI3", "MC2", "PB1", "PB2", "PS1", "PS2", "PS2", "WSU1"]);
+    for unit in ["UI3", "MC2", "PB1", "PB2", "PS1", "PS2", "WSU1"] {
+        let png = std::fs::read(runs.join(format!("report/figures/{unit}.png"))).unwrap();
+        assert!(png.starts_with(b"\x89PNG\r\n\x1a\n") && png.len() > 10_000, "{unit}.png is not a drawn PNG");
+    }
+    let shown = common::shakeflow(&["show", "runs/demo/report/summary/data.parquet"], work.path());
+    assert!(common::stdout(&shown).contains("FB-4"), "{}", common::stdout(&shown));
+
     for test in manifest["tests"].as_array().unwrap() {
         let id = test["id"].as_str().unwrap();
         // Lag: DAQ2 time τ is DAQ1 time τ + offset, i.e. the target leads: lag = −offset.

@@ -137,3 +137,54 @@ fn inspect_describes_mcap_files_and_datasets() {
         stderr(&missing)
     );
 }
+
+#[test]
+fn signal_stages_run_alone_on_files() {
+    // synchronize two copies of one record, the second 0.25 s late: the lag comes back.
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let mut reference = String::from("t,a\n");
+    let mut target = String::from("t,a\n");
+    let signal = |t: f64| {
+        (2.0 * std::f64::consts::PI * 1.3 * t).sin() * (-((t - 10.0) / 4.0).powi(2)).exp()
+            + 0.3 * (7.1 * t).sin() * (-((t - 9.0) / 3.0).powi(2)).exp()
+    };
+    for i in 0..4000 {
+        let t = i as f64 / 200.0;
+        reference.push_str(&format!("{t:.6},{:.9}\n", signal(t)));
+        target.push_str(&format!("{t:.6},{:.9}\n", signal(t - 0.25)));
+    }
+    std::fs::write(root.join("ref.csv"), reference).unwrap();
+    std::fs::write(root.join("tgt.csv"), target).unwrap();
+    for (file, out) in [("ref.csv", "r"), ("tgt.csv", "t")] {
+        let loaded =
+            shakeflow(&["stage", "load", "-i", file, "-o", out, "--set", "time_column=t", "--set", "unit=m/s^2"], root);
+        assert!(loaded.status.success(), "{}", stderr(&loaded));
+    }
+    // Both records lack a `motion` key; join on none by giving them one through a folder layout.
+    for (from, to) in [("r/records/data.parquet", "ref/motion=X"), ("t/records/data.parquet", "tgt/motion=X")] {
+        std::fs::create_dir_all(root.join(to)).unwrap();
+        std::fs::copy(root.join(from), root.join(to).join("data.parquet")).unwrap();
+    }
+    let synced = shakeflow(
+        &[
+            "stage",
+            "synchronize",
+            "-i",
+            "ref",
+            "-i",
+            "tgt",
+            "-o",
+            "s",
+            "--set",
+            "reference_channel=a",
+            "--set",
+            "target_channel=a",
+        ],
+        root,
+    );
+    assert!(synced.status.success(), "{}", stderr(&synced));
+    let lags = shakeflow::io::parquet::read_table(&root.join("s/lags/motion=X/data.parquet")).unwrap();
+    let lag = lags.f64_column("lag_s").unwrap()[0];
+    assert!((lag - 0.25).abs() < 1e-3, "lag {lag}");
+}

@@ -164,7 +164,13 @@ fn align(
     for (prefix, table) in references {
         for c in table.columns.iter().filter(|c| c.name != TIME_COLUMN) {
             if let ColumnData::F64(v) = &c.data {
-                let name = if prefix.is_empty() { c.name.clone() } else { format!("{prefix}_{}", c.name) };
+                let clashes = target_columns.iter().any(|(t, _)| t.name == c.name);
+                let name = match (prefix.is_empty(), clashes) {
+                    (false, _) => format!("{prefix}_{}", c.name),
+                    // One reference record with the target's own column names: keep both apart.
+                    (true, true) => format!("reference_{}", c.name),
+                    (true, false) => c.name.clone(),
+                };
                 out.push(Column {
                     name,
                     unit: c.unit.clone(),

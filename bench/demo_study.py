@@ -1,0 +1,99 @@
+"""`make bench` (second part): the whole demo study, shakeflow vs the same steps in numpy/scipy.
+
+shakeflow runs pipelines/demo.yaml from scratch (load, baseline, synchronize, transfer_function,
+detect_toppling, report with figures, MCAP twins). The Python side does the same numerical steps
+with the usual scientific stack and writes Parquet: pyarrow CSV reading, numpy.polyfit baselines,
+scipy.signal.resample_poly (256 -> 200 Hz) and FFT cross-correlation with parabolic refinement,
+np.interp shifting, scipy.signal.csd/welch transfer functions with MATLAB tfestimate defaults for
+the white-noise tests, and a simplified STA/LTA + RMS-drop toppling check per unit channel (a port
+of the same steps for timing, not a validated detector). It skips MCAP
+and figures, so the comparison does not favour shakeflow. Medians over --repeat runs; ratios are
+Python / shakeflow (above 1: shakeflow is faster or leaner).
+"""
+import argparse
+import os
+import pathlib
+import statistics
+import sys
+import tempfile
+
+from load_baseline import measure
+
+PYTHON_SIDE = r'''
+import pathlib, sys
+import numpy as np, scipy.signal as ss
+import pyarrow as pa, pyarrow.csv as pcsv, pyarrow.parquet as pq
+G = 9.80665
+archive, out = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])
+UNITS = {"UI3": 4, "MC2": 4, "PB1": 4, "PB2": 4, "PS1": 5, "PS2": 5, "WSU1": 5}
+def read(path):
+    t = pcsv.read_csv(path, read_options=pcsv.ReadOptions(skip_rows=4))
+    time = t.column("Time").to_numpy()
+    cols = {n: t.column(n).to_numpy() * G for n in t.column_names if n != "Time"}
+    for n, a in cols.items():
+        cols[n] = a - np.polyval(np.polyfit(time, a, 3), time)
+    return time, cols
+def write(path, cols):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    pq.write_table(pa.table(cols), path, compression="zstd")
+def tfestimate(x, y, fs):
+    L = len(x) * 2 // 9
+    kw = dict(fs=fs, window=ss.get_window("hamming", L, fftbins=False), nperseg=L, noverlap=L // 2, nfft=max(256, 1 << (L - 1).bit_length()), detrend=False)
+    f, pxy = ss.csd(x, y, **kw); _, pxx = ss.welch(x, **kw); _, pyy = ss.welch(y, **kw)
+    return f, pxy / pxx, np.abs(pxy) ** 2 / (pxx * pyy)
+def toppled(t, a):
+    d = np.abs(np.diff(a, prepend=a[0])); fs = 1 / (t[1] - t[0])
+    sta = np.convolve(d ** 2, np.ones(int(0.02 * fs)) / int(0.02 * fs), "same")
+    lta = np.convolve(d ** 2, np.ones(int(5 * fs)) / int(5 * fs), "same")
+    k = int(np.argmax(np.sqrt(sta / np.maximum(lta, 1e-12))))
+    pre = a[max(0, k - int(2 * fs)):k]; post = a[k + int(0.4 * fs):k + int(2.4 * fs)]
+    return len(post) > fs and np.std(post) < 0.35 * np.std(pre), t[k]
+for test in sorted(p for p in archive.iterdir() if p.is_dir()):
+    t1, floors = read(test / "DAQ1_floors.csv"); t2, eq = read(test / "DAQ2_equipment.csv")
+    ref = floors["A5_EW"]; sync = ss.resample_poly(eq["A5_EW_SYNC"], 25, 32)
+    n = min(len(ref), len(sync)); c = ss.correlate(sync[:n], ref[:n], method="fft"); k = int(np.argmax(np.abs(c)))
+    y0, y1, y2 = c[k - 1], c[k], c[k + 1]; frac = 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
+    lag = (k - (n - 1) + frac) / 200.0
+    aligned = {n_: np.interp(t1 - lag, t2, v) for n_, v in eq.items()}
+    write(out / "sync" / f"motion={test.name}" / "data.parquet", {"time_s": t1, **{f"f{k_}": v for k_, v in floors.items()}, **aligned})
+    events = []
+    for unit, floor in UNITS.items():
+        hit, when = toppled(t1, aligned[f"{unit}_TOP_EW"]); events.append((unit, bool(hit), float(when)))
+    write(out / "toppling" / f"motion={test.name}" / "data.parquet", {"unit": [e[0] for e in events], "toppled": [e[1] for e in events], "time": [e[2] for e in events]})
+    if test.name.startswith("WN"):
+        rows = []
+        for unit, floor in UNITS.items():
+            f, h1, coh = tfestimate(floors[f"A{floor}_EW"], aligned[f"{unit}_TOP_EW"], 200.0)
+            band = (f >= 1.5) & (f <= 8.0); i = np.argmax(np.abs(h1) * band); rows.append((unit, f[i], coh[i]))
+        write(out / "tf" / f"motion={test.name}" / "data.parquet", {"unit": [r[0] for r in rows], "frequency_hz": [r[1] for r in rows], "coherence": [r[2] for r in rows]})
+'''
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--shakeflow", required=True)
+    ap.add_argument("--archive", required=True)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    archive = pathlib.Path(args.archive).resolve()
+    pipeline_src = (pathlib.Path(__file__).resolve().parents[1] / "pipelines" / "demo.yaml").read_text()
+    results = {"shakeflow (demo pipeline)": [], "numpy/scipy script": []}
+    for _ in range(args.repeat):
+        with tempfile.TemporaryDirectory() as tmp:
+            tmp = pathlib.Path(tmp)
+            pipeline = tmp / "demo.yaml"
+            pipeline.write_text(pipeline_src.replace("../runs/demo-archive", str(archive)).replace("output_dir: ../runs/demo", f"output_dir: {tmp / 'out'}"))
+            results["shakeflow (demo pipeline)"].append(measure([args.shakeflow, "run", "--quiet", str(pipeline)]))
+            script = tmp / "py_side.py"
+            script.write_text(PYTHON_SIDE)
+            results["numpy/scipy script"].append(measure([sys.executable, str(script), str(archive), str(tmp / "py_out")]))
+    median = {k: (statistics.median(w for w, _ in v), statistics.median(m for _, m in v)) for k, v in results.items()}
+    py_wall, py_mem = median["numpy/scipy script"]
+    print(f"whole demo study on {archive} ({os.cpu_count()} cores), median of {args.repeat}")
+    print(f"{'':28}{'wall s':>9}{'peak MiB':>10}{'wall ratio':>12}{'mem ratio':>11}")
+    for side, (wall, mem) in median.items():
+        print(f"{side:28}{wall:>9.2f}{mem:>10.1f}{py_wall / wall:>12.2f}{py_mem / mem:>11.2f}")
+
+
+if __name__ == "__main__":
+    main()
