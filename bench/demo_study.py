@@ -10,14 +10,12 @@ of the same steps for timing, not a validated detector). It skips MCAP
 and figures, so the comparison does not favour shakeflow. Medians over --repeat runs; ratios are
 Python / shakeflow (above 1: shakeflow is faster or leaner).
 """
-import argparse
 import os
 import pathlib
-import statistics
 import sys
 import tempfile
 
-from load_baseline import measure
+from load_baseline import measure, parse_args, print_table
 
 PYTHON_SIDE = r'''
 import pathlib, sys
@@ -70,29 +68,20 @@ for test in sorted(p for p in archive.iterdir() if p.is_dir()):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--shakeflow", required=True)
-    ap.add_argument("--archive", required=True)
-    ap.add_argument("--repeat", type=int, default=3)
-    args = ap.parse_args()
-    archive = pathlib.Path(args.archive).resolve()
-    pipeline_src = (pathlib.Path(__file__).resolve().parents[1] / "pipelines" / "demo.yaml").read_text()
-    results = {"shakeflow (demo pipeline)": [], "numpy/scipy script": []}
+    args = parse_args(__doc__)
+    sides = ["shakeflow (demo pipeline)", "numpy/scipy script"]
+    results = {side: [] for side in sides}
     for _ in range(args.repeat):
         with tempfile.TemporaryDirectory() as tmp:
             tmp = pathlib.Path(tmp)
             pipeline = tmp / "demo.yaml"
-            pipeline.write_text(pipeline_src.replace("../runs/demo-archive", str(archive)).replace("output_dir: ../runs/demo", f"output_dir: {tmp / 'out'}"))
-            results["shakeflow (demo pipeline)"].append(measure([args.shakeflow, "run", "--quiet", str(pipeline)]))
+            text = args.pipeline.replace("../runs/demo-archive", str(args.archive))
+            pipeline.write_text(text.replace("output_dir: ../runs/demo", f"output_dir: {tmp / 'out'}"))
+            results[sides[0]].append(measure([args.shakeflow, "run", "--quiet", str(pipeline)]))
             script = tmp / "py_side.py"
             script.write_text(PYTHON_SIDE)
-            results["numpy/scipy script"].append(measure([sys.executable, str(script), str(archive), str(tmp / "py_out")]))
-    median = {k: (statistics.median(w for w, _ in v), statistics.median(m for _, m in v)) for k, v in results.items()}
-    py_wall, py_mem = median["numpy/scipy script"]
-    print(f"whole demo study on {archive} ({os.cpu_count()} cores), median of {args.repeat}")
-    print(f"{'':28}{'wall s':>9}{'peak MiB':>10}{'wall ratio':>12}{'mem ratio':>11}")
-    for side, (wall, mem) in median.items():
-        print(f"{side:28}{wall:>9.2f}{mem:>10.1f}{py_wall / wall:>12.2f}{py_mem / mem:>11.2f}")
+            results[sides[1]].append(measure([sys.executable, str(script), str(args.archive), str(tmp / "py_out")]))
+    print_table(f"whole demo study on {args.archive} ({os.cpu_count()} cores), median of {args.repeat}", results, sides[1])
 
 
 if __name__ == "__main__":

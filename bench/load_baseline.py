@@ -54,37 +54,46 @@ def measure(cmd):
     return wall, usage.ru_maxrss / 1024.0  # KiB → MiB
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def parse_args(doc):
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--shakeflow", required=True)
     ap.add_argument("--archive", required=True)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
-    archive = pathlib.Path(args.archive).resolve()
-    pipeline_src = (pathlib.Path(__file__).resolve().parents[1] / "pipelines" / "demo.yaml").read_text()
-    size = sum(p.stat().st_size for p in archive.rglob("*.csv"))
+    args.archive = pathlib.Path(args.archive).resolve()
+    args.pipeline = (pathlib.Path(__file__).resolve().parents[1] / "pipelines" / "demo.yaml").read_text()
+    return args
+
+
+def print_table(title, results, python_side):
+    """Medians per side, and Python / side ratios (above 1: the side is faster or leaner)."""
+    median = {side: (statistics.median(w for w, _ in r), statistics.median(m for _, m in r)) for side, r in results.items()}
+    py_wall, py_mem = median[python_side]
+    print(title)
+    print(f"{'':28}{'wall s':>9}{'peak MiB':>10}{'wall ratio':>12}{'mem ratio':>11}")
+    for side, (wall, mem) in median.items():
+        print(f"{side:28}{wall:>9.2f}{mem:>10.1f}{py_wall / wall:>12.2f}{py_mem / mem:>11.2f}")
+
+
+def main():
+    args = parse_args(__doc__)
+    size = sum(p.stat().st_size for p in args.archive.rglob("*.csv"))
     sides = ["shakeflow (demo, +MCAP)", "shakeflow (mcap: false)", "numpy/pyarrow script"]
     results = {side: [] for side in sides}
     for _ in range(args.repeat):
         with tempfile.TemporaryDirectory() as tmp:
             tmp = pathlib.Path(tmp)
-            text = pipeline_src.replace("../runs/demo-archive", str(archive))
+            # Only the load and baseline stages: cut the pipeline before `synchronize`.
+            text = args.pipeline.split("  synchronize:")[0].replace("../runs/demo-archive", str(args.archive))
             no_mcap = text.replace("      order: 3\n", "      order: 3\n      mcap: false\n")
             for side, variant, name in zip(sides[:2], (text, no_mcap), ("demo", "no_mcap")):
-                out = tmp / name
-                pipeline = tmp / f"{out.name}.yaml"
-                pipeline.write_text(variant.replace("output_dir: ../runs/demo", f"output_dir: {out}"))
+                pipeline = tmp / f"{name}.yaml"
+                pipeline.write_text(variant.replace("output_dir: ../runs/demo", f"output_dir: {tmp / name}"))
                 results[side].append(measure([args.shakeflow, "run", "--quiet", str(pipeline)]))
             script = tmp / "py_side.py"
             script.write_text(PYTHON_SIDE)
-            results[sides[2]].append(measure([sys.executable, str(script), str(archive), str(tmp / "py_out")]))
-    median = {side: (statistics.median(w for w, _ in r), statistics.median(m for _, m in r)) for side, r in results.items()}
-    py_wall, py_mem = median[sides[2]]
-    print(f"load + baseline on {archive} ({size / 1e6:.1f} MB of CSV, {os.cpu_count()} cores), median of {args.repeat}")
-    print(f"{'':28}{'wall s':>9}{'peak MiB':>10}{'wall ratio':>12}{'mem ratio':>11}")
-    for side in sides:
-        wall, mem = median[side]
-        print(f"{side:28}{wall:>9.2f}{mem:>10.1f}{py_wall / wall:>12.2f}{py_mem / mem:>11.2f}")
+            results[sides[2]].append(measure([sys.executable, str(script), str(args.archive), str(tmp / "py_out")]))
+    print_table(f"load + baseline on {args.archive} ({size / 1e6:.1f} MB of CSV, {os.cpu_count()} cores), median of {args.repeat}", results, sides[2])
 
 
 if __name__ == "__main__":

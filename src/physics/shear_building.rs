@@ -332,7 +332,7 @@ mod tests {
             let ag: Vec<f64> = (0..n).map(|i| (omega * i as f64 * dt).sin()).collect();
             let acc = b.absolute_accelerations(&ag, dt);
             // Transient decays as exp(-ζω t): after 20 s it is e^-12.6 ≈ 3e-6 of its start.
-            let (amp, phase) = crate::physics::fit_harmonic(&acc[0], dt, omega, 20_000);
+            let (amp, phase) = crate::signal::test_support::fit_harmonic(&acc[0], dt, omega, 20_000..acc[0].len());
             let h = {
                 let num = rustfft::num_complex::Complex64::new(1.0, 2.0 * zeta * r);
                 let den = rustfft::num_complex::Complex64::new(1.0 - r * r, 2.0 * zeta * r);

@@ -232,22 +232,9 @@ mod tests {
         freqs.iter().map(|&(a, f, ph)| a * (2.0 * PI * f * t + ph).sin()).sum()
     }
 
-    /// Amplitude of a sinusoid of frequency f in y (rate fs) by least squares on an
-    /// interior window.
+    /// Amplitude of a sinusoid of frequency f in y (rate fs), fitted on an interior window.
     fn fitted_amplitude(y: &[f64], fs: f64, f: f64, skip: usize) -> f64 {
-        let (mut ss, mut cc, mut sc, mut ys, mut yc) = (0.0, 0.0, 0.0, 0.0, 0.0);
-        for (k, &v) in y.iter().enumerate().skip(skip).take(y.len() - 2 * skip) {
-            let (s, c) = (2.0 * PI * f * k as f64 / fs).sin_cos();
-            ss += s * s;
-            cc += c * c;
-            sc += s * c;
-            ys += v * s;
-            yc += v * c;
-        }
-        let det = ss * cc - sc * sc;
-        let a = (ys * cc - yc * sc) / det;
-        let b = (yc * ss - ys * sc) / det;
-        (a * a + b * b).sqrt()
+        crate::signal::test_support::fit_harmonic(y, 1.0 / fs, 2.0 * PI * f, skip..y.len() - skip).0
     }
 
     #[test]

@@ -91,3 +91,21 @@ pub fn fourier_resample_delayed(x: &[f64], fs_in: f64, fs_out: f64, delay_s: f64
     let n_out = ((x.len() - 1) as f64 * ratio + 1e-9).floor() as usize + 1;
     out[..n_out].iter().map(|c| c.re / p as f64).collect()
 }
+
+/// Least-squares fit of x(t) ≈ s sin(Ωt) + c cos(Ωt) over samples `range`; returns (amplitude,
+/// phase) with x ≈ A sin(Ωt + φ). Steady-state checks against closed forms.
+pub fn fit_harmonic(x: &[f64], dt: f64, omega: f64, range: std::ops::Range<usize>) -> (f64, f64) {
+    let (mut ss, mut sc, mut cc, mut xs, mut xc) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for i in range {
+        let (s, c) = (omega * i as f64 * dt).sin_cos();
+        ss += s * s;
+        sc += s * c;
+        cc += c * c;
+        xs += x[i] * s;
+        xc += x[i] * c;
+    }
+    let det = ss * cc - sc * sc;
+    let a = (xs * cc - xc * sc) / det;
+    let b = (xc * ss - xs * sc) / det;
+    (a.hypot(b), b.atan2(a))
+}
