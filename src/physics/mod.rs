@@ -1,3 +1,6 @@
-//! Linear structural models used to synthesise floor and equipment responses.
+//! Physical models: linear structures that synthesise floor and equipment responses, the rocking
+//! block of the toppling model, and the integrators they share (pure numerics, no I/O).
+pub mod ode;
+pub mod rocking;
 pub mod sdof;
 pub mod shear_building;

@@ -1,0 +1,854 @@
+//! The study's 2D toppling model: a rigid block on a moving floor that stays at rest, rocks on
+//! alternate base corners, or overturns (Housner 1963; Yim, Chopra & Penzien 1980; Makris &
+//! Roussos 2000; SEED-SUMMARY.md Eqs. 20–25 with the errata applied).
+//!
+//! Sign convention (the demo cases' `equipment.yaml`): x is the in-plane horizontal floor axis,
+//! z is up; θ > 0 is a rotation about the +x base corner with the top moving toward +x. A floor
+//! accelerating toward +x throws the block toward −x, so it uplifts with θ < 0. "Side" is the
+//! sign of θ: the corner the block pivots on and the way it overturns.
+//!
+//! Regimes, each exact where it can be:
+//! - **rest**: θ = θ̇ = 0 exactly, no integration. Uplift toward side s starts when
+//!   −s·a_x > (g + a_v)·tan α (Eq. 20/21); with the floor linear between samples this is the
+//!   root of a linear function, found in closed form.
+//! - **rocking** about corner s (Eq. 22): θ̈ = −(mR/I₀)[(g + a_v) sin(sα − θ) + a_x cos(sα − θ)],
+//!   integrated by an adaptive Dormand–Prince 5(4) (or the study's RK4) with events located on
+//!   the dense output.
+//! - **impact** at θ = 0: the pivot moves to the other corner and θ̇ is multiplied by the
+//!   restitution e (Eq. 24: e = 1 − (mRB/I₀) sin α, B the base width, or a given e). When the
+//!   rebound can no longer lift the block (|θ̇| below `rest_velocity_radps`, or the floor pushes
+//!   it straight back) it returns to rest.
+//! - **overturned**: θ reaches the angle at which the block lies on its side (π/2 for a
+//!   rectangle); it stays there.
+//!
+//! The model is mass-independent (only I₀/m enters); the mass is kept for reports.
+
+use crate::physics::ode::{Advance, Dopri5, Rk4, Stats, Stepper};
+use crate::physics::sdof::Sdof;
+
+/// Geometry as the cases' `equipment.yaml` states it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Shape {
+    /// Width B, height H, centre of mass raised by f·H above mid-height (Table 5, Eq. 21).
+    Rectangular { b_m: f64, h_m: f64, f: f64 },
+    /// Base (short side) B₁, top B₂, height H; uniform lamina (Eq. 20).
+    Trapezoidal { b1_m: f64, b2_m: f64, h_m: f64 },
+}
+
+/// A rigid block with the derived quantities of the rocking equations.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Block {
+    pub shape: Shape,
+    pub mass_kg: f64,
+    pub g_mps2: f64,
+    /// Half the base width: horizontal distance from the centre of mass to a pivot corner.
+    pub half_base_m: f64,
+    /// Height of the centre of mass above the base (Z_c).
+    pub cm_height_m: f64,
+    pub height_m: f64,
+    /// Pivot-to-centre-of-mass distance R.
+    pub r_m: f64,
+    /// Critical angle α (θ_c) = atan(half base / CM height).
+    pub alpha_rad: f64,
+    /// I₀/m: moment of inertia about a pivot corner per unit mass.
+    pub i0_per_kg: f64,
+    /// Frequency parameter p = √(gR m/I₀).
+    pub p_radps: f64,
+    /// Eq. 24: e = 1 − (mRB/I₀) sin α.
+    pub restitution_eq24: f64,
+    /// Angle at which the block lies on its side after overturning.
+    pub lie_angle_rad: f64,
+}
+
+impl Block {
+    pub fn new(shape: Shape, mass_kg: f64, g_mps2: f64) -> Result<Self, String> {
+        let positive = |name: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("{name} must be a positive number, got {v}"))
+            }
+        };
+        positive("mass_kg", mass_kg)?;
+        positive("g", g_mps2)?;
+        let (half_base, cm_height, height, icm_per_kg, lie) = match shape {
+            Shape::Rectangular { b_m, h_m, f } => {
+                positive("B_m", b_m)?;
+                positive("H_m", h_m)?;
+                let hc = h_m * (0.5 + f);
+                if !(hc > 0.0 && hc < h_m) {
+                    return Err(format!("f = {f} puts the centre of mass outside the block (0 < H/2 + fH < H)"));
+                }
+                // Centroidal inertia of the uniform rectangle; f shifts the CM, not the inertia
+                // (the convention of the study's Table 5 and of the demo cases).
+                (0.5 * b_m, hc, h_m, (b_m * b_m + h_m * h_m) / 12.0, std::f64::consts::FRAC_PI_2)
+            }
+            Shape::Trapezoidal { b1_m, b2_m, h_m } => {
+                positive("B1_m", b1_m)?;
+                positive("B2_m", b2_m)?;
+                positive("H_m", h_m)?;
+                let (zc, icm) = trapezoid_centroid_and_inertia(b1_m, b2_m, h_m);
+                // The side face leans out by atan((B2 − B1)/2H); it meets the floor at π/2 − lean.
+                let lean = ((b2_m - b1_m) / (2.0 * h_m)).atan();
+                (0.5 * b1_m, zc, h_m, icm, std::f64::consts::FRAC_PI_2 - lean)
+            }
+        };
+        let r = half_base.hypot(cm_height);
+        let alpha = half_base.atan2(cm_height);
+        let i0_per_kg = icm_per_kg + r * r;
+        let p = (g_mps2 * r / i0_per_kg).sqrt();
+        let restitution = 1.0 - r * 2.0 * half_base / i0_per_kg * alpha.sin();
+        Ok(Block {
+            shape,
+            mass_kg,
+            g_mps2,
+            half_base_m: half_base,
+            cm_height_m: cm_height,
+            height_m: height,
+            r_m: r,
+            alpha_rad: alpha,
+            i0_per_kg,
+            p_radps: p,
+            restitution_eq24: restitution,
+            lie_angle_rad: lie,
+        })
+    }
+
+    /// Floor acceleration that uplifts the block at rest, for a vertical acceleration a_v.
+    pub fn uplift_threshold_mps2(&self, vertical_mps2: f64) -> f64 {
+        (self.g_mps2 + vertical_mps2) * self.alpha_rad.tan()
+    }
+}
+
+/// Centroid height and centroidal polar inertia per unit mass of a uniform trapezoidal lamina
+/// with base b1, top b2 and height h (width linear in height).
+fn trapezoid_centroid_and_inertia(b1: f64, b2: f64, h: f64) -> (f64, f64) {
+    let area = 0.5 * h * (b1 + b2);
+    let first_moment = h * h * (b1 / 2.0 + (b2 - b1) / 3.0);
+    let zc = first_moment / area;
+    // ∫ w(z)³/12 dz with w linear: h (b1+b2)(b1²+b2²)/4 /12.
+    let ixx = h * (b1 + b2) * (b1 * b1 + b2 * b2) / 48.0;
+    let izz = h.powi(3) * (b1 / 3.0 + (b2 - b1) / 4.0);
+    let i_origin = (ixx + izz) / area;
+    (zc, i_origin - zc * zc)
+}
+
+/// Named blocks of the study: Table 5 (rectangular and trapezoidal equivalents of PS2 and PB1,
+/// masses from Table 2) and the free-standing wire shelving WSU1 (Table 2: 0.66 m deep in the
+/// shaking direction, 1.88 m tall, 43.6 kg, centre of mass at mid-height).
+pub fn preset(name: &str) -> Option<(Shape, f64)> {
+    Some(match name {
+        "PS2" => (Shape::Rectangular { b_m: 0.349, h_m: 1.082, f: 0.0850 }, 150.0),
+        "PS2_trapezoid" => (Shape::Trapezoidal { b1_m: 0.349, b2_m: 1.082, h_m: 1.082 }, 150.0),
+        "PB1" => (Shape::Rectangular { b_m: 0.705, h_m: 1.500, f: 0.0526 }, 259.0),
+        "PB1_trapezoid" => (Shape::Trapezoidal { b1_m: 0.705, b2_m: 1.335, h_m: 1.500 }, 259.0),
+        "WSU1" => (Shape::Rectangular { b_m: 0.66, h_m: 1.88, f: 0.0 }, 43.6),
+        _ => return None,
+    })
+}
+
+pub const PRESETS: &[&str] = &["PS2", "PS2_trapezoid", "PB1", "PB1_trapezoid", "WSU1"];
+
+/// Tension anchors at both base corners (after Makris & Zhang 2001): each is slack in
+/// compression, elastic in tension up to its strength F (at the yield uplift of the heel),
+/// perfectly plastic up to a total elongation of μ times the yield elongation, then fractured.
+/// Plastic elongation is permanent: an anchor that yielded is slack until the heel lifts past it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Anchorage {
+    /// F/W: anchor strength over the block's weight.
+    pub strength_ratio: f64,
+    /// μ: elongation at fracture over elongation at yield.
+    pub ductility: f64,
+    /// Block rotation at which an anchor, loaded from slack, yields (θ_y; δ_y = B sin θ_y).
+    pub yield_rotation_rad: f64,
+}
+
+/// Linear isolation under the block: an SDOF of period T_b and damping ξ carries the block;
+/// the block's mass is taken as small against the isolated mass, so the base is not loaded back.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IsolatedBase {
+    pub period_s: f64,
+    pub damping_ratio: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Method {
+    /// Dormand–Prince 5(4), adaptive, events located on the dense output.
+    Adaptive { rtol: f64, atol_rad: f64 },
+    /// The study's classical RK4 at a fixed step, events located on a Hermite interpolant.
+    Rk4 { dt_s: f64 },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Options {
+    /// Coefficient of restitution; None uses Eq. 24.
+    pub restitution: Option<f64>,
+    pub anchorage: Option<Anchorage>,
+    pub isolated_base: Option<IsolatedBase>,
+    /// Height of the top accelerometer above the base; None: the top of the block.
+    pub sensor_height_m: Option<f64>,
+    /// After an impact slower than this the block is at rest again.
+    pub rest_velocity_radps: f64,
+    pub initial_theta_rad: f64,
+    pub initial_theta_dot_radps: f64,
+    pub method: Method,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            restitution: None,
+            anchorage: None,
+            isolated_base: None,
+            sensor_height_m: None,
+            rest_velocity_radps: 1e-6,
+            initial_theta_rad: 0.0,
+            initial_theta_dot_radps: 0.0,
+            method: Method::Adaptive { rtol: 1e-9, atol_rad: 1e-11 },
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EventKind {
+    Uplift,
+    Impact,
+    Rest,
+    AnchorYield,
+    AnchorFracture,
+    Overturn,
+}
+
+impl EventKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            EventKind::Uplift => "uplift",
+            EventKind::Impact => "impact",
+            EventKind::Rest => "rest",
+            EventKind::AnchorYield => "anchor_yield",
+            EventKind::AnchorFracture => "anchor_fracture",
+            EventKind::Overturn => "overturn",
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Event {
+    pub time_s: f64,
+    pub kind: EventKind,
+    /// Side (sign of θ) the block rocks on after the event (before it, for an overturn).
+    pub side: i8,
+    /// θ̇ just before and just after (equal except at impacts).
+    pub theta_dot_before: f64,
+    pub theta_dot_after: f64,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Response {
+    pub theta_rad: Vec<f64>,
+    pub theta_dot_radps: Vec<f64>,
+    pub theta_ddot_radps2: Vec<f64>,
+    /// Absolute horizontal acceleration of the top sensor point; after an overturn the sensor
+    /// lies along the vertical and records the floor's vertical acceleration (as PS2's did).
+    pub top_ax_mps2: Vec<f64>,
+    /// The horizontal acceleration under the block (the floor, or the isolated base).
+    pub base_ax_mps2: Vec<f64>,
+    pub events: Vec<Event>,
+    pub overturn: Option<(f64, i8)>,
+    pub stats: Stats,
+}
+
+impl Response {
+    pub fn count(&self, kind: EventKind) -> usize {
+        self.events.iter().filter(|e| e.kind == kind).count()
+    }
+
+    pub fn max_abs_theta(&self) -> f64 {
+        self.theta_rad.iter().fold(0.0, |m, t| m.max(t.abs()))
+    }
+}
+
+/// Floor motion sampled at a constant step: horizontal (in-plane) and optional vertical.
+#[derive(Clone, Copy, Debug)]
+pub struct Excitation<'a> {
+    pub t0_s: f64,
+    pub dt_s: f64,
+    pub horizontal_mps2: &'a [f64],
+    pub vertical_mps2: Option<&'a [f64]>,
+}
+
+/// The floor inside one sample interval: linear in time.
+#[derive(Clone, Copy, Debug)]
+struct Segment {
+    t0: f64,
+    ax0: f64,
+    ax_rate: f64,
+    av0: f64,
+    av_rate: f64,
+}
+
+impl Segment {
+    fn at(&self, t: f64) -> (f64, f64) {
+        let s = t - self.t0;
+        (self.ax0 + self.ax_rate * s, self.av0 + self.av_rate * s)
+    }
+}
+
+/// The anchorage in the quantities the equations use.
+#[derive(Clone, Copy, Debug)]
+struct AnchorLaw {
+    /// F/W.
+    strength_ratio: f64,
+    /// Heel uplift at which an anchor loaded from slack yields.
+    yield_m: f64,
+    /// Total elongation at fracture.
+    fracture_m: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum AnchorState {
+    /// Elastic in tension, slack below this permanent elongation.
+    Elastic {
+        plastic_m: f64,
+    },
+    /// Yielding at the full strength while the heel keeps rising.
+    Plastic,
+    Fractured,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Regime {
+    Rest,
+    Rocking { side: i8 },
+    Overturned,
+}
+
+/// The rocking equations on one side, over one floor segment, with the heel anchor's state.
+struct RockingOnSide<'a> {
+    block: &'a Block,
+    side: f64,
+    seg: Segment,
+    anchor: Option<(AnchorLaw, AnchorState)>,
+}
+
+impl RockingOnSide<'_> {
+    /// Heel uplift = elongation of the heel anchor.
+    fn heel_uplift(&self, theta: f64) -> f64 {
+        2.0 * self.block.half_base_m * (self.side * theta).max(0.0).sin()
+    }
+
+    fn theta_ddot(&self, t: f64, y: &[f64; 2]) -> f64 {
+        let b = self.block;
+        let (ax, av) = self.seg.at(t);
+        let (sin, cos) = (self.side * b.alpha_rad - y[0]).sin_cos();
+        let mut acc = -(b.r_m / b.i0_per_kg) * ((b.g_mps2 + av) * sin + ax * cos);
+        if let Some((law, state)) = self.anchor {
+            let force_ratio = match state {
+                AnchorState::Elastic { plastic_m } => {
+                    law.strength_ratio * ((self.heel_uplift(y[0]) - plastic_m) / law.yield_m).clamp(0.0, 1.0)
+                }
+                AnchorState::Plastic => law.strength_ratio,
+                AnchorState::Fractured => 0.0,
+            };
+            // The anchor pulls the heel down, a lever 2b·cos θ from the pivot.
+            acc -= self.side * force_ratio * b.g_mps2 * 2.0 * b.half_base_m * y[0].cos() / b.i0_per_kg;
+        }
+        acc
+    }
+
+    /// Event functions, positive while nothing happens: 0 impact (θ back to 0), 1 overturn,
+    /// 2 the heel anchor yields, 3 the yielding anchor unloads, 4 it fractures.
+    fn events(&self, y: &[f64; 2]) -> [f64; 5] {
+        let s = self.side;
+        let mut g = [s * y[0], self.block.lie_angle_rad - s * y[0], 1.0, 1.0, 1.0];
+        if let Some((law, state)) = self.anchor {
+            let uplift = self.heel_uplift(y[0]);
+            match state {
+                AnchorState::Elastic { plastic_m } => g[2] = law.yield_m - (uplift - plastic_m),
+                AnchorState::Plastic => {
+                    g[3] = s * y[1];
+                    g[4] = law.fracture_m - uplift;
+                }
+                AnchorState::Fractured => {}
+            }
+        }
+        g
+    }
+}
+
+/// The first time in [t, t_end] at which the floor uplifts a block at rest, and the side.
+fn uplift_time(block: &Block, seg: &Segment, t: f64, t_end: f64) -> Option<(f64, i8)> {
+    let tan = block.alpha_rad.tan();
+    // φ_s > 0 uplifts toward side s; linear in time inside the segment.
+    let phi = |time: f64, s: f64| {
+        let (ax, av) = seg.at(time);
+        -s * ax - (block.g_mps2 + av) * tan
+    };
+    let mut first: Option<(f64, i8)> = None;
+    for side in [1i8, -1] {
+        let s = f64::from(side);
+        let (p0, p1) = (phi(t, s), phi(t_end, s));
+        let when = if p0 > 0.0 {
+            Some(t)
+        } else if p1 > 0.0 {
+            Some((t + p0 / (p0 - p1) * (t_end - t)).clamp(t, t_end))
+        } else {
+            None
+        };
+        if let Some(tu) = when {
+            if first.is_none_or(|(tf, _)| tu < tf) {
+                first = Some((tu, side));
+            }
+        }
+    }
+    first
+}
+
+/// Simulates the block under the floor motion; outputs are on the input time base.
+pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -> Result<Response, String> {
+    let n = excitation.horizontal_mps2.len();
+    let dt = excitation.dt_s;
+    if n < 2 {
+        return Err(format!("the floor record has {n} sample(s); at least 2 are needed"));
+    }
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(format!("the sample interval must be positive, got {dt} s"));
+    }
+    if let Some(v) = excitation.vertical_mps2 {
+        if v.len() != n {
+            return Err(format!("horizontal and vertical records differ in length ({n} vs {})", v.len()));
+        }
+    }
+    let vertical = |k: usize| excitation.vertical_mps2.map_or(0.0, |v| v[k]);
+    for k in 0..n {
+        let (ax, av) = (excitation.horizontal_mps2[k], vertical(k));
+        if !ax.is_finite() || !av.is_finite() {
+            return Err(format!("sample {k} (t = {} s) is not a finite number", excitation.t0_s + k as f64 * dt));
+        }
+        if block.g_mps2 + av <= 0.0 {
+            return Err(format!(
+                "at t = {} s the floor falls faster than gravity (vertical {av} m/s^2): the block would fly, which the model does not cover",
+                excitation.t0_s + k as f64 * dt
+            ));
+        }
+    }
+    if let Some(e) = options.restitution {
+        if !(0.0..=1.0).contains(&e) {
+            return Err(format!("the coefficient of restitution must be within 0..1, got {e}"));
+        }
+    }
+    let base_ax = match options.isolated_base {
+        Some(iso) => {
+            if !(iso.period_s > 0.0 && (0.0..1.0).contains(&iso.damping_ratio)) {
+                return Err(format!(
+                    "the isolated base needs a positive period and a damping ratio in [0, 1), got T_b = {} s, ξ = {}",
+                    iso.period_s, iso.damping_ratio
+                ));
+            }
+            Sdof::new(1.0 / iso.period_s, iso.damping_ratio).absolute_acceleration(excitation.horizontal_mps2, dt)
+        }
+        None => excitation.horizontal_mps2.to_vec(),
+    };
+    let anchor = match options.anchorage {
+        Some(a) => {
+            if !(a.strength_ratio > 0.0 && a.ductility >= 1.0 && a.yield_rotation_rad > 0.0) {
+                return Err(format!(
+                    "the anchorage needs F/W > 0, ductility ≥ 1 and a positive yield rotation, got {a:?}"
+                ));
+            }
+            let yield_m = 2.0 * block.half_base_m * a.yield_rotation_rad.sin();
+            Some(AnchorLaw { strength_ratio: a.strength_ratio, yield_m, fracture_m: a.ductility * yield_m })
+        }
+        None => None,
+    };
+    let setup = Setup { block, excitation, base_ax: &base_ax, options, anchor };
+    match options.method {
+        Method::Adaptive { rtol, atol_rad } => setup.run(Dopri5::new(rtol, [atol_rad, atol_rad * block.p_radps], dt)),
+        Method::Rk4 { dt_s } => setup.run(Rk4::new(dt_s)),
+    }
+}
+
+struct Setup<'a> {
+    block: &'a Block,
+    excitation: &'a Excitation<'a>,
+    base_ax: &'a [f64],
+    options: &'a Options,
+    anchor: Option<AnchorLaw>,
+}
+
+/// Impacts and regime changes allowed within one sample interval before the run is declared
+/// stuck (impact chatter that the rest criterion should have ended).
+const MAX_TRANSITIONS_PER_SAMPLE: usize = 10_000;
+
+impl Setup<'_> {
+    fn run<S: Stepper<2>>(&self, mut stepper: S) -> Result<Response, String> {
+        let block = self.block;
+        let exc = self.excitation;
+        let n = self.base_ax.len();
+        let dt = exc.dt_s;
+        let vertical = |k: usize| exc.vertical_mps2.map_or(0.0, |v| v[k]);
+        let restitution = self.options.restitution.unwrap_or(block.restitution_eq24);
+        let sensor_h = self.options.sensor_height_m.unwrap_or(block.height_m);
+        let mut response = Response {
+            theta_rad: Vec::with_capacity(n),
+            theta_dot_radps: Vec::with_capacity(n),
+            theta_ddot_radps2: Vec::with_capacity(n),
+            top_ax_mps2: Vec::with_capacity(n),
+            base_ax_mps2: self.base_ax.to_vec(),
+            events: Vec::new(),
+            overturn: None,
+            stats: Stats::default(),
+        };
+        let mut y = [self.options.initial_theta_rad, self.options.initial_theta_dot_radps];
+        let mut regime = match (y[0], y[1]) {
+            (th, _) if th != 0.0 => Regime::Rocking { side: th.signum() as i8 },
+            (_, w) if w != 0.0 => Regime::Rocking { side: w.signum() as i8 },
+            _ => Regime::Rest,
+        };
+        // Anchor at the −x corner (heel when pivoting on +x) and at the +x corner.
+        let mut anchors = [AnchorState::Elastic { plastic_m: 0.0 }; 2];
+        let heel = |side: i8| usize::from(side < 0);
+        let segment = |k: usize| {
+            let k1 = (k + 1).min(n - 1);
+            Segment {
+                t0: exc.t0_s + k as f64 * dt,
+                ax0: self.base_ax[k],
+                ax_rate: (self.base_ax[k1] - self.base_ax[k]) / dt,
+                av0: vertical(k),
+                av_rate: (vertical(k1) - vertical(k)) / dt,
+            }
+        };
+        let on_side = |side: i8, seg: Segment, anchors: &[AnchorState; 2]| RockingOnSide {
+            block,
+            side: f64::from(side),
+            seg,
+            anchor: self.anchor.map(|law| (law, anchors[heel(side)])),
+        };
+        let mut record =
+            |response: &mut Response, k: usize, regime: Regime, y: [f64; 2], anchors: &[AnchorState; 2]| {
+                let (ax, av) = (self.base_ax[k], vertical(k));
+                let (theta_ddot, top) = match regime {
+                    Regime::Rest => (0.0, ax),
+                    Regime::Overturned => (0.0, av),
+                    Regime::Rocking { side } => {
+                        let model = on_side(side, segment(k), anchors);
+                        let acc = model.theta_ddot(exc.t0_s + k as f64 * dt, &y);
+                        let (sin, cos) = y[0].sin_cos();
+                        let sb = model.side * block.half_base_m;
+                        (acc, ax + (sb * sin + sensor_h * cos) * acc + (sb * cos - sensor_h * sin) * y[1] * y[1])
+                    }
+                };
+                response.theta_rad.push(y[0]);
+                response.theta_dot_radps.push(y[1]);
+                response.theta_ddot_radps2.push(theta_ddot);
+                response.top_ax_mps2.push(top);
+            };
+        record(&mut response, 0, regime, y, &anchors);
+        let push = |response: &mut Response, time_s: f64, kind: EventKind, side: i8, before: f64, after: f64| {
+            response.events.push(Event { time_s, kind, side, theta_dot_before: before, theta_dot_after: after });
+        };
+        for k in 0..n - 1 {
+            let seg = segment(k);
+            let t_end = exc.t0_s + (k + 1) as f64 * dt;
+            let mut t = seg.t0;
+            let mut transitions = 0;
+            while t < t_end {
+                transitions += 1;
+                if transitions > MAX_TRANSITIONS_PER_SAMPLE {
+                    return Err(format!(
+                        "impact chatter near t = {t:.4} s did not settle; raise `rest_velocity_radps` (now {})",
+                        self.options.rest_velocity_radps
+                    ));
+                }
+                match regime {
+                    Regime::Overturned => t = t_end,
+                    Regime::Rest => match uplift_time(block, &seg, t, t_end) {
+                        Some((tu, side)) => {
+                            regime = Regime::Rocking { side };
+                            y = [0.0, 0.0];
+                            t = tu;
+                            stepper.reset();
+                            push(&mut response, tu, EventKind::Uplift, side, 0.0, 0.0);
+                        }
+                        None => t = t_end,
+                    },
+                    Regime::Rocking { side } => {
+                        let model = on_side(side, seg, &anchors);
+                        let outcome =
+                            stepper.advance(&|t, y: &[f64; 2]| [y[1], model.theta_ddot(t, y)], t, y, t_end, &|_, y| {
+                                model.events(y)
+                            });
+                        match outcome {
+                            Advance::Reached(y1) => {
+                                y = y1;
+                                t = t_end;
+                            }
+                            Advance::Event { index, t: te, y: ye } => {
+                                let immediate = te <= t;
+                                t = te;
+                                y = ye;
+                                stepper.reset();
+                                match index {
+                                    0 => {
+                                        let before = ye[1];
+                                        let after = restitution * before;
+                                        if immediate || after.abs() < self.options.rest_velocity_radps {
+                                            // The rebound cannot lift the block: it sits down.
+                                            regime = Regime::Rest;
+                                            y = [0.0, 0.0];
+                                            push(&mut response, te, EventKind::Rest, 0, before, 0.0);
+                                        } else {
+                                            regime = Regime::Rocking { side: -side };
+                                            y = [0.0, after];
+                                            push(&mut response, te, EventKind::Impact, -side, before, after);
+                                        }
+                                    }
+                                    1 => {
+                                        regime = Regime::Overturned;
+                                        y = [f64::from(side) * block.lie_angle_rad, 0.0];
+                                        response.overturn = Some((te, side));
+                                        push(&mut response, te, EventKind::Overturn, side, ye[1], 0.0);
+                                    }
+                                    2 => {
+                                        anchors[heel(side)] = AnchorState::Plastic;
+                                        push(&mut response, te, EventKind::AnchorYield, side, ye[1], ye[1]);
+                                    }
+                                    3 => {
+                                        let law = self.anchor.expect("only anchored blocks unload anchors");
+                                        let uplift = model.heel_uplift(ye[0]);
+                                        anchors[heel(side)] = AnchorState::Elastic { plastic_m: uplift - law.yield_m };
+                                    }
+                                    _ => {
+                                        anchors[heel(side)] = AnchorState::Fractured;
+                                        push(&mut response, te, EventKind::AnchorFracture, side, ye[1], ye[1]);
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            record(&mut response, k + 1, regime, y, &anchors);
+        }
+        response.stats = stepper.stats();
+        Ok(response)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const G: f64 = 9.81;
+
+    fn rectangle(b: f64, h: f64, f: f64) -> Block {
+        Block::new(Shape::Rectangular { b_m: b, h_m: h, f }, 100.0, G).unwrap()
+    }
+
+    fn quiet_floor(n: usize) -> Vec<f64> {
+        vec![0.0; n]
+    }
+
+    #[test]
+    fn derived_quantities_match_the_demo_cases_equipment_files() {
+        // ../shared/cases/demo/demo_01/equipment.yaml (PS2, written by an independent generator):
+        // hc 0.63297, alpha 0.269002, R 0.656583, I0 80.8218 kg m^2 (150 kg), p 3.45749, e 0.886973.
+        let b = Block::new(Shape::Rectangular { b_m: 0.349, h_m: 1.082, f: 0.085 }, 150.0, G).unwrap();
+        assert!((b.cm_height_m - 0.63297).abs() < 5e-6);
+        assert!((b.alpha_rad - 0.269002).abs() < 5e-7);
+        assert!((b.r_m - 0.656583).abs() < 5e-7);
+        assert!((b.i0_per_kg * 150.0 - 80.8218).abs() < 5e-5);
+        assert!((b.p_radps - 3.45749).abs() < 5e-6);
+        assert!((b.restitution_eq24 - 0.886973).abs() < 5e-7);
+        // A centred rectangle: e = 1 − 1.5 sin²α (SEED-SUMMARY.md, Eq. 24).
+        let c = rectangle(0.66, 1.88, 0.0);
+        assert!((c.restitution_eq24 - (1.0 - 1.5 * c.alpha_rad.sin().powi(2))).abs() < 1e-14);
+    }
+
+    #[test]
+    fn trapezoids_reduce_to_rectangles_and_match_table_5_equivalents() {
+        let square = Block::new(Shape::Trapezoidal { b1_m: 0.5, b2_m: 0.5, h_m: 1.5 }, 1.0, G).unwrap();
+        let rect = rectangle(0.5, 1.5, 0.0);
+        assert!((square.i0_per_kg - rect.i0_per_kg).abs() < 1e-14);
+        assert!((square.cm_height_m - rect.cm_height_m).abs() < 1e-15);
+        assert_eq!(square.lie_angle_rad, std::f64::consts::FRAC_PI_2);
+        // Table 5 gives each trapezoid a rectangle with the same base, height and CM height
+        // (f printed to 3 digits): Z_c = H (0.5 + f) within that rounding (0.3 %).
+        for (trap, rect) in [("PS2_trapezoid", "PS2"), ("PB1_trapezoid", "PB1")] {
+            let (ts, m) = preset(trap).unwrap();
+            let (rs, _) = preset(rect).unwrap();
+            let (t, r) = (Block::new(ts, m, G).unwrap(), Block::new(rs, m, G).unwrap());
+            let rel = (t.cm_height_m - r.cm_height_m).abs() / r.cm_height_m;
+            assert!(rel < 3e-3, "{trap}: Z_c {} vs {} ({rel})", t.cm_height_m, r.cm_height_m);
+            assert_eq!(t.half_base_m, r.half_base_m);
+        }
+    }
+
+    /// Housner (1963): free rocking from rest at θ₀ reaches θ = 0 after
+    /// t = ∫₀^θ₀ dθ / √(2p²[cos(α − θ) − cos(α − θ₀)]) (energy conservation), which for slender
+    /// blocks is acosh(1/(1 − θ₀/α))/p.
+    fn housner_quarter_period(p: f64, alpha: f64, theta0: f64) -> f64 {
+        // θ = θ₀ − w² removes the endpoint singularity; composite Gauss–Legendre on w.
+        let integrand = |w: f64| {
+            let th = theta0 - w * w;
+            let d = (alpha - theta0).cos() - (alpha - th).cos();
+            if w == 0.0 {
+                2.0 / (2.0 * p * p * (alpha - theta0).sin()).sqrt()
+            } else {
+                2.0 * w / (2.0 * p * p * d).sqrt()
+            }
+        };
+        let (nodes, weights) = (
+            [-0.906179845938664, -0.538469310105683, 0.0, 0.538469310105683, 0.906179845938664],
+            [0.236926885056189, 0.478628670499366, 0.568888888888889, 0.478628670499366, 0.236926885056189],
+        );
+        let (a, b, panels) = (0.0, theta0.sqrt(), 400);
+        let h = (b - a) / panels as f64;
+        (0..panels)
+            .map(|i| {
+                let mid = a + (i as f64 + 0.5) * h;
+                nodes.iter().zip(&weights).map(|(x, w)| w * integrand(mid + 0.5 * h * x)).sum::<f64>() * 0.5 * h
+            })
+            .sum()
+    }
+
+    #[test]
+    fn free_rocking_matches_housner_and_loses_eq24_velocity_at_each_impact() {
+        for (b, h, f, ratio) in [(0.349, 1.082, 0.085, 0.5), (0.2, 4.0, 0.0, 0.8), (0.66, 1.88, 0.0, 0.3)] {
+            let block = rectangle(b, h, f);
+            let theta0 = ratio * block.alpha_rad;
+            let dt = 0.005;
+            let floor = quiet_floor(2000);
+            let options = Options { initial_theta_rad: theta0, ..Options::default() };
+            let r = simulate(
+                &block,
+                &Excitation { t0_s: 0.0, dt_s: dt, horizontal_mps2: &floor, vertical_mps2: None },
+                &options,
+            )
+            .unwrap();
+            let impacts: Vec<&Event> = r.events.iter().filter(|e| e.kind == EventKind::Impact).collect();
+            assert!(impacts.len() >= 3, "{:?}", r.events);
+            let expected = housner_quarter_period(block.p_radps, block.alpha_rad, theta0);
+            assert!(
+                (impacts[0].time_s - expected).abs() < 1e-8,
+                "first impact at {} s, Housner {expected} s",
+                impacts[0].time_s
+            );
+            if block.alpha_rad < 0.06 {
+                // The slender-block closed form holds to O(α²).
+                let linear = (1.0 / (1.0 - ratio)).acosh() / block.p_radps;
+                assert!((impacts[0].time_s - linear).abs() / linear < block.alpha_rad.powi(2));
+            }
+            for e in &impacts {
+                let measured = e.theta_dot_after / e.theta_dot_before;
+                assert!((measured - block.restitution_eq24).abs() < 1e-12, "velocity ratio {measured}");
+                // θ̇ keeps its sign through the impact: the block swings on onto the other corner.
+                assert!(e.theta_dot_before * f64::from(e.side) > 0.0);
+            }
+            assert!(r.overturn.is_none());
+        }
+    }
+
+    #[test]
+    fn below_the_uplift_threshold_the_block_never_moves() {
+        let block = rectangle(0.349, 1.082, 0.085);
+        let threshold = block.uplift_threshold_mps2(0.0);
+        let n = 4000;
+        let floor: Vec<f64> = (0..n).map(|k| 0.999 * threshold * (k as f64 * 0.01).sin()).collect();
+        let r = simulate(
+            &block,
+            &Excitation { t0_s: 0.0, dt_s: 0.005, horizontal_mps2: &floor, vertical_mps2: None },
+            &Options::default(),
+        )
+        .unwrap();
+        assert!(r.theta_rad.iter().chain(&r.theta_dot_radps).all(|&v| v == 0.0));
+        assert_eq!(r.top_ax_mps2, floor, "at rest the top moves with the floor");
+        assert!(r.events.is_empty());
+        // Just above, it uplifts exactly where the linear floor crosses the threshold.
+        let floor: Vec<f64> = (0..n).map(|k| -1.001 * threshold * (k as f64 * 0.01).sin()).collect();
+        let r = simulate(
+            &block,
+            &Excitation { t0_s: 0.0, dt_s: 0.005, horizontal_mps2: &floor, vertical_mps2: None },
+            &Options::default(),
+        )
+        .unwrap();
+        let first = r.events[0];
+        assert_eq!((first.kind, first.side), (EventKind::Uplift, 1));
+        let k = (first.time_s / 0.005).floor() as usize;
+        assert!(-floor[k] <= threshold && -floor[k + 1] > threshold);
+    }
+
+    #[test]
+    fn mirrored_floor_gives_a_mirrored_response() {
+        let block = rectangle(0.8, 4.0, 0.03);
+        let n = 3000;
+        // Two seconds of 3 Hz shaking at 1.5 times the uplift threshold, then free rocking.
+        let floor: Vec<f64> = (0..n)
+            .map(|k| {
+                let t = k as f64 * 0.005;
+                if t < 2.0 {
+                    3.0 * (6.0 * std::f64::consts::PI * t).sin() + 0.5 * (23.0 * t).sin()
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let vertical: Vec<f64> = (0..n).map(|k| 0.8 * (11.0 * k as f64 * 0.005).sin()).collect();
+        let mirrored: Vec<f64> = floor.iter().map(|v| -v).collect();
+        let run = |h: &[f64]| {
+            simulate(
+                &block,
+                &Excitation { t0_s: 0.0, dt_s: 0.005, horizontal_mps2: h, vertical_mps2: Some(&vertical) },
+                &Options::default(),
+            )
+            .unwrap()
+        };
+        let (a, b) = (run(&floor), run(&mirrored));
+        assert!(a.count(EventKind::Impact) > 3, "{:?}", a.events);
+        for (x, y) in a.theta_rad.iter().zip(&b.theta_rad) {
+            assert!((x + y).abs() < 1e-12, "{x} vs {y}");
+        }
+        assert_eq!(a.events.len(), b.events.len());
+    }
+
+    #[test]
+    fn adaptive_and_rk4_agree() {
+        let block = rectangle(0.349, 1.082, 0.085);
+        let n = 4000;
+        let floor: Vec<f64> = (0..n)
+            .map(|k| {
+                let t = k as f64 * 0.005;
+                4.5 * (3.0 * t).sin() * (-0.1 * t).exp()
+            })
+            .collect();
+        let exc = Excitation { t0_s: 0.0, dt_s: 0.005, horizontal_mps2: &floor, vertical_mps2: None };
+        let adaptive = simulate(&block, &exc, &Options::default()).unwrap();
+        let rk4 =
+            simulate(&block, &exc, &Options { method: Method::Rk4 { dt_s: 1e-4 }, ..Options::default() }).unwrap();
+        let kinds = |r: &Response| r.events.iter().map(|e| (e.kind, e.side)).collect::<Vec<_>>();
+        assert_eq!(kinds(&adaptive), kinds(&rk4));
+        let max_diff = adaptive.theta_rad.iter().zip(&rk4.theta_rad).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(max_diff < 1e-6, "max |Δθ| = {max_diff}");
+        assert!(adaptive.stats.rhs_evals * 20 < rk4.stats.rhs_evals, "{:?} vs {:?}", adaptive.stats, rk4.stats);
+    }
+
+    #[test]
+    fn a_strong_pulse_overturns_toward_the_side_it_throws_the_block() {
+        let block = rectangle(0.349, 1.082, 0.085);
+        let n = 1000;
+        // A long push toward +x throws the block toward −x.
+        let floor: Vec<f64> = (0..n).map(|k| if k < 200 { 8.0 } else { 0.0 }).collect();
+        let r = simulate(
+            &block,
+            &Excitation { t0_s: 0.0, dt_s: 0.005, horizontal_mps2: &floor, vertical_mps2: None },
+            &Options::default(),
+        )
+        .unwrap();
+        let (time, side) = r.overturn.expect("overturns");
+        assert_eq!(side, -1);
+        assert!(time > 0.0 && time < 5.0);
+        let last = *r.theta_rad.last().unwrap();
+        assert_eq!(last, -std::f64::consts::FRAC_PI_2);
+        assert_eq!(*r.top_ax_mps2.last().unwrap(), 0.0, "after overturn the sensor reads the (zero) vertical floor");
+    }
+}
