@@ -300,7 +300,7 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
             (params, stage_inputs)
         }
     };
-    let input_hashes: BTreeMap<String, String> = stage_inputs
+    let mut input_hashes: BTreeMap<String, String> = stage_inputs
         .iter()
         .map(|i| {
             (
@@ -309,13 +309,19 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
             )
         })
         .collect();
+    let base_dir = PathBuf::from(".");
+    for (key, path) in params::file_params(info.params, &params) {
+        let hash = hash::hash_file(&base_dir.join(path)).with_context(|| format!("`--set {key}={path}`"))?;
+        input_hashes.insert(params::file_param_label(key), hash);
+    }
     let parent = output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     std::fs::create_dir_all(parent).with_context(|| format!("cannot create `{}`", parent.display()))?;
     let staging = crate::io::atomic::temp_sibling(output);
     let reporter = Reporter::new(false);
     let records: usize = stage_inputs.iter().map(|i| i.parts().len()).sum();
     let sink = OutputSink::new(&staging, name, info, &params, &input_hashes, reporter.stage_bar(name, records as u64));
-    let ctx = StageContext { stage_name: name, params: &params, inputs: &stage_inputs, sink: &sink };
+    let ctx =
+        StageContext { stage_name: name, params: &params, inputs: &stage_inputs, sink: &sink, base_dir: &base_dir };
     let result = stage.run(&ctx).and_then(|()| {
         for o in info.outputs {
             std::fs::create_dir_all(staging.join(o.name))?;

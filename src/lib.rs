@@ -12,5 +12,6 @@ pub mod plot;
 pub mod schema;
 pub mod signal;
 pub mod stages;
+pub mod stats;
 pub mod table;
 pub mod units;

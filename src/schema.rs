@@ -11,18 +11,23 @@ fn param_schema(p: &ParamSpec) -> Value {
         ParamKind::Float => json!({"type": "number"}),
         ParamKind::Int => json!({"type": "integer"}),
         ParamKind::Bool => json!({"type": "boolean"}),
-        ParamKind::Str => json!({"type": "string"}),
+        ParamKind::Str | ParamKind::File => json!({"type": "string"}),
         ParamKind::Choice(options) => json!({"enum": options}),
         ParamKind::StrList => json!({"type": "array", "items": {"type": "string"}}),
+        ParamKind::FloatList => json!({"type": "array", "items": {"type": "number"}}),
     };
     let unit = if p.unit.is_empty() { String::new() } else { format!(" [{}]", p.unit) };
     s["description"] = Value::from(format!("{}{unit}", p.description));
     if let Some(default) = p.default {
         s["default"] = serde_json::from_str(default).expect("defaults are valid JSON");
     }
-    if let (Some((lo, hi)), ParamKind::Float | ParamKind::Int) = (p.range, p.kind) {
-        s["minimum"] = json!(lo);
-        s["maximum"] = json!(hi);
+    match (p.range, p.kind) {
+        (Some((lo, hi)), ParamKind::Float | ParamKind::Int) => {
+            s["minimum"] = json!(lo);
+            s["maximum"] = json!(hi);
+        }
+        (Some((lo, hi)), ParamKind::FloatList) => s["items"] = json!({"type": "number", "minimum": lo, "maximum": hi}),
+        _ => {}
     }
     s
 }

@@ -115,9 +115,30 @@ impl Table {
 /// The name of the time column every time-series table starts with.
 pub const TIME_COLUMN: &str = "time_s";
 
+/// The mean step when every step is within a small tolerance of it; else the index of the first bad step.
+pub fn uniform_step(time: &[f64]) -> Result<f64, usize> {
+    let n = time.len();
+    let dt = (time[n - 1] - time[0]) / (n - 1) as f64;
+    // Text files round time to a few decimals: allow that rounding, not a real jitter.
+    let tolerance = 1e-3 * dt + 2e-6;
+    match time.windows(2).position(|w| !(dt > 0.0 && ((w[1] - w[0]) - dt).abs() <= tolerance)) {
+        None => Ok(dt),
+        Some(i) => Err(i),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn uniform_check_tolerates_rounding_but_not_jitter() {
+        let rounded: Vec<f64> = (0..1000).map(|i| ((i as f64 / 256.0) * 1e6).round() / 1e6).collect();
+        assert!((uniform_step(&rounded).unwrap() - 1.0 / 256.0).abs() < 1e-9);
+        let mut jittered = rounded.clone();
+        jittered[500] += 0.001;
+        assert_eq!(uniform_step(&jittered), Err(499));
+    }
 
     #[test]
     #[should_panic(expected = "has 2 rows but the table has 3")]

@@ -524,25 +524,24 @@ impl Setup<'_> {
             seg,
             anchor: self.anchor.map(|law| (law, anchors[heel(side)])),
         };
-        let mut record =
-            |response: &mut Response, k: usize, regime: Regime, y: [f64; 2], anchors: &[AnchorState; 2]| {
-                let (ax, av) = (self.base_ax[k], vertical(k));
-                let (theta_ddot, top) = match regime {
-                    Regime::Rest => (0.0, ax),
-                    Regime::Overturned => (0.0, av),
-                    Regime::Rocking { side } => {
-                        let model = on_side(side, segment(k), anchors);
-                        let acc = model.theta_ddot(exc.t0_s + k as f64 * dt, &y);
-                        let (sin, cos) = y[0].sin_cos();
-                        let sb = model.side * block.half_base_m;
-                        (acc, ax + (sb * sin + sensor_h * cos) * acc + (sb * cos - sensor_h * sin) * y[1] * y[1])
-                    }
-                };
-                response.theta_rad.push(y[0]);
-                response.theta_dot_radps.push(y[1]);
-                response.theta_ddot_radps2.push(theta_ddot);
-                response.top_ax_mps2.push(top);
+        let record = |response: &mut Response, k: usize, regime: Regime, y: [f64; 2], anchors: &[AnchorState; 2]| {
+            let (ax, av) = (self.base_ax[k], vertical(k));
+            let (theta_ddot, top) = match regime {
+                Regime::Rest => (0.0, ax),
+                Regime::Overturned => (0.0, av),
+                Regime::Rocking { side } => {
+                    let model = on_side(side, segment(k), anchors);
+                    let acc = model.theta_ddot(exc.t0_s + k as f64 * dt, &y);
+                    let (sin, cos) = y[0].sin_cos();
+                    let sb = model.side * block.half_base_m;
+                    (acc, ax + (sb * sin + sensor_h * cos) * acc + (sb * cos - sensor_h * sin) * y[1] * y[1])
+                }
             };
+            response.theta_rad.push(y[0]);
+            response.theta_dot_radps.push(y[1]);
+            response.theta_ddot_radps2.push(theta_ddot);
+            response.top_ax_mps2.push(top);
+        };
         record(&mut response, 0, regime, y, &anchors);
         let push = |response: &mut Response, time_s: f64, kind: EventKind, side: i8, before: f64, after: f64| {
             response.events.push(Event { time_s, kind, side, theta_dot_before: before, theta_dot_after: after });

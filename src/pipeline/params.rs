@@ -16,6 +16,11 @@ pub enum ParamKind {
     Choice(&'static [&'static str]),
     /// A list of names (e.g. columns); empty means "all".
     StrList,
+    /// A list of numbers (e.g. scale factors).
+    FloatList,
+    /// A file the stage reads (e.g. an equipment description), relative to the pipeline file.
+    /// Its content is hashed into the stage's inputs, so editing the file reruns the stage.
+    File,
 }
 
 impl ParamKind {
@@ -27,6 +32,8 @@ impl ParamKind {
             ParamKind::Str => "text".into(),
             ParamKind::Choice(options) => options.join("|"),
             ParamKind::StrList => "list of names".into(),
+            ParamKind::FloatList => "list of numbers".into(),
+            ParamKind::File => "path of a file, relative to the pipeline file".into(),
         }
     }
 }
@@ -116,10 +123,15 @@ fn check(spec: &ParamSpec, value: Value) -> Result<Value, String> {
         ParamKind::Float => value.as_f64().map(Value::from).ok_or("expected a number")?,
         ParamKind::Int => value.as_i64().map(Value::from).ok_or("expected a whole number")?,
         ParamKind::Bool => value.as_bool().map(Value::from).ok_or("expected true or false")?,
-        ParamKind::Str => value.as_str().map(Value::from).ok_or("expected text")?,
+        ParamKind::Str | ParamKind::File => value.as_str().map(Value::from).ok_or("expected text")?,
         ParamKind::Choice(options) => match value.as_str() {
             Some(s) if options.contains(&s) => Value::from(s),
             _ => return Err(format!("expected one of {}, found {value}", options.join(", "))),
+        },
+        ParamKind::FloatList => match &value {
+            Value::Number(_) => Value::from(vec![value.clone()]),
+            Value::Array(items) if items.iter().all(Value::is_number) => value,
+            _ => return Err("expected a list of numbers".into()),
         },
         ParamKind::StrList => match &value {
             Value::String(s) => Value::from(vec![s.clone()]),
@@ -127,8 +139,12 @@ fn check(spec: &ParamSpec, value: Value) -> Result<Value, String> {
             _ => return Err("expected a list of names".into()),
         },
     };
-    if let (Some((lo, hi)), Some(x)) = (spec.range, checked.as_f64()) {
-        if !(lo..=hi).contains(&x) {
+    if let Some((lo, hi)) = spec.range {
+        let numbers = match &checked {
+            Value::Array(items) => items.iter().filter_map(Value::as_f64).collect(),
+            other => other.as_f64().into_iter().collect::<Vec<_>>(),
+        };
+        if let Some(x) = numbers.into_iter().find(|x| !(lo..=hi).contains(x)) {
             return Err(format!("{x} is outside the allowed range {lo} to {hi}"));
         }
     }
@@ -148,6 +164,20 @@ pub fn parse_set(assignment: &str) -> Result<(String, Value), String> {
     Ok((key.trim().to_string(), yaml_to_json(&yaml)))
 }
 
+/// The files named by `File` parameters (set, not null), as (parameter, path relative to `base`).
+pub fn file_params<'p>(specs: &[ParamSpec], params: &'p Params) -> Vec<(&'static str, &'p str)> {
+    specs
+        .iter()
+        .filter(|s| s.kind == ParamKind::File)
+        .filter_map(|s| params.get(s.name).and_then(Value::as_str).map(|path| (s.name, path)))
+        .collect()
+}
+
+/// The input label under which a file parameter's content hash is recorded.
+pub fn file_param_label(name: &str) -> String {
+    format!("params.{name}")
+}
+
 /// Typed access for stage implementations; the values were checked by `normalize`.
 pub trait ParamsExt {
     fn f64_of(&self, key: &str) -> f64;
@@ -155,6 +185,7 @@ pub trait ParamsExt {
     fn bool_of(&self, key: &str) -> bool;
     fn str_of(&self, key: &str) -> &str;
     fn list_of(&self, key: &str) -> Vec<String>;
+    fn f64_list_of(&self, key: &str) -> Vec<f64>;
 }
 
 impl ParamsExt for Params {
@@ -169,6 +200,9 @@ impl ParamsExt for Params {
     }
     fn str_of(&self, key: &str) -> &str {
         self[key].as_str().unwrap_or_else(|| panic!("parameter `{key}` was normalised as text"))
+    }
+    fn f64_list_of(&self, key: &str) -> Vec<f64> {
+        self[key].as_array().map(|a| a.iter().filter_map(Value::as_f64).collect()).unwrap_or_default()
     }
     fn list_of(&self, key: &str) -> Vec<String> {
         self[key]

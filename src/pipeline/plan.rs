@@ -70,6 +70,13 @@ impl Plan {
                 };
                 UserError::new(e.message).in_file(&file.path).at(position).hint(e.hint)
             })?;
+            for (key, path) in params::file_params(info.params, &params) {
+                if !file.base_dir().join(path).is_file() {
+                    return Err(file
+                        .error_at(&["stages", name, "params", key], format!("`{key}`: no file `{path}`"))
+                        .hint("paths in parameters are relative to the pipeline file"));
+                }
+            }
             let inputs = resolve_inputs(&file, name, &spec.inputs, info.inputs)?;
             planned.insert(
                 name.clone(),

@@ -107,6 +107,11 @@ impl OutputSink {
         })
     }
 
+    /// One unit of work done that writes no file of its own (e.g. one run of a sweep).
+    pub fn tick(&self) {
+        self.progress.inc(1);
+    }
+
     pub fn set_total(&self, records: usize) {
         self.progress.set_length(records as u64);
     }

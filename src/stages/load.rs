@@ -114,7 +114,7 @@ pub fn load_record(spec: &SourceSpec, part: &InputPart) -> Result<Table, UserErr
             if let Some(i) = time.iter().position(|v| !v.is_finite()) {
                 return Err(err("the time column has a missing value".into()).at(first_line.map(|l| (l + i, 1))));
             }
-            match check_uniform(time) {
+            match crate::table::uniform_step(time) {
                 Ok(dt) => (time[0], dt, None),
                 Err(bad) => match spec.non_uniform {
                     NonUniformPolicy::Error => {
@@ -244,18 +244,6 @@ fn missing_column(path: &std::path::Path, name: &str, raw: &RawRecord) -> UserEr
         .hint(format!("{suggestion}its columns are: {}", available.join(", ")))
 }
 
-/// The mean step when every step is within a small tolerance of it; else the index of the first bad step.
-fn check_uniform(time: &[f64]) -> Result<f64, usize> {
-    let n = time.len();
-    let dt = (time[n - 1] - time[0]) / (n - 1) as f64;
-    // Text files round time to a few decimals: allow that rounding, not a real jitter.
-    let tolerance = 1e-3 * dt + 2e-6;
-    match time.windows(2).position(|w| !(dt > 0.0 && ((w[1] - w[0]) - dt).abs() <= tolerance)) {
-        None => Ok(dt),
-        Some(i) => Err(i),
-    }
-}
-
 fn median_step(time: &[f64]) -> Option<f64> {
     let mut steps: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).collect();
     steps.sort_by(f64::total_cmp);
@@ -270,6 +258,14 @@ pub fn ad_hoc_source(
 ) -> anyhow::Result<SourceSpec> {
     let format = records::sniff_format(path).unwrap_or("delimited");
     let mut value = json!({"format": format, "path": path.display().to_string()});
+    if format == "delimited" && !overrides.contains_key("time_column") && !overrides.contains_key("dt") {
+        let skip = overrides.get("header_lines").and_then(|v| v.as_u64()).unwrap_or(0) as usize;
+        for (key, guess) in guess_delimited_layout(path, skip) {
+            if !overrides.contains_key(key) {
+                value[key] = guess;
+            }
+        }
+    }
     for (k, v) in overrides {
         value[k] = v.clone();
     }
@@ -277,16 +273,30 @@ pub fn ad_hoc_source(
         .context("the --set values do not form a valid source (see `inputs:` in schemas/pipeline.schema.json)")
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn uniform_check_tolerates_rounding_but_not_jitter() {
-        let rounded: Vec<f64> = (0..1000).map(|i| ((i as f64 / 256.0) * 1e6).round() / 1e6).collect();
-        assert!((check_uniform(&rounded).unwrap() - 1.0 / 256.0).abs() < 1e-9);
-        let mut jittered = rounded.clone();
-        jittered[500] += 0.001;
-        assert_eq!(check_uniform(&jittered), Err(499));
+/// What a delimited file's column names say about it: a time column (`time_s`, `time`, `t`) and
+/// a unit shared by every other column's suffix (`ax_mps2` → m/s^2, `a_g` → g), for
+/// `shakeflow stage load FILE` without options. Pipelines state these explicitly.
+fn guess_delimited_layout(path: &std::path::Path, skip: usize) -> Vec<(&'static str, serde_json::Value)> {
+    use std::io::BufRead;
+    let Ok(file) = std::fs::File::open(path) else { return Vec::new() };
+    let Some(Ok(header)) =
+        std::io::BufReader::new(file).lines().skip(skip).find(|l| l.as_ref().map_or(true, |l| !l.starts_with('#')))
+    else {
+        return Vec::new();
+    };
+    let names: Vec<&str> = header.split([',', '\t', ';']).map(str::trim).collect();
+    let mut guesses = Vec::new();
+    let Some(time) = names.iter().find(|n| ["time_s", "time", "t"].contains(&n.to_ascii_lowercase().as_str())) else {
+        return guesses;
+    };
+    guesses.push(("time_column", json!(time)));
+    const SUFFIXES: &[(&str, &str)] = &[("_mps2", "m/s^2"), ("_mps", "m/s"), ("_g", "g"), ("_rad", "rad"), ("_m", "m")];
+    let unit_of = |name: &str| SUFFIXES.iter().find(|(s, _)| name.ends_with(s)).map(|(_, u)| *u);
+    let units: Vec<Option<&str>> = names.iter().filter(|n| *n != time).map(|n| unit_of(n)).collect();
+    if let Some(Some(first)) = units.first() {
+        if units.iter().all(|u| *u == Some(first)) {
+            guesses.push(("unit", json!(first)));
+        }
     }
+    guesses
 }

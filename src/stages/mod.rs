@@ -14,7 +14,9 @@ pub mod baseline;
 pub mod detect_toppling;
 pub mod load;
 pub mod report;
+pub mod simulate_toppling;
 pub mod synchronize;
+pub mod toppling_fragility;
 pub mod transfer_function;
 
 /// What a stage type consumes.
@@ -90,6 +92,16 @@ pub struct StageContext<'a> {
     pub params: &'a Params,
     pub inputs: &'a [StageInput],
     pub sink: &'a OutputSink,
+    /// Where relative paths in parameters point from: the pipeline file's folder (or the
+    /// working directory for `shakeflow stage`).
+    pub base_dir: &'a std::path::Path,
+}
+
+impl StageContext<'_> {
+    /// A `File` parameter resolved against the base directory; None when it is null.
+    pub fn file_param(&self, key: &str) -> Option<PathBuf> {
+        self.params.get(key).and_then(|v| v.as_str()).map(|p| self.base_dir.join(p))
+    }
 }
 
 pub trait Stage: Sync + Send {
@@ -104,6 +116,8 @@ pub fn registry() -> &'static [&'static dyn Stage] {
         &synchronize::Synchronize,
         &transfer_function::TransferFunction,
         &detect_toppling::DetectToppling,
+        &simulate_toppling::SimulateToppling,
+        &toppling_fragility::TopplingFragility,
         &report::Report,
     ]
 }

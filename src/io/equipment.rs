@@ -1,0 +1,65 @@
+//! Equipment description files: the geometry and mass of a rocking unit, in the form of the
+//! cases' `equipment.yaml` (`shape`, `B_m`, `H_m`, `f`, `mass_kg`; `B1_m`, `B2_m` for a
+//! trapezoid). Descriptive sections those files carry (sensors, conventions, derived values) are
+//! accepted and ignored; any other key is an error, so a misspelt dimension is never dropped.
+
+use std::path::Path;
+
+use serde::Deserialize;
+
+use crate::error::UserError;
+
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RockingEquipment {
+    pub shape: Option<String>,
+    #[serde(rename = "B_m")]
+    pub b_m: Option<f64>,
+    #[serde(rename = "H_m")]
+    pub h_m: Option<f64>,
+    pub f: Option<f64>,
+    #[serde(rename = "B1_m")]
+    pub b1_m: Option<f64>,
+    #[serde(rename = "B2_m")]
+    pub b2_m: Option<f64>,
+    pub mass_kg: Option<f64>,
+    pub g_mps2: Option<f64>,
+    // Descriptive: read so that case files load as they are, not used by the model.
+    pub name: Option<String>,
+    pub description: Option<String>,
+    pub e_formula: Option<f64>,
+    pub derived: Option<serde_yaml::Value>,
+    pub sensors: Option<serde_yaml::Value>,
+    pub conventions: Option<serde_yaml::Value>,
+}
+
+pub fn read_rocking_equipment(path: &Path) -> Result<RockingEquipment, UserError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| UserError::new(format!("cannot read the equipment file: {e}")).in_file(path))?;
+    serde_yaml::from_str(&text).map_err(|e| {
+        let position = e.location().map(|l| (l.line(), l.column()));
+        UserError::new(format!("not a valid equipment file: {e}")).in_file(path).at(position).hint(
+            "keys: shape (rectangular|trapezoidal), B_m, H_m, f, mass_kg, B1_m, B2_m, g_mps2 \
+             (plus the descriptive name, description, e_formula, derived, sensors, conventions)",
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_a_case_file_and_names_a_misspelt_key_with_its_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let good = dir.path().join("good.yaml");
+        std::fs::write(&good, "name: PS2\nshape: rectangular\nB_m: 0.349\nH_m: 1.082\nf: 0.085\nmass_kg: 150\nsensors:\n  accelerometer: {rate_hz: 200}\n").unwrap();
+        let e = read_rocking_equipment(&good).unwrap();
+        assert_eq!((e.b_m, e.h_m, e.f, e.mass_kg), (Some(0.349), Some(1.082), Some(0.085), Some(150.0)));
+        let bad = dir.path().join("bad.yaml");
+        std::fs::write(&bad, "shape: rectangular\nB_m: 0.349\nH_M: 1.082\n").unwrap();
+        let err = read_rocking_equipment(&bad).unwrap_err();
+        assert_eq!(err.line, Some(3), "{err}");
+        assert!(err.to_string().contains("H_M"), "{err}");
+    }
+}

@@ -1,0 +1,375 @@
+//! `simulate_toppling`: the study's 2D rigid-block model (rest, rocking, impacts, overturning)
+//! driven by floor records: θ(t), θ̇(t) and what a top accelerometer would record, the events,
+//! and a figure per record.
+
+use std::path::Path;
+
+use rayon::prelude::*;
+
+use super::{partition_path, InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use crate::error::UserError;
+use crate::io::{equipment, parquet};
+use crate::physics::rocking::{self, Anchorage, Block, Excitation, IsolatedBase, Method, Options, Response, Shape};
+use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
+use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
+
+pub struct SimulateToppling;
+
+/// Parameters that describe the unit and the model, shared with `toppling_fragility`.
+macro_rules! rocking_params {
+    ($($extra:expr),* $(,)?) => {
+        &[
+            ParamSpec { name: "preset", kind: ParamKind::Choice(crate::physics::rocking::PRESETS), default: Some("null"), unit: "", description: "a unit of the study (Table 5 rectangles PS2, PB1 and their trapezoids; WSU1 from Table 2)", range: None },
+            ParamSpec { name: "equipment", kind: ParamKind::File, default: Some("null"), unit: "", description: "a YAML file with shape, B_m, H_m, f, mass_kg (B1_m, B2_m), like the cases' equipment.yaml; overrides the preset", range: None },
+            ParamSpec { name: "shape", kind: ParamKind::Choice(&["rectangular", "trapezoidal"]), default: Some("null"), unit: "", description: "block shape; overrides preset and equipment file", range: None },
+            ParamSpec { name: "B_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "rectangle: base width B (in the shaking plane)", range: Some((1e-6, 1e3)) },
+            ParamSpec { name: "H_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "height H", range: Some((1e-6, 1e3)) },
+            ParamSpec { name: "f", kind: ParamKind::Float, default: Some("null"), unit: "", description: "rectangle: centre of mass above mid-height, as a fraction of H (Table 5's f)", range: Some((-0.5, 0.5)) },
+            ParamSpec { name: "B1_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "trapezoid: base (short side) B1", range: Some((1e-6, 1e3)) },
+            ParamSpec { name: "B2_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "trapezoid: top B2", range: Some((1e-6, 1e3)) },
+            ParamSpec { name: "mass_kg", kind: ParamKind::Float, default: Some("null"), unit: "kg", description: "mass (the rocking response does not depend on it; reported)", range: Some((1e-9, 1e9)) },
+            ParamSpec { name: "g_mps2", kind: ParamKind::Float, default: Some("null"), unit: "m/s^2", description: "gravity; null: the equipment file's g_mps2, else the study's 9.81", range: Some((0.1, 100.0)) },
+            ParamSpec { name: "horizontal", kind: ParamKind::Str, default: Some("\"ax_mps2\""), unit: "", description: "input column: in-plane horizontal floor acceleration (m/s^2)", range: None },
+            ParamSpec { name: "vertical", kind: ParamKind::Str, default: Some("null"), unit: "", description: "input column: vertical floor acceleration (m/s^2, up); null: none", range: None },
+            ParamSpec { name: "restitution", kind: ParamKind::Float, default: Some("null"), unit: "", description: "coefficient of restitution; null: Eq. 24, e = 1 - (mRB/I0) sin(alpha)", range: Some((0.0, 1.0)) },
+            ParamSpec { name: "anchor_strength", kind: ParamKind::Float, default: Some("null"), unit: "", description: "tension anchors at both base corners, strength F/W; null: free-standing", range: Some((1e-6, 100.0)) },
+            ParamSpec { name: "anchor_ductility", kind: ParamKind::Float, default: Some("5.0"), unit: "", description: "anchor elongation at fracture over elongation at yield (mu)", range: Some((1.0, 1e3)) },
+            ParamSpec { name: "anchor_yield_rotation_rad", kind: ParamKind::Float, default: Some("0.001"), unit: "rad", description: "block rotation at which a slack anchor yields (sets the anchor stiffness)", range: Some((1e-7, 0.5)) },
+            ParamSpec { name: "isolation_period_s", kind: ParamKind::Float, default: Some("null"), unit: "s", description: "linear isolated base under the block (period T_b); null: on the floor", range: Some((1e-3, 100.0)) },
+            ParamSpec { name: "isolation_damping", kind: ParamKind::Float, default: Some("0.1"), unit: "", description: "damping ratio of the isolated base", range: Some((0.0, 0.99)) },
+            ParamSpec { name: "sensor_height_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "height of the top accelerometer; null: the top of the block", range: Some((0.0, 1e3)) },
+            ParamSpec { name: "method", kind: ParamKind::Choice(&["adaptive", "rk4"]), default: Some("\"adaptive\""), unit: "", description: "adaptive Dormand-Prince 5(4) with located events, or the study's fixed-step RK4", range: None },
+            ParamSpec { name: "rtol", kind: ParamKind::Float, default: Some("1e-9"), unit: "", description: "relative tolerance of the adaptive integrator (absolute: 1e-2 rtol rad)", range: Some((1e-14, 1e-2)) },
+            ParamSpec { name: "rk4_dt_s", kind: ParamKind::Float, default: Some("0.0001"), unit: "s", description: "RK4 step (the study's 1e-4 s)", range: Some((1e-7, 0.1)) },
+            ParamSpec { name: "rest_velocity_radps", kind: ParamKind::Float, default: Some("1e-6"), unit: "rad/s", description: "an impact slower than this puts the block back at rest", range: Some((0.0, 1.0)) },
+            $($extra),*
+        ]
+    };
+}
+pub(crate) use rocking_params;
+
+static INFO: StageInfo = StageInfo {
+    name: "simulate_toppling",
+    version: 1,
+    summary: "The study's 2D rigid-block toppling model on floor records: rest, uplift (Eq. 20/21), rocking (Eq. 22), impacts (Eq. 24), overturning; adaptive integration with located events.",
+    inputs: InputKind::Datasets,
+    outputs: &[
+        OutputInfo { name: "response", description: "per record: time_s, theta_rad, theta_dot_radps, top_ax_mps2 (what a top accelerometer records), on the input time base", timeseries: true },
+        OutputInfo { name: "events", description: "per record: uplifts, impacts, returns to rest, anchor yield/fracture, overturn; the last row (event = summary) and every row carry overturned, overturn_time_s, overturn_side", timeseries: false },
+        OutputInfo { name: "figures", description: "<record>.png: floor and top acceleration, theta with the events marked", timeseries: false },
+    ],
+    params: rocking_params![
+        ParamSpec { name: "initial_theta_rad", kind: ParamKind::Float, default: Some("0.0"), unit: "rad", description: "initial rotation (free-rocking tests); 0: at rest", range: Some((-1.5, 1.5)) },
+        ParamSpec { name: "mcap", kind: ParamKind::Bool, default: Some("true"), unit: "", description: "also write the response as MCAP for Foxglove", range: None },
+    ],
+};
+
+impl Stage for SimulateToppling {
+    fn info(&self) -> &'static StageInfo {
+        &INFO
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
+        let (block, mut options) = model_from_params(ctx.params, ctx.file_param("equipment").as_deref())?;
+        options.initial_theta_rad = ctx.params.f64_of("initial_theta_rad");
+        let columns =
+            (ctx.params.str_of("horizontal").to_string(), ctx.params.get("vertical").and_then(|v| v.as_str()));
+        let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
+        ctx.sink.set_total(parts.len());
+        parts.par_iter().try_for_each(|part| {
+            let table = parquet::read_table(&part.path)?;
+            let (floor, response) = simulate_record(&table, &block, &options, &columns.0, columns.1)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
+            let mut series = response_table(&floor, &response);
+            let mut events = events_table(&response);
+            let facts = model_facts(&block, &options).to_string();
+            for t in [&mut series, &mut events] {
+                t.metadata.extend(super::record_provenance(part));
+                t.metadata.insert("shakeflow.rocking".into(), facts.clone());
+            }
+            let name = match partition_path(&part.partition) {
+                p if p.is_empty() => "response".to_string(),
+                p => p.replace('/', "_"),
+            };
+            let png = figure(&name, &floor, &response).map_err(anyhow::Error::msg)?;
+            ctx.sink.write_file("figures", &format!("{name}.png"), &png)?;
+            ctx.sink.write("events", &part.partition, events)?;
+            ctx.sink.write("response", &part.partition, series)
+        })
+    }
+}
+
+/// The floor a record provides: its time base and the chosen channels.
+pub struct Floor {
+    pub time: Vec<f64>,
+    pub horizontal: Vec<f64>,
+    pub vertical: Option<Vec<f64>>,
+}
+
+/// Reads the floor channels of a record and runs the model.
+pub fn simulate_record(
+    table: &Table,
+    block: &Block,
+    options: &Options,
+    horizontal: &str,
+    vertical: Option<&str>,
+) -> Result<(Floor, Response), String> {
+    let column = |name: &str| {
+        table
+            .f64_column(name)
+            .map(<[f64]>::to_vec)
+            .ok_or_else(|| format!("no float column `{name}`; columns: {}", table.column_names().join(", ")))
+    };
+    let time = column(TIME_COLUMN)?;
+    if time.len() < 2 {
+        return Err("the record has fewer than 2 samples".into());
+    }
+    let dt = crate::table::uniform_step(&time)
+        .map_err(|i| format!("time is not uniformly sampled after t = {} s; resample it first", time[i]))?;
+    let floor = Floor { horizontal: column(horizontal)?, vertical: vertical.map(column).transpose()?, time };
+    let excitation = Excitation {
+        t0_s: floor.time[0],
+        dt_s: dt,
+        horizontal_mps2: &floor.horizontal,
+        vertical_mps2: floor.vertical.as_deref(),
+    };
+    let response = rocking::simulate(block, &excitation, options)?;
+    Ok((floor, response))
+}
+
+/// The block and model options from the parameters: a preset, then an equipment file, then
+/// the explicit geometry parameters, each overriding the one before.
+pub fn model_from_params(params: &Params, equipment_file: Option<&Path>) -> Result<(Block, Options), UserError> {
+    let number = |key: &str| params.get(key).and_then(|v| v.as_f64());
+    let mut geometry = equipment::RockingEquipment::default();
+    if let Some(name) = params.get("preset").and_then(|v| v.as_str()) {
+        let (shape, mass) = rocking::preset(name).expect("presets are checked as a choice");
+        geometry.mass_kg = Some(mass);
+        match shape {
+            Shape::Rectangular { b_m, h_m, f } => {
+                (geometry.shape, geometry.b_m, geometry.h_m, geometry.f) =
+                    (Some("rectangular".into()), Some(b_m), Some(h_m), Some(f));
+            }
+            Shape::Trapezoidal { b1_m, b2_m, h_m } => {
+                (geometry.shape, geometry.b1_m, geometry.b2_m, geometry.h_m) =
+                    (Some("trapezoidal".into()), Some(b1_m), Some(b2_m), Some(h_m));
+            }
+        }
+    }
+    if let Some(path) = equipment_file {
+        let file = equipment::read_rocking_equipment(path)?;
+        let keep = |a: Option<f64>, b: Option<f64>| b.or(a);
+        geometry = equipment::RockingEquipment {
+            shape: file.shape.or(geometry.shape),
+            b_m: keep(geometry.b_m, file.b_m),
+            h_m: keep(geometry.h_m, file.h_m),
+            f: keep(geometry.f, file.f),
+            b1_m: keep(geometry.b1_m, file.b1_m),
+            b2_m: keep(geometry.b2_m, file.b2_m),
+            mass_kg: keep(geometry.mass_kg, file.mass_kg),
+            g_mps2: file.g_mps2,
+            ..Default::default()
+        };
+    }
+    let shape_name = params.get("shape").and_then(|v| v.as_str()).map(String::from).or(geometry.shape);
+    let pick = |key: &str, fallback: Option<f64>| number(key).or(fallback);
+    let missing = |key: &str| {
+        UserError::new(format!("the block needs `{key}`")).hint(
+            "set `preset`, an `equipment` file, or the geometry parameters (see `shakeflow stages simulate_toppling`)",
+        )
+    };
+    let shape = match shape_name.as_deref() {
+        Some("rectangular") => Shape::Rectangular {
+            b_m: pick("B_m", geometry.b_m).ok_or_else(|| missing("B_m"))?,
+            h_m: pick("H_m", geometry.h_m).ok_or_else(|| missing("H_m"))?,
+            f: pick("f", geometry.f).unwrap_or(0.0),
+        },
+        Some("trapezoidal") => Shape::Trapezoidal {
+            b1_m: pick("B1_m", geometry.b1_m).ok_or_else(|| missing("B1_m"))?,
+            b2_m: pick("B2_m", geometry.b2_m).ok_or_else(|| missing("B2_m"))?,
+            h_m: pick("H_m", geometry.h_m).ok_or_else(|| missing("H_m"))?,
+        },
+        Some(other) => {
+            return Err(UserError::new(format!("unknown shape `{other}`")).hint("shape is rectangular or trapezoidal"))
+        }
+        None => return Err(missing("shape")),
+    };
+    let mass = pick("mass_kg", geometry.mass_kg).unwrap_or(1.0);
+    let g = number("g_mps2").or(geometry.g_mps2).unwrap_or(9.81);
+    let block = Block::new(shape, mass, g).map_err(|e| UserError::new(format!("invalid block: {e}")))?;
+    let options = Options {
+        restitution: number("restitution"),
+        anchorage: number("anchor_strength").map(|strength_ratio| Anchorage {
+            strength_ratio,
+            ductility: params.f64_of("anchor_ductility"),
+            yield_rotation_rad: params.f64_of("anchor_yield_rotation_rad"),
+        }),
+        isolated_base: number("isolation_period_s")
+            .map(|period_s| IsolatedBase { period_s, damping_ratio: params.f64_of("isolation_damping") }),
+        sensor_height_m: number("sensor_height_m"),
+        rest_velocity_radps: params.f64_of("rest_velocity_radps"),
+        method: match params.str_of("method") {
+            "rk4" => Method::Rk4 { dt_s: params.f64_of("rk4_dt_s") },
+            _ => Method::Adaptive { rtol: params.f64_of("rtol"), atol_rad: 1e-2 * params.f64_of("rtol") },
+        },
+        ..Options::default()
+    };
+    Ok((block, options))
+}
+
+/// The derived quantities a reader needs to interpret the results (artifact metadata).
+pub fn model_facts(block: &Block, options: &Options) -> serde_json::Value {
+    serde_json::json!({
+        "shape": format!("{:?}", block.shape),
+        "mass_kg": block.mass_kg,
+        "g_mps2": block.g_mps2,
+        "alpha_rad": block.alpha_rad,
+        "R_m": block.r_m,
+        "cm_height_m": block.cm_height_m,
+        "I0_per_kg_m2": block.i0_per_kg,
+        "p_radps": block.p_radps,
+        "restitution_eq24": block.restitution_eq24,
+        "restitution_used": options.restitution.unwrap_or(block.restitution_eq24),
+        "uplift_threshold_mps2": block.uplift_threshold_mps2(0.0),
+        "lie_angle_rad": block.lie_angle_rad,
+        "sign_convention": "theta > 0: rotation about the +x base corner, top moving toward +x",
+        "options": format!("{options:?}"),
+    })
+}
+
+fn response_table(floor: &Floor, r: &Response) -> Table {
+    let mut t = Table::new();
+    t.push(Column::f64(TIME_COLUMN, "s", "time", floor.time.clone()));
+    t.push(Column::f64(
+        "theta_rad",
+        "rad",
+        "rocking angle (> 0: about the +x corner, top toward +x)",
+        r.theta_rad.clone(),
+    ));
+    t.push(Column::f64("theta_dot_radps", "rad/s", "angular velocity", r.theta_dot_radps.clone()));
+    t.push(Column::f64("theta_ddot_radps2", "rad/s^2", "angular acceleration", r.theta_ddot_radps2.clone()));
+    t.push(Column::f64(
+        "top_ax_mps2",
+        "m/s^2",
+        "absolute horizontal acceleration at the top sensor (what a top accelerometer records); after an overturn the sensor lies along the vertical and reads the floor's vertical acceleration",
+        r.top_ax_mps2.clone(),
+    ));
+    t.push(Column::f64(
+        "base_ax_mps2",
+        "m/s^2",
+        "horizontal acceleration under the block (the floor, or the isolated base)",
+        r.base_ax_mps2.clone(),
+    ));
+    t
+}
+
+fn events_table(r: &Response) -> Table {
+    let overturned = r.overturn.is_some();
+    let (overturn_time, overturn_side) = r.overturn.map_or((None, 0), |(t, s)| (Some(t), i64::from(s)));
+    let mut time: Vec<Option<f64>> = r.events.iter().map(|e| Some(e.time_s)).collect();
+    let mut kind: Vec<String> = r.events.iter().map(|e| e.kind.name().to_string()).collect();
+    let mut side: Vec<i64> = r.events.iter().map(|e| i64::from(e.side)).collect();
+    let mut before: Vec<Option<f64>> = r.events.iter().map(|e| Some(e.theta_dot_before)).collect();
+    let mut after: Vec<Option<f64>> = r.events.iter().map(|e| Some(e.theta_dot_after)).collect();
+    time.push(overturn_time);
+    kind.push("summary".into());
+    side.push(overturn_side);
+    before.push(None);
+    after.push(None);
+    let rows = time.len();
+    let count = |k| r.count(k) as i64;
+    let optional = |name: &str, unit: &str, description: &str, data: Vec<Option<f64>>| Column {
+        name: name.into(),
+        unit: unit.into(),
+        description: description.into(),
+        data: ColumnData::OptF64(data),
+    };
+    let mut t = Table::new();
+    t.push(optional(TIME_COLUMN, "s", "time of the event (summary row: the overturn time, null when none)", time));
+    t.push(Column {
+        name: "event".into(),
+        unit: String::new(),
+        description: "uplift | impact | rest | anchor_yield | anchor_fracture | overturn | summary".into(),
+        data: ColumnData::Str(kind),
+    });
+    t.push(Column {
+        name: "side".into(),
+        unit: String::new(),
+        description: "sign of theta after the event (the pivot corner); for overturn and summary, the side it fell to"
+            .into(),
+        data: ColumnData::I64(side),
+    });
+    t.push(optional("theta_dot_before_radps", "rad/s", "angular velocity just before", before));
+    t.push(optional("theta_dot_after_radps", "rad/s", "angular velocity just after (impacts: e times before)", after));
+    t.push(Column {
+        name: "overturned".into(),
+        unit: String::new(),
+        description: "the block overturned in this record (same on every row)".into(),
+        data: ColumnData::Bool(vec![overturned; rows]),
+    });
+    t.push(optional(
+        "overturn_time_s",
+        "s",
+        "when it reached the lying angle (null when it did not overturn)",
+        vec![overturn_time; rows],
+    ));
+    t.push(Column {
+        name: "overturn_side".into(),
+        unit: String::new(),
+        description: "+1 / -1: the sign of theta it overturned to; 0 when it did not".into(),
+        data: ColumnData::I64(vec![overturn_side; rows]),
+    });
+    t.push(Column::f64("max_abs_theta_rad", "rad", "largest |theta| in the record", vec![r.max_abs_theta(); rows]));
+    t.push(Column {
+        name: "n_impacts".into(),
+        unit: String::new(),
+        description: "impacts in the record".into(),
+        data: ColumnData::I64(vec![count(rocking::EventKind::Impact); rows]),
+    });
+    t.push(Column {
+        name: "n_uplifts".into(),
+        unit: String::new(),
+        description: "uplifts from rest in the record".into(),
+        data: ColumnData::I64(vec![count(rocking::EventKind::Uplift); rows]),
+    });
+    t
+}
+
+fn figure(name: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
+    use crate::plot::{render_png, Marker, Panel, Series};
+    let mut markers: Vec<Marker> = r
+        .events
+        .iter()
+        .filter(|e| matches!(e.kind, rocking::EventKind::Uplift | rocking::EventKind::Overturn))
+        .take(12)
+        .map(|e| Marker { x: e.time_s, label: e.kind.name().into() })
+        .collect();
+    if let Some(first_impact) = r.events.iter().find(|e| e.kind == rocking::EventKind::Impact) {
+        markers.push(Marker { x: first_impact.time_s, label: "first impact".into() });
+    }
+    let panels = [
+        Panel {
+            title: "floor and top accelerometer".into(),
+            x_label: "time [s]".into(),
+            y_label: "acceleration [m/s^2]".into(),
+            series: vec![
+                Series { label: "floor horizontal".into(), x: &floor.time, y: &floor.horizontal },
+                Series { label: "top (model)".into(), x: &floor.time, y: &r.top_ax_mps2 },
+            ],
+            markers: Vec::new(),
+            log_y: false,
+        },
+        Panel {
+            title: match r.overturn {
+                Some((t, s)) => format!("rocking angle: overturned to side {s:+} at {t:.3} s"),
+                None => format!("rocking angle: no overturn, max |theta| {:.4} rad", r.max_abs_theta()),
+            },
+            x_label: "time [s]".into(),
+            y_label: "theta [rad]".into(),
+            series: vec![Series { label: "theta".into(), x: &floor.time, y: &r.theta_rad }],
+            markers,
+            log_y: false,
+        },
+    ];
+    render_png(&format!("simulate_toppling: {name}"), &panels, 1200, 800)
+}

@@ -1,0 +1,277 @@
+//! `toppling_fragility`: one unit under a set of floor records scaled over a range of
+//! intensities, every run simulated (in parallel), and a lognormal fragility curve fitted to
+//! overturn / no overturn by maximum likelihood.
+
+use rayon::prelude::*;
+
+use super::simulate_toppling::{model_from_params, rocking_params, simulate_record};
+use super::{partition_path, InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use crate::io::parquet;
+use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
+use crate::stats::fragility::{fit_lognormal, FitOutcome, LognormalFit};
+use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
+
+pub struct TopplingFragility;
+
+static INFO: StageInfo = StageInfo {
+    name: "toppling_fragility",
+    version: 1,
+    summary: "Overturning fragility of one unit: floor records scaled over intensities, all runs simulated in parallel, lognormal curve (median, beta) by maximum likelihood.",
+    inputs: InputKind::Datasets,
+    outputs: &[
+        OutputInfo { name: "runs", description: "every run: record, scale, im, overturned, overturn_time_s, overturn_side, max_abs_theta_rad", timeseries: false },
+        OutputInfo { name: "fragility", description: "one row: im_measure, median, beta, log_likelihood, n_runs, n_overturned, note", timeseries: false },
+        OutputInfo { name: "figures", description: "fragility.png: the fitted curve with the runs and the overturned fraction per level", timeseries: false },
+    ],
+    params: rocking_params![
+        ParamSpec { name: "im", kind: ParamKind::Choice(&["pfa", "pfv"]), default: Some("\"pfa\""), unit: "", description: "intensity measure: peak floor acceleration (m/s^2) or peak floor velocity (m/s, trapezoidal integral of the horizontal record)", range: None },
+        ParamSpec { name: "scales", kind: ParamKind::FloatList, default: Some("[]"), unit: "", description: "scale factors applied to every record (horizontal and vertical alike); or use im_levels", range: Some((0.0, 1e3)) },
+        ParamSpec { name: "im_levels", kind: ParamKind::FloatList, default: Some("[]"), unit: "", description: "target intensities (m/s^2 for pfa, m/s for pfv): each record is scaled to each level", range: Some((0.0, 1e3)) },
+    ],
+};
+
+impl Stage for TopplingFragility {
+    fn info(&self) -> &'static StageInfo {
+        &INFO
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
+        let (block, options) = model_from_params(ctx.params, ctx.file_param("equipment").as_deref())?;
+        let (scales, levels) = (ctx.params.f64_list_of("scales"), ctx.params.f64_list_of("im_levels"));
+        if scales.is_empty() == levels.is_empty() {
+            anyhow::bail!("give either `scales` or `im_levels` (exactly one of them, non-empty)");
+        }
+        let horizontal = ctx.params.str_of("horizontal").to_string();
+        let vertical = ctx.params.get("vertical").and_then(|v| v.as_str()).map(String::from);
+        let by_velocity = ctx.params.str_of("im") == "pfv";
+        let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
+        if parts.is_empty() {
+            anyhow::bail!("no records to scale: the stage's inputs (after `select`) are empty");
+        }
+        let records: Vec<(String, Table, f64)> = parts
+            .par_iter()
+            .map(|part| {
+                let table = parquet::read_table(&part.path)?;
+                let im =
+                    intensity(&table, &horizontal, by_velocity).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
+                Ok((partition_path(&part.partition), table, im))
+            })
+            .collect::<anyhow::Result<_>>()?;
+        // Every (record, level) pair, in a fixed order so the runs table is deterministic.
+        let runs: Vec<(usize, f64)> = records
+            .iter()
+            .enumerate()
+            .flat_map(|(r, (_, _, im))| {
+                let factors: Vec<f64> =
+                    if scales.is_empty() { levels.iter().map(|l| l / im).collect() } else { scales.clone() };
+                factors.into_iter().map(move |s| (r, s))
+            })
+            .collect();
+        ctx.sink.set_total(runs.len());
+        let results: Vec<(bool, Option<f64>, i64, f64, i64)> = runs
+            .par_iter()
+            .map(|&(r, scale)| {
+                let table = scaled(&records[r].1, scale, &horizontal, vertical.as_deref());
+                let (_, response) = simulate_record(&table, &block, &options, &horizontal, vertical.as_deref())
+                    .map_err(|e| anyhow::anyhow!("{} × {scale}: {e}", records[r].0))?;
+                ctx.sink.tick();
+                let (time, side) = response.overturn.map_or((None, 0), |(t, s)| (Some(t), i64::from(s)));
+                let impacts = response.count(crate::physics::rocking::EventKind::Impact) as i64;
+                Ok((response.overturn.is_some(), time, side, response.max_abs_theta(), impacts))
+            })
+            .collect::<anyhow::Result<_>>()?;
+        let ims: Vec<f64> = runs.iter().map(|&(r, s)| records[r].2 * s).collect();
+        let overturned: Vec<bool> = results.iter().map(|r| r.0).collect();
+        let outcome = fit_lognormal(&ims, &overturned);
+        let unit = if by_velocity { "m/s" } else { "m/s^2" };
+        let im_name = if by_velocity { "pfv" } else { "pfa" };
+
+        let mut table = Table::new();
+        table.push(Column {
+            name: "record".into(),
+            unit: String::new(),
+            description: "the floor record (its partition)".into(),
+            data: ColumnData::Str(runs.iter().map(|&(r, _)| records[r].0.clone()).collect()),
+        });
+        table.push(Column::f64("scale", "", "factor applied to the record", runs.iter().map(|r| r.1).collect()));
+        table.push(Column::f64("im", unit, &format!("intensity of the scaled record ({im_name})"), ims.clone()));
+        table.push(Column {
+            name: "overturned".into(),
+            unit: String::new(),
+            description: "the unit overturned".into(),
+            data: ColumnData::Bool(overturned.clone()),
+        });
+        table.push(Column {
+            name: "overturn_time_s".into(),
+            unit: "s".into(),
+            description: "when (null when it did not)".into(),
+            data: ColumnData::OptF64(results.iter().map(|r| r.1).collect()),
+        });
+        table.push(Column {
+            name: "overturn_side".into(),
+            unit: String::new(),
+            description: "+1 / -1, the sign of theta; 0 when it did not overturn".into(),
+            data: ColumnData::I64(results.iter().map(|r| r.2).collect()),
+        });
+        table.push(Column::f64(
+            "max_abs_theta_rad",
+            "rad",
+            "largest |theta| of the run",
+            results.iter().map(|r| r.3).collect(),
+        ));
+        table.push(Column {
+            name: "n_impacts".into(),
+            unit: String::new(),
+            description: "impacts in the run".into(),
+            data: ColumnData::I64(results.iter().map(|r| r.4).collect()),
+        });
+        table
+            .metadata
+            .insert("shakeflow.rocking".into(), super::simulate_toppling::model_facts(&block, &options).to_string());
+
+        let (fit, note) = describe(&outcome, unit);
+        let mut summary = Table::new();
+        summary.push(Column {
+            name: "im_measure".into(),
+            unit: String::new(),
+            description: "pfa or pfv".into(),
+            data: ColumnData::Str(vec![im_name.into()]),
+        });
+        summary.push(Column {
+            name: "median".into(),
+            unit: unit.into(),
+            description: "intensity with 50 % probability of overturning (theta of the lognormal)".into(),
+            data: ColumnData::OptF64(vec![fit.map(|f| f.median)]),
+        });
+        summary.push(Column {
+            name: "beta".into(),
+            unit: String::new(),
+            description: "logarithmic standard deviation".into(),
+            data: ColumnData::OptF64(vec![fit.map(|f| f.beta)]),
+        });
+        summary.push(Column {
+            name: "log_likelihood".into(),
+            unit: String::new(),
+            description: "at the maximum".into(),
+            data: ColumnData::OptF64(vec![fit.map(|f| f.log_likelihood)]),
+        });
+        summary.push(Column {
+            name: "n_runs".into(),
+            unit: String::new(),
+            description: "runs".into(),
+            data: ColumnData::I64(vec![ims.len() as i64]),
+        });
+        summary.push(Column {
+            name: "n_overturned".into(),
+            unit: String::new(),
+            description: "runs that overturned".into(),
+            data: ColumnData::I64(vec![overturned.iter().filter(|&&o| o).count() as i64]),
+        });
+        summary.push(Column {
+            name: "note".into(),
+            unit: String::new(),
+            description: "how to read the fit".into(),
+            data: ColumnData::Str(vec![note.clone()]),
+        });
+
+        let png = figure(&ims, &overturned, fit.as_ref(), im_name, unit, &note).map_err(anyhow::Error::msg)?;
+        ctx.sink.write_file("figures", "fragility.png", &png)?;
+        ctx.sink.write("runs", &Vec::new(), table)?;
+        ctx.sink.write("fragility", &Vec::new(), summary)
+    }
+}
+
+/// PFA, or PFV from the trapezoidal integral of the (baseline-corrected) horizontal record.
+fn intensity(table: &Table, horizontal: &str, velocity: bool) -> Result<f64, String> {
+    let a = table
+        .f64_column(horizontal)
+        .ok_or_else(|| format!("no float column `{horizontal}`; columns: {}", table.column_names().join(", ")))?;
+    let im = if velocity {
+        let t = table.f64_column(TIME_COLUMN).ok_or("no time_s column")?;
+        let mut v = 0.0_f64;
+        let mut peak = 0.0_f64;
+        for k in 1..a.len() {
+            v += 0.5 * (a[k] + a[k - 1]) * (t[k] - t[k - 1]);
+            peak = peak.max(v.abs());
+        }
+        peak
+    } else {
+        a.iter().fold(0.0_f64, |m, v| m.max(v.abs()))
+    };
+    if im > 0.0 && im.is_finite() {
+        Ok(im)
+    } else {
+        Err(format!("`{horizontal}` has no motion to scale (intensity {im})"))
+    }
+}
+
+/// The record with its floor channels multiplied by `scale`.
+fn scaled(table: &Table, scale: f64, horizontal: &str, vertical: Option<&str>) -> Table {
+    let mut out = Table::new();
+    for c in &table.columns {
+        if c.name == TIME_COLUMN || c.name == horizontal || Some(c.name.as_str()) == vertical {
+            let mut c = c.clone();
+            if c.name != TIME_COLUMN {
+                if let ColumnData::F64(v) = &mut c.data {
+                    v.iter_mut().for_each(|x| *x *= scale);
+                }
+            }
+            out.push(c);
+        }
+    }
+    out
+}
+
+fn describe(outcome: &FitOutcome, unit: &str) -> (Option<LognormalFit>, String) {
+    match *outcome {
+        FitOutcome::Fitted(f) => (Some(f), format!("lognormal MLE: median {:.4} {unit}, beta {:.3}", f.median, f.beta)),
+        FitOutcome::NoneOverturned => (None, "no run overturned: raise the intensities".into()),
+        FitOutcome::AllOverturned => (None, "every run overturned: lower the intensities".into()),
+        FitOutcome::Separated { highest_survival, lowest_overturn } => (
+            None,
+            format!("every overturn lies above every survival (between {highest_survival:.4} and {lowest_overturn:.4} {unit}): beta is not identifiable; use more records or finer levels"),
+        ),
+    }
+}
+
+fn figure(
+    ims: &[f64],
+    overturned: &[bool],
+    fit: Option<&LognormalFit>,
+    name: &str,
+    unit: &str,
+    note: &str,
+) -> Result<Vec<u8>, String> {
+    use crate::plot::{render_png, Panel, Series};
+    // Overturned fraction per distinct intensity level (levels repeat across records when
+    // `im_levels` is used; with `scales`, every run is its own point).
+    let mut levels: Vec<(f64, bool)> = ims.iter().copied().zip(overturned.iter().copied()).collect();
+    levels.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut points_x = Vec::new();
+    let mut points_y = Vec::new();
+    let mut k = 0;
+    while k < levels.len() {
+        let mut j = k;
+        while j < levels.len() && (levels[j].0 - levels[k].0).abs() <= 1e-9 * levels[k].0 {
+            j += 1;
+        }
+        points_x.push(levels[k].0);
+        points_y.push(levels[k..j].iter().filter(|l| l.1).count() as f64 / (j - k) as f64);
+        k = j;
+    }
+    let (lo, hi) = (levels[0].0, levels[levels.len() - 1].0);
+    let curve_x: Vec<f64> = (0..=200).map(|i| lo + (hi - lo) * i as f64 / 200.0).collect();
+    let curve_y: Vec<f64> = curve_x.iter().map(|&x| fit.map_or(f64::NAN, |f| f.probability(x))).collect();
+    let panels = [Panel {
+        title: note.to_string(),
+        x_label: format!("{name} [{unit}]"),
+        y_label: "P(overturn)".into(),
+        series: vec![
+            Series { label: "lognormal fit".into(), x: &curve_x, y: &curve_y },
+            Series { label: "overturned fraction".into(), x: &points_x, y: &points_y },
+        ],
+        markers: Vec::new(),
+        log_y: false,
+    }];
+    render_png("toppling fragility", &panels, 1000, 600)
+}

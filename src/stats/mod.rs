@@ -1,0 +1,2 @@
+//! Statistics on results: fragility curves (lognormal, by maximum likelihood).
+pub mod fragility;
