@@ -157,10 +157,6 @@ struct EventWatch<const M: usize> {
     positive_g: [f64; M],
 }
 
-/// Points inside a step where event functions are sampled, so a function that dips below zero
-/// and comes back within one step is not missed.
-const EVENT_SAMPLES: [f64; 4] = [0.25, 0.5, 0.75, 1.0];
-
 impl<const M: usize> EventWatch<M> {
     fn new(g0: [f64; M], t0: f64) -> Self {
         let mut positive_at = [None; M];
@@ -173,6 +169,11 @@ impl<const M: usize> EventWatch<M> {
     }
 
     /// Checks one accepted step [t0, t1] on its dense output; returns the earliest event.
+    ///
+    /// Event functions are sampled at the step's start, quarters and end. Besides sign changes
+    /// between samples, a dip between three positive samples (a trajectory grazing its boundary,
+    /// e.g. a small rocking excursion inside one step) is searched for its minimum, so an impact
+    /// is not missed because it fell between samples.
     fn check<const N: usize, G, D>(
         &mut self,
         g: &G,
@@ -185,44 +186,95 @@ impl<const M: usize> EventWatch<M> {
         G: Fn(f64, &[f64; N]) -> [f64; M],
         D: Dense<N>,
     {
-        let mut earliest: Option<(usize, f64, [f64; N])> = None;
         let h = t1 - t0;
-        for &frac in &EVENT_SAMPLES {
-            let t = if frac == 1.0 { t1 } else { t0 + frac * h };
-            let y = dense.eval(t);
-            let values = g(t, &y);
-            for i in 0..M {
-                let value = values[i];
-                if value > 0.0 {
-                    if earliest.is_none() {
-                        self.positive_at[i] = Some(t);
-                        self.positive_g[i] = value;
+        let times: [f64; 5] = std::array::from_fn(|j| if j == 4 { t1 } else { t0 + 0.25 * j as f64 * h });
+        let values: [[f64; M]; 5] = std::array::from_fn(|j| g(times[j], &dense.eval(times[j])));
+        let mut earliest: Option<(usize, f64)> = None;
+        for i in 0..M {
+            let g_at = |s: f64| g(s, &dense.eval(s))[i];
+            // A function that starts on its boundary may turn positive and come back before the
+            // first quarter: look for its positive stretch closer to the start.
+            if self.positive_at[i].is_none() && first_step && values[1][i] <= 0.0 {
+                if let Some((ta, ga)) =
+                    (1..=24).map(|k| t0 + 0.25 * h * 0.25f64.powi(k)).map(|s| (s, g_at(s))).find(|&(_, v)| v > 0.0)
+                {
+                    self.positive_at[i] = Some(ta);
+                    self.positive_g[i] = ga;
+                }
+            }
+            let mut found = None;
+            for j in 1..5 {
+                let value = values[j][i];
+                if value <= 0.0 {
+                    found = match self.positive_at[i] {
+                        Some(ta) => Some(locate_root(g_at, ta, self.positive_g[i], times[j], value)),
+                        // Never positive since the start of the first step: the trajectory cannot
+                        // leave the boundary in the direction the event function describes.
+                        None if first_step && j == 4 => Some(t0),
+                        None => None,
+                    };
+                    if found.is_some() {
+                        break;
                     }
                     continue;
                 }
-                let found = match self.positive_at[i] {
-                    Some(ta) => {
-                        let tb = t;
-                        let root = locate_root(|s| g(s, &dense.eval(s))[i], ta, self.positive_g[i], tb, value);
-                        Some(root)
-                    }
-                    // Never positive since the start of the first step: the trajectory cannot
-                    // leave the boundary in the direction the event function describes.
-                    None if first_step && frac == 1.0 => Some(t0),
-                    None => None,
-                };
-                if let Some(root) = found {
-                    if earliest.is_none_or(|(_, te, _)| root < te) {
-                        earliest = Some((i, root, dense.eval(root)));
+                if j >= 2 && self.positive_at[i].is_some() && values[j - 2][i] > 0.0 && values[j - 1][i] > 0.0 {
+                    if let Some((tm, gm)) = dip_minimum(
+                        &g_at,
+                        [times[j - 2], times[j - 1], times[j]],
+                        [values[j - 2][i], values[j - 1][i], value],
+                    ) {
+                        if gm <= 0.0 {
+                            found = Some(locate_root(g_at, times[j - 2], values[j - 2][i], tm, gm));
+                            break;
+                        }
                     }
                 }
+                self.positive_at[i] = Some(times[j]);
+                self.positive_g[i] = value;
             }
-            if earliest.is_some() {
-                return earliest;
+            if let Some(root) = found {
+                if earliest.is_none_or(|(_, te)| root < te) {
+                    earliest = Some((i, root));
+                }
             }
         }
-        None
+        earliest.map(|(i, t)| (i, t, dense.eval(t)))
     }
+}
+
+/// The minimum of g over [t_a, t_c] when three positive samples suggest a dip (the middle one
+/// is the lowest and the parabola through them goes below half of it): golden-section search.
+fn dip_minimum(g: &impl Fn(f64) -> f64, t: [f64; 3], v: [f64; 3]) -> Option<(f64, f64)> {
+    if !(v[1] < v[0] && v[1] < v[2]) {
+        return None;
+    }
+    // Parabola through equally spaced samples: vertex value v1 − (v2 − v0)²/(8(v0 − 2v1 + v2)).
+    let curvature = v[0] - 2.0 * v[1] + v[2];
+    let vertex = v[1] - (v[2] - v[0]).powi(2) / (8.0 * curvature);
+    if vertex > 0.5 * v[1] {
+        return None;
+    }
+    const INV_PHI: f64 = 0.618_033_988_749_894_9;
+    let (mut a, mut b) = (t[0], t[2]);
+    let mut c = b - INV_PHI * (b - a);
+    let mut d = a + INV_PHI * (b - a);
+    let (mut gc, mut gd) = (g(c), g(d));
+    for _ in 0..60 {
+        if gc.min(gd) <= 0.0 || b - a < 1e-13 * (1.0 + b.abs()) {
+            break;
+        }
+        if gc < gd {
+            (b, d, gd) = (d, c, gc);
+            c = b - INV_PHI * (b - a);
+            gc = g(c);
+        } else {
+            (a, c, gc) = (c, d, gd);
+            d = a + INV_PHI * (b - a);
+            gd = g(d);
+        }
+    }
+    Some(if gc < gd { (c, gc) } else { (d, gd) })
 }
 
 /// Root of a continuous g on [a, b] with g(a) > 0 ≥ g(b): Illinois regula falsi, to 1e-13 s.

@@ -39,9 +39,9 @@ macro_rules! rocking_params {
             ParamSpec { name: "isolation_damping", kind: ParamKind::Float, default: Some("0.1"), unit: "", description: "damping ratio of the isolated base", range: Some((0.0, 0.99)) },
             ParamSpec { name: "sensor_height_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "height of the top accelerometer; null: the top of the block", range: Some((0.0, 1e3)) },
             ParamSpec { name: "method", kind: ParamKind::Choice(&["adaptive", "rk4"]), default: Some("\"adaptive\""), unit: "", description: "adaptive Dormand-Prince 5(4) with located events, or the study's fixed-step RK4", range: None },
-            ParamSpec { name: "rtol", kind: ParamKind::Float, default: Some("1e-9"), unit: "", description: "relative tolerance of the adaptive integrator (absolute: 1e-2 rtol rad)", range: Some((1e-14, 1e-2)) },
+            ParamSpec { name: "rtol", kind: ParamKind::Float, default: Some("1e-11"), unit: "", description: "relative tolerance of the adaptive integrator (absolute: 1e-2 rtol rad)", range: Some((1e-14, 1e-2)) },
             ParamSpec { name: "rk4_dt_s", kind: ParamKind::Float, default: Some("0.0001"), unit: "s", description: "RK4 step (the study's 1e-4 s)", range: Some((1e-7, 0.1)) },
-            ParamSpec { name: "rest_velocity_radps", kind: ParamKind::Float, default: Some("1e-6"), unit: "rad/s", description: "an impact slower than this puts the block back at rest", range: Some((0.0, 1.0)) },
+            ParamSpec { name: "rest_amplitude_rad", kind: ParamKind::Float, default: Some("1e-7"), unit: "rad", description: "an impact whose rebound would rock the block less than this (free rocking) puts it back at rest", range: Some((0.0, 0.1)) },
             $($extra),*
         ]
     };
@@ -207,7 +207,7 @@ pub fn model_from_params(params: &Params, equipment_file: Option<&Path>) -> Resu
         isolated_base: number("isolation_period_s")
             .map(|period_s| IsolatedBase { period_s, damping_ratio: params.f64_of("isolation_damping") }),
         sensor_height_m: number("sensor_height_m"),
-        rest_velocity_radps: params.f64_of("rest_velocity_radps"),
+        rest_amplitude_rad: params.f64_of("rest_amplitude_rad"),
         method: match params.str_of("method") {
             "rk4" => Method::Rk4 { dt_s: params.f64_of("rk4_dt_s") },
             _ => Method::Adaptive { rtol: params.f64_of("rtol"), atol_rad: 1e-2 * params.f64_of("rtol") },
