@@ -181,12 +181,37 @@ pub enum Method {
     Rk4 { dt_s: f64 },
 }
 
+/// A wall or neighbouring unit that stops the rotation toward one side at an angle, with a
+/// rebound of its own restitution.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Obstacle {
+    /// The side (sign of θ) it stands on.
+    pub side: i8,
+    pub angle_rad: f64,
+    /// θ̇ after / θ̇ before the contact, magnitudes (the rotation reverses).
+    pub restitution: f64,
+}
+
+/// Part of the mass leaves at `time_s` (contents thrown): from then on the block has the
+/// geometry of `after` (its centre of mass, inertia, α and p), with θ and θ̇ continuous.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MassChange {
+    pub time_s: f64,
+    pub after: Block,
+}
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Options {
     /// Coefficient of restitution; None uses Eq. 24.
     pub restitution: Option<f64>,
     pub anchorage: Option<Anchorage>,
     pub isolated_base: Option<IsolatedBase>,
+    /// Coulomb friction under a block at rest: it slides on the floor when the floor's
+    /// acceleration exceeds μ(g + a_v), and sticks again when the sliding stops. Rocking starts
+    /// from the floor's acceleration (Eq. 20/21) and its pivot is taken to stick. None: no sliding.
+    pub friction: Option<f64>,
+    pub obstacle: Option<Obstacle>,
+    pub mass_change: Option<MassChange>,
     /// Height of the top accelerometer above the base; None: the top of the block.
     pub sensor_height_m: Option<f64>,
     /// After an impact whose rebound would rock the block (freely) by less than this, it is at
@@ -203,6 +228,9 @@ impl Default for Options {
             restitution: None,
             anchorage: None,
             isolated_base: None,
+            friction: None,
+            obstacle: None,
+            mass_change: None,
             sensor_height_m: None,
             rest_amplitude_rad: 1e-7,
             initial_theta_rad: 0.0,
@@ -221,6 +249,14 @@ pub enum EventKind {
     Rest,
     AnchorYield,
     AnchorFracture,
+    /// The rotation hit the obstacle and rebounded.
+    WallImpact,
+    /// The block came to lean on the obstacle, or left it.
+    WallLean,
+    WallRelease,
+    SlideStart,
+    Stick,
+    MassChange,
     Overturn,
 }
 
@@ -232,6 +268,12 @@ impl EventKind {
             EventKind::Rest => "rest",
             EventKind::AnchorYield => "anchor_yield",
             EventKind::AnchorFracture => "anchor_fracture",
+            EventKind::WallImpact => "wall_impact",
+            EventKind::WallLean => "wall_lean",
+            EventKind::WallRelease => "wall_release",
+            EventKind::SlideStart => "slide_start",
+            EventKind::Stick => "stick",
+            EventKind::MassChange => "mass_change",
             EventKind::Overturn => "overturn",
         }
     }
@@ -256,6 +298,10 @@ pub struct Response {
     /// Absolute horizontal acceleration of the top sensor point; after an overturn the sensor
     /// lies along the vertical and records the floor's vertical acceleration (as PS2's did).
     pub top_ax_mps2: Vec<f64>,
+    /// Absolute kinematic acceleration of the sensor point in world axes (horizontal, vertical
+    /// up), without gravity: what a sensor that turns with the body is built from.
+    pub sensor_ax_mps2: Vec<f64>,
+    pub sensor_az_mps2: Vec<f64>,
     /// The horizontal acceleration under the block (the floor, or the isolated base).
     pub base_ax_mps2: Vec<f64>,
     pub events: Vec<Event>,
@@ -321,19 +367,14 @@ enum AnchorState {
     Fractured,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Regime {
-    Rest,
-    Rocking { side: i8 },
-    Overturned,
-}
-
 /// The rocking equations on one side, over one floor segment, with the heel anchor's state.
 struct RockingOnSide<'a> {
     block: &'a Block,
     side: f64,
     seg: Segment,
     anchor: Option<(AnchorLaw, AnchorState)>,
+    /// The obstacle's angle when it stands on this side.
+    wall_rad: Option<f64>,
 }
 
 impl RockingOnSide<'_> {
@@ -362,10 +403,10 @@ impl RockingOnSide<'_> {
     }
 
     /// Event functions, positive while nothing happens: 0 impact (θ back to 0), 1 overturn,
-    /// 2 the heel anchor yields, 3 the yielding anchor unloads, 4 it fractures.
-    fn events(&self, y: &[f64; 2]) -> [f64; 5] {
+    /// 2 the heel anchor yields, 3 the yielding anchor unloads, 4 it fractures, 5 the obstacle.
+    fn events(&self, y: &[f64; 2]) -> [f64; 6] {
         let s = self.side;
-        let mut g = [s * y[0], self.block.lie_angle_rad - s * y[0], 1.0, 1.0, 1.0];
+        let mut g = [s * y[0], self.block.lie_angle_rad - s * y[0], 1.0, 1.0, 1.0, 1.0];
         if let Some((law, state)) = self.anchor {
             let uplift = self.heel_uplift(y[0]);
             match state {
@@ -376,6 +417,9 @@ impl RockingOnSide<'_> {
                 }
                 AnchorState::Fractured => {}
             }
+        }
+        if let Some(angle) = self.wall_rad {
+            g[5] = angle - s * y[0];
         }
         g
     }
@@ -389,24 +433,65 @@ fn uplift_time(block: &Block, seg: &Segment, t: f64, t_end: f64) -> Option<(f64,
         let (ax, av) = seg.at(time);
         -s * ax - (block.g_mps2 + av) * tan
     };
-    let mut first: Option<(f64, i8)> = None;
-    for side in [1i8, -1] {
-        let s = f64::from(side);
-        let (p0, p1) = (phi(t, s), phi(t_end, s));
-        let when = if p0 > 0.0 {
-            Some(t)
-        } else if p1 > 0.0 {
-            Some((t + p0 / (p0 - p1) * (t_end - t)).clamp(t, t_end))
-        } else {
-            None
-        };
-        if let Some(tu) = when {
-            if first.is_none_or(|(tf, _)| tu < tf) {
-                first = Some((tu, side));
-            }
-        }
+    [1i8, -1]
+        .into_iter()
+        .filter_map(|side| first_positive(|time| phi(time, f64::from(side)), t, t_end).map(|tu| (tu, side)))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+}
+
+/// The first time in [t, t_end] at which a function linear in time turns positive.
+fn first_positive(f: impl Fn(f64) -> f64, t: f64, t_end: f64) -> Option<f64> {
+    let (f0, f1) = (f(t), f(t_end));
+    if f0 > 0.0 {
+        Some(t)
+    } else if f1 > 0.0 {
+        Some((t + f0 / (f0 - f1) * (t_end - t)).clamp(t, t_end))
+    } else {
+        None
     }
-    first
+}
+
+/// A block at rest starts sliding when |a_x| > μ(g + a_v): the first such time in [t, t_end]
+/// and the direction of the relative sliding velocity (against the floor's acceleration).
+fn slide_start(block: &Block, mu: f64, seg: &Segment, t: f64, t_end: f64) -> Option<(f64, f64)> {
+    [1.0f64, -1.0]
+        .into_iter()
+        .filter_map(|s| {
+            first_positive(
+                |time| {
+                    let (ax, av) = seg.at(time);
+                    s * ax - mu * (block.g_mps2 + av)
+                },
+                t,
+                t_end,
+            )
+            .map(|ts| (ts, -s))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+}
+
+/// Sliding with relative velocity v of sign `dir`: v̇ = −a_x − dir·μ(g + a_v), linear in time
+/// inside the segment, so v is quadratic. Returns v at `t1`, or the first time it reaches 0.
+fn slide(block: &Block, mu: f64, seg: &Segment, dir: f64, t: f64, v: f64, t1: f64) -> Result<f64, f64> {
+    let (ax, av) = seg.at(t);
+    // v(t + τ) = v + c1 τ + c2 τ².
+    let c1 = -ax - dir * mu * (block.g_mps2 + av);
+    let c2 = 0.5 * (-seg.ax_rate - dir * mu * seg.av_rate);
+    let at = |tau: f64| v + c1 * tau + c2 * tau * tau;
+    let end = t1 - t;
+    let v_end = at(end);
+    if v_end * dir > 0.0 {
+        return Ok(v_end);
+    }
+    // The first root of the quadratic in (0, end].
+    let root = if c2.abs() < 1e-300 {
+        -v / c1
+    } else {
+        let disc = (c1 * c1 - 4.0 * c2 * v).max(0.0).sqrt();
+        let (r1, r2) = ((-c1 - disc) / (2.0 * c2), (-c1 + disc) / (2.0 * c2));
+        [r1, r2].into_iter().filter(|r| *r > 0.0 && *r <= end * (1.0 + 1e-12)).fold(end, f64::min)
+    };
+    Err(t + root.clamp(0.0, end))
 }
 
 /// Simulates the block under the floor motion; outputs are on the input time base.
@@ -442,6 +527,20 @@ pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -
             return Err(format!("the coefficient of restitution must be within 0..1, got {e}"));
         }
     }
+    if let Some(mu) = options.friction {
+        if !(mu > 0.0 && mu.is_finite()) {
+            return Err(format!("the friction coefficient must be positive, got {mu}"));
+        }
+    }
+    if let Some(o) = options.obstacle {
+        if !(o.side.abs() == 1
+            && o.angle_rad > 0.0
+            && o.angle_rad < block.lie_angle_rad
+            && (0.0..=1.0).contains(&o.restitution))
+        {
+            return Err(format!("the obstacle needs side ±1, an angle between 0 and the lying angle and a restitution in 0..1, got {o:?}"));
+        }
+    }
     let base_ax = match options.isolated_base {
         Some(iso) => {
             if !(iso.period_s > 0.0 && (0.0..1.0).contains(&iso.damping_ratio)) {
@@ -466,19 +565,37 @@ pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -
         }
         None => None,
     };
-    let setup = Setup { block, excitation, base_ax: &base_ax, options, anchor };
+    let setup = Setup { excitation, base_ax: &base_ax, options, anchor };
     match options.method {
-        Method::Adaptive { rtol, atol_rad } => setup.run(Dopri5::new(rtol, [atol_rad, atol_rad * block.p_radps], dt)),
-        Method::Rk4 { dt_s } => setup.run(Rk4::new(dt_s)),
+        Method::Adaptive { rtol, atol_rad } => {
+            setup.run(block, Dopri5::new(rtol, [atol_rad, atol_rad * block.p_radps], dt))
+        }
+        Method::Rk4 { dt_s } => setup.run(block, Rk4::new(dt_s)),
     }
 }
 
 struct Setup<'a> {
-    block: &'a Block,
     excitation: &'a Excitation<'a>,
     base_ax: &'a [f64],
     options: &'a Options,
     anchor: Option<AnchorLaw>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Regime {
+    Rest,
+    /// Sliding on the floor with this relative velocity.
+    Sliding {
+        velocity: f64,
+    },
+    Rocking {
+        side: i8,
+    },
+    /// Held against the obstacle.
+    Leaning {
+        side: i8,
+    },
+    Overturned,
 }
 
 /// Impacts and regime changes allowed within one sample interval before the run is declared
@@ -486,27 +603,37 @@ struct Setup<'a> {
 const MAX_TRANSITIONS_PER_SAMPLE: usize = 10_000;
 
 impl Setup<'_> {
-    fn run<S: Stepper<2>>(&self, mut stepper: S) -> Result<Response, String> {
-        let block = self.block;
+    fn on_side<'b>(&self, block: &'b Block, side: i8, seg: Segment, anchors: &[AnchorState; 2]) -> RockingOnSide<'b> {
+        RockingOnSide {
+            block,
+            side: f64::from(side),
+            seg,
+            anchor: self.anchor.map(|law| (law, anchors[usize::from(side < 0)])),
+            wall_rad: self.options.obstacle.filter(|o| o.side == side).map(|o| o.angle_rad),
+        }
+    }
+
+    fn run<S: Stepper<2>>(&self, initial_block: &Block, mut stepper: S) -> Result<Response, String> {
         let exc = self.excitation;
+        let options = self.options;
         let n = self.base_ax.len();
         let dt = exc.dt_s;
         let vertical = |k: usize| exc.vertical_mps2.map_or(0.0, |v| v[k]);
-        let restitution = self.options.restitution.unwrap_or(block.restitution_eq24);
-        let sensor_h = self.options.sensor_height_m.unwrap_or(block.height_m);
-        // Free rocking from θ = 0 at speed w rises to w²/(2p² sin α) (small angles).
-        let rest_speed_squared = 2.0 * block.p_radps.powi(2) * block.alpha_rad.sin() * self.options.rest_amplitude_rad;
+        let mut block = *initial_block;
+        let mut pending_change = options.mass_change;
         let mut response = Response {
             theta_rad: Vec::with_capacity(n),
             theta_dot_radps: Vec::with_capacity(n),
             theta_ddot_radps2: Vec::with_capacity(n),
             top_ax_mps2: Vec::with_capacity(n),
+            sensor_ax_mps2: Vec::with_capacity(n),
+            sensor_az_mps2: Vec::with_capacity(n),
             base_ax_mps2: self.base_ax.to_vec(),
             events: Vec::new(),
             overturn: None,
             stats: Stats::default(),
         };
-        let mut y = [self.options.initial_theta_rad, self.options.initial_theta_dot_radps];
+        let mut y = [options.initial_theta_rad, options.initial_theta_dot_radps];
         let mut regime = match (y[0], y[1]) {
             (th, _) if th != 0.0 => Regime::Rocking { side: th.signum() as i8 },
             (_, w) if w != 0.0 => Regime::Rocking { side: w.signum() as i8 },
@@ -525,31 +652,39 @@ impl Setup<'_> {
                 av_rate: (vertical(k1) - vertical(k)) / dt,
             }
         };
-        let on_side = |side: i8, seg: Segment, anchors: &[AnchorState; 2]| RockingOnSide {
-            block,
-            side: f64::from(side),
-            seg,
-            anchor: self.anchor.map(|law| (law, anchors[heel(side)])),
-        };
-        let record = |response: &mut Response, k: usize, regime: Regime, y: [f64; 2], anchors: &[AnchorState; 2]| {
+        let record = |response: &mut Response,
+                      block: &Block,
+                      k: usize,
+                      regime: Regime,
+                      y: [f64; 2],
+                      anchors: &[AnchorState; 2]| {
             let (ax, av) = (self.base_ax[k], vertical(k));
-            let (theta_ddot, top) = match regime {
-                Regime::Rest => (0.0, ax),
-                Regime::Overturned => (0.0, av),
+            let (theta_ddot, sensor) = match regime {
+                Regime::Rest | Regime::Leaning { .. } | Regime::Overturned => (0.0, (ax, av)),
+                Regime::Sliding { velocity } => {
+                    (0.0, (-velocity.signum() * options.friction.unwrap_or(0.0) * (block.g_mps2 + av), av))
+                }
                 Regime::Rocking { side } => {
-                    let model = on_side(side, segment(k), anchors);
+                    let model = self.on_side(block, side, segment(k), anchors);
                     let acc = model.theta_ddot(exc.t0_s + k as f64 * dt, &y);
                     let (sin, cos) = y[0].sin_cos();
                     let sb = model.side * block.half_base_m;
-                    (acc, ax + (sb * sin + sensor_h * cos) * acc + (sb * cos - sensor_h * sin) * y[1] * y[1])
+                    let h = options.sensor_height_m.unwrap_or(block.height_m);
+                    let w2 = y[1] * y[1];
+                    // The sensor relative to the pivot: x = −sb cos θ + h sin θ, z = sb sin θ + h cos θ.
+                    let ax_rel = (sb * sin + h * cos) * acc + (sb * cos - h * sin) * w2;
+                    let az_rel = (sb * cos - h * sin) * acc - (sb * sin + h * cos) * w2;
+                    (acc, (ax + ax_rel, av + az_rel))
                 }
             };
             response.theta_rad.push(y[0]);
             response.theta_dot_radps.push(y[1]);
             response.theta_ddot_radps2.push(theta_ddot);
-            response.top_ax_mps2.push(top);
+            response.top_ax_mps2.push(if regime == Regime::Overturned { av } else { sensor.0 });
+            response.sensor_ax_mps2.push(sensor.0);
+            response.sensor_az_mps2.push(sensor.1);
         };
-        record(&mut response, 0, regime, y, &anchors);
+        record(&mut response, &block, 0, regime, y, &anchors);
         let push = |response: &mut Response, time_s: f64, kind: EventKind, side: i8, before: f64, after: f64| {
             response.events.push(Event { time_s, kind, side, theta_dot_before: before, theta_dot_after: after });
         };
@@ -563,31 +698,107 @@ impl Setup<'_> {
                 if transitions > MAX_TRANSITIONS_PER_SAMPLE {
                     return Err(format!(
                         "impact chatter near t = {t:.4} s did not settle; raise `rest_amplitude_rad` (now {})",
-                        self.options.rest_amplitude_rad
+                        options.rest_amplitude_rad
                     ));
                 }
+                // A mass change splits the interval: the phase ends there and the block changes.
+                let limit = match pending_change {
+                    Some(change) if change.time_s < t_end => change.time_s.max(t),
+                    _ => t_end,
+                };
+                if t >= limit {
+                    let change = pending_change.take().expect("the limit came from a pending change");
+                    block = change.after;
+                    stepper.reset();
+                    push(&mut response, t, EventKind::MassChange, 0, y[1], y[1]);
+                    continue;
+                }
+                // Free rocking from θ = 0 at speed w rises to w²/(2p² sin α) (small angles).
+                let rest_speed_squared =
+                    2.0 * block.p_radps.powi(2) * block.alpha_rad.sin() * options.rest_amplitude_rad;
+                let restitution = options.restitution.unwrap_or(block.restitution_eq24);
                 match regime {
-                    Regime::Overturned => t = t_end,
-                    Regime::Rest => match uplift_time(block, &seg, t, t_end) {
-                        Some((tu, side)) => {
-                            regime = Regime::Rocking { side };
-                            y = [0.0, 0.0];
-                            t = tu;
-                            stepper.reset();
-                            push(&mut response, tu, EventKind::Uplift, side, 0.0, 0.0);
+                    Regime::Overturned => t = limit,
+                    Regime::Rest => {
+                        let uplift = uplift_time(&block, &seg, t, limit);
+                        let sliding = options.friction.and_then(|mu| slide_start(&block, mu, &seg, t, limit));
+                        match (uplift, sliding) {
+                            (Some((tu, side)), slide) if slide.is_none_or(|(ts, _)| tu <= ts) => {
+                                regime = Regime::Rocking { side };
+                                y = [0.0, 0.0];
+                                t = tu;
+                                stepper.reset();
+                                push(&mut response, tu, EventKind::Uplift, side, 0.0, 0.0);
+                            }
+                            (_, Some((ts, dir))) => {
+                                // Start with an infinitesimal velocity in the sliding direction.
+                                regime = Regime::Sliding { velocity: dir * f64::MIN_POSITIVE };
+                                t = ts;
+                                push(&mut response, ts, EventKind::SlideStart, dir as i8, 0.0, 0.0);
+                            }
+                            _ => t = limit,
                         }
-                        None => t = t_end,
-                    },
+                    }
+                    Regime::Sliding { velocity } => {
+                        let mu = options.friction.expect("only blocks with friction slide");
+                        if let Some((tu, side)) = uplift_time(&block, &seg, t, limit) {
+                            // Rocking takes over; its pivot sticks.
+                            match slide(&block, mu, &seg, velocity.signum(), t, velocity, tu) {
+                                Ok(_) => {
+                                    regime = Regime::Rocking { side };
+                                    y = [0.0, 0.0];
+                                    t = tu;
+                                    stepper.reset();
+                                    push(&mut response, tu, EventKind::Uplift, side, 0.0, 0.0);
+                                    continue;
+                                }
+                                Err(ts) => {
+                                    regime = Regime::Rest;
+                                    t = ts;
+                                    push(&mut response, ts, EventKind::Stick, 0, 0.0, 0.0);
+                                    continue;
+                                }
+                            }
+                        }
+                        match slide(&block, mu, &seg, velocity.signum(), t, velocity, limit) {
+                            Ok(v) => {
+                                regime = Regime::Sliding { velocity: v };
+                                t = limit;
+                            }
+                            Err(ts) => {
+                                // The slip stops: it sticks unless the floor drags it the other way
+                                // (the rest regime then starts the reverse slide at once).
+                                regime = Regime::Rest;
+                                t = ts.max(t);
+                                push(&mut response, ts, EventKind::Stick, 0, 0.0, 0.0);
+                            }
+                        }
+                    }
+                    Regime::Leaning { side } => {
+                        // Held at the obstacle until the equations pull the block away from it:
+                        // θ̈ at fixed θ is linear in the floor, so the release is a linear root.
+                        let model = self.on_side(&block, side, seg, &anchors);
+                        let away = |time: f64| -f64::from(side) * model.theta_ddot(time, &y);
+                        match first_positive(away, t, limit) {
+                            Some(tr) => {
+                                regime = Regime::Rocking { side };
+                                t = tr;
+                                stepper.reset();
+                                push(&mut response, tr, EventKind::WallRelease, side, 0.0, 0.0);
+                            }
+                            None => t = limit,
+                        }
+                    }
                     Regime::Rocking { side } => {
-                        let model = on_side(side, seg, &anchors);
+                        let model = self.on_side(&block, side, seg, &anchors);
                         let outcome =
-                            stepper.advance(&|t, y: &[f64; 2]| [y[1], model.theta_ddot(t, y)], t, y, t_end, &|_, y| {
+                            stepper.advance(&|t, y: &[f64; 2]| [y[1], model.theta_ddot(t, y)], t, y, limit, &|_, y| {
                                 model.events(y)
                             });
                         match outcome {
                             Advance::Reached(y1) => {
                                 y = y1;
-                                t = t_end;
+                                t = limit;
                             }
                             Advance::Event { index, t: te, y: ye } => {
                                 let immediate = te <= t;
@@ -624,9 +835,22 @@ impl Setup<'_> {
                                         let uplift = model.heel_uplift(ye[0]);
                                         anchors[heel(side)] = AnchorState::Elastic { plastic_m: uplift - law.yield_m };
                                     }
-                                    _ => {
+                                    4 => {
                                         anchors[heel(side)] = AnchorState::Fractured;
                                         push(&mut response, te, EventKind::AnchorFracture, side, ye[1], ye[1]);
+                                    }
+                                    _ => {
+                                        let wall = options.obstacle.expect("only obstacles stop the rotation");
+                                        let before = ye[1];
+                                        let after = -wall.restitution * before;
+                                        y = [f64::from(side) * wall.angle_rad, after];
+                                        if immediate || after * after < rest_speed_squared {
+                                            regime = Regime::Leaning { side };
+                                            y[1] = 0.0;
+                                            push(&mut response, te, EventKind::WallLean, side, before, 0.0);
+                                        } else {
+                                            push(&mut response, te, EventKind::WallImpact, side, before, after);
+                                        }
                                     }
                                 }
                             }
@@ -634,7 +858,7 @@ impl Setup<'_> {
                     }
                 }
             }
-            record(&mut response, k + 1, regime, y, &anchors);
+            record(&mut response, &block, k + 1, regime, y, &anchors);
         }
         response.stats = stepper.stats();
         Ok(response)
