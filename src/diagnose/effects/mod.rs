@@ -1,0 +1,52 @@
+//! The physics library of the diagnosis: one file per effect the nominal rigid-block model
+//! leaves out. Adding one is a new file implementing [`Effect`] and a line in [`library`].
+
+use super::{Case, Prediction};
+
+mod flexibility;
+mod mass_change;
+mod obstacle_impact;
+mod restitution;
+mod sensor_tilt;
+mod sliding;
+
+/// A hypothesis: the nominal model plus one physical effect with a few parameters.
+pub trait Effect: Sync {
+    /// The verdict this effect stands for (the diagnosis vocabulary).
+    fn name(&self) -> &'static str;
+    fn parameter_names(&self) -> &'static [&'static str];
+    /// Parameters that take a few discrete values (a side): fitted by the grid only.
+    fn discrete(&self) -> &'static [bool] {
+        &[]
+    }
+    /// Plausible ranges, given the case and where the mismatch was found.
+    fn bounds(&self, case: &Case, window: (f64, f64)) -> Vec<(f64, f64)>;
+    /// Starting points covering the ranges.
+    fn grid(&self, case: &Case, window: (f64, f64)) -> Vec<Vec<f64>>;
+    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, String>;
+    /// One clause for the explanation, with the fitted values in engineering terms.
+    fn explain(&self, case: &Case, params: &[f64]) -> String;
+}
+
+pub fn library() -> &'static [&'static dyn Effect] {
+    &[
+        &sliding::Sliding,
+        &mass_change::MassChange,
+        &restitution::Restitution,
+        &flexibility::Flexibility,
+        &obstacle_impact::ObstacleImpact,
+        &sensor_tilt::SensorTilt,
+    ]
+}
+
+/// `count` values from `lo` to `hi`, evenly spaced.
+pub fn linspace(lo: f64, hi: f64, count: usize) -> Vec<f64> {
+    (0..count).map(|i| lo + (hi - lo) * i as f64 / (count.max(2) - 1) as f64).collect()
+}
+
+/// Every combination of the axes' values.
+pub fn product(axes: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    axes.iter().fold(vec![Vec::new()], |points, axis| {
+        points.iter().flat_map(|p| axis.iter().map(move |v| [p.as_slice(), &[*v]].concat())).collect()
+    })
+}

@@ -1,0 +1,40 @@
+//! `restitution`: the impacts lose a different share of the rocking energy than Eq. 24 says
+//! (a soft or sticky contact, a base that is not a flat rigid line): one coefficient e.
+
+use super::{linspace, Case, Effect, Prediction};
+use crate::physics::rocking::Options;
+
+pub struct Restitution;
+
+impl Effect for Restitution {
+    fn name(&self) -> &'static str {
+        "restitution"
+    }
+
+    fn parameter_names(&self) -> &'static [&'static str] {
+        &["e"]
+    }
+
+    fn bounds(&self, _: &Case, _: (f64, f64)) -> Vec<(f64, f64)> {
+        vec![(0.05, 1.0)]
+    }
+
+    fn grid(&self, _: &Case, _: (f64, f64)) -> Vec<Vec<f64>> {
+        linspace(0.05, 1.0, 39).into_iter().map(|e| vec![e]).collect()
+    }
+
+    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, String> {
+        let options = Options { restitution: Some(params[0]), ..case.nominal_options() };
+        Ok(case.simulate(&case.block, &options)?.1)
+    }
+
+    fn explain(&self, case: &Case, params: &[f64]) -> String {
+        let e = params[0];
+        let eq24 = case.block.restitution_eq24;
+        format!(
+            "the impacts keep a fraction e = {e:.3} of the angular velocity (Eq. 24 says {eq24:.3}): each impact {} {:.0} % of the rocking energy",
+            if e < eq24 { "dissipates" } else { "dissipates only" },
+            100.0 * (1.0 - e * e)
+        )
+    }
+}

@@ -1,0 +1,250 @@
+//! The observations a prediction is judged against: each sensor's samples placed on the floor's
+//! time base, weighed by the sensor's noise, with what no model here predicts masked out.
+
+use super::{Case, Prediction};
+use crate::signal::toppling::{detect_toppling, DetectOptions};
+
+/// Samples closer than this (s) form one cluster of exceedances.
+const CLUSTER_S: f64 = 0.1;
+/// Exceedances needed within a cluster span: 5 accelerometer (of 20 at 200 Hz) or 2 camera
+/// (of 3 at 30 Hz) samples, so isolated noise peaks and lone outliers never flag.
+const ACCEL_CLUSTER: usize = 5;
+const CAMERA_CLUSTER: usize = 2;
+/// The overturn impact rings for tens of ms; no rigid model predicts it.
+const SPIKE_MASK_S: (f64, f64) = (0.05, 0.3);
+/// A sample is solver-sensitive when the nominal model's prediction moves by more than this
+/// under other solver settings (micro-rocking chatter ends at slightly different times).
+const SENSITIVE_ACCEL_MPS2: f64 = 0.1;
+const SENSITIVE_THETA_RAD: f64 = 0.005;
+
+#[derive(Debug, Clone, Copy)]
+struct Sample {
+    t: f64,
+    /// Position on the floor grid: left index and weight of the right neighbour.
+    k: usize,
+    w: f64,
+    value: f64,
+    /// False when missing (NaN), masked as a spike, or solver-sensitive.
+    valid: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Misfit {
+    /// Σ ((observed − predicted)/σ)² over the valid samples of both sensors.
+    pub chi2: f64,
+    pub samples: usize,
+}
+
+#[derive(Debug, Clone)]
+pub struct Evidence {
+    pub exceedance_sigma: f64,
+    accel: Vec<Sample>,
+    camera: Vec<Sample>,
+    accel_sigma: f64,
+    camera_sigma: f64,
+    /// Time spans masked for the overturn impact (observed, and predicted by the nominal model).
+    pub spike_masks: Vec<(f64, f64)>,
+    pub sensitive_samples: usize,
+}
+
+impl Evidence {
+    pub fn new(case: &Case, baseline: &Prediction, variant: &Prediction, exceedance_sigma: f64) -> Evidence {
+        let n = case.floor_ax_mps2.len();
+        let place = |t: f64| {
+            let x = ((t - case.t0_s) / case.dt_s).clamp(0.0, (n - 1) as f64);
+            let k = (x.floor() as usize).min(n.saturating_sub(2));
+            (k, x - k as f64)
+        };
+        let samples = |observed: &Option<super::Observed>| -> Vec<Sample> {
+            observed.as_ref().map_or_else(Vec::new, |o| {
+                o.time_s
+                    .iter()
+                    .zip(&o.value)
+                    .filter(|(t, _)| **t >= case.t0_s && **t <= case.t0_s + case.duration_s() + 1e-9)
+                    .map(|(&t, &value)| {
+                        let (k, w) = place(t);
+                        Sample { t, k, w, value, valid: value.is_finite() }
+                    })
+                    .collect()
+            })
+        };
+        let mut accel = samples(&case.accel);
+        let mut camera = samples(&case.camera);
+        let mut spike_masks = Vec::new();
+        if let Some(observed) = &case.accel {
+            let times: Vec<f64> = accel.iter().map(|s| s.t).collect();
+            let values: Vec<f64> = accel.iter().map(|s| if s.value.is_finite() { s.value } else { 0.0 }).collect();
+            if times.len() > 2 && observed.time_s.len() == times.len() {
+                let event = detect_toppling(&times, &values, None, &DetectOptions::default());
+                if let Some(t) = event.impact_time_s {
+                    spike_masks.push((t - SPIKE_MASK_S.0, t + SPIKE_MASK_S.1));
+                }
+            }
+        }
+        if let Some((t, _)) = baseline.overturn {
+            // The same impact seen twice (observed and predicted) is masked once.
+            if !spike_masks.iter().any(|(a, b)| t >= *a && t <= *b) {
+                spike_masks.push((t - SPIKE_MASK_S.0, t + SPIKE_MASK_S.1));
+            }
+        }
+        let mut sensitive_samples = 0;
+        for s in &mut accel {
+            let masked = spike_masks.iter().any(|(a, b)| s.t >= *a && s.t <= *b);
+            let sensitive = (at(&baseline.top_ax_mps2, s) - at(&variant.top_ax_mps2, s)).abs() > SENSITIVE_ACCEL_MPS2;
+            sensitive_samples += usize::from(sensitive && s.valid && !masked);
+            s.valid &= !masked && !sensitive;
+        }
+        for s in &mut camera {
+            let sensitive = (at(&baseline.theta_rad, s) - at(&variant.theta_rad, s)).abs() > SENSITIVE_THETA_RAD;
+            sensitive_samples += usize::from(sensitive && s.valid);
+            s.valid &= !sensitive;
+        }
+        Evidence {
+            exceedance_sigma,
+            accel,
+            camera,
+            accel_sigma: case.accel_noise_mps2,
+            camera_sigma: case.camera_noise_rad,
+            spike_masks,
+            sensitive_samples,
+        }
+    }
+
+    /// Noise-normalised residuals (observed − predicted)/σ of the valid samples, as (time, z).
+    fn normalised<'a>(&'a self, p: &'a Prediction) -> impl Iterator<Item = (f64, f64, bool)> + 'a {
+        let accel = self.accel.iter().filter(|s| s.valid).map(move |s| (s.t, (s.value - at(&p.top_ax_mps2, s)) / self.accel_sigma, true));
+        let camera = self.camera.iter().filter(|s| s.valid).map(move |s| (s.t, (s.value - at(&p.theta_rad, s)) / self.camera_sigma, false));
+        accel.chain(camera)
+    }
+
+    pub fn misfit(&self, p: &Prediction) -> Misfit {
+        self.misfit_until(p, f64::INFINITY)
+    }
+
+    /// The misfit of the samples up to `t_end` only.
+    pub fn misfit_until(&self, p: &Prediction, t_end: f64) -> Misfit {
+        let (mut chi2, mut samples) = (0.0, 0);
+        for (_, z, _) in self.normalised(p).filter(|(t, _, _)| *t <= t_end) {
+            chi2 += z * z;
+            samples += 1;
+        }
+        Misfit { chi2, samples }
+    }
+
+    /// Noise-normalised RMS residual inside `window` (everywhere when None); 1 is pure noise.
+    pub fn window_rmse(&self, p: &Prediction, window: Option<(f64, f64)>) -> f64 {
+        let inside = |t: f64| window.is_none_or(|(a, b)| t >= a && t <= b);
+        let (sum, count) = self.normalised(p).filter(|(t, _, _)| inside(*t)).fold((0.0, 0usize), |(s, c), (_, z, _)| (s + z * z, c + 1));
+        if count == 0 {
+            return 0.0;
+        }
+        (sum / count as f64).sqrt()
+    }
+
+    /// Times of the samples whose residuals exceed the threshold in clusters (both sensors).
+    fn flagged_times(&self, p: &Prediction) -> Vec<f64> {
+        let mut flagged = Vec::new();
+        for (samples, sigma, series, needed) in [
+            (&self.accel, self.accel_sigma, &p.top_ax_mps2, ACCEL_CLUSTER),
+            (&self.camera, self.camera_sigma, &p.theta_rad, CAMERA_CLUSTER),
+        ] {
+            let exceeding: Vec<f64> = samples
+                .iter()
+                .filter(|s| s.valid && ((s.value - at(series, s)) / sigma).abs() > self.exceedance_sigma)
+                .map(|s| s.t)
+                .collect();
+            // A cluster: `needed` exceedances within CLUSTER_S; all of its members are flagged.
+            let mut marked = vec![false; exceeding.len()];
+            for i in 0..exceeding.len() {
+                let j = exceeding[i..].partition_point(|t| *t < exceeding[i] + CLUSTER_S) + i;
+                if j - i >= needed {
+                    marked[i..j].iter_mut().for_each(|m| *m = true);
+                }
+            }
+            flagged.extend(exceeding.iter().zip(&marked).filter(|(_, m)| **m).map(|(t, _)| *t));
+        }
+        flagged
+    }
+
+    /// How many samples the prediction's residuals flag.
+    pub fn flagged(&self, p: &Prediction) -> usize {
+        self.flagged_times(p).len()
+    }
+
+    /// From the first to the last flagged sample: where the prediction disagrees with the records.
+    pub fn window(&self, p: &Prediction) -> Option<(f64, f64)> {
+        let times = self.flagged_times(p);
+        let first = times.iter().copied().fold(f64::INFINITY, f64::min);
+        let last = times.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        (first <= last).then_some((first, last))
+    }
+
+    /// "the accelerometer by up to 3.2 m/s^2 and the camera by up to 0.12 rad".
+    pub fn describe_disagreement(&self, p: &Prediction, window: (f64, f64)) -> String {
+        let worst = |samples: &[Sample], series: &[f64]| {
+            samples
+                .iter()
+                .filter(|s| s.valid && s.t >= window.0 && s.t <= window.1)
+                .map(|s| (s.value - at(series, s)).abs())
+                .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v))))
+        };
+        let parts: Vec<String> = [
+            worst(&self.accel, &p.top_ax_mps2).map(|v| format!("the top accelerometer by up to {v:.2} m/s^2")),
+            worst(&self.camera, &p.theta_rad).map(|v| format!("the camera rotation by up to {v:.3} rad")),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        if parts.is_empty() {
+            "though no valid sample falls inside it".into()
+        } else {
+            format!("departing from {}", parts.join(" and "))
+        }
+    }
+
+    /// What was left out of the comparison, for the explanation.
+    pub fn mask_note(&self) -> String {
+        let mut notes = Vec::new();
+        for (a, b) in &self.spike_masks {
+            notes.push(format!("the overturn impact spike at {:.2} s ({:.2} s of accelerometer record)", a + SPIKE_MASK_S.0, b - a));
+        }
+        if self.sensitive_samples > 0 {
+            notes.push(format!(
+                "{} samples where the nominal model itself depends on solver settings (impact chatter)",
+                self.sensitive_samples
+            ));
+        }
+        if notes.is_empty() {
+            String::new()
+        } else {
+            format!(" Not compared: {}.", notes.join("; "))
+        }
+    }
+
+    /// Per observed sample: time, observed, predicted, residual (NaN where not compared).
+    pub fn accel_series(&self, p: &Prediction) -> Vec<(f64, f64, f64, f64)> {
+        series(&self.accel, &p.top_ax_mps2)
+    }
+
+    pub fn camera_series(&self, p: &Prediction) -> Vec<(f64, f64, f64, f64)> {
+        series(&self.camera, &p.theta_rad)
+    }
+}
+
+fn series(samples: &[Sample], predicted: &[f64]) -> Vec<(f64, f64, f64, f64)> {
+    samples
+        .iter()
+        .map(|s| {
+            let p = at(predicted, s);
+            (s.t, s.value, p, if s.valid { s.value - p } else { f64::NAN })
+        })
+        .collect()
+}
+
+/// A floor-grid series at a sample's position (linear between grid points).
+fn at(series: &[f64], s: &Sample) -> f64 {
+    match series.get(s.k + 1) {
+        Some(next) => series[s.k] * (1.0 - s.w) + next * s.w,
+        None => series[s.k],
+    }
+}
