@@ -100,6 +100,29 @@ enum Command {
         #[arg(long, default_value_t = 100)]
         rows: usize,
     },
+    /// Diagnose a unit: where the toppling model and its records disagree, which physics explains it.
+    ///
+    /// A case folder holds equipment.yaml, floor.csv (time_s, ax_mps2, ay_mps2, az_mps2),
+    /// observed_accel.csv (time_s, top_ax_mps2) and observed_cpt.csv (time_s, theta_rad).
+    /// Writes OUT/diagnosis.json (verdict, window, rmse before/after, candidates, explanation),
+    /// accel.parquet and camera.parquet (observed, nominal and accepted model, residuals),
+    /// diagnosis.mcap and diagnosis.png; with several cases, one sub-folder per case.
+    ///
+    /// Example: shakeflow diagnose ../shared/cases/demo/demo_02 --out runs/diagnosis/demo_02
+    Diagnose {
+        /// Case folders.
+        #[arg(required = true)]
+        cases: Vec<PathBuf>,
+        /// Output folder.
+        #[arg(long, short = 'o')]
+        out: PathBuf,
+        /// Worker threads (default: all cores).
+        #[arg(long, short = 'j')]
+        jobs: Option<usize>,
+        /// Decision threshold as key=value (exceedance_sigma, min_improvement, max_remaining_flagged).
+        #[arg(long = "set", short = 's', value_name = "KEY=VALUE")]
+        set: Vec<String>,
+    },
     /// Write the synthetic demo archive (12 motions + 2 white-noise tests, floors 4/5, 7 units).
     DemoArchive {
         dir: PathBuf,
@@ -204,6 +227,13 @@ pub fn main() -> anyhow::Result<ExitCode> {
                 bytes as f64 / 1e6,
                 started.elapsed().as_secs_f64()
             );
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Diagnose { cases, out, jobs, set } => {
+            if let Some(jobs) = jobs {
+                rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build_global().context("setting --jobs")?;
+            }
+            diagnose_cases(&cases, &out, &set)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Schema => {
@@ -340,4 +370,69 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
 /// A run-independent name for a file given on the command line: its file name.
 fn file_label(path: &Path) -> String {
     path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+}
+
+/// `shakeflow diagnose`: every case is diagnosed first; files are written only when all succeeded.
+fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Result<()> {
+    use rayon::prelude::*;
+    let info = stages::Stage::info(&stages::diagnose::Diagnose);
+    let assignments: Vec<(String, serde_json::Value)> =
+        set.iter().map(|s| params::parse_set(s)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
+    let params = params::normalize(info.params, info.name, assignments.iter().map(|(k, v)| (k.as_str(), v.clone())))
+        .map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;
+    let settings = stages::diagnose::settings(&params);
+    let started = std::time::Instant::now();
+    let results: Vec<(PathBuf, crate::diagnose::Diagnosis, String)> = cases
+        .par_iter()
+        .map(|dir| {
+            let case = crate::io::case::read_case(dir)?;
+            let d =
+                crate::diagnose::diagnose(&case, &settings).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
+            eprintln!(
+                "{}: {} (window {}, rmse {:.2} → {:.2})",
+                dir.display(),
+                d.verdict,
+                d.window.map_or("none".to_string(), |(a, b)| format!("{a:.2}-{b:.2} s")),
+                d.rmse_before,
+                d.rmse_after
+            );
+            Ok((dir.clone(), d, hash::hash_dir(dir)?.0))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    for (dir, d, input_hash) in &results {
+        let target = if results.len() == 1 { out.to_path_buf() } else { out.join(&d.case) };
+        std::fs::create_dir_all(&target).with_context(|| format!("cannot create `{}`", target.display()))?;
+        let provenance = BTreeMap::from([
+            ("shakeflow.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+            ("shakeflow.command".to_string(), "diagnose".to_string()),
+            ("shakeflow.case".to_string(), d.case.clone()),
+            ("shakeflow.input_hash".to_string(), input_hash.clone()),
+            ("shakeflow.params".to_string(), serde_json::to_string(&params)?),
+            ("shakeflow.verdict".to_string(), d.verdict.to_string()),
+        ]);
+        let mut accel = stages::diagnose::accel_table(d);
+        let mut camera = stages::diagnose::camera_table(d);
+        accel.metadata.extend(provenance.clone());
+        camera.metadata.extend(provenance.clone());
+        let png = stages::diagnose::figure(d).map_err(anyhow::Error::msg)?;
+        crate::io::parquet::write_table(&target.join("accel.parquet"), &accel)?;
+        crate::io::parquet::write_table(&target.join("camera.parquet"), &camera)?;
+        crate::io::mcap::write_timeseries(
+            &target.join("diagnosis.mcap"),
+            &[
+                crate::io::mcap::Topic { name: format!("/{}/accel", d.case), table: &accel },
+                crate::io::mcap::Topic { name: format!("/{}/camera", d.case), table: &camera },
+            ],
+            &provenance,
+        )?;
+        crate::io::atomic::write_file(&target.join("diagnosis.png"), |w| Ok(std::io::Write::write_all(w, &png)?))?;
+        // The contract file last: its presence means the folder is complete.
+        let json = stages::diagnose::json_bytes(d);
+        crate::io::atomic::write_file(&target.join("diagnosis.json"), |w| {
+            Ok(std::io::Write::write_all(w, json.as_bytes())?)
+        })?;
+        eprintln!("{} → {}", dir.display(), target.join("diagnosis.json").display());
+    }
+    eprintln!("{} case(s) in {:.1} s", results.len(), started.elapsed().as_secs_f64());
+    Ok(())
 }

@@ -36,6 +36,7 @@ pub struct Marker {
 }
 
 /// One plot panel (one set of axes).
+#[derive(Default)]
 pub struct Panel<'a> {
     pub title: String,
     pub x_label: String,
@@ -44,6 +45,8 @@ pub struct Panel<'a> {
     pub markers: Vec<Marker>,
     /// Logarithmic y axis; non-positive y values are skipped (break the line).
     pub log_y: bool,
+    /// x intervals shaded behind the data (e.g. a located time window).
+    pub spans: Vec<(f64, f64)>,
 }
 
 const PALETTE: [RGBColor; 8] = [
@@ -57,6 +60,7 @@ const PALETTE: [RGBColor; 8] = [
     RGBColor(23, 190, 207),  // cyan
 ];
 const MARKER_COLOR: RGBColor = RGBColor(90, 90, 90);
+const SPAN_COLOR: RGBColor = RGBColor(255, 236, 204);
 
 /// Render `panels` stacked vertically under an overall `title` into a PNG
 /// (RGB, 8 bit) of `width` x `height` pixels.
@@ -243,6 +247,18 @@ where
         .draw()
         .map_err(err)?;
 
+    // Shaded spans, behind the data, in pixel space over the whole plotting height.
+    let (_, py) = chart.plotting_area().get_pixel_range();
+    for &(a, b) in &p.spans {
+        let (a, b) = (a.max(xr.start), b.min(xr.end));
+        if a < b {
+            let (xa, _) = chart.backend_coord(&(a, 1.0));
+            let (xb, _) = chart.backend_coord(&(b, 1.0));
+            root.draw(&Rectangle::new([(xa, py.start), (xb.max(xa + 1), py.end - 1)], SPAN_COLOR.filled()))
+                .map_err(err)?;
+        }
+    }
+
     let log_y = p.log_y;
     for (si, s) in p.series.iter().enumerate() {
         let color = PALETTE[si % PALETTE.len()];
@@ -283,7 +299,6 @@ where
     }
 
     // Markers: vertical dashed lines drawn in pixel space on the root area.
-    let (_, py) = chart.plotting_area().get_pixel_range();
     let label_font = ("sans-serif", 13).into_font().color(&MARKER_COLOR);
     for (mi, m) in p.markers.iter().enumerate() {
         if !(m.x.is_finite() && m.x >= xr.start && m.x <= xr.end) {
@@ -350,6 +365,7 @@ mod tests {
                 ],
                 markers: vec![],
                 log_y: false,
+                spans: vec![(10.0, 20.0)],
             },
             Panel {
                 title: "Spectrum".into(),
@@ -361,6 +377,7 @@ mod tests {
                 ],
                 markers: vec![Marker { x: 3.1, label: "f₀ = 3.1 Hz".into() }],
                 log_y: true,
+                spans: vec![],
             },
         ];
         render_png("Test figure", &panels, 1000, 800).expect("render")
@@ -400,7 +417,7 @@ mod tests {
             y_label: String::new(),
             series: vec![Series { label: "s".into(), x: &x, y: &y }],
             markers: vec![],
-            log_y: false,
+            ..Panel::default()
         };
         assert!(render_png("t", &[p], 200, 200).is_err());
         let nan = [f64::NAN, f64::NAN];
@@ -411,6 +428,7 @@ mod tests {
             series: vec![Series { label: "s".into(), x: &x, y: &nan }],
             markers: vec![Marker { x: 1.5, label: "m".into() }],
             log_y: true,
+            spans: vec![],
         };
         assert!(render_png("t", &[p], 300, 200).is_ok());
         assert!(render_png("", &[], 100, 100).is_ok());

@@ -112,8 +112,16 @@ impl Evidence {
 
     /// Noise-normalised residuals (observed − predicted)/σ of the valid samples, as (time, z).
     fn normalised<'a>(&'a self, p: &'a Prediction) -> impl Iterator<Item = (f64, f64, bool)> + 'a {
-        let accel = self.accel.iter().filter(|s| s.valid).map(move |s| (s.t, (s.value - at(&p.top_ax_mps2, s)) / self.accel_sigma, true));
-        let camera = self.camera.iter().filter(|s| s.valid).map(move |s| (s.t, (s.value - at(&p.theta_rad, s)) / self.camera_sigma, false));
+        let accel = self
+            .accel
+            .iter()
+            .filter(|s| s.valid)
+            .map(move |s| (s.t, (s.value - at(&p.top_ax_mps2, s)) / self.accel_sigma, true));
+        let camera = self
+            .camera
+            .iter()
+            .filter(|s| s.valid)
+            .map(move |s| (s.t, (s.value - at(&p.theta_rad, s)) / self.camera_sigma, false));
         accel.chain(camera)
     }
 
@@ -134,7 +142,10 @@ impl Evidence {
     /// Noise-normalised RMS residual inside `window` (everywhere when None); 1 is pure noise.
     pub fn window_rmse(&self, p: &Prediction, window: Option<(f64, f64)>) -> f64 {
         let inside = |t: f64| window.is_none_or(|(a, b)| t >= a && t <= b);
-        let (sum, count) = self.normalised(p).filter(|(t, _, _)| inside(*t)).fold((0.0, 0usize), |(s, c), (_, z, _)| (s + z * z, c + 1));
+        let (sum, count) = self
+            .normalised(p)
+            .filter(|(t, _, _)| inside(*t))
+            .fold((0.0, 0usize), |(s, c), (_, z, _)| (s + z * z, c + 1));
         if count == 0 {
             return 0.0;
         }
@@ -206,7 +217,11 @@ impl Evidence {
     pub fn mask_note(&self) -> String {
         let mut notes = Vec::new();
         for (a, b) in &self.spike_masks {
-            notes.push(format!("the overturn impact spike at {:.2} s ({:.2} s of accelerometer record)", a + SPIKE_MASK_S.0, b - a));
+            notes.push(format!(
+                "the overturn impact spike at {:.2} s ({:.2} s of accelerometer record)",
+                a + SPIKE_MASK_S.0,
+                b - a
+            ));
         }
         if self.sensitive_samples > 0 {
             notes.push(format!(

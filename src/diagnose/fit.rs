@@ -91,8 +91,7 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
     let mut order: Vec<usize> = (0..scored.len()).collect();
     order.sort_by(|&a, &b| scored[a].0.total_cmp(&scored[b].0).then(a.cmp(&b)));
     let discrete = effect.discrete();
-    let continuous: Vec<usize> =
-        (0..bounds.len()).filter(|&i| !discrete.get(i).copied().unwrap_or(false)).collect();
+    let continuous: Vec<usize> = (0..bounds.len()).filter(|&i| !discrete.get(i).copied().unwrap_or(false)).collect();
     let starts: Vec<Vec<f64>> = order.iter().take(STARTS).map(|&i| scored[i].1.clone()).collect();
     let refined: Vec<(f64, Vec<f64>)> = starts
         .into_par_iter()
@@ -129,7 +128,11 @@ fn search(
         .iter()
         .map(|&i| {
             let (lo, hi) = bounds[i];
-            if hi > lo { (start[i] - lo) / (hi - lo) } else { 0.0 }
+            if hi > lo {
+                (start[i] - lo) / (hi - lo)
+            } else {
+                0.0
+            }
         })
         .collect();
     // The first simplex spans about one grid step in each direction.

@@ -155,7 +155,11 @@ pub fn diagnose(case: &Case, settings: &Settings) -> Result<Diagnosis, String> {
     // The same model under other solver settings: samples where it changes are not evidence.
     let (_, variant) = case.simulate(
         &case.block,
-        &Options { rest_amplitude_rad: 1e-5, method: rocking::Method::Adaptive { rtol: 1e-8, atol_rad: 1e-10 }, ..options },
+        &Options {
+            rest_amplitude_rad: 1e-5,
+            method: rocking::Method::Adaptive { rtol: 1e-8, atol_rad: 1e-10 },
+            ..options
+        },
     )?;
     let evidence = Evidence::new(case, &baseline, &variant, settings.exceedance_sigma);
     let base_misfit = evidence.misfit(&baseline);

@@ -62,9 +62,8 @@ pub fn read_case(dir: &Path) -> Result<Case, UserError> {
     }
     let equipment = read_rocking_equipment(&equipment_path)?;
     let number = |value: Option<f64>, key: &str| {
-        value.ok_or_else(|| {
-            UserError::new(format!("the equipment file does not give `{key}`")).in_file(&equipment_path)
-        })
+        value
+            .ok_or_else(|| UserError::new(format!("the equipment file does not give `{key}`")).in_file(&equipment_path))
     };
     let shape = match equipment.shape.as_deref().unwrap_or("rectangular") {
         "rectangular" => Shape::Rectangular {

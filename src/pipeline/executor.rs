@@ -21,6 +21,7 @@ use super::progress::Reporter;
 use super::sink::OutputSink;
 use super::sources;
 use crate::error::UserError;
+use crate::pipeline::spec::RecordFormat;
 use crate::stages::{InputPart, StageContext, StageInput};
 
 #[derive(Debug, Clone, Default)]
@@ -85,8 +86,22 @@ fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, User
                 None => located,
             }
         })?;
+        // A case source names each case by its equipment.yaml; the case is the whole folder.
+        let files: Vec<sources::MatchedFile> = if spec.format == RecordFormat::Case {
+            files
+                .into_iter()
+                .map(|f| sources::MatchedFile { path: f.path.parent().map(Path::to_path_buf).unwrap_or(f.path), ..f })
+                .collect()
+        } else {
+            files
+        };
         let paths: Vec<PathBuf> = files.iter().map(|f| f.path.clone()).collect();
-        let hashes = hash::hash_files(&paths).map_err(|e| UserError::new(format!("source `{name}`: {e:#}")))?;
+        let hashes = if spec.format == RecordFormat::Case {
+            paths.iter().map(|p| hash::hash_dir(p).map(|h| h.0)).collect::<anyhow::Result<Vec<_>>>()
+        } else {
+            hash::hash_files(&paths)
+        }
+        .map_err(|e| UserError::new(format!("source `{name}`: {e:#}")))?;
         let mut summary = serde_json::to_string(spec).expect("specs serialise");
         let parts: Vec<InputPart> = files
             .into_iter()

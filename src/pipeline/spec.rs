@@ -59,6 +59,9 @@ pub enum RecordFormat {
     RenadicV1,
     /// SimCenter event JSON (`dT`, `data_x`, `data_y`).
     SimcenterJson,
+    /// A diagnosis case folder, named by its `equipment.yaml` (`cases/{case}/equipment.yaml`):
+    /// equipment, floor record and observations, read whole by `diagnose`.
+    Case,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]

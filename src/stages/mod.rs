@@ -12,6 +12,7 @@ use crate::pipeline::spec::SourceSpec;
 
 pub mod baseline;
 pub mod detect_toppling;
+pub mod diagnose;
 pub mod load;
 pub mod report;
 pub mod simulate_toppling;
@@ -118,6 +119,7 @@ pub fn registry() -> &'static [&'static dyn Stage] {
         &detect_toppling::DetectToppling,
         &simulate_toppling::SimulateToppling,
         &toppling_fragility::TopplingFragility,
+        &diagnose::Diagnose,
         &report::Report,
     ]
 }

@@ -141,6 +141,7 @@ fn figures(
                 ],
                 markers: impacts,
                 log_y: false,
+                spans: Vec::new(),
             },
             Panel {
                 title: format!("transfer function {input} -> {channel}"),
@@ -149,6 +150,7 @@ fn figures(
                 series: spectrum_series,
                 markers: peaks,
                 log_y: true,
+                spans: Vec::new(),
             },
         ];
         let png = render_png(&unit, &panels, 1200, 900).map_err(anyhow::Error::msg)?;

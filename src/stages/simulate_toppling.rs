@@ -358,6 +358,7 @@ fn figure(name: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
             ],
             markers: Vec::new(),
             log_y: false,
+            spans: Vec::new(),
         },
         Panel {
             title: match r.overturn {
@@ -369,6 +370,7 @@ fn figure(name: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
             series: vec![Series { label: "theta".into(), x: &floor.time, y: &r.theta_rad }],
             markers,
             log_y: false,
+            spans: Vec::new(),
         },
     ];
     render_png(&format!("simulate_toppling: {name}"), &panels, 1200, 800)

@@ -272,6 +272,7 @@ fn figure(
         ],
         markers: Vec::new(),
         log_y: false,
+        spans: Vec::new(),
     }];
     render_png("toppling fragility", &panels, 1000, 600)
 }

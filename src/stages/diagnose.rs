@@ -1,0 +1,285 @@
+//! `diagnose` (stage and `shakeflow diagnose` command): for each case folder, where the nominal
+//! toppling model and the recordings disagree, which physics explains it, and the fit before
+//! and after. Writes the contract `diagnosis.json`, the observed/baseline/model series and
+//! residuals (Parquet + MCAP) and a figure with the located window shaded.
+
+use rayon::prelude::*;
+use serde_json::{json, Value};
+
+use super::{InputKind, OutputInfo, Stage, StageContext, StageInfo, StageInput};
+use crate::diagnose::{diagnose, Diagnosis, Settings};
+use crate::io::case::read_case;
+use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
+use crate::pipeline::spec::RecordFormat;
+use crate::table::{Column, Table, TIME_COLUMN};
+
+pub struct Diagnose;
+
+static INFO: StageInfo = StageInfo {
+    name: "diagnose",
+    version: 1,
+    summary: "Where the toppling model and a unit's records disagree, which physics it left out (sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt), fitted, ranked by BIC, or `unexplained`.",
+    inputs: InputKind::Sources,
+    outputs: &[
+        OutputInfo { name: "diagnosis", description: "per case: mismatch, verdict, window_start_s, window_end_s, rmse_before, rmse_after, explanation, candidates (JSON)", timeseries: false },
+        OutputInfo { name: "accel", description: "per case: observed, baseline and model top acceleration and the residuals before/after", timeseries: true },
+        OutputInfo { name: "camera", description: "per case: observed, baseline and model rotation and the residuals before/after", timeseries: true },
+        OutputInfo { name: "reports", description: "<case>.json (the diagnosis.json contract) and <case>.png (records, models, residuals, window shaded)", timeseries: false },
+    ],
+    params: &[
+        ParamSpec { name: "exceedance_sigma", kind: ParamKind::Float, default: Some("4.0"), unit: "", description: "a residual beyond this many noise standard deviations counts as a disagreement (5 within 0.1 s flag a mismatch)", range: Some((2.0, 20.0)) },
+        ParamSpec { name: "min_improvement", kind: ParamKind::Float, default: Some("3.0"), unit: "", description: "a physics is accepted only if it cuts the window's noise-normalised RMS misfit at least this many times", range: Some((1.0, 1e3)) },
+        ParamSpec { name: "max_remaining_flagged", kind: ParamKind::Float, default: Some("0.05"), unit: "", description: "... and leaves at most this fraction of the flagged samples flagged", range: Some((0.0, 1.0)) },
+        ParamSpec { name: "mcap", kind: ParamKind::Bool, default: Some("true"), unit: "", description: "also write the series as MCAP for Foxglove", range: None },
+    ],
+};
+
+pub fn settings(params: &Params) -> Settings {
+    Settings {
+        exceedance_sigma: params.f64_of("exceedance_sigma"),
+        min_improvement: params.f64_of("min_improvement"),
+        max_remaining_flagged: params.f64_of("max_remaining_flagged"),
+    }
+}
+
+impl Stage for Diagnose {
+    fn info(&self) -> &'static StageInfo {
+        &INFO
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
+        let settings = settings(ctx.params);
+        for input in ctx.inputs {
+            if let StageInput::Source { name, spec, .. } = input {
+                if spec.format != RecordFormat::Case {
+                    anyhow::bail!("source `{name}` is not a case (format: case, path: cases/{{case}}/equipment.yaml)");
+                }
+            }
+        }
+        let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
+        ctx.sink.set_total(parts.len());
+        let mut rows: Vec<(String, Diagnosis)> = parts
+            .par_iter()
+            .map(|part| {
+                let case = read_case(&part.path)?;
+                let d = diagnose(&case, &settings).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
+                let mut accel = accel_table(&d);
+                let mut camera = camera_table(&d);
+                for t in [&mut accel, &mut camera] {
+                    t.metadata.extend(super::record_provenance(part));
+                }
+                ctx.sink.write("accel", &part.partition, accel)?;
+                ctx.sink.write("camera", &part.partition, camera)?;
+                let name = super::partition_path(&part.partition).replace('/', "_");
+                let name = if name.is_empty() { d.case.clone() } else { name };
+                ctx.sink.write_file("reports", &format!("{name}.json"), json_bytes(&d).as_bytes())?;
+                ctx.sink.write_file("reports", &format!("{name}.png"), &figure(&d).map_err(anyhow::Error::msg)?)?;
+                Ok((super::partition_path(&part.partition), d))
+            })
+            .collect::<anyhow::Result<_>>()?;
+        rows.sort_by(|a, b| a.0.cmp(&b.0));
+        ctx.sink.write("diagnosis", &Vec::new(), summary_table(&rows))
+    }
+}
+
+/// The `diagnosis.json` contract, with a few fields added for readers.
+pub fn diagnosis_json(d: &Diagnosis) -> Value {
+    let candidates: Vec<Value> = d
+        .candidates
+        .iter()
+        .map(|c| {
+            let params: serde_json::Map<String, Value> =
+                c.params.iter().map(|(k, v)| (k.to_string(), json!(v))).collect();
+            json!({
+                "effect": c.effect,
+                "params": params,
+                "rmse": c.rmse,
+                "score": c.score,
+                "bic": c.bic,
+                "chi2": c.misfit.chi2,
+                "flagged_samples": c.flagged,
+                "evaluations": c.evaluations,
+                "overturn_time_s": c.prediction.overturn.map(|o| o.0),
+                "overturn_side": c.prediction.overturn.map(|o| o.1),
+                "explanation": c.sentence,
+            })
+        })
+        .collect();
+    json!({
+        "case": d.case,
+        "mismatch": d.mismatch,
+        "verdict": d.verdict,
+        "window": d.window.map(|(a, b)| json!({"start_s": a, "end_s": b})),
+        "rmse_before": d.rmse_before,
+        "rmse_after": d.rmse_after,
+        "rmse_definition": "sqrt(mean(((observed - predicted) / noise_sd)^2)) over the accelerometer and camera samples inside the window (the whole record when there is none), overturn impact spike and solver-sensitive samples excluded; 1 is pure sensor noise",
+        "noise": {"accel_mps2": d.accel_noise_mps2, "camera_rad": d.camera_noise_rad},
+        "candidates": candidates,
+        "explanation": d.explanation,
+        "shakeflow_version": env!("CARGO_PKG_VERSION"),
+    })
+}
+
+pub fn json_bytes(d: &Diagnosis) -> String {
+    serde_json::to_string_pretty(&diagnosis_json(d)).expect("the diagnosis is JSON") + "\n"
+}
+
+fn series_table(rows: &[(f64, f64, f64, f64)], model: &[(f64, f64, f64, f64)], quantity: &str, unit: &str) -> Table {
+    let column =
+        |name: String, description: String, f: &dyn Fn(&(f64, f64, f64, f64)) -> f64, from: &[(f64, f64, f64, f64)]| {
+            Column::f64(&name, unit, &description, from.iter().map(f).collect())
+        };
+    let mut t = Table::new();
+    t.push(Column::f64(TIME_COLUMN, "s", "time", rows.iter().map(|r| r.0).collect()));
+    t.push(column(format!("observed_{quantity}"), format!("recorded {quantity}"), &|r| r.1, rows));
+    t.push(column(
+        format!("baseline_{quantity}"),
+        format!("{quantity} of the nominal rigid-block model"),
+        &|r| r.2,
+        rows,
+    ));
+    t.push(column(
+        format!("model_{quantity}"),
+        format!("{quantity} of the accepted model (the baseline when none is accepted)"),
+        &|r| r.2,
+        model,
+    ));
+    t.push(column(
+        format!("residual_before_{quantity}"),
+        "observed − baseline (NaN where not compared)".into(),
+        &|r| r.3,
+        rows,
+    ));
+    t.push(column(
+        format!("residual_after_{quantity}"),
+        "observed − accepted model (NaN where not compared)".into(),
+        &|r| r.3,
+        model,
+    ));
+    t
+}
+
+pub fn accel_table(d: &Diagnosis) -> Table {
+    series_table(&d.evidence.accel_series(&d.baseline), &d.evidence.accel_series(&d.model), "top_ax_mps2", "m/s^2")
+}
+
+pub fn camera_table(d: &Diagnosis) -> Table {
+    series_table(&d.evidence.camera_series(&d.baseline), &d.evidence.camera_series(&d.model), "theta_rad", "rad")
+}
+
+fn summary_table(rows: &[(String, Diagnosis)]) -> Table {
+    let text = |name: &str, description: &str, v: Vec<String>| Column {
+        name: name.into(),
+        unit: String::new(),
+        description: description.into(),
+        data: crate::table::ColumnData::Str(v),
+    };
+    let optional = |name: &str, description: &str, v: Vec<Option<f64>>| Column {
+        name: name.into(),
+        unit: "s".into(),
+        description: description.into(),
+        data: crate::table::ColumnData::OptF64(v),
+    };
+    let mut t = Table::new();
+    t.push(text("case", "the case (its partition)", rows.iter().map(|r| r.0.clone()).collect()));
+    t.push(Column {
+        name: "mismatch".into(),
+        unit: String::new(),
+        description: "the nominal model disagrees with the records beyond their noise".into(),
+        data: crate::table::ColumnData::Bool(rows.iter().map(|r| r.1.mismatch).collect()),
+    });
+    t.push(text(
+        "verdict",
+        "none | sliding | mass_change | restitution | flexibility | obstacle_impact | sensor_tilt | unexplained",
+        rows.iter().map(|r| r.1.verdict.to_string()).collect(),
+    ));
+    t.push(optional(
+        "window_start_s",
+        "first disagreement (null without one)",
+        rows.iter().map(|r| r.1.window.map(|w| w.0)).collect(),
+    ));
+    t.push(optional("window_end_s", "last disagreement", rows.iter().map(|r| r.1.window.map(|w| w.1)).collect()));
+    t.push(Column::f64(
+        "rmse_before",
+        "",
+        "noise-normalised RMS misfit of the nominal model in the window",
+        rows.iter().map(|r| r.1.rmse_before).collect(),
+    ));
+    t.push(Column::f64(
+        "rmse_after",
+        "",
+        "the same for the accepted model",
+        rows.iter().map(|r| r.1.rmse_after).collect(),
+    ));
+    t.push(text("explanation", "for a test engineer", rows.iter().map(|r| r.1.explanation.clone()).collect()));
+    t.push(text(
+        "candidates",
+        "every fitted hypothesis (JSON)",
+        rows.iter().map(|r| diagnosis_json(&r.1)["candidates"].to_string()).collect(),
+    ));
+    t
+}
+
+/// Records, nominal model and accepted model, the residuals, with the window shaded.
+pub fn figure(d: &Diagnosis) -> Result<Vec<u8>, String> {
+    use crate::plot::{render_png, Panel, Series};
+    let accel = d.evidence.accel_series(&d.baseline);
+    let accel_model = d.evidence.accel_series(&d.model);
+    let camera = d.evidence.camera_series(&d.baseline);
+    let camera_model = d.evidence.camera_series(&d.model);
+    let col =
+        |rows: &[(f64, f64, f64, f64)], f: fn(&(f64, f64, f64, f64)) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
+    let (ta, oa, ba, ma) =
+        (col(&accel, |r| r.0), col(&accel, |r| r.1), col(&accel, |r| r.2), col(&accel_model, |r| r.2));
+    let (tc, oc, bc, mc) =
+        (col(&camera, |r| r.0), col(&camera, |r| r.1), col(&camera, |r| r.2), col(&camera_model, |r| r.2));
+    let za: Vec<f64> = accel.iter().map(|r| r.3 / d.accel_noise_mps2).collect();
+    let zm: Vec<f64> = accel_model.iter().map(|r| r.3 / d.accel_noise_mps2).collect();
+    let spans: Vec<(f64, f64)> = d.window.into_iter().collect();
+    let model_label = format!("model: {}", d.verdict);
+    let panels = [
+        Panel {
+            title: "top accelerometer".into(),
+            x_label: "time [s]".into(),
+            y_label: "m/s^2".into(),
+            series: vec![
+                Series { label: "observed".into(), x: &ta, y: &oa },
+                Series { label: "nominal model".into(), x: &ta, y: &ba },
+                Series { label: model_label.clone(), x: &ta, y: &ma },
+            ],
+            spans: spans.clone(),
+            ..Panel::default()
+        },
+        Panel {
+            title: "camera rotation".into(),
+            x_label: "time [s]".into(),
+            y_label: "theta [rad]".into(),
+            series: vec![
+                Series { label: "observed".into(), x: &tc, y: &oc },
+                Series { label: "nominal model".into(), x: &tc, y: &bc },
+                Series { label: model_label, x: &tc, y: &mc },
+            ],
+            spans: spans.clone(),
+            ..Panel::default()
+        },
+        Panel {
+            title: format!(
+                "accelerometer residual / noise: RMS in the window {:.1} → {:.1}",
+                d.rmse_before, d.rmse_after
+            ),
+            x_label: "time [s]".into(),
+            y_label: "residual / sigma".into(),
+            series: vec![
+                Series { label: "nominal model".into(), x: &ta, y: &za },
+                Series { label: "accepted model".into(), x: &ta, y: &zm },
+            ],
+            spans,
+            ..Panel::default()
+        },
+    ];
+    let title = match d.window {
+        Some((a, b)) => format!("{}: {} (mismatch {a:.2}-{b:.2} s, shaded)", d.case, d.verdict),
+        None => format!("{}: no mismatch", d.case),
+    };
+    render_png(&title, &panels, 1400, 1100)
+}
