@@ -16,7 +16,8 @@ fn truth(id: &str) -> serde_yaml::Value {
 fn demo_cases_get_their_concealed_verdicts() {
     let out = tempfile::tempdir().unwrap();
     let ids = ["demo_01", "demo_02", "demo_03", "demo_04"];
-    let dirs: Vec<String> = ids.iter().map(|id| shared_dir().join("cases/demo").join(id).display().to_string()).collect();
+    let dirs: Vec<String> =
+        ids.iter().map(|id| shared_dir().join("cases/demo").join(id).display().to_string()).collect();
     let mut args = vec!["diagnose"];
     args.extend(dirs.iter().map(String::as_str));
     args.extend(["--out", out.path().to_str().unwrap()]);
@@ -37,7 +38,10 @@ fn demo_cases_get_their_concealed_verdicts() {
         let onset = truth["onset_s"].as_f64().unwrap();
         let (before, after) = (d["rmse_before"].as_f64().unwrap(), d["rmse_after"].as_f64().unwrap());
         let start = d["window"]["start_s"].as_f64().expect("a mismatch window");
-        println!("{id}: {} (truth {expected}), window from {start:.2} s (onset {onset:.2} s), rmse {before:.1} → {after:.2}", d["verdict"]);
+        println!(
+            "{id}: {} (truth {expected}), window from {start:.2} s (onset {onset:.2} s), rmse {before:.1} → {after:.2}",
+            d["verdict"]
+        );
         assert_eq!(d["verdict"], expected, "{id}: {}", d["explanation"]);
         assert_eq!(d["mismatch"], true);
         assert!((start - onset).abs() < 0.5, "{id}: window starts at {start}, onset {onset}");

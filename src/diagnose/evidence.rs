@@ -110,18 +110,26 @@ impl Evidence {
         }
     }
 
-    /// Noise-normalised residuals (observed − predicted)/σ of the valid samples, as (time, z).
-    fn normalised<'a>(&'a self, p: &'a Prediction) -> impl Iterator<Item = (f64, f64, bool)> + 'a {
-        let accel = self
-            .accel
-            .iter()
-            .filter(|s| s.valid)
-            .map(move |s| (s.t, (s.value - at(&p.top_ax_mps2, s)) / self.accel_sigma, true));
-        let camera = self
-            .camera
-            .iter()
-            .filter(|s| s.valid)
-            .map(move |s| (s.t, (s.value - at(&p.theta_rad, s)) / self.camera_sigma, false));
+    /// The accelerometer's standard deviation at a sample: sensor noise and the prediction's own
+    /// uncertainty (micro-rocking), combined.
+    fn accel_sd(&self, p: &Prediction, s: &Sample) -> f64 {
+        self.accel_sigma.hypot(at(&p.top_ax_uncertainty_mps2, s))
+    }
+
+    fn camera_sd(&self, p: &Prediction, s: &Sample) -> f64 {
+        self.camera_sigma.hypot(at(&p.theta_uncertainty_rad, s))
+    }
+
+    /// Normalised residuals (observed − predicted)/sd of the valid samples, as (time, z, ln(sd/σ)).
+    fn normalised<'a>(&'a self, p: &'a Prediction) -> impl Iterator<Item = (f64, f64, f64)> + 'a {
+        let accel = self.accel.iter().filter(|s| s.valid).map(move |s| {
+            let sd = self.accel_sd(p, s);
+            (s.t, (s.value - at(&p.top_ax_mps2, s)) / sd, (sd / self.accel_sigma).ln())
+        });
+        let camera = self.camera.iter().filter(|s| s.valid).map(move |s| {
+            let sd = self.camera_sd(p, s);
+            (s.t, (s.value - at(&p.theta_rad, s)) / sd, (sd / self.camera_sigma).ln())
+        });
         accel.chain(camera)
     }
 
@@ -129,11 +137,12 @@ impl Evidence {
         self.misfit_until(p, f64::INFINITY)
     }
 
-    /// The misfit of the samples up to `t_end` only.
+    /// −2 log-likelihood (up to a constant) of the samples up to `t_end`: Σ z² plus, where the
+    /// prediction admits its own uncertainty, the price of it (2 ln(sd/σ)).
     pub fn misfit_until(&self, p: &Prediction, t_end: f64) -> Misfit {
         let (mut chi2, mut samples) = (0.0, 0);
-        for (_, z, _) in self.normalised(p).filter(|(t, _, _)| *t <= t_end) {
-            chi2 += z * z;
+        for (_, z, log_ratio) in self.normalised(p).filter(|(t, _, _)| *t <= t_end) {
+            chi2 += z * z + 2.0 * log_ratio;
             samples += 1;
         }
         Misfit { chi2, samples }
@@ -155,13 +164,16 @@ impl Evidence {
     /// Times of the samples whose residuals exceed the threshold in clusters (both sensors).
     fn flagged_times(&self, p: &Prediction) -> Vec<f64> {
         let mut flagged = Vec::new();
-        for (samples, sigma, series, needed) in [
-            (&self.accel, self.accel_sigma, &p.top_ax_mps2, ACCEL_CLUSTER),
-            (&self.camera, self.camera_sigma, &p.theta_rad, CAMERA_CLUSTER),
-        ] {
+        let accel_sd = |s: &Sample| self.accel_sd(p, s);
+        let camera_sd = |s: &Sample| self.camera_sd(p, s);
+        let sensors: [(&Vec<Sample>, &dyn Fn(&Sample) -> f64, &Vec<f64>, usize); 2] = [
+            (&self.accel, &accel_sd, &p.top_ax_mps2, ACCEL_CLUSTER),
+            (&self.camera, &camera_sd, &p.theta_rad, CAMERA_CLUSTER),
+        ];
+        for (samples, sd, series, needed) in sensors {
             let exceeding: Vec<f64> = samples
                 .iter()
-                .filter(|s| s.valid && ((s.value - at(series, s)) / sigma).abs() > self.exceedance_sigma)
+                .filter(|s| s.valid && ((s.value - at(series, s)) / sd(s)).abs() > self.exceedance_sigma)
                 .map(|s| s.t)
                 .collect();
             // A cluster: `needed` exceedances within CLUSTER_S; all of its members are flagged.

@@ -22,8 +22,10 @@ use super::{Case, Prediction};
 /// Grid points a local search starts from.
 const STARTS: usize = 4;
 const MAX_ITERATIONS: u64 = 60;
-/// Horizons after the start of the disagreement (s); the last is the whole record.
-const HORIZONS_S: [f64; 3] = [1.5, 5.0, f64::INFINITY];
+/// Horizons after the start of the disagreement (s), the last the whole record, each with the
+/// size of the first simplex (a fraction of the ranges): coarse while the landscape is smooth,
+/// fine once a longer horizon makes it rugged.
+const HORIZONS: [(f64, f64); 4] = [(1.5, 0.04), (4.0, 0.008), (10.0, 0.002), (f64::INFINITY, 0.0005)];
 
 pub struct Fit {
     pub params: Vec<f64>,
@@ -85,34 +87,45 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
     let evaluations = AtomicUsize::new(0);
     let objective = Objective { effect, case, evidence, evaluations: &evaluations };
     let bounds = effect.bounds(case, window);
-    let horizons = HORIZONS_S.map(|h| window.0 + h);
+    let horizons = HORIZONS.map(|(h, step)| (window.0 + h, step));
     let grid = effect.grid(case, window);
-    let scored: Vec<(f64, Vec<f64>)> = grid.into_par_iter().map(|p| (objective.chi2(&p, horizons[0]), p)).collect();
+    let scored: Vec<(f64, Vec<f64>)> = grid.into_par_iter().map(|p| (objective.chi2(&p, horizons[0].0), p)).collect();
     let mut order: Vec<usize> = (0..scored.len()).collect();
     order.sort_by(|&a, &b| scored[a].0.total_cmp(&scored[b].0).then(a.cmp(&b)));
     let discrete = effect.discrete();
     let continuous: Vec<usize> = (0..bounds.len()).filter(|&i| !discrete.get(i).copied().unwrap_or(false)).collect();
     let starts: Vec<Vec<f64>> = order.iter().take(STARTS).map(|&i| scored[i].1.clone()).collect();
-    let refined: Vec<(f64, Vec<f64>)> = starts
+    // Every start leaves its optimum after each horizon: long horizons can trade the exact
+    // parameters for a lucky match of chaotic late rocking, so all of them compete at the end.
+    let optima: Vec<Vec<f64>> = starts
         .into_par_iter()
-        .map(|start| {
+        .flat_map_iter(|start| {
             let mut params = start;
+            let mut found = vec![params.clone()];
             if !continuous.is_empty() {
-                for &until in &horizons {
-                    params = search(&objective, &bounds, &continuous, &params, until).unwrap_or(params);
+                for &(until, step) in &horizons {
+                    params = search(&objective, &bounds, &continuous, &params, until, step).unwrap_or(params);
+                    found.push(params.clone());
                 }
             }
-            (objective.chi2(&params, f64::INFINITY), params)
+            found
         })
         .collect();
-    let best = refined.into_iter().reduce(|a, b| if b.0 < a.0 { b } else { a }).expect("at least one start");
-    let prediction = effect.predict(case, &best.1).unwrap_or_else(|_| Prediction {
-        top_ax_mps2: vec![f64::NAN; case.floor_ax_mps2.len()],
-        theta_rad: vec![f64::NAN; case.floor_ax_mps2.len()],
-        overturn: None,
-    });
+    // Judged on the whole record with each prediction's chaotic sensitivity as its uncertainty.
+    let judged: Vec<(f64, Vec<f64>, Prediction)> = optima
+        .into_par_iter()
+        .filter_map(|params| {
+            evaluations.fetch_add(2, Ordering::Relaxed);
+            let prediction = case.with_sensitivity(|c| effect.predict(c, &params)).ok()?;
+            Some((evidence.misfit(&prediction).chi2, params, prediction))
+        })
+        .collect();
+    let (_, params, prediction) = judged
+        .into_iter()
+        .reduce(|a, b| if b.0 < a.0 { b } else { a })
+        .unwrap_or_else(|| (f64::INFINITY, scored[order[0]].1.clone(), failed(case)));
     let misfit = evidence.misfit(&prediction);
-    Fit { params: best.1, misfit, prediction, evaluations: evaluations.into_inner() }
+    Fit { params, misfit, prediction, evaluations: evaluations.into_inner() }
 }
 
 /// Nelder–Mead from `start` over the continuous parameters, judged on the records up to `until`.
@@ -122,6 +135,7 @@ fn search(
     continuous: &[usize],
     start: &[f64],
     until: f64,
+    step: f64,
 ) -> Option<Vec<f64>> {
     let problem = Scaled { objective, until, bounds, template: start, continuous };
     let u0: Vec<f64> = continuous
@@ -135,18 +149,29 @@ fn search(
             }
         })
         .collect();
-    // The first simplex spans about one grid step in each direction.
     let mut simplex = vec![u0.clone()];
     for d in 0..u0.len() {
         let mut vertex = u0.clone();
-        vertex[d] = if vertex[d] > 0.5 { vertex[d] - 0.04 } else { vertex[d] + 0.04 };
+        vertex[d] = if vertex[d] > 0.5 { vertex[d] - step } else { vertex[d] + step };
         simplex.push(vertex);
     }
     let start_cost = objective.chi2(start, until);
-    let solver = NelderMead::new(simplex).with_sd_tolerance(1e-4 * start_cost.max(1.0)).ok()?;
+    let solver = NelderMead::new(simplex).with_sd_tolerance(1e-6 * start_cost.max(1.0)).ok()?;
     let result = Executor::new(problem, solver).configure(|s| s.max_iters(MAX_ITERATIONS)).run().ok()?;
     let state = result.state();
     let u = state.get_best_param()?.clone();
     (state.get_best_cost() <= start_cost)
         .then(|| Scaled { objective, until, bounds, template: start, continuous }.params(&u))
+}
+
+/// What a model that cannot run predicts: nothing (every residual is NaN, never accepted).
+fn failed(case: &Case) -> Prediction {
+    let n = case.floor_ax_mps2.len();
+    Prediction {
+        top_ax_mps2: vec![f64::NAN; n],
+        theta_rad: vec![f64::NAN; n],
+        overturn: None,
+        top_ax_uncertainty_mps2: vec![0.0; n],
+        theta_uncertainty_rad: vec![0.0; n],
+    }
 }
