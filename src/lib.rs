@@ -14,3 +14,4 @@ pub mod signal;
 pub mod stages;
 pub mod table;
 pub mod units;
+pub mod vision;
