@@ -82,6 +82,11 @@ fn parse(spec: &SourceSpec, path: &std::path::Path) -> Result<RawRecord, UserErr
         RecordFormat::Csv => records::read_delimited(path, &delimited(delimiter.or(Some(b',')))),
         RecordFormat::Tsv => records::read_delimited(path, &delimited(delimiter.or(Some(b'\t')))),
         RecordFormat::Delimited => records::read_delimited(path, &delimited(delimiter)),
+        RecordFormat::Frames | RecordFormat::ControlPoints => {
+            return Err(UserError::new(format!("`load` does not read `{}` sources", spec.format.name()))
+                .in_file(path)
+                .hint("a `frames` source feeds `cpt_track`, a `control_points` source feeds `cpt_calibrate`"))
+        }
     }
     .map_err(as_user_error)
 }

@@ -46,7 +46,10 @@ pub const MIN_OUTLIER_PX: f64 = 0.5;
 pub enum CalibrationError {
     TooFewPoints(usize),
     /// RMS distance of the points from their best plane, and their RMS spread in that plane.
-    Coplanar { off_plane: f64, spread: f64 },
+    Coplanar {
+        off_plane: f64,
+        spread: f64,
+    },
     Degenerate(String),
     /// Index of a point the DLT camera sees behind itself.
     BehindCamera(usize),
@@ -89,7 +92,11 @@ pub struct Calibration {
     pub warnings: Vec<String>,
 }
 
-pub fn calibrate(points: &[ControlPoint], distortion: Distortion, outlier_sigma: f64) -> Result<Calibration, CalibrationError> {
+pub fn calibrate(
+    points: &[ControlPoint],
+    distortion: Distortion,
+    outlier_sigma: f64,
+) -> Result<Calibration, CalibrationError> {
     let n = points.len();
     if n < MIN_POINTS {
         return Err(CalibrationError::TooFewPoints(n));
@@ -118,11 +125,14 @@ pub fn calibrate(points: &[ControlPoint], distortion: Distortion, outlier_sigma:
     let d: Vec<f64> = residuals.iter().map(|r| r[0].hypot(r[1])).collect();
     let mean_distance_px = d.iter().sum::<f64>() / n as f64;
     let rms_px = (d.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt();
-    // Robust noise scale: the median of a 2D Gaussian's distance (Rayleigh) is σ√(2 ln 2).
+    // Robust noise scale: the median of a 2D Gaussian's distance (Rayleigh) is σ√(2 ln 2), and a
+    // fit of d parameters shrinks residuals by √(1 − d/2n) on average.
     let mut sorted = d.clone();
     sorted.sort_by(f64::total_cmp);
     let median = if n % 2 == 1 { sorted[n / 2] } else { 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]) };
-    let sigma = median / (2.0 * std::f64::consts::LN_2).sqrt();
+    let sigma = median
+        / (2.0 * std::f64::consts::LN_2).sqrt()
+        / expected_rms_px(1.0 / 2f64.sqrt(), n, distortion.parameters()).max(0.1);
     let outlier_threshold_px = (outlier_sigma * sigma).max(MIN_OUTLIER_PX);
     let outliers: Vec<bool> = d.iter().map(|&x| !(x <= outlier_threshold_px)).collect();
     if camera.k1 != 0.0 || camera.k2 != 0.0 {
@@ -132,7 +142,9 @@ pub fn calibrate(points: &[ControlPoint], distortion: Distortion, outlier_sigma:
             .filter(|[u, v]| camera.normalised_of_pixel(*u, *v).is_none())
             .count();
         if worst > 0 {
-            warnings.push(format!("{worst} control point(s) lie beyond the radius where the fitted distortion can be inverted"));
+            warnings.push(format!(
+                "{worst} control point(s) lie beyond the radius where the fitted distortion can be inverted"
+            ));
         }
     }
     Ok(Calibration {

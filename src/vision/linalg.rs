@@ -162,8 +162,7 @@ pub fn svd_right(a: &[f64], rows: usize, cols: usize) -> (Vec<f64>, Vec<Vec<f64>
             break;
         }
     }
-    let mut order: Vec<(f64, usize)> =
-        (0..cols).map(|j| (u[j].iter().map(|x| x * x).sum::<f64>().sqrt(), j)).collect();
+    let mut order: Vec<(f64, usize)> = (0..cols).map(|j| (u[j].iter().map(|x| x * x).sum::<f64>().sqrt(), j)).collect();
     order.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
     (order.iter().map(|o| o.0).collect(), order.iter().map(|o| v[o.1].clone()).collect())
 }
@@ -236,7 +235,13 @@ mod tests {
     #[test]
     fn svd_finds_the_null_vector() {
         // Rows orthogonal to x = (1, 2, -1, 0.5)/|·|, plus a well-conditioned rest.
-        let rows = [[2.0, -1.0, 0.0, 0.0], [1.0, 0.0, 1.0, 0.0], [0.0, 1.0, 2.0, 0.0], [1.0, 0.0, 0.0, -2.0], [3.0, -1.0, 1.0, 0.0]];
+        let rows = [
+            [2.0, -1.0, 0.0, 0.0],
+            [1.0, 0.0, 1.0, 0.0],
+            [0.0, 1.0, 2.0, 0.0],
+            [1.0, 0.0, 0.0, -2.0],
+            [3.0, -1.0, 1.0, 0.0],
+        ];
         let a: Vec<f64> = rows.iter().flatten().copied().collect();
         let (s, v) = svd_right(&a, 5, 4);
         assert!(s[3] < 1e-12 * s[0], "{s:?}");

@@ -156,15 +156,24 @@ impl ScoreMap {
         let sign = if score == Score::Zncc { 1.0 } else { -1.0 };
         let values = if score == Score::Zncc { &self.zncc } else { &self.ssd };
         let s = |dx: i64, dy: i64| sign * values[(r as i64 + dy) as usize * self.cols + (c as i64 + dx) as usize];
-        let (mut b, mut cc, mut e, mut x_pairs, mut x_mid, mut y_pairs, mut y_mid) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        let (mut b, mut cc, mut e, mut x_pairs, mut x_mid, mut y_pairs, mut y_mid) =
+            (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
         for dy in -1..=1 {
             for dx in -1..=1 {
                 let v = s(dx, dy);
                 b += dx as f64 * v;
                 cc += dy as f64 * v;
                 e += (dx * dy) as f64 * v;
-                if dx == 0 { x_mid += v } else { x_pairs += v }
-                if dy == 0 { y_mid += v } else { y_pairs += v }
+                if dx == 0 {
+                    x_mid += v
+                } else {
+                    x_pairs += v
+                }
+                if dy == 0 {
+                    y_mid += v
+                } else {
+                    y_pairs += v
+                }
             }
         }
         let (b, cc, e) = (b / 6.0, cc / 6.0, e / 4.0);
@@ -180,7 +189,11 @@ impl ScoreMap {
         }
         let parabola = |m: f64, z: f64, p: f64| {
             let curvature = m - 2.0 * z + p;
-            if curvature < 0.0 { (0.5 * (m - p) / curvature).clamp(-0.5, 0.5) } else { 0.0 }
+            if curvature < 0.0 {
+                (0.5 * (m - p) / curvature).clamp(-0.5, 0.5)
+            } else {
+                0.0
+            }
         };
         [integer[0] + parabola(s(-1, 0), s(0, 0), s(1, 0)), integer[1] + parabola(s(0, -1), s(0, 0), s(0, 1))]
     }
@@ -252,7 +265,8 @@ pub fn match_template(
     let m = template.size;
     for r in 0..rows {
         for c in 0..cols {
-            let box_sum = |ii: &[i64]| ii[(r + m) * iw + c + m] - ii[r * iw + c + m] - ii[(r + m) * iw + c] + ii[r * iw + c];
+            let box_sum =
+                |ii: &[i64]| ii[(r + m) * iw + c + m] - ii[r * iw + c + m] - ii[(r + m) * iw + c] + ii[r * iw + c];
             let s = box_sum(&scratch.integral);
             let s2 = box_sum(&scratch.integral_sq);
             let mut cross = i64::from(scratch.correlation[r * cols + c]);
@@ -351,7 +365,8 @@ mod x86 {
                     }
                 }
                 for k in 0..block {
-                    let halves = _mm_add_epi32(_mm256_castsi256_si128(wide_acc[k]), _mm256_extracti128_si256(wide_acc[k], 1));
+                    let halves =
+                        _mm_add_epi32(_mm256_castsi256_si128(wide_acc[k]), _mm256_extracti128_si256(wide_acc[k], 1));
                     out[(r + k) * cols + c] = horizontal_sum(_mm_add_epi32(halves, tail_acc[k]));
                 }
             }
@@ -393,7 +408,8 @@ mod x86 {
                     }
                 }
                 for k in 0..block {
-                    let halves = _mm_add_epi32(_mm256_castsi256_si128(wide_acc[k]), _mm256_extracti128_si256(wide_acc[k], 1));
+                    let halves =
+                        _mm_add_epi32(_mm256_castsi256_si128(wide_acc[k]), _mm256_extracti128_si256(wide_acc[k], 1));
                     out[(r + k) * cols + c] = horizontal_sum(_mm_add_epi32(halves, tail_acc[k]));
                 }
             }
@@ -428,7 +444,10 @@ mod tests {
             for kernel in Kernel::available() {
                 let map = match_template(&image, &template, (12, 9), 60, kernel, &mut Scratch::default()).unwrap();
                 let best = map.best(Score::Zncc);
-                assert_eq!((map.origin.0 + (best % map.cols) as i64, map.origin.1 + (best / map.cols) as i64), (30, 25));
+                assert_eq!(
+                    (map.origin.0 + (best % map.cols) as i64, map.origin.1 + (best / map.cols) as i64),
+                    (30, 25)
+                );
                 assert!((map.zncc[best] - 1.0).abs() < 1e-12 && map.ssd[map.best(Score::Ssd)] == 0.0);
                 if let Some(r) = &reference {
                     assert_eq!(r.zncc, map.zncc, "{kernel:?} differs for size {size}");

@@ -37,7 +37,9 @@ impl std::fmt::Display for ProjectError {
                 write!(f, "the camera ray meets the plane at {angle_deg:.2}°, nearly parallel: the 3D position is not determined")
             }
             ProjectError::BehindCamera => write!(f, "the camera ray meets the plane behind the camera"),
-            ProjectError::OutsideDistortionModel => write!(f, "the pixel lies where the lens distortion model cannot be inverted"),
+            ProjectError::OutsideDistortionModel => {
+                write!(f, "the pixel lies where the lens distortion model cannot be inverted")
+            }
         }
     }
 }
@@ -76,14 +78,21 @@ pub fn backproject(camera: &Camera, pixel: [f64; 2], plane: &Plane, min_angle_de
 
 /// Rigid motion of a unit from two of its points on the plane, relative to the first sample
 /// where both are known: translation of their midpoint and the rotation of the segment between
-/// them about the plane normal (right-handed, radians, unwrapped).
+/// them about the plane normal (right-handed, radians, unwrapped). With `zero_direction`, the
+/// rotation is measured from that direction instead of the first segment (e.g. world up, for a
+/// rocking unit whose two points are one above the other when it stands upright).
 #[derive(Debug, Clone, PartialEq)]
 pub struct PairMotion {
     pub translation: Vec<Vec3>,
     pub rotation: Vec<f64>,
 }
 
-pub fn pair_motion(first: &[Option<Vec3>], second: &[Option<Vec3>], plane: &Plane) -> PairMotion {
+pub fn pair_motion(
+    first: &[Option<Vec3>],
+    second: &[Option<Vec3>],
+    plane: &Plane,
+    zero_direction: Option<Vec3>,
+) -> PairMotion {
     let n = linalg::norm3(&plane.normal());
     let normal = plane.normal().map(|v| v / n);
     let both: Vec<Option<(Vec3, Vec3)>> = first.iter().zip(second).map(|(a, b)| Some(((*a)?, (*b)?))).collect();
@@ -92,7 +101,14 @@ pub fn pair_motion(first: &[Option<Vec3>], second: &[Option<Vec3>], plane: &Plan
     };
     let mid = |a: &Vec3, b: &Vec3| [0, 1, 2].map(|k| 0.5 * (a[k] + b[k]));
     let mid0 = mid(&a0, &b0);
-    let d0 = [0, 1, 2].map(|k| b0[k] - a0[k]);
+    let d0 = match zero_direction {
+        // Its component in the plane.
+        Some(z) => {
+            let along = linalg::dot3(&z, &normal);
+            [0, 1, 2].map(|k| z[k] - along * normal[k])
+        }
+        None => [0, 1, 2].map(|k| b0[k] - a0[k]),
+    };
     let mut translation = Vec::with_capacity(first.len());
     let mut rotation = Vec::with_capacity(first.len());
     let mut previous: Option<f64> = None;
@@ -163,8 +179,10 @@ mod tests {
         let first: Vec<Option<Vec3>> = thetas.iter().map(|&t| Some(rotate([0.0, 0.0, 100.0], t))).collect();
         let mut second: Vec<Option<Vec3>> = thetas.iter().map(|&t| Some(rotate([0.0, 0.0, 800.0], t))).collect();
         second[2] = None;
-        let motion = pair_motion(&first, &second, &plane);
+        let motion = pair_motion(&first, &second, &plane, None);
         assert!(motion.rotation[2].is_nan());
+        let upright = pair_motion(&first[1..2], &second[1..2], &plane, Some([0.0, 0.0, 1.0]));
+        assert!((upright.rotation[0] - 0.1).abs() < 1e-12, "{:?}", upright.rotation);
         for (k, &t) in thetas.iter().enumerate().filter(|(k, _)| *k != 2) {
             let expected = if t == -3.0 { 2.0 * std::f64::consts::PI - 3.0 } else { t };
             assert!((motion.rotation[k] - expected).abs() < 1e-12, "{k}: {} vs {expected}", motion.rotation[k]);

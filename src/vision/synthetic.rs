@@ -66,8 +66,9 @@ impl Texture {
     fn block_mean(&self, sx: usize, sy: usize) -> f64 {
         let s = SUPERSAMPLING;
         let w = self.cols + 1;
-        let sum = self.integral[(sy + s) * w + sx + s] - self.integral[sy * w + sx + s] - self.integral[(sy + s) * w + sx]
-            + self.integral[sy * w + sx];
+        let sum =
+            self.integral[(sy + s) * w + sx + s] - self.integral[sy * w + sx + s] - self.integral[(sy + s) * w + sx]
+                + self.integral[sy * w + sx];
         sum / (s * s) as f64
     }
 
@@ -146,7 +147,11 @@ impl SpeckleScene {
             .iter()
             .map(|l| {
                 let shift = l.shift.map(|v| (v * s as f64).round() as i64);
-                assert!(shift.iter().all(|v| v.abs() < (MARGIN as i64 - 2) * s), "layer shift {:?} beyond the margin", l.shift);
+                assert!(
+                    shift.iter().all(|v| v.abs() < (MARGIN as i64 - 2) * s),
+                    "layer shift {:?} beyond the margin",
+                    l.shift
+                );
                 // Sample-grid rectangle of the moved layer.
                 let rect = l.rect.map(|r| {
                     let q = r.map(|v| (v * s as f64).round() as i64);
@@ -181,7 +186,9 @@ impl SpeckleScene {
                             let (texture, _, shift) = placed
                                 .iter()
                                 .rev()
-                                .find(|(_, rect, _)| rect.is_none_or(|r| sx >= r[0] && sy >= r[1] && sx < r[2] && sy < r[3]))
+                                .find(|(_, rect, _)| {
+                                    rect.is_none_or(|r| sx >= r[0] && sy >= r[1] && sx < r[2] && sy < r[3])
+                                })
                                 .expect("the first layer covers the frame");
                             sum += texture.sample((sx + margin - shift[0]) as usize, (sy + margin - shift[1]) as usize);
                         }

@@ -201,7 +201,9 @@ impl PointTracker {
             if found.as_ref().is_none_or(|f| f.score < options.refresh_below) {
                 let candidate = search(scratch, samples, frame, &self.reference, prediction, search_size, options);
                 if let Some(candidate) = candidate {
-                    if candidate.score >= options.refresh_below || found.as_ref().is_none_or(|f| candidate.score > f.score) {
+                    if candidate.score >= options.refresh_below
+                        || found.as_ref().is_none_or(|f| candidate.score > f.score)
+                    {
                         found = Some(candidate);
                         on_reference = true;
                     }
@@ -290,7 +292,14 @@ struct Match {
 
 /// Quadratic peak, then ECC iterations maximising the ZNCC of the template against the
 /// bicubic-interpolated frame. None when the refinement leaves the image or wanders off.
-fn refine(frame: &GrayImage, anchor: &Anchor, map: &ScoreMap, best: usize, score: Score, scratch: &mut Vec<f64>) -> Option<([f64; 2], f64)> {
+fn refine(
+    frame: &GrayImage,
+    anchor: &Anchor,
+    map: &ScoreMap,
+    best: usize,
+    score: Score,
+    scratch: &mut Vec<f64>,
+) -> Option<([f64; 2], f64)> {
     let start = map.subpixel_peak(best, score);
     let m = anchor.template.size;
     let t = &anchor.centred;
@@ -383,7 +392,9 @@ impl SequenceTracker {
     ) -> Result<(SequenceTracker, FrameObservations), (String, TrackError)> {
         let start = |list: &[NamedPoint]| {
             list.iter()
-                .map(|p| PointTracker::new(first, p.start, &options).map(|t| (p.clone(), t)).map_err(|e| (p.name.clone(), e)))
+                .map(|p| {
+                    PointTracker::new(first, p.start, &options).map(|t| (p.clone(), t)).map_err(|e| (p.name.clone(), e))
+                })
                 .collect::<Result<Vec<_>, _>>()
         };
         let tracker = SequenceTracker { options, points: start(points)?, references: start(references)? };
@@ -447,7 +458,7 @@ impl Observation {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vision::synthetic::{SpeckleScene, Layer};
+    use crate::vision::synthetic::{Layer, SpeckleScene};
 
     fn options() -> TrackOptions {
         TrackOptions { window: 16, search: 40, ..TrackOptions::default() }
