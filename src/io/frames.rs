@@ -228,6 +228,9 @@ pub struct VideoReader {
     notes: mpsc::Receiver<Note>,
     log: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
     size: Option<(usize, usize)>,
+    /// Presentation times that arrived before the frame size (ffmpeg logs the first frame's
+    /// before it announces its output).
+    early_pts: std::collections::VecDeque<f64>,
     next: usize,
     first_pts: Option<f64>,
 }
@@ -292,7 +295,17 @@ impl VideoReader {
                 }
             }
         });
-        Ok(VideoReader { path: path.to_path_buf(), child, stdout, notes, log, size: None, next: 0, first_pts: None })
+        Ok(VideoReader {
+            path: path.to_path_buf(),
+            child,
+            stdout,
+            notes,
+            log,
+            size: None,
+            early_pts: std::collections::VecDeque::new(),
+            next: 0,
+            first_pts: None,
+        })
     }
 
     fn failure(&mut self, what: &str) -> UserError {
@@ -306,10 +319,11 @@ impl VideoReader {
     }
 
     fn next_frame(&mut self) -> Result<Option<Frame>, UserError> {
-        if self.size.is_none() {
+        while self.size.is_none() {
             match self.notes.recv() {
                 Ok(Note::Size(w, h)) => self.size = Some((w, h)),
-                _ => return Err(self.failure("ffmpeg could not decode the video")),
+                Ok(Note::Pts(t)) => self.early_pts.push_back(t),
+                Err(_) => return Err(self.failure("ffmpeg could not decode the video")),
             }
         }
         let (w, h) = self.size.expect("set above");
@@ -333,6 +347,9 @@ impl VideoReader {
             return Err(self.failure(&format!("frame {} ended after {filled} of {} bytes", self.next, pixels.len())));
         }
         let pts = loop {
+            if let Some(t) = self.early_pts.pop_front() {
+                break t;
+            }
             match self.notes.recv() {
                 Ok(Note::Pts(t)) => break t,
                 Ok(Note::Size(..)) => continue,

@@ -13,7 +13,7 @@ use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::pipeline::spec::RecordFormat;
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
-use crate::vision::calibrate::{calibrate, expected_rms_px, Calibration, CalibrationError, Distortion};
+use crate::vision::calibrate::{calibrate, expected_rms_px, Calibration, CalibrationError, Distortion, Model};
 
 pub struct CptCalibrate;
 
@@ -29,6 +29,7 @@ static INFO: StageInfo = StageInfo {
     ],
     params: &[
         ParamSpec { name: "distortion", kind: ParamKind::Choice(&["none", "k1", "k1k2"]), default: Some("\"none\""), unit: "", description: "radial lens distortion to fit (none: the study's pinhole P)", range: None },
+        ParamSpec { name: "skew", kind: ParamKind::Choice(&["free", "zero"]), default: Some("\"zero\""), unit: "", description: "zero: no skew (OpenCV's model; one parameter fewer, noticeably more accurate with few points); free: the study's 11-parameter P", range: None },
         ParamSpec { name: "outlier_sigma", kind: ParamKind::Float, default: Some("3.5"), unit: "", description: "flag points whose residual exceeds this many robust noise sigmas (and 0.5 px)", range: Some((1.0, 100.0)) },
     ],
 };
@@ -44,13 +45,14 @@ impl Stage for CptCalibrate {
             "k1k2" => Distortion::K1K2,
             _ => Distortion::None,
         };
+        let model = Model { distortion, zero_skew: ctx.params.str_of("skew") == "zero" };
         let outlier_sigma = ctx.params.f64_of("outlier_sigma");
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
             let points = read_control_points(&part.path)?;
             let controls: Vec<_> = points.iter().map(|p| p.point).collect();
-            let result = calibrate(&controls, distortion, outlier_sigma).map_err(|e| {
+            let result = calibrate(&controls, model, outlier_sigma).map_err(|e| {
                 let hint = match e {
                     CalibrationError::TooFewPoints(_) => {
                         "add control points: at least 8, spread over the image and over depth"
@@ -128,7 +130,7 @@ fn calibration_table(result: &Calibration) -> Table {
             table.push(Column::f64(&name, unit, &description, vec![value]));
         }
     }
-    if result.parameters >= 12 {
+    if result.model.distortion != Distortion::None {
         table.push(Column::f64(
             "k1",
             "",
@@ -136,7 +138,7 @@ fn calibration_table(result: &Calibration) -> Table {
             vec![camera.k1],
         ));
     }
-    if result.parameters >= 13 {
+    if result.model.distortion == Distortion::K1K2 {
         table.push(Column::f64(
             "k2",
             "",

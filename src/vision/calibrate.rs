@@ -3,6 +3,8 @@
 //! physical parameters (fx, fy, skew, cx, cy, rotation, translation[, k₁[, k₂]]), which span the
 //! same cameras as a free P when there is no distortion.
 //!
+//! Skew may be held at zero (OpenCV's model, one parameter fewer).
+//!
 //! Reported: the study's objective (Eq. 2, mean reprojection distance) and the RMS distance,
 //! whose expectation under Gaussian pixel noise σ is σ√2·√(1 − d/2n) for d parameters.
 
@@ -22,13 +24,25 @@ pub enum Distortion {
     K1K2,
 }
 
-impl Distortion {
+/// What the calibration fits: the study's free P (11 parameters, skew included), or P with zero
+/// skew (10, as OpenCV's model), each optionally with radial distortion.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Model {
+    pub distortion: Distortion,
+    pub zero_skew: bool,
+}
+
+impl Model {
+    /// The study's: a free projection matrix, no distortion.
+    pub const PINHOLE: Model = Model { distortion: Distortion::None, zero_skew: false };
+
     pub fn parameters(self) -> usize {
-        match self {
-            Distortion::None => 11,
-            Distortion::K1 => 12,
-            Distortion::K1K2 => 13,
-        }
+        let distortion = match self.distortion {
+            Distortion::None => 0,
+            Distortion::K1 => 1,
+            Distortion::K1K2 => 2,
+        };
+        11 + distortion - usize::from(self.zero_skew)
     }
 }
 
@@ -84,6 +98,7 @@ pub struct Calibration {
     /// Eq. 2 for the DLT start (before the nonlinear refinement).
     pub dlt_mean_distance_px: f64,
     pub iterations: usize,
+    pub model: Model,
     pub parameters: usize,
     pub outlier_threshold_px: f64,
     pub outliers: Vec<bool>,
@@ -92,11 +107,7 @@ pub struct Calibration {
     pub warnings: Vec<String>,
 }
 
-pub fn calibrate(
-    points: &[ControlPoint],
-    distortion: Distortion,
-    outlier_sigma: f64,
-) -> Result<Calibration, CalibrationError> {
+pub fn calibrate(points: &[ControlPoint], model: Model, outlier_sigma: f64) -> Result<Calibration, CalibrationError> {
     let n = points.len();
     if n < MIN_POINTS {
         return Err(CalibrationError::TooFewPoints(n));
@@ -114,7 +125,7 @@ pub fn calibrate(
         return Err(CalibrationError::BehindCamera(i));
     }
     let dlt_mean_distance_px = distances(&dlt, points).iter().sum::<f64>() / n as f64;
-    let (camera, iterations) = refine(points, &dlt, distortion);
+    let (camera, iterations) = refine(points, &dlt, model);
     let residuals: Vec<[f64; 2]> = points
         .iter()
         .map(|p| {
@@ -132,7 +143,7 @@ pub fn calibrate(
     let median = if n % 2 == 1 { sorted[n / 2] } else { 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]) };
     let sigma = median
         / (2.0 * std::f64::consts::LN_2).sqrt()
-        / expected_rms_px(1.0 / 2f64.sqrt(), n, distortion.parameters()).max(0.1);
+        / expected_rms_px(1.0 / 2f64.sqrt(), n, model.parameters()).max(0.1);
     let outlier_threshold_px = (outlier_sigma * sigma).max(MIN_OUTLIER_PX);
     let outliers: Vec<bool> = d.iter().map(|&x| !(x <= outlier_threshold_px)).collect();
     if camera.k1 != 0.0 || camera.k2 != 0.0 {
@@ -154,7 +165,8 @@ pub fn calibrate(
         rms_px,
         dlt_mean_distance_px,
         iterations,
-        parameters: distortion.parameters(),
+        model,
+        parameters: model.parameters(),
         outlier_threshold_px,
         outliers,
         thickness_ratio,
@@ -278,9 +290,14 @@ fn residuals(params: &[f64], points: &[ControlPoint], out: &mut Vec<f64>) {
 }
 
 /// Levenberg–Marquardt (Marquardt's diagonal scaling) with central-difference Jacobians.
-fn refine(points: &[ControlPoint], start: &Camera, distortion: Distortion) -> (Camera, usize) {
-    let mut params = to_params(start, distortion);
-    let m = params.len();
+fn refine(points: &[ControlPoint], start: &Camera, model: Model) -> (Camera, usize) {
+    let mut params = to_params(start, model.distortion);
+    // Parameters the search moves: all but the skew (index 2) when it is held at zero.
+    if model.zero_skew {
+        params[2] = 0.0;
+    }
+    let free: Vec<usize> = (0..params.len()).filter(|&j| !(model.zero_skew && j == 2)).collect();
+    let m = free.len();
     let rows = 2 * points.len();
     let mut r = Vec::with_capacity(rows);
     residuals(&params, points, &mut r);
@@ -300,7 +317,7 @@ fn refine(points: &[ControlPoint], start: &Camera, distortion: Distortion) -> (C
     let mut jac = vec![0.0; rows * m];
     for iteration in 1..=200 {
         iterations = iteration;
-        for j in 0..m {
+        for (column, &j) in free.iter().enumerate() {
             let h = scale_of(j, params[j]);
             let mut p = params.clone();
             p[j] = params[j] + h;
@@ -308,7 +325,7 @@ fn refine(points: &[ControlPoint], start: &Camera, distortion: Distortion) -> (C
             p[j] = params[j] - h;
             residuals(&p, points, &mut minus);
             for i in 0..rows {
-                jac[i * m + j] = (plus[i] - minus[i]) / (2.0 * h);
+                jac[i * m + column] = (plus[i] - minus[i]) / (2.0 * h);
             }
         }
         // Normal equations of r(θ + δ) ≈ r + J δ.
@@ -334,7 +351,10 @@ fn refine(points: &[ControlPoint], start: &Camera, distortion: Distortion) -> (C
                 lambda *= 10.0;
                 continue;
             };
-            let trial: Vec<f64> = params.iter().zip(&delta).map(|(p, d)| p + d).collect();
+            let mut trial = params.clone();
+            for (column, &j) in free.iter().enumerate() {
+                trial[j] += delta[column];
+            }
             residuals(&trial, points, &mut plus);
             let trial_cost: f64 = plus.iter().map(|x| x * x).sum();
             if trial_cost < cost {
@@ -389,7 +409,7 @@ pub(crate) mod tests {
         for (k1, distortion) in [(0.0, Distortion::None), (-0.08, Distortion::K1)] {
             let truth = test_camera(k1);
             let points = scene_points(&truth, 12, 0.0, 3);
-            let cal = calibrate(&points, distortion, 3.5).unwrap();
+            let cal = calibrate(&points, Model { distortion, zero_skew: false }, 3.5).unwrap();
             assert!(cal.rms_px < 1e-6, "rms {} ({distortion:?})", cal.rms_px);
             assert!((cal.camera.intrinsics.fx - 1400.0).abs() < 1e-4, "{:?}", cal.camera.intrinsics);
             assert!((cal.camera.k1 - k1).abs() < 1e-8);
@@ -401,12 +421,12 @@ pub(crate) mod tests {
     fn coplanar_and_too_few_points_are_refused() {
         let truth = test_camera(0.0);
         let mut points = scene_points(&truth, 12, 0.5, 4);
-        assert_eq!(calibrate(&points[..7], Distortion::None, 3.5).unwrap_err(), CalibrationError::TooFewPoints(7));
+        assert_eq!(calibrate(&points[..7], Model::PINHOLE, 3.5).unwrap_err(), CalibrationError::TooFewPoints(7));
         for p in &mut points {
             p.world[2] = 0.0;
             p.pixel = truth.project(&p.world).unwrap();
         }
-        let err = calibrate(&points, Distortion::None, 3.5).unwrap_err();
+        let err = calibrate(&points, Model::PINHOLE, 3.5).unwrap_err();
         assert!(matches!(err, CalibrationError::Coplanar { .. }), "{err}");
         assert!(err.to_string().contains("coplanar"));
     }
@@ -416,7 +436,7 @@ pub(crate) mod tests {
         let truth = test_camera(0.0);
         let mut points = scene_points(&truth, 16, 0.5, 5);
         points[6].pixel[0] += 15.0;
-        let cal = calibrate(&points, Distortion::None, 3.5).unwrap();
+        let cal = calibrate(&points, Model::PINHOLE, 3.5).unwrap();
         assert!(cal.outliers[6], "residuals {:?}", cal.residuals);
         assert_eq!(cal.outliers.iter().filter(|o| **o).count(), 1, "threshold {}", cal.outlier_threshold_px);
     }
