@@ -113,22 +113,30 @@ fn check_camera_projection(runs: &Path, archive: &Path, manifest: &Value) {
     let points_line = pipeline.lines().find(|l| l.trim_start().starts_with("points: \"M1=")).unwrap();
     for start in manifest["cpt"]["start_points"].as_array().unwrap() {
         let (name, u, v) = (start[0].as_str().unwrap(), start[1][0].as_f64().unwrap(), start[1][1].as_f64().unwrap());
-        assert!(points_line.contains(&format!("{name}={u:.1},{v:.1}")), "demo.yaml's start of {name} is not ({u:.1}, {v:.1}): {points_line}");
+        assert!(
+            points_line.contains(&format!("{name}={u:.1},{v:.1}")),
+            "demo.yaml's start of {name} is not ({u:.1}, {v:.1}): {points_line}"
+        );
     }
     let tracks = read_table(&runs.join("cpt_track/tracks/data.parquet")).unwrap();
-    assert_eq!(tracks.num_rows(), 4 * 120);
+    assert_eq!(tracks.num_rows(), 4 * manifest["cpt"]["frames"].as_u64().unwrap() as usize);
     assert!(str_column(&tracks, "status").iter().all(|s| s == "ok"), "every marker is tracked in every frame");
 
     let truth = std::fs::read_to_string(archive.join("cpt/truth.csv")).unwrap();
-    let rows: Vec<Vec<f64>> = truth.lines().skip(1).map(|l| l.split(',').map(|c| c.parse().unwrap()).collect()).collect();
+    let rows: Vec<Vec<f64>> =
+        truth.lines().skip(1).map(|l| l.split(',').map(|c| c.parse().unwrap()).collect()).collect();
     let column = |k: usize| rows.iter().map(|r| r[k]).collect::<Vec<f64>>();
     let (time, theta, x, y, yaw) = (column(0), column(1), column(2), column(3), column(4));
 
     let rocking = read_table(&runs.join("cpt_rocking/motion/data.parquet")).unwrap();
     let frame_times = rocking.f64_column("time_s").unwrap();
     assert_eq!(frame_times.len(), time.len(), "one θ per frame");
-    assert!(frame_times.iter().zip(&time).all(|(a, b)| (a - b).abs() < 1e-6), "θ at the frame times (truth.csv: 6 decimals)");
-    let theta_error: Vec<f64> = rocking.f64_column("theta_rad").unwrap().iter().zip(&theta).map(|(m, t)| m - t).collect();
+    assert!(
+        frame_times.iter().zip(&time).all(|(a, b)| (a - b).abs() < 1e-6),
+        "θ at the frame times (truth.csv: 6 decimals)"
+    );
+    let theta_error: Vec<f64> =
+        rocking.f64_column("theta_rad").unwrap().iter().zip(&theta).map(|(m, t)| m - t).collect();
     let (theta_rms, theta_max) = (rms(&theta_error), theta_error.iter().fold(0.0_f64, |a, e| a.max(e.abs())));
     println!("CPT rocking: θ RMS error {:.3} mrad, max {:.3} mrad", 1e3 * theta_rms, 1e3 * theta_max);
     assert!(theta_rms < 2e-3 && theta_max < 5e-3, "θ(t) error RMS {theta_rms} rad, max {theta_max} rad");
@@ -151,7 +159,12 @@ fn check_camera_projection(runs: &Path, archive: &Path, manifest: &Value) {
     for (r, mine) in reported.iter().zip([dx, dy, dyaw]) {
         assert!((r - mine).abs() < 1e-3 * mine, "compare stage {r} vs {mine}");
     }
-    for figure in ["cpt_calibrate/figures/calibration.png", "cpt_track/figures/tracks.png", "cpt_rocking/figures/motion.png", "cpt_check_rocking/figures/compare.png"] {
+    for figure in [
+        "cpt_calibrate/figures/calibration.png",
+        "cpt_track/figures/tracks.png",
+        "cpt_rocking/figures/motion.png",
+        "cpt_check_rocking/figures/compare.png",
+    ] {
         let png = std::fs::read(runs.join(figure)).unwrap();
         assert!(png.starts_with(b"\x89PNG") && png.len() > 10_000, "{figure} is not a drawn PNG");
     }

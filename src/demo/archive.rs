@@ -724,7 +724,7 @@ per test, in manifest.json). A toppled unit shows an impact spike, then about 1/
 Camera projection technique (cpt/)
   cpt/control_points.csv     14 surveyed points: point,X_mm,Y_mm,Z_mm,u_px,v_px (pixels measured
                              with 0.5 px noise; world mm, X = E-W, Y = N-S, Z up, floor at Z = 0)
-  cpt/frames/frame_NNNN.png  960x540 grayscale video at 30 fps (120 frames) from that camera: a
+  cpt/frames/frame_NNNN.png  960x540 grayscale video at 30 fps (105 frames) from that camera: a
                              rocking stretcher panel in the plane Y = 0 (markers M1 low, M2 high) and
                              a rolling cart top at Z = 900 mm (markers M3, M4), rendered at 8x8 samples
                              per pixel with 1 grey level of noise

@@ -18,7 +18,7 @@ use crate::vision::linalg::{self, Mat3, Vec3};
 pub const WIDTH: usize = 960;
 pub const HEIGHT: usize = 540;
 pub const FRAME_RATE_HZ: f64 = 30.0;
-pub const FRAMES: usize = 120;
+pub const FRAMES: usize = 105;
 const SAMPLES: usize = 8;
 /// Camera noise (grey levels, Gaussian) and control-point pixel noise (px per coordinate).
 pub const IMAGE_NOISE: f64 = 1.0;
@@ -37,6 +37,12 @@ pub const CART_SIZE_MM: [f64; 2] = [650.0, 900.0];
 /// Markers on the cart top, symmetric about its centre so their midpoint is the centre.
 pub const CART_MARKERS: [(&str, [f64; 2]); 2] = [("M3", [-220.0, 0.0]), ("M4", [220.0, 0.0])];
 const WALL_Y_MM: f64 = 2500.0;
+/// Panel: a darker frame band along its edges, a flat grey inside; bullseye rings of this width.
+const PANEL_FRAME_MM: f64 = 18.0;
+const PANEL_GREY: f64 = 200.0;
+const PANEL_RING_MM: f64 = 11.0;
+const CART_GREY: f64 = 80.0;
+const CART_RING_MM: f64 = 15.0;
 
 /// The motions the frames show, sampled at the frame times.
 #[derive(Debug, Clone, PartialEq)]
@@ -224,22 +230,24 @@ impl Scene {
         if let Some([bx, bz]) = self.panel.hit(x, y) {
             if bx.abs() <= ROCKING_B_MM / 2.0 && (0.0..=ROCKING_H_MM).contains(&bz) {
                 for (_, m) in ROCKING_MARKERS {
-                    if let Some(v) = bullseye((bx - m[0]).hypot(bz - m[1]), 11.0, 25.0, 235.0) {
+                    if let Some(v) = bullseye((bx - m[0]).hypot(bz - m[1]), PANEL_RING_MM, 25.0, 235.0) {
                         return v;
                     }
                 }
-                let frame = bx.abs() > ROCKING_B_MM / 2.0 - 18.0 || bz < 18.0 || bz > ROCKING_H_MM - 18.0;
-                return if frame { 95.0 } else { 200.0 };
+                let frame = bx.abs() > ROCKING_B_MM / 2.0 - PANEL_FRAME_MM
+                    || bz < PANEL_FRAME_MM
+                    || bz > ROCKING_H_MM - PANEL_FRAME_MM;
+                return if frame { 95.0 } else { PANEL_GREY };
             }
         }
         if let Some([cx, cy]) = self.cart.hit(x, y) {
             if cx.abs() <= CART_SIZE_MM[0] / 2.0 && cy.abs() <= CART_SIZE_MM[1] / 2.0 {
                 for (_, m) in CART_MARKERS {
-                    if let Some(v) = bullseye((cx - m[0]).hypot(cy - m[1]), 15.0, 235.0, 30.0) {
+                    if let Some(v) = bullseye((cx - m[0]).hypot(cy - m[1]), CART_RING_MM, 235.0, 30.0) {
                         return v;
                     }
                 }
-                return 80.0;
+                return CART_GREY;
             }
         }
         self.background(x, y)
@@ -265,9 +273,14 @@ impl Rays {
         Rays { corners }
     }
 
-    fn pixel(&self, scene: &Scene, i: usize, j: usize) -> f64 {
+    fn corners_of(&self, i: usize, j: usize) -> [[f64; 2]; 4] {
         let c = |di: usize, dj: usize| self.corners[(j + dj) * (WIDTH + 1) + i + di];
-        let (c00, c10, c01, c11) = (c(0, 0), c(1, 0), c(0, 1), c(1, 1));
+        [c(0, 0), c(1, 0), c(0, 1), c(1, 1)]
+    }
+
+    /// The mean of 8 × 8 samples over the pixel.
+    fn pixel(&self, scene: &Scene, i: usize, j: usize) -> f64 {
+        let [c00, c10, c01, c11] = self.corners_of(i, j);
         let mut sum = 0.0;
         for b in 0..SAMPLES {
             let fy = (b as f64 + 0.5) / SAMPLES as f64;
@@ -280,6 +293,52 @@ impl Rays {
             }
         }
         sum / (SAMPLES * SAMPLES) as f64
+    }
+}
+
+/// What a pixel's footprint covers, decided from its corners alone: every sample lies in the
+/// convex hull of the corners, which the plane's homography maps inside the bounding box of the
+/// mapped corners. So a box clear of edges and markers means a flat grey, exactly.
+enum Cover {
+    Background,
+    Flat(f64),
+    Mixed,
+}
+
+impl Scene {
+    fn cover(&self, corners: &[[f64; 2]; 4]) -> Cover {
+        let plane_box = |map: &PlaneMap| -> Option<[f64; 4]> {
+            let hits: Vec<[f64; 2]> = corners.iter().map(|c| map.hit(c[0], c[1])).collect::<Option<_>>()?;
+            let (lo, hi) = (
+                |k: usize| hits.iter().map(|h| h[k]).fold(f64::INFINITY, f64::min),
+                |k: usize| hits.iter().map(|h| h[k]).fold(f64::NEG_INFINITY, f64::max),
+            );
+            Some([lo(0), lo(1), hi(0), hi(1)])
+        };
+        let (Some(panel), Some(cart)) = (plane_box(&self.panel), plane_box(&self.cart)) else { return Cover::Mixed };
+        let apart = |b: [f64; 4], r: [f64; 4]| b[2] < r[0] || b[0] > r[2] || b[3] < r[1] || b[1] > r[3];
+        let within = |b: [f64; 4], r: [f64; 4]| b[0] >= r[0] && b[2] <= r[2] && b[1] >= r[1] && b[3] <= r[3];
+        let clear = |b: [f64; 4], markers: &[(&str, [f64; 2])], radius: f64| {
+            markers.iter().all(|(_, m)| apart(b, [m[0] - radius, m[1] - radius, m[0] + radius, m[1] + radius]))
+        };
+        let (hb, h) = (ROCKING_B_MM / 2.0, ROCKING_H_MM);
+        // The panel is drawn over everything, so it is decided first.
+        if within(panel, [-hb + PANEL_FRAME_MM, PANEL_FRAME_MM, hb - PANEL_FRAME_MM, h - PANEL_FRAME_MM])
+            && clear(panel, &ROCKING_MARKERS, 4.0 * PANEL_RING_MM)
+        {
+            return Cover::Flat(PANEL_GREY);
+        }
+        if !apart(panel, [-hb, 0.0, hb, h]) {
+            return Cover::Mixed;
+        }
+        let (ha, hc) = (CART_SIZE_MM[0] / 2.0, CART_SIZE_MM[1] / 2.0);
+        if within(cart, [-ha, -hc, ha, hc]) && clear(cart, &CART_MARKERS, 4.0 * CART_RING_MM) {
+            return Cover::Flat(CART_GREY);
+        }
+        if !apart(cart, [-ha, -hc, ha, hc]) {
+            return Cover::Mixed;
+        }
+        Cover::Background
     }
 }
 
@@ -329,8 +388,16 @@ pub fn render_frame(camera: &Camera, rays: &Rays, background: &[f64], pose: Pose
     let mut pixels = Vec::with_capacity(WIDTH * HEIGHT);
     for j in 0..HEIGHT {
         for i in 0..WIDTH {
-            let inside = boxes.iter().any(|b| i >= b[0] && i < b[2] && j >= b[1] && j < b[3]);
-            let value = if inside { rays.pixel(&scene, i, j) } else { background[j * WIDTH + i] };
+            let near_a_unit = boxes.iter().any(|b| i >= b[0] && i < b[2] && j >= b[1] && j < b[3]);
+            let value = if near_a_unit {
+                match scene.cover(&rays.corners_of(i, j)) {
+                    Cover::Background => background[j * WIDTH + i],
+                    Cover::Flat(grey) => grey,
+                    Cover::Mixed => rays.pixel(&scene, i, j),
+                }
+            } else {
+                background[j * WIDTH + i]
+            };
             pixels.push((value + IMAGE_NOISE * rng.normal()).round().clamp(0.0, 255.0) as u8);
         }
     }

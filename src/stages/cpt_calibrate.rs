@@ -30,7 +30,7 @@ static INFO: StageInfo = StageInfo {
     params: &[
         ParamSpec { name: "distortion", kind: ParamKind::Choice(&["none", "k1", "k1k2"]), default: Some("\"none\""), unit: "", description: "radial lens distortion to fit (none: the study's pinhole P)", range: None },
         ParamSpec { name: "skew", kind: ParamKind::Choice(&["free", "zero"]), default: Some("\"zero\""), unit: "", description: "zero: no skew (OpenCV's model; one parameter fewer, noticeably more accurate with few points); free: the study's 11-parameter P", range: None },
-        ParamSpec { name: "outlier_sigma", kind: ParamKind::Float, default: Some("3.5"), unit: "", description: "flag points whose residual exceeds this many robust noise sigmas (and 0.5 px)", range: Some((1.0, 100.0)) },
+        ParamSpec { name: "outlier_sigma", kind: ParamKind::Float, default: Some("3.5"), unit: "", description: "flag points whose leave-one-out prediction error exceeds this many robust noise sigmas (and 0.5 px)", range: Some((1.0, 100.0)) },
     ],
 };
 
@@ -193,11 +193,17 @@ fn residual_table(result: &Calibration, names: &[String], points: &[crate::visio
         "reprojection distance (its mean is Eq. 2)",
         column(&|i| result.residuals[i][0].hypot(result.residuals[i][1])),
     ));
+    table.push(Column::f64(
+        "loo_dist_px",
+        "px",
+        "leave-one-out distance: from the point's pixel to its prediction by the camera fitted without it",
+        result.leave_one_out_px.clone(),
+    ));
     table.push(Column {
         name: "outlier".into(),
         unit: String::new(),
         description: format!(
-            "dist_px above {:.3} px (robust noise scale × outlier_sigma, at least 0.5 px)",
+            "loo_dist_px above {:.3} px (outlier_sigma × the robust noise scale of the leave-one-out distances, at least 0.5 px)",
             result.outlier_threshold_px
         ),
         data: ColumnData::Bool(result.outliers.clone()),
@@ -240,7 +246,12 @@ fn figure(
             y_label: "distance [px]".into(),
             series: vec![
                 Series { label: "dist_px".into(), x: &index, y: &distance },
-                Series { label: "outlier threshold".into(), x: &index, y: &threshold },
+                Series {
+                    label: "loo_dist_px (fitted without the point)".into(),
+                    x: &index,
+                    y: &result.leave_one_out_px,
+                },
+                Series { label: "outlier threshold (on loo_dist_px)".into(), x: &index, y: &threshold },
             ],
             markers: vec![],
             log_y: false,

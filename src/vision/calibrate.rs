@@ -100,6 +100,9 @@ pub struct Calibration {
     pub iterations: usize,
     pub model: Model,
     pub parameters: usize,
+    /// Distance of each point from its prediction by the camera fitted without it (px).
+    pub leave_one_out_px: Vec<f64>,
+    /// Leave-one-out distances above this are outliers.
     pub outlier_threshold_px: f64,
     pub outliers: Vec<bool>,
     /// Ratio of the points' RMS distance from their best plane to their spread (≥ COPLANAR_RATIO).
@@ -136,16 +139,25 @@ pub fn calibrate(points: &[ControlPoint], model: Model, outlier_sigma: f64) -> R
     let d: Vec<f64> = residuals.iter().map(|r| r[0].hypot(r[1])).collect();
     let mean_distance_px = d.iter().sum::<f64>() / n as f64;
     let rms_px = (d.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt();
-    // Robust noise scale: the median of a 2D Gaussian's distance (Rayleigh) is σ√(2 ln 2), and a
-    // fit of d parameters shrinks residuals by √(1 − d/2n) on average.
-    let mut sorted = d.clone();
+    // A gross error spreads over every residual of a least-squares fit, so outliers are judged
+    // by leave-one-out prediction errors: each point against the camera fitted without it.
+    let leave_one_out: Vec<f64> = (0..n)
+        .map(|i| {
+            let others: Vec<ControlPoint> =
+                points.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, p)| *p).collect();
+            let (without, _) = refine(&others, &camera, model);
+            without
+                .project(&points[i].world)
+                .map_or(f64::INFINITY, |[u, v]| (points[i].pixel[0] - u).hypot(points[i].pixel[1] - v))
+        })
+        .collect();
+    // Robust noise scale: the median of a 2D Gaussian's distance (Rayleigh) is σ√(2 ln 2).
+    let mut sorted = leave_one_out.clone();
     sorted.sort_by(f64::total_cmp);
     let median = if n % 2 == 1 { sorted[n / 2] } else { 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]) };
-    let sigma = median
-        / (2.0 * std::f64::consts::LN_2).sqrt()
-        / expected_rms_px(1.0 / 2f64.sqrt(), n, model.parameters()).max(0.1);
+    let sigma = median / (2.0 * std::f64::consts::LN_2).sqrt();
     let outlier_threshold_px = (outlier_sigma * sigma).max(MIN_OUTLIER_PX);
-    let outliers: Vec<bool> = d.iter().map(|&x| !(x <= outlier_threshold_px)).collect();
+    let outliers: Vec<bool> = leave_one_out.iter().map(|&x| !(x <= outlier_threshold_px)).collect();
     if camera.k1 != 0.0 || camera.k2 != 0.0 {
         let worst = points
             .iter()
@@ -167,6 +179,7 @@ pub fn calibrate(points: &[ControlPoint], model: Model, outlier_sigma: f64) -> R
         iterations,
         model,
         parameters: model.parameters(),
+        leave_one_out_px: leave_one_out,
         outlier_threshold_px,
         outliers,
         thickness_ratio,
