@@ -3,7 +3,7 @@
 //! (Eq. 5), for every integer offset of an m × m template inside a search region.
 //!
 //! Both scores come from one integer cross-correlation Σ T·I per offset plus window sums Σ I and
-//! Σ I² from integral images, so every score is computed from exact integers: the result is the
+//! Σ I² (sliding sums), so every score is computed from exact integers: the result is the
 //! same on every machine whichever kernel runs. The correlation kernel is chosen at run time:
 //! AVX-512 VNNI (u8 × i8, four products per lane), AVX2 (`vpmaddwd` on i16), or portable code.
 
@@ -204,8 +204,10 @@ impl ScoreMap {
 pub struct Scratch {
     region_u8: Vec<u8>,
     region_i16: Vec<i16>,
-    integral: Vec<i64>,
-    integral_sq: Vec<i64>,
+    column_sum: Vec<i32>,
+    column_sq: Vec<i32>,
+    window_sum: Vec<i64>,
+    window_sq: Vec<i64>,
     correlation: Vec<i32>,
 }
 
@@ -232,53 +234,77 @@ pub fn match_template(
     let (cols, rows) = (w - template.size + 1, h - template.size + 1);
     // The region, copied with zero padding on the right so kernels may read whole vectors.
     let stride = w + 64;
-    let padded_rows = h + 1;
+    // Kernels compute four rows at a time and read whole vectors: pad below and to the right.
+    let padded_rows = h + 4;
     scratch.region_u8.clear();
     scratch.region_u8.resize(stride * padded_rows, 0);
     for y in 0..h {
         let src = (y0 as usize + y) * image.width + x0 as usize;
         scratch.region_u8[y * stride..y * stride + w].copy_from_slice(&image.pixels[src..src + w]);
     }
-    // Integral images of I and I² ((w + 1) × (h + 1), exact).
-    let iw = w + 1;
-    scratch.integral.clear();
-    scratch.integral.resize(iw * (h + 1), 0);
-    scratch.integral_sq.clear();
-    scratch.integral_sq.resize(iw * (h + 1), 0);
-    for y in 0..h {
-        let (mut row_sum, mut row_sq) = (0i64, 0i64);
-        for x in 0..w {
-            let v = i64::from(scratch.region_u8[y * stride + x]);
-            row_sum += v;
-            row_sq += v * v;
-            scratch.integral[(y + 1) * iw + x + 1] = scratch.integral[y * iw + x + 1] + row_sum;
-            scratch.integral_sq[(y + 1) * iw + x + 1] = scratch.integral_sq[y * iw + x + 1] + row_sq;
+    // Σ I and Σ I² of every window, exactly: column sums over m rows slide down, a running sum
+    // of them slides across.
+    let m = template.size;
+    let region = &scratch.region_u8;
+    let (columns, columns_sq) = (&mut scratch.column_sum, &mut scratch.column_sq);
+    columns.clear();
+    columns.resize(w, 0);
+    columns_sq.clear();
+    columns_sq.resize(w, 0);
+    // Column sums fit in i32 (m ≤ 200: 200 · 255² < 2³¹), which vectorises twice as wide.
+    let add_row = |columns: &mut [i32], columns_sq: &mut [i32], y: usize, sign: i32| {
+        for ((c, q), &v) in columns.iter_mut().zip(columns_sq.iter_mut()).zip(&region[y * stride..y * stride + w]) {
+            let v = i32::from(v);
+            *c += sign * v;
+            *q += sign * v * v;
+        }
+    };
+    for y in 0..m {
+        add_row(columns, columns_sq, y, 1);
+    }
+    scratch.window_sum.clear();
+    scratch.window_sum.resize(cols * rows, 0);
+    scratch.window_sq.clear();
+    scratch.window_sq.resize(cols * rows, 0);
+    for r in 0..rows {
+        if r > 0 {
+            add_row(columns, columns_sq, r - 1, -1);
+            add_row(columns, columns_sq, r + m - 1, 1);
+        }
+        let (mut sum, mut sq): (i64, i64) =
+            (columns[..m].iter().map(|&v| i64::from(v)).sum(), columns_sq[..m].iter().map(|&v| i64::from(v)).sum());
+        let sums = &mut scratch.window_sum[r * cols..(r + 1) * cols];
+        let squares = &mut scratch.window_sq[r * cols..(r + 1) * cols];
+        sums[0] = sum;
+        squares[0] = sq;
+        for c in 1..cols {
+            sum += i64::from(columns[c + m - 1] - columns[c - 1]);
+            sq += i64::from(columns_sq[c + m - 1] - columns_sq[c - 1]);
+            sums[c] = sum;
+            squares[c] = sq;
         }
     }
     scratch.correlation.clear();
     scratch.correlation.resize(cols * rows, 0);
     correlate(template, kernel, cols, rows, stride, scratch);
 
-    let n = (template.size * template.size) as i64;
-    let t_var = n * template.sum_sq - template.sum * template.sum;
+    // In f64 from here: every integer below stays under 2⁵³ (m ≤ 200), so the arithmetic is
+    // still exact until the square root and the division, which IEEE rounds the same everywhere.
+    let n = (m * m) as f64;
+    let (t_sum, t_sum_sq) = (template.sum as f64, template.sum_sq as f64);
+    let t_var = n * t_sum_sq - t_sum * t_sum;
+    // VNNI correlates with T − 128: add back 128 Σ I.
+    let offset = if kernel == Kernel::Vnni { 128.0 } else { 0.0 };
     let (mut zncc, mut ssd) = (vec![0.0; cols * rows], vec![0.0; cols * rows]);
-    let m = template.size;
-    for r in 0..rows {
-        for c in 0..cols {
-            let box_sum =
-                |ii: &[i64]| ii[(r + m) * iw + c + m] - ii[r * iw + c + m] - ii[(r + m) * iw + c] + ii[r * iw + c];
-            let s = box_sum(&scratch.integral);
-            let s2 = box_sum(&scratch.integral_sq);
-            let mut cross = i64::from(scratch.correlation[r * cols + c]);
-            if kernel == Kernel::Vnni {
-                cross += 128 * s;
-            }
-            let i_var = n * s2 - s * s;
-            let numerator = n * cross - template.sum * s;
-            let denominator = (t_var as f64 * i_var as f64).sqrt();
-            zncc[r * cols + c] = if denominator > 0.0 { numerator as f64 / denominator } else { 0.0 };
-            ssd[r * cols + c] = (template.sum_sq + s2 - 2 * cross) as f64;
-        }
+    let windows = scratch.window_sum.iter().zip(&scratch.window_sq);
+    for (((z, q), &correlation), (&s, &s2)) in
+        zncc.iter_mut().zip(ssd.iter_mut()).zip(&scratch.correlation).zip(windows)
+    {
+        let (s, s2) = (s as f64, s2 as f64);
+        let cross = f64::from(correlation) + offset * s;
+        let denominator = (t_var * (n * s2 - s * s)).sqrt();
+        *z = if denominator > 0.0 { (n * cross - t_sum * s) / denominator } else { 0.0 };
+        *q = t_sum_sq + s2 - 2.0 * cross;
     }
     Some(ScoreMap { origin: (x0, y0), cols, rows, zncc, ssd })
 }
@@ -291,8 +317,8 @@ fn correlate(template: &Template, kernel: Kernel, cols: usize, rows: usize, stri
             assert!(std::arch::is_x86_feature_detected!("avx2"), "the AVX2 kernel needs AVX2");
             scratch.region_i16.clear();
             scratch.region_i16.extend(scratch.region_u8.iter().map(|&v| i16::from(v)));
-            // SAFETY: AVX2 is present (checked above); the kernel's reads stay inside the padded
-            // buffers (see its bounds assertions).
+            // SAFETY: AVX2 is present (checked above); the region has 4 padding rows below and
+            // 64 values of padding right of every row, which covers every read (see `avx2`).
             unsafe { x86::avx2(template, &scratch.region_i16, stride, cols, rows, &mut scratch.correlation) }
         }
         #[cfg(target_arch = "x86_64")]
@@ -328,89 +354,134 @@ fn portable(template: &Template, region: &[u8], stride: usize, cols: usize, rows
 mod x86 {
     use std::arch::x86_64::*;
 
-    use super::Template;
+    use super::{portable, Template};
 
-    /// Four output rows at a time share each template row load; a template row is 16-lane
-    /// chunks plus an optional 8-lane tail of `vpmaddwd` (i16 pairs → i32).
-    #[target_feature(enable = "avx2")]
+    /// Dispatches on the template's row width in vectors, so the inner loops have constant trip
+    /// counts; templates wider than these (over 56 px) take the portable kernel.
+    ///
+    /// # Safety
+    /// AVX2 must be present; `region` must hold `rows + m + 3` rows of `stride` values, each row
+    /// readable `cols + 16` values past its last offset (the caller pads it).
     pub unsafe fn avx2(t: &Template, region: &[i16], stride: usize, cols: usize, rows: usize, out: &mut [i32]) {
-        let m = t.size;
-        let ts = t.i16_stride;
-        let (wide, tail) = (ts / 16, ts % 16 == 8);
-        assert!(out.len() >= cols * rows);
-        // Reads reach row rows + 3 + m − 1 at most when a block of four overruns `rows`: clamp instead.
-        assert!(region.len() >= (rows - 1 + m) * stride + cols - 1 + ts);
-        let tp = t.as_i16.as_ptr();
-        let sp = region.as_ptr();
+        assert!(out.len() >= cols * rows && region.len() >= (rows + t.size + 3) * stride);
+        match (t.i16_stride / 16, t.i16_stride % 16 == 8) {
+            (0, _) => avx2_rows::<0, true>(t, region, stride, cols, rows, out),
+            (1, false) => avx2_rows::<1, false>(t, region, stride, cols, rows, out),
+            (1, true) => avx2_rows::<1, true>(t, region, stride, cols, rows, out),
+            (2, false) => avx2_rows::<2, false>(t, region, stride, cols, rows, out),
+            (2, true) => avx2_rows::<2, true>(t, region, stride, cols, rows, out),
+            (3, false) => avx2_rows::<3, false>(t, region, stride, cols, rows, out),
+            (3, true) => avx2_rows::<3, true>(t, region, stride, cols, rows, out),
+            _ => {
+                let bytes: Vec<u8> = region.iter().map(|&v| v as u8).collect();
+                portable(t, &bytes, stride, cols, rows, out)
+            }
+        }
+    }
+
+    /// Four output rows at a time share each template row, loaded once into registers; a row is
+    /// WIDE 16-lane chunks plus (TAIL) an 8-lane chunk of `vpmaddwd` (i16 pairs → i32 sums).
+    #[target_feature(enable = "avx2")]
+    unsafe fn avx2_rows<const WIDE: usize, const TAIL: bool>(
+        t: &Template,
+        region: &[i16],
+        stride: usize,
+        cols: usize,
+        rows: usize,
+        out: &mut [i32],
+    ) {
+        let (m, ts) = (t.size, t.i16_stride);
+        let (tp, sp) = (t.as_i16.as_ptr(), region.as_ptr());
         let mut r = 0;
         while r < rows {
-            let block = (rows - r).min(4);
             for c in 0..cols {
                 let mut wide_acc = [_mm256_setzero_si256(); 4];
                 let mut tail_acc = [_mm_setzero_si128(); 4];
                 for ty in 0..m {
-                    for k in 0..block {
+                    let trow = tp.add(ty * ts);
+                    let mut tw = [_mm256_setzero_si256(); 3];
+                    for (chunk, v) in tw.iter_mut().enumerate().take(WIDE) {
+                        *v = _mm256_loadu_si256(trow.add(16 * chunk) as *const __m256i);
+                    }
+                    let tt =
+                        if TAIL { _mm_loadu_si128(trow.add(16 * WIDE) as *const __m128i) } else { _mm_setzero_si128() };
+                    for k in 0..4 {
                         let s = sp.add((r + k + ty) * stride + c);
-                        let trow = tp.add(ty * ts);
-                        for chunk in 0..wide {
-                            let tv = _mm256_loadu_si256(trow.add(16 * chunk) as *const __m256i);
+                        for (chunk, tv) in tw.iter().enumerate().take(WIDE) {
                             let sv = _mm256_loadu_si256(s.add(16 * chunk) as *const __m256i);
-                            wide_acc[k] = _mm256_add_epi32(wide_acc[k], _mm256_madd_epi16(tv, sv));
+                            wide_acc[k] = _mm256_add_epi32(wide_acc[k], _mm256_madd_epi16(*tv, sv));
                         }
-                        if tail {
-                            let tv = _mm_loadu_si128(trow.add(16 * wide) as *const __m128i);
-                            let sv = _mm_loadu_si128(s.add(16 * wide) as *const __m128i);
-                            tail_acc[k] = _mm_add_epi32(tail_acc[k], _mm_madd_epi16(tv, sv));
+                        if TAIL {
+                            let sv = _mm_loadu_si128(s.add(16 * WIDE) as *const __m128i);
+                            tail_acc[k] = _mm_add_epi32(tail_acc[k], _mm_madd_epi16(tt, sv));
                         }
                     }
                 }
-                for k in 0..block {
-                    let halves =
-                        _mm_add_epi32(_mm256_castsi256_si128(wide_acc[k]), _mm256_extracti128_si256(wide_acc[k], 1));
-                    out[(r + k) * cols + c] = horizontal_sum(_mm_add_epi32(halves, tail_acc[k]));
+                // Rows past the last (a partial block of four) were computed on padding: dropped.
+                for k in 0..(rows - r).min(4) {
+                    out[(r + k) * cols + c] = reduce(wide_acc[k], tail_acc[k]);
                 }
             }
             r += 4;
+        }
+    }
+
+    /// # Safety
+    /// AVX-512 VNNI, VL and BW must be present; `region` padded as for [`avx2`].
+    pub unsafe fn vnni(t: &Template, region: &[u8], stride: usize, cols: usize, rows: usize, out: &mut [i32]) {
+        assert!(out.len() >= cols * rows && region.len() >= (rows + t.size + 3) * stride);
+        match (t.i8_stride / 32, t.i8_stride % 32 == 16) {
+            (0, _) => vnni_rows::<0, true>(t, region, stride, cols, rows, out),
+            (1, false) => vnni_rows::<1, false>(t, region, stride, cols, rows, out),
+            (1, true) => vnni_rows::<1, true>(t, region, stride, cols, rows, out),
+            (2, false) => vnni_rows::<2, false>(t, region, stride, cols, rows, out),
+            (2, true) => vnni_rows::<2, true>(t, region, stride, cols, rows, out),
+            (3, false) => vnni_rows::<3, false>(t, region, stride, cols, rows, out),
+            (3, true) => vnni_rows::<3, true>(t, region, stride, cols, rows, out),
+            _ => portable(t, region, stride, cols, rows, out),
         }
     }
 
     /// `vpdpbusd`: unsigned image bytes × signed (T − 128) bytes, four products summed per i32
     /// lane without intermediate saturation; the caller adds back 128 · Σ I.
     #[target_feature(enable = "avx512vnni,avx512vl,avx512bw,avx512f,avx2")]
-    pub unsafe fn vnni(t: &Template, region: &[u8], stride: usize, cols: usize, rows: usize, out: &mut [i32]) {
-        let m = t.size;
-        let ts = t.i8_stride;
-        let (wide, tail) = (ts / 32, ts % 32 == 16);
-        assert!(out.len() >= cols * rows);
-        assert!(region.len() >= (rows - 1 + m) * stride + cols - 1 + ts);
-        let tp = t.as_i8.as_ptr();
-        let sp = region.as_ptr();
+    unsafe fn vnni_rows<const WIDE: usize, const TAIL: bool>(
+        t: &Template,
+        region: &[u8],
+        stride: usize,
+        cols: usize,
+        rows: usize,
+        out: &mut [i32],
+    ) {
+        let (m, ts) = (t.size, t.i8_stride);
+        let (tp, sp) = (t.as_i8.as_ptr(), region.as_ptr());
         let mut r = 0;
         while r < rows {
-            let block = (rows - r).min(4);
             for c in 0..cols {
                 let mut wide_acc = [_mm256_setzero_si256(); 4];
                 let mut tail_acc = [_mm_setzero_si128(); 4];
                 for ty in 0..m {
-                    for k in 0..block {
+                    let trow = tp.add(ty * ts);
+                    let mut tw = [_mm256_setzero_si256(); 3];
+                    for (chunk, v) in tw.iter_mut().enumerate().take(WIDE) {
+                        *v = _mm256_loadu_si256(trow.add(32 * chunk) as *const __m256i);
+                    }
+                    let tt =
+                        if TAIL { _mm_loadu_si128(trow.add(32 * WIDE) as *const __m128i) } else { _mm_setzero_si128() };
+                    for k in 0..4 {
                         let s = sp.add((r + k + ty) * stride + c);
-                        let trow = tp.add(ty * ts);
-                        for chunk in 0..wide {
-                            let tv = _mm256_loadu_si256(trow.add(32 * chunk) as *const __m256i);
+                        for (chunk, tv) in tw.iter().enumerate().take(WIDE) {
                             let sv = _mm256_loadu_si256(s.add(32 * chunk) as *const __m256i);
-                            wide_acc[k] = _mm256_dpbusd_epi32(wide_acc[k], sv, tv);
+                            wide_acc[k] = _mm256_dpbusd_epi32(wide_acc[k], sv, *tv);
                         }
-                        if tail {
-                            let tv = _mm_loadu_si128(trow.add(32 * wide) as *const __m128i);
-                            let sv = _mm_loadu_si128(s.add(32 * wide) as *const __m128i);
-                            tail_acc[k] = _mm_dpbusd_epi32(tail_acc[k], sv, tv);
+                        if TAIL {
+                            let sv = _mm_loadu_si128(s.add(32 * WIDE) as *const __m128i);
+                            tail_acc[k] = _mm_dpbusd_epi32(tail_acc[k], sv, tt);
                         }
                     }
                 }
-                for k in 0..block {
-                    let halves =
-                        _mm_add_epi32(_mm256_castsi256_si128(wide_acc[k]), _mm256_extracti128_si256(wide_acc[k], 1));
-                    out[(r + k) * cols + c] = horizontal_sum(_mm_add_epi32(halves, tail_acc[k]));
+                for k in 0..(rows - r).min(4) {
+                    out[(r + k) * cols + c] = reduce(wide_acc[k], tail_acc[k]);
                 }
             }
             r += 4;
@@ -418,7 +489,8 @@ mod x86 {
     }
 
     #[target_feature(enable = "avx2")]
-    unsafe fn horizontal_sum(v: __m128i) -> i32 {
+    unsafe fn reduce(wide: __m256i, tail: __m128i) -> i32 {
+        let v = _mm_add_epi32(_mm_add_epi32(_mm256_castsi256_si128(wide), _mm256_extracti128_si256(wide, 1)), tail);
         let v = _mm_add_epi32(v, _mm_shuffle_epi32(v, 0b01_00_11_10));
         let v = _mm_add_epi32(v, _mm_shuffle_epi32(v, 0b10_11_00_01));
         _mm_cvtsi128_si32(v)
