@@ -299,8 +299,11 @@ fn frame_file(k: usize) -> String {
     format!("{CPT_FRAMES_DIR}/frame_{k:04}.png")
 }
 
+/// A file to write: its path in the archive and its bytes.
+type NamedBytes = (String, Vec<u8>);
+
 /// The CPT part of the archive: files (path, bytes) and the manifest entry.
-fn cpt_contents() -> io::Result<(Vec<(String, Vec<u8>)>, CptEntry)> {
+fn cpt_contents() -> io::Result<(Vec<NamedBytes>, CptEntry)> {
     use rayon::prelude::*;
     let cam = camera::demo_camera();
     let motions = camera::demo_motions();
@@ -326,7 +329,7 @@ fn cpt_contents() -> io::Result<(Vec<(String, Vec<u8>)>, CptEntry)> {
     files.push((CPT_TRUTH_FILE.to_string(), truth.into_bytes()));
     let rays = camera::Rays::new(&cam);
     let background = camera::render_background(&cam, &rays);
-    let frames: Vec<(String, Vec<u8>)> = (0..camera::FRAMES)
+    let frames: Vec<NamedBytes> = (0..camera::FRAMES)
         .into_par_iter()
         .map(|k| {
             let pixels = camera::render_frame(&cam, &rays, &background, motions.pose(k), k);

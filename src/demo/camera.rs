@@ -183,7 +183,7 @@ impl PlaneMap {
 
 fn bullseye(r: f64, scale: f64, dark: f64, light: f64) -> Option<f64> {
     let ring = (r / scale) as usize;
-    (ring < 4).then(|| if ring % 2 == 0 { dark } else { light })
+    (ring < 4).then_some(if ring.is_multiple_of(2) { dark } else { light })
 }
 
 struct Scene {
@@ -235,8 +235,7 @@ impl Scene {
                     }
                 }
                 let frame = bx.abs() > ROCKING_B_MM / 2.0 - PANEL_FRAME_MM
-                    || bz < PANEL_FRAME_MM
-                    || bz > ROCKING_H_MM - PANEL_FRAME_MM;
+                    || !(PANEL_FRAME_MM..=ROCKING_H_MM - PANEL_FRAME_MM).contains(&bz);
                 return if frame { 95.0 } else { PANEL_GREY };
             }
         }

@@ -120,7 +120,9 @@ fn compare(
     };
     let (mut names_m, mut names_r, mut units, mut samples, mut missing, mut rms, mut max_abs, mut spread) =
         (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
-    let mut plotted: Vec<(String, Vec<f64>, Vec<f64>, Vec<f64>)> = Vec::new();
+    // Per pair: label, measured, reference on the measured times, difference.
+    let mut plotted: Vec<[Vec<f64>; 3]> = Vec::new();
+    let mut labels: Vec<String> = Vec::new();
     for (m_name, r_name) in pairs {
         let (m, m_unit) = column(measured, m_name, m_label)?;
         let (r, r_unit) = column(reference, r_name, r_label)?;
@@ -157,7 +159,8 @@ fn compare(
         } else {
             (finite_ref.iter().map(|v| v * v).sum::<f64>() / finite_ref.len() as f64).sqrt()
         });
-        plotted.push((format!("{m_name} [{m_unit}]"), m, on_time, diff));
+        labels.push(format!("{m_name} [{m_unit}]"));
+        plotted.push([m, on_time, diff]);
     }
     let text = |name: &str, description: &str, v: Vec<String>| Column {
         name: name.into(),
@@ -193,8 +196,9 @@ fn compare(
 
     let panels: Vec<Panel<'_>> = plotted
         .iter()
+        .zip(&labels)
         .zip(&names_r)
-        .flat_map(|((label, m, r, d), r_name)| {
+        .flat_map(|(([m, r, d], label), r_name)| {
             [
                 Panel {
                     title: format!("{label}: measured and reference ({r_name})"),

@@ -179,7 +179,7 @@ fn project(
         available.iter().filter(|n| n.starts_with('M')).map(|n| (*n).clone()).collect()
     } else {
         for w in wanted {
-            if !available.iter().any(|a| *a == w) {
+            if !available.contains(&w) {
                 return Err(UserError::new(format!("parameter `points`: `{w}` is not a tracked point of {label}"))
                     .hint(format!(
                         "tracked points: {}",

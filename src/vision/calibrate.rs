@@ -252,10 +252,11 @@ fn dlt(points: &[ControlPoint]) -> Result<Camera, CalibrationError> {
         let shift = row[0] * wm[0] + row[1] * wm[1] + row[2] * wm[2];
         p[r] = [row[0] * ws, row[1] * ws, row[2] * ws, row[3] - ws * shift];
     }
-    for c in 0..4 {
-        let third = p[2][c];
-        p[0][c] = p[0][c] / is + im[0] * third;
-        p[1][c] = p[1][c] / is + im[1] * third;
+    let third = p[2];
+    for (row, centre) in [(0, im[0]), (1, im[1])] {
+        for (v, t) in p[row].iter_mut().zip(third) {
+            *v = *v / is + centre * t;
+        }
     }
     Camera::from_projection(&p, 0.0, 0.0)
         .ok_or_else(|| CalibrationError::Degenerate("the DLT camera has a singular 3×3 block".into()))

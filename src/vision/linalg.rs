@@ -146,16 +146,8 @@ pub fn svd_right(a: &[f64], rows: usize, cols: usize) -> (Vec<f64>, Vec<Vec<f64>
                 let t = if zeta == 0.0 { 1.0 } else { t };
                 let c = 1.0 / (1.0 + t * t).sqrt();
                 let s = c * t;
-                for i in 0..rows {
-                    let (x, y) = (u[p][i], u[q][i]);
-                    u[p][i] = c * x - s * y;
-                    u[q][i] = s * x + c * y;
-                }
-                for i in 0..cols {
-                    let (x, y) = (v[p][i], v[q][i]);
-                    v[p][i] = c * x - s * y;
-                    v[q][i] = s * x + c * y;
-                }
+                rotate(&mut u, p, q, c, s);
+                rotate(&mut v, p, q, c, s);
             }
         }
         if !rotated {
@@ -165,6 +157,16 @@ pub fn svd_right(a: &[f64], rows: usize, cols: usize) -> (Vec<f64>, Vec<Vec<f64>
     let mut order: Vec<(f64, usize)> = (0..cols).map(|j| (u[j].iter().map(|x| x * x).sum::<f64>().sqrt(), j)).collect();
     order.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
     (order.iter().map(|o| o.0).collect(), order.iter().map(|o| v[o.1].clone()).collect())
+}
+
+/// Plane rotation of vectors p < q: (x, y) → (c x − s y, s x + c y), element-wise.
+fn rotate(vectors: &mut [Vec<f64>], p: usize, q: usize, c: f64, s: f64) {
+    let (left, right) = vectors.split_at_mut(q);
+    for (x, y) in left[p].iter_mut().zip(right[0].iter_mut()) {
+        let (a, b) = (*x, *y);
+        *x = c * a - s * b;
+        *y = s * a + c * b;
+    }
 }
 
 /// Solves `a x = b` (n × n, row-major) by Gaussian elimination with partial pivoting; None

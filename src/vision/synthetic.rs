@@ -122,6 +122,9 @@ impl Default for Look {
     }
 }
 
+/// A layer ready to render: its texture, its moved rectangle and its shift, in samples.
+type Placed<'a> = (&'a Texture, Option<[i64; 4]>, [i64; 2]);
+
 pub struct SpeckleScene {
     pub width: usize,
     pub height: usize,
@@ -143,7 +146,7 @@ impl SpeckleScene {
     pub fn render_with(&self, layers: &[Layer], look: &Look, index: u64) -> GrayImage {
         let s = SUPERSAMPLING as i64;
         let (w, h) = (self.width, self.height);
-        let placed: Vec<(&Texture, Option<[i64; 4]>, [i64; 2])> = layers
+        let placed: Vec<Placed<'_>> = layers
             .iter()
             .map(|l| {
                 let shift = l.shift.map(|v| (v * s as f64).round() as i64);

@@ -316,17 +316,17 @@ fn refine(
         let (mi, mx, my) = (mean(&patch.values), mean(&patch.dx), mean(&patch.dy));
         let (mut q11, mut q12, mut q22, mut gt1, mut gt2, mut gi1, mut gi2, mut ti, mut ii) =
             (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-        for k in 0..m * m {
-            let i = patch.values[k] - mi;
-            let (g1, g2) = (patch.dx[k] - mx, patch.dy[k] - my);
+        for (((&value, &dx), &dy), &tk) in patch.values.iter().zip(&patch.dx).zip(&patch.dy).zip(t) {
+            let i = value - mi;
+            let (g1, g2) = (dx - mx, dy - my);
             q11 += g1 * g1;
             q12 += g1 * g2;
             q22 += g2 * g2;
-            gt1 += g1 * t[k];
-            gt2 += g2 * t[k];
+            gt1 += g1 * tk;
+            gt2 += g2 * tk;
             gi1 += g1 * i;
             gi2 += g2 * i;
-            ti += t[k] * i;
+            ti += tk * i;
             ii += i * i;
         }
         zncc = if ii > 0.0 { ti / (t_norm * ii.sqrt()) } else { 0.0 };
