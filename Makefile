@@ -17,7 +17,7 @@ BIN := $(CARGO_TARGET_DIR)/release/shakeflow
 help:
 	@echo "make demo    build (release) and run the demo study: runs/demo-archive -> runs/demo"
 	@echo "make test    build and run the whole test suite (installs the Python references it needs)"
-	@echo "make bench   load+baseline, the whole demo study and the rocking model, vs numpy/scipy/pyarrow equivalents"
+	@echo "make bench   load+baseline and the whole demo study vs numpy/scipy/pyarrow scripts; the rocking model vs scipy and RK4; CPT matching and 1080p tracking vs OpenCV"
 	@echo "make schema  regenerate schemas/pipeline.schema.json from the stage registry"
 
 release:
@@ -42,6 +42,8 @@ bench: release $(PY_STAMP)
 	$(VENV_PY) bench/load_baseline.py --shakeflow $(BIN) --archive runs/demo-archive
 	$(VENV_PY) bench/demo_study.py --shakeflow $(BIN) --archive runs/demo-archive
 	$(VENV_PY) bench/rocking.py --shakeflow $(BIN)
+	$(CARGO) build --release --locked --example cpt_match
+	$(VENV_PY) bench/cpt.py --shakeflow $(BIN) --matcher $(CARGO_TARGET_DIR)/release/examples/cpt_match
 
 schema:
 	$(CARGO) run --quiet --locked -- schema > schemas/pipeline.schema.json

@@ -38,7 +38,7 @@ def process(path, groups, dest):
         d = dest / key
         d.mkdir(parents=True, exist_ok=True)
         pq.write_table(pa.table(arrays), d / "data.parquet", compression="zstd")
-for test in sorted(p for p in archive.iterdir() if p.is_dir()):
+for test in sorted(p for p in archive.iterdir() if (p / "DAQ1_floors.csv").is_file()):
     process(test / "DAQ1_floors.csv", {f"floor={f}": [f"A{f}_EW", f"A{f}_NS", f"A{f}_UD"] for f in (4, 5)}, out / "floors" / f"motion={test.name}")
     process(test / "DAQ2_equipment.csv", {"": ["A5_EW_SYNC", "UI3_TOP_EW", "MC2_TOP_EW", "PB1_TOP_EW", "PB2_TOP_EW", "PS1_TOP_EW", "PS2_TOP_EW", "WSU1_TOP_EW"]}, out / "equipment" / f"motion={test.name}")
 '''

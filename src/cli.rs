@@ -12,7 +12,7 @@ use crate::pipeline::params;
 use crate::pipeline::plan::Plan;
 use crate::pipeline::progress::Reporter;
 use crate::pipeline::sink::OutputSink;
-use crate::pipeline::spec::PipelineFile;
+use crate::pipeline::spec::{PipelineFile, RecordFormat, SourceSpec};
 use crate::pipeline::{hash, sources};
 use crate::stages::{self, InputKind, InputPart, StageContext, StageInput};
 
@@ -173,8 +173,9 @@ pub fn main() -> anyhow::Result<ExitCode> {
             let plan = Plan::new(PipelineFile::read(&pipeline)?)?;
             if !skip_inputs {
                 for (name, source) in &plan.file.spec.inputs {
-                    let files =
-                        sources::resolve(&plan.file.base_dir(), &source.path, &source.partition).map_err(|e| {
+                    let folders = source.format == RecordFormat::Frames;
+                    let files = sources::resolve(&plan.file.base_dir(), &source.path, &source.partition, folders)
+                        .map_err(|e| {
                             plan.file
                                 .error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message))
                                 .hint(e.hint.unwrap_or_default())
@@ -255,8 +256,12 @@ fn describe_stages(only: Option<&str>) -> anyhow::Result<String> {
         let info = stage.info();
         writeln!(out, "{} (version {})\n  {}", info.name, info.version, info.summary)?;
         let reads = match info.inputs {
-            InputKind::Sources => "record sources declared under `inputs:`",
-            InputKind::Datasets => "outputs of other stages",
+            InputKind::Sources => "record sources declared under `inputs:`".to_string(),
+            InputKind::Datasets => "outputs of other stages".to_string(),
+            InputKind::Files(formats) => format!(
+                "`{}` sources declared under `inputs:`",
+                formats.iter().map(|f| f.name()).collect::<Vec<_>>().join("` or `")
+            ),
         };
         writeln!(out, "  reads: {reads}")?;
         for o in info.outputs {
@@ -276,7 +281,8 @@ fn describe_stages(only: Option<&str>) -> anyhow::Result<String> {
     Ok(out)
 }
 
-/// Gathers inputs for a stage run outside a pipeline: raw files for `load`, Parquet parts otherwise.
+/// Gathers inputs for a stage run outside a pipeline: raw files for `load` and the stages that
+/// read files themselves (frames, control points), Parquet parts otherwise.
 fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String]) -> anyhow::Result<()> {
     let stage = stages::find(name).ok_or_else(|| {
         crate::error::UserError::new(format!("unknown stage type `{name}`"))
@@ -304,6 +310,39 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
                 });
             }
             (params::normalize(info.params, info.name, []).map_err(|e| anyhow::anyhow!("{}", e.message))?, stage_inputs)
+        }
+        InputKind::Files(formats) => {
+            let given = assignments.iter().map(|(k, v)| (k.as_str(), v.clone()));
+            let params = params::normalize(info.params, info.name, given)
+                .map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;
+            let mut stage_inputs = Vec::new();
+            for path in inputs {
+                if !path.exists() {
+                    return Err(crate::error::UserError::new("the input does not exist")
+                        .in_file(path)
+                        .hint("check the path")
+                        .into());
+                }
+                let format = if crate::io::frames::is_frame_source(path) && formats.contains(&RecordFormat::Frames) {
+                    RecordFormat::Frames
+                } else {
+                    formats[0]
+                };
+                let spec: SourceSpec =
+                    serde_json::from_value(serde_json::json!({"format": format, "path": path.display().to_string()}))?;
+                let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+                let partition = if inputs.len() > 1 { vec![("file".to_string(), stem)] } else { Vec::new() };
+                let part =
+                    InputPart { partition, path: path.clone(), label: file_label(path), hash: hash::hash_path(path)? };
+                let base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+                stage_inputs.push(StageInput::Source {
+                    name: path.display().to_string(),
+                    spec,
+                    base_dir,
+                    files: vec![part],
+                });
+            }
+            (params, stage_inputs)
         }
         InputKind::Datasets => {
             let given = assignments.iter().map(|(k, v)| (k.as_str(), v.clone()));

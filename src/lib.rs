@@ -16,3 +16,4 @@ pub mod stages;
 pub mod stats;
 pub mod table;
 pub mod units;
+pub mod vision;

@@ -4,6 +4,7 @@
 use serde_json::{json, Map, Value};
 
 use crate::pipeline::params::{ParamKind, ParamSpec};
+use crate::pipeline::spec::RecordFormat;
 use crate::stages;
 
 fn param_schema(p: &ParamSpec) -> Value {
@@ -68,8 +69,8 @@ pub fn pipeline_schema() -> Value {
                 "additionalProperties": false,
                 "required": ["format", "path"],
                 "properties": {
-                    "format": {"enum": ["delimited", "csv", "tsv", "at2", "renadic_v1", "simcenter_json"], "description": "record file format"},
-                    "path": {"type": "string", "description": "file, glob, or template whose {key} parts become partition keys"},
+                    "format": {"enum": RecordFormat::ALL.map(|f| f.name()), "description": "record file format (read by `load`), or `frames` (an image sequence: a folder of PNG/JPEG frames or a video file, for `cpt_track`) or `control_points` (X_mm, Y_mm, Z_mm, u_px, v_px CSV, for `cpt_calibrate`)"},
+                    "path": {"type": "string", "description": "file (or, for `frames`, a folder), glob, or template whose {key} parts become partition keys"},
                     "description": {"type": "string"},
                     "partition": {"type": "object", "additionalProperties": {"type": "string"}, "description": "constant partition keys for every record"},
                     "header_lines": {"type": "integer", "minimum": 0, "default": 0, "description": "delimited: lines before the column-name row"},

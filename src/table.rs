@@ -110,6 +110,31 @@ impl Table {
     pub fn column_names(&self) -> Vec<&str> {
         self.columns.iter().map(|c| c.name.as_str()).collect()
     }
+
+    /// A table of the given rows (in that order), same columns, no metadata.
+    pub fn select_rows(&self, rows: &[usize]) -> Table {
+        fn pick<T: Clone>(v: &[T], rows: &[usize]) -> Vec<T> {
+            rows.iter().map(|&r| v[r].clone()).collect()
+        }
+        let columns = self
+            .columns
+            .iter()
+            .map(|c| Column {
+                name: c.name.clone(),
+                unit: c.unit.clone(),
+                description: c.description.clone(),
+                data: match &c.data {
+                    ColumnData::F64(v) => ColumnData::F64(pick(v, rows)),
+                    ColumnData::OptF64(v) => ColumnData::OptF64(pick(v, rows)),
+                    ColumnData::I64(v) => ColumnData::I64(pick(v, rows)),
+                    ColumnData::Bool(v) => ColumnData::Bool(pick(v, rows)),
+                    ColumnData::Str(v) => ColumnData::Str(pick(v, rows)),
+                    ColumnData::OptStr(v) => ColumnData::OptStr(pick(v, rows)),
+                },
+            })
+            .collect();
+        Table { columns, metadata: BTreeMap::new() }
+    }
 }
 
 /// The name of the time column every time-series table starts with.

@@ -7,7 +7,11 @@ use std::path::Path;
 
 /// Runs the small project once successfully, applies `break_it`, reruns, and checks the failure.
 fn fails_cleanly(break_it: impl FnOnce(&Path), expected: &[&str]) -> String {
-    let project = small_project();
+    fails_cleanly_in(small_project(), break_it, expected)
+}
+
+/// The same for any project folder holding a `pipeline.yaml` that runs.
+fn fails_cleanly_in(project: tempfile::TempDir, break_it: impl FnOnce(&Path), expected: &[&str]) -> String {
     let root = project.path();
     let ok = shakeflow(&["run", "pipeline.yaml"], root);
     assert!(ok.status.success(), "{}", stderr(&ok));
@@ -175,4 +179,127 @@ fn damaged_lockfile_is_an_error_not_a_silent_reset() {
         |root| edit(root, "out/shakeflow.lock", |t| t.replace("stages:", "stages: [")),
         &["shakeflow.lock", "damaged"],
     );
+}
+
+// The camera projection technique (cpt_calibrate, cpt_track, cpt_project).
+
+fn replace_control_points(root: &Path, rows: impl Fn(&[&str]) -> Vec<String>) {
+    edit(root, "control_points.csv", |t| {
+        let lines: Vec<&str> = t.lines().collect();
+        let mut out = vec![lines[0].to_string()];
+        out.extend(rows(&lines[1..]));
+        out.join("\n") + "\n"
+    });
+}
+
+#[test]
+fn coplanar_control_points() {
+    let message = fails_cleanly_in(
+        cpt_project(),
+        |root| {
+            replace_control_points(root, |rows| {
+                rows.iter()
+                    .map(|r| {
+                        let mut cells: Vec<&str> = r.split(',').collect();
+                        cells[3] = "0";
+                        cells.join(",")
+                    })
+                    .collect()
+            })
+        },
+        &["control_points.csv", "coplanar"],
+    );
+    assert!(message.contains("off that plane"), "the hint says what to do:\n{message}");
+}
+
+#[test]
+fn too_few_control_points() {
+    fails_cleanly_in(
+        cpt_project(),
+        |root| replace_control_points(root, |rows| rows[..7].iter().map(|r| r.to_string()).collect()),
+        &["control_points.csv", "7 control point(s)", "at least 8"],
+    );
+}
+
+#[test]
+fn non_numeric_control_point() {
+    fails_cleanly_in(
+        cpt_project(),
+        |root| edit(root, "control_points.csv", |t| t.replacen("C3,800,", "C3,8OO,", 1)),
+        &["control_points.csv:4:4", "cannot read '8OO' as a number (X_mm)"],
+    );
+}
+
+#[test]
+fn ray_parallel_to_the_plane() {
+    // A vertical plane through the camera centre that contains the tracked pixel's ray.
+    let camera = cpt_test_camera();
+    let c = camera.centre();
+    let [x, y] = camera.normalised_of_pixel(40.0, 30.0).unwrap();
+    let r = camera.rotation;
+    let ray = [0, 1, 2].map(|k| r[0][k] * x + r[1][k] * y + r[2][k]);
+    let normal = [ray[1], -ray[0], 0.0];
+    let d = -(normal[0] * c[0] + normal[1] * c[1]);
+    let plane = format!("{},{},0,{}", normal[0], normal[1], d);
+    fails_cleanly_in(
+        cpt_project(),
+        |root| edit(root, "pipeline.yaml", |t| t.replace("plane: \"0,0,1,0\"", &format!("plane: \"{plane}\""))),
+        &["stage `project`", "point M1 in frame 0", "nearly parallel", "check the plane"],
+    );
+}
+
+#[test]
+fn unreadable_frame() {
+    fails_cleanly_in(
+        cpt_project(),
+        |root| std::fs::write(root.join("frames/f0003.png"), b"\x89PNG\r\n\x1a\n truncated").unwrap(),
+        &["frames/f0003.png", "cannot decode the frame"],
+    );
+}
+
+#[test]
+fn start_point_outside_the_image() {
+    fails_cleanly_in(
+        cpt_project(),
+        |root| edit(root, "pipeline.yaml", |t| t.replace("points: \"40,30\"", "points: \"40,30;95,20\"")),
+        &["frames", "point M2", "start point (95.0, 20.0) is outside the 80×60 frame", "u from 0 to 79"],
+    );
+}
+
+#[test]
+fn frames_folder_without_a_frame_rate() {
+    fails_cleanly_in(
+        cpt_project(),
+        |root| edit(root, "pipeline.yaml", |t| t.replace("      fps: 30\n", "")),
+        &["frames", "no timestamps", "fps: 30"],
+    );
+}
+
+#[test]
+fn frames_source_fed_to_load() {
+    fails_cleanly_in(
+        cpt_project(),
+        |root| edit(root, "pipeline.yaml", |t| t + "  load_video:\n    type: load\n    inputs: [video]\n"),
+        &["pipeline.yaml:", "`video` is a `frames` source, which this stage type does not read", "feeds `cpt_track`"],
+    );
+}
+
+#[test]
+fn video_without_ffmpeg() {
+    let project = cpt_project();
+    let root = project.path();
+    std::fs::write(root.join("clip.mp4"), b"not decoded without ffmpeg").unwrap();
+    edit(root, "pipeline.yaml", |t| t.replace("path: frames", "path: clip.mp4"));
+    let out = shakeflow_env(&["run", "pipeline.yaml"], root, &[("SHAKEFLOW_FFMPEG", "/nonexistent/ffmpeg")]);
+    let message = stderr(&out);
+    assert!(!out.status.success());
+    for needle in [
+        "clip.mp4",
+        "needs the `ffmpeg` command-line tool, which was not found",
+        "SHAKEFLOW_FFMPEG",
+        "folder of PNG/JPEG frames",
+    ] {
+        assert!(message.contains(needle), "message lacks `{needle}`:\n{message}");
+    }
+    assert!(!root.join("out/track").exists(), "nothing written:\n{message}");
 }

@@ -136,6 +136,7 @@ fn layout_headers_rows_and_manifest() {
     let mut expected_top: Vec<String> = ids.iter().map(|s| s.to_string()).collect();
     expected_top.push(README_FILE.into());
     expected_top.push(MANIFEST_FILE.into());
+    expected_top.push("cpt".into());
     expected_top.sort();
     assert_eq!(listing(dir), expected_top);
     let readme = fs::read_to_string(dir.join(README_FILE)).unwrap();
@@ -148,8 +149,19 @@ fn layout_headers_rows_and_manifest() {
     for f in &m.files {
         total_bytes += f.bytes;
     }
-    println!("archive size {:.1} MB", total_bytes as f64 / 1e6);
-    assert!(total_bytes < 60_000_000);
+    let cpt_bytes: u64 = m.files.iter().filter(|f| f.path.starts_with("cpt/")).map(|f| f.bytes).sum();
+    println!(
+        "archive size {:.1} MB, of which the CPT video and its files {:.1} MB",
+        total_bytes as f64 / 1e6,
+        cpt_bytes as f64 / 1e6
+    );
+    assert!(total_bytes - cpt_bytes < 60_000_000);
+    assert!(cpt_bytes < 25_000_000, "the CPT part stays small");
+    assert_eq!(listing(&dir.join("cpt")), ["control_points.csv", "frames", "truth.csv"]);
+    assert_eq!(listing(&dir.join("cpt/frames")).len(), m.cpt.frames);
+    let truth = fs::read_to_string(dir.join("cpt/truth.csv")).unwrap();
+    assert_eq!(truth.lines().count(), m.cpt.frames + 1);
+    assert!(truth.starts_with("time_s,theta_rad,x_mm,y_mm,yaw_rad\n"));
 
     for t in &m.tests {
         let tdir = dir.join(&t.id);

@@ -14,6 +14,7 @@
 //! order is fixed, numbers are printed with explicit precision and manifest values are quantised
 //! before use so the manifest states exactly what was applied.
 
+use crate::demo::camera;
 use crate::demo::study::{Base, Equipment, FrequencySet, Motion, EQUIPMENT, MOTIONS};
 use crate::physics::sdof::Sdof;
 use crate::physics::shear_building::ShearBuilding;
@@ -29,11 +30,16 @@ use std::path::{Path, PathBuf};
 
 pub const GENERATOR_NAME: &str = "shakeflow demo-archive";
 /// Bump whenever the bytes written change, so `is_current` rejects older archives.
-pub const GENERATOR_VERSION: &str = "1.1.0";
+pub const GENERATOR_VERSION: &str = "1.2.0";
 pub const README_FILE: &str = "README.txt";
 pub const MANIFEST_FILE: &str = "manifest.json";
 pub const DAQ1_FILE: &str = "DAQ1_floors.csv";
 pub const DAQ2_FILE: &str = "DAQ2_equipment.csv";
+/// The camera projection technique's inputs: a calibrated camera's video of a rocking and a
+/// rolling unit (see `demo::camera`).
+pub const CPT_CONTROL_POINTS_FILE: &str = "cpt/control_points.csv";
+pub const CPT_TRUTH_FILE: &str = "cpt/truth.csv";
+pub const CPT_FRAMES_DIR: &str = "cpt/frames";
 pub const DAQ1_RATE_HZ: u32 = 200;
 pub const DAQ2_RATE_HZ: u32 = 256;
 pub const DAQ1_COLUMNS: [&str; 7] = ["Time", "A4_EW", "A4_NS", "A4_UD", "A5_EW", "A5_NS", "A5_UD"];
@@ -91,8 +97,31 @@ pub struct Manifest {
     /// How DAQ2 values relate to the physical signal (formula, in words).
     pub daq2_sensor_model: String,
     pub tests: Vec<TestEntry>,
+    pub cpt: CptEntry,
     /// Every file except manifest.json, with its size.
     pub files: Vec<FileEntry>,
+}
+
+/// The truth behind the CPT video: the camera, the units' geometry, where the markers start.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CptEntry {
+    /// Where the motions come from (the function to replace with the physics models).
+    pub motion_source: String,
+    pub width_px: usize,
+    pub height_px: usize,
+    pub frame_rate_hz: f64,
+    pub frames: usize,
+    pub image_noise_grey_levels: f64,
+    pub control_point_noise_px: f64,
+    /// P = K[R|t] with ‖(p31, p32, p33)‖ = 1, and the radial distortion used to render.
+    pub projection: [[f64; 4]; 3],
+    pub k1: f64,
+    pub camera_centre_mm: [f64; 3],
+    /// Planes a,b,c,d (aX + bY + cZ + d = 0, mm) of the rocking panel and of the cart top.
+    pub rocking_plane: [f64; 4],
+    pub rolling_plane: [f64; 4],
+    /// True marker centres in the first frame (px), what a person would click.
+    pub start_points: Vec<(String, [f64; 2])>,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -260,7 +289,83 @@ fn expected_files(ids: &[&str]) -> Vec<String> {
         out.push(format!("{id}/{DAQ1_FILE}"));
         out.push(format!("{id}/{DAQ2_FILE}"));
     }
+    out.push(CPT_CONTROL_POINTS_FILE.to_string());
+    out.push(CPT_TRUTH_FILE.to_string());
+    out.extend((0..camera::FRAMES).map(frame_file));
     out
+}
+
+fn frame_file(k: usize) -> String {
+    format!("{CPT_FRAMES_DIR}/frame_{k:04}.png")
+}
+
+/// A file to write: its path in the archive and its bytes.
+type NamedBytes = (String, Vec<u8>);
+
+/// The CPT part of the archive: files (path, bytes) and the manifest entry.
+fn cpt_contents() -> io::Result<(Vec<NamedBytes>, CptEntry)> {
+    use rayon::prelude::*;
+    let cam = camera::demo_camera();
+    let motions = camera::demo_motions();
+    let mut files = Vec::new();
+    let mut text = String::from("point,X_mm,Y_mm,Z_mm,u_px,v_px\n");
+    for p in camera::control_points(&cam) {
+        let [x, y, z] = p.world_mm;
+        let _ = writeln!(text, "{},{x:.1},{y:.1},{z:.1},{:.2},{:.2}", p.name, p.pixel[0], p.pixel[1]);
+    }
+    files.push((CPT_CONTROL_POINTS_FILE.to_string(), text.into_bytes()));
+    let mut truth = String::from("time_s,theta_rad,x_mm,y_mm,yaw_rad\n");
+    for k in 0..camera::FRAMES {
+        let _ = writeln!(
+            truth,
+            "{:.6},{:.9},{:.6},{:.6},{:.9}",
+            motions.time_s[k],
+            motions.rocking_theta_rad[k],
+            motions.rolling_x_mm[k],
+            motions.rolling_y_mm[k],
+            motions.rolling_yaw_rad[k]
+        );
+    }
+    files.push((CPT_TRUTH_FILE.to_string(), truth.into_bytes()));
+    let rays = camera::Rays::new(&cam);
+    let background = camera::render_background(&cam, &rays);
+    let frames: Vec<NamedBytes> = (0..camera::FRAMES)
+        .into_par_iter()
+        .map(|k| {
+            let pixels = camera::render_frame(&cam, &rays, &background, motions.pose(k), k);
+            Ok((frame_file(k), gray_png(&pixels, camera::WIDTH, camera::HEIGHT)?))
+        })
+        .collect::<io::Result<_>>()?;
+    files.extend(frames);
+    let entry = CptEntry {
+        motion_source:
+            "demo::camera::demo_motions (synthetic stand-in: free rocking of PS2 from 0.12 rad; smooth cart drift)"
+                .into(),
+        width_px: camera::WIDTH,
+        height_px: camera::HEIGHT,
+        frame_rate_hz: camera::FRAME_RATE_HZ,
+        frames: camera::FRAMES,
+        image_noise_grey_levels: camera::IMAGE_NOISE,
+        control_point_noise_px: camera::CONTROL_POINT_NOISE_PX,
+        projection: cam.projection(),
+        k1: cam.k1,
+        camera_centre_mm: cam.centre(),
+        rocking_plane: [0.0, 1.0, 0.0, 0.0],
+        rolling_plane: [0.0, 0.0, 1.0, -camera::CART_TOP_Z_MM],
+        start_points: camera::marker_pixels(&cam, motions.pose(0)),
+    };
+    Ok((files, entry))
+}
+
+fn gray_png(pixels: &[u8], width: usize, height: usize) -> io::Result<Vec<u8>> {
+    let mut out = Vec::new();
+    let mut encoder = png::Encoder::new(&mut out, width as u32, height as u32);
+    encoder.set_color(png::ColorType::Grayscale);
+    encoder.set_depth(png::BitDepth::Eight);
+    let mut writer = encoder.write_header().map_err(io::Error::other)?;
+    writer.write_image_data(pixels).map_err(io::Error::other)?;
+    writer.finish().map_err(io::Error::other)?;
+    Ok(out)
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -619,6 +724,16 @@ Clocks: DAQ2 is not synchronised with DAQ1. DAQ2 time 0 is DAQ1 time clock_offse
 per test, in manifest.json). A toppled unit shows an impact spike, then about 1/10 amplitude
 (its sensor then records the floor's vertical motion).
 
+Camera projection technique (cpt/)
+  cpt/control_points.csv     14 surveyed points: point,X_mm,Y_mm,Z_mm,u_px,v_px (pixels measured
+                             with 0.5 px noise; world mm, X = E-W, Y = N-S, Z up, floor at Z = 0)
+  cpt/frames/frame_NNNN.png  960x540 grayscale video at 30 fps (105 frames) from that camera: a
+                             rocking stretcher panel in the plane Y = 0 (markers M1 low, M2 high) and
+                             a rolling cart top at Z = 900 mm (markers M3, M4), rendered at 8x8 samples
+                             per pixel with 1 grey level of noise
+  cpt/truth.csv              the motion that made the frames: time_s,theta_rad (rocking, positive:
+                             top toward +X),x_mm,y_mm,yaw_rad (cart centre from rest, yaw about +Z)
+
 Tests (chronological)
 ",
     );
@@ -649,6 +764,12 @@ fn write_contents(dir: &Path) -> io::Result<Vec<FileEntry>> {
             files.push(FileEntry { path: format!("{id}/{name}"), bytes: text.len() as u64 });
         }
     }
+    let (cpt_files, cpt) = cpt_contents()?;
+    fs::create_dir_all(dir.join(CPT_FRAMES_DIR))?;
+    for (path, bytes) in cpt_files {
+        fs::write(dir.join(&path), &bytes)?;
+        files.push(FileEntry { path, bytes: bytes.len() as u64 });
+    }
     let manifest = Manifest {
         generator: GeneratorInfo { name: GENERATOR_NAME.into(), version: GENERATOR_VERSION.into() },
         project: "NEES-2009-0722 UCSD BNCS".into(),
@@ -658,6 +779,7 @@ fn write_contents(dir: &Path) -> io::Result<Vec<FileEntry>> {
         daq2: DaqInfo { file: DAQ2_FILE.into(), sample_rate_hz: DAQ2_RATE_HZ, columns: DAQ2_COLUMNS.map(String::from).to_vec() },
         daq2_sensor_model: "value(tau) = signal(tau + clock_offset_s) + offset_g + drift_linear_g*(tau/duration_s) + drift_quadratic_g*(tau/duration_s)^2 + noise(noise_rms_g); tau = DAQ2 time, signal in DAQ1 time".into(),
         tests,
+        cpt,
         files: files.clone(),
     };
     let mut text = serde_json::to_string_pretty(&manifest).map_err(io::Error::other)?;

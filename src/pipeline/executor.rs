@@ -20,8 +20,8 @@ use super::plan::{InputRef, Plan, PlannedStage};
 use super::progress::Reporter;
 use super::sink::OutputSink;
 use super::sources;
+use super::spec::RecordFormat;
 use crate::error::UserError;
-use crate::pipeline::spec::RecordFormat;
 use crate::stages::{InputPart, StageContext, StageInput};
 
 #[derive(Debug, Clone, Default)]
@@ -79,7 +79,8 @@ fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, User
     let mut resolved = BTreeMap::new();
     for name in used {
         let spec = &plan.file.spec.inputs[name];
-        let files = sources::resolve(&base, &spec.path, &spec.partition).map_err(|e| {
+        let folders = spec.format == RecordFormat::Frames;
+        let files = sources::resolve(&base, &spec.path, &spec.partition, folders).map_err(|e| {
             let located = plan.file.error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message));
             match e.hint {
                 Some(h) => located.hint(h),
@@ -96,12 +97,11 @@ fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, User
             files
         };
         let paths: Vec<PathBuf> = files.iter().map(|f| f.path.clone()).collect();
-        let hashes = if spec.format == RecordFormat::Case {
-            paths.iter().map(|p| hash::hash_dir(p).map(|h| h.0)).collect::<anyhow::Result<Vec<_>>>()
-        } else {
-            hash::hash_files(&paths)
-        }
-        .map_err(|e| UserError::new(format!("source `{name}`: {e:#}")))?;
+        let hashes: Vec<String> = paths
+            .par_iter()
+            .map(|p| hash::hash_path(p))
+            .collect::<anyhow::Result<_>>()
+            .map_err(|e| UserError::new(format!("source `{name}`: {e:#}")))?;
         let mut summary = serde_json::to_string(spec).expect("specs serialise");
         let parts: Vec<InputPart> = files
             .into_iter()

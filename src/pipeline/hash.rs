@@ -51,6 +51,15 @@ pub fn hash_dir(dir: &Path) -> anyhow::Result<(String, usize)> {
     Ok((hash_bytes(combined.as_bytes()), files.len()))
 }
 
+/// Hash of a source path: a file's content, or a folder's file names and contents.
+pub fn hash_path(path: &Path) -> anyhow::Result<String> {
+    if path.is_dir() {
+        Ok(hash_dir(path)?.0)
+    } else {
+        hash_file(path)
+    }
+}
+
 /// Hashes many files in parallel, keeping their order.
 pub fn hash_files(paths: &[PathBuf]) -> anyhow::Result<Vec<String>> {
     paths.par_iter().map(|p| hash_file(p)).collect()

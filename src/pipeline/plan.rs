@@ -157,7 +157,7 @@ fn resolve_inputs(
     let key_path = ["stages", stage_name, "inputs"];
     if names.is_empty() {
         let what = match kind {
-            InputKind::Sources => "a source from `inputs:`",
+            InputKind::Sources | InputKind::Files(_) => "a source from `inputs:`",
             InputKind::Datasets => "another stage",
         };
         return Err(file
@@ -170,15 +170,29 @@ fn resolve_inputs(
             Some((h, o)) => (h, Some(o)),
             None => (name.as_str(), None),
         };
-        let reference = if file.spec.inputs.contains_key(name) {
-            if kind != InputKind::Sources {
-                return Err(file
-                    .error_at_value(
-                        &key_path,
-                        name,
-                        format!("`{name}` is a record source, but this stage type reads stage outputs"),
-                    )
-                    .hint(format!("load it first with a `load` stage and name that stage here instead of `{name}`")));
+        let reference = if let Some(source) = file.spec.inputs.get(name) {
+            let format = source.format;
+            let refusal = match kind {
+                InputKind::Datasets if format.is_record() => Some((
+                    format!("`{name}` is a record source, but this stage type reads stage outputs"),
+                    format!("load it first with a `load` stage and name that stage here instead of `{name}`"),
+                )),
+                InputKind::Datasets | InputKind::Sources if !format.is_record() => Some((
+                    format!("`{name}` is a `{}` source, which this stage type does not read", format.name()),
+                    "a `frames` source feeds `cpt_track`, a `control_points` source feeds `cpt_calibrate`".to_string(),
+                )),
+                InputKind::Files(formats) if !formats.contains(&format) => Some((
+                    format!(
+                        "`{name}` is a `{}` source, but this stage type reads `{}` sources",
+                        format.name(),
+                        formats.iter().map(|f| f.name()).collect::<Vec<_>>().join("` or `")
+                    ),
+                    format!("declare a source with `format: {}` under `inputs:`", formats[0].name()),
+                )),
+                _ => None,
+            };
+            if let Some((message, hint)) = refusal {
+                return Err(file.error_at_value(&key_path, name, message).hint(hint));
             }
             InputRef::Source(name.clone())
         } else if let Some(upstream) = file.spec.stages.get(head) {
@@ -187,7 +201,7 @@ fn resolve_inputs(
                     .error_at_value(
                         &key_path,
                         name,
-                        format!("`{name}` is a stage, but this stage type reads record sources"),
+                        format!("`{name}` is a stage, but this stage type reads sources declared under `inputs:`"),
                     )
                     .hint("name a source declared under `inputs:`"));
             }

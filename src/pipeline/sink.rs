@@ -65,7 +65,23 @@ impl OutputSink {
     }
 
     /// Writes one record of one output. Records are independent, so stages call this in parallel.
-    pub fn write(&self, output: &str, partition: &Partition, mut table: Table) -> anyhow::Result<()> {
+    pub fn write(&self, output: &str, partition: &Partition, table: Table) -> anyhow::Result<()> {
+        self.write_split(output, partition, table, None)
+    }
+
+    /// Like [`write`](Self::write) for a long table holding several series (a `point` column):
+    /// the MCAP twin gets one topic per value of `key`, so each series plots on its own.
+    pub fn write_series(&self, output: &str, partition: &Partition, table: Table, key: &str) -> anyhow::Result<()> {
+        self.write_split(output, partition, table, Some(key))
+    }
+
+    fn write_split(
+        &self,
+        output: &str,
+        partition: &Partition,
+        mut table: Table,
+        key: Option<&str>,
+    ) -> anyhow::Result<()> {
         let info = self.output_info(output)?;
         let relative = partition_path(partition);
         if !self.written.lock().expect("no panics while holding the lock").insert(format!("{output}/{relative}")) {
@@ -86,11 +102,15 @@ impl OutputSink {
             // A separate tree: pyarrow.dataset and friends refuse folders that mix in non-Parquet files.
             let mcap_dir = self.root.join(MCAP_DIR).join(output).join(&relative);
             std::fs::create_dir_all(&mcap_dir).map_err(|e| anyhow!("cannot create `{}`: {e}", mcap_dir.display()))?;
-            mcap::write_timeseries(
-                &mcap_dir.join(MCAP_FILE),
-                &[mcap::Topic { name: topic, table: &table }],
-                &table.metadata,
-            )?;
+            let split = match key {
+                None => vec![(topic, table.clone())],
+                Some(key) => {
+                    split_by(&table, key)?.into_iter().map(|(value, part)| (format!("{topic}/{value}"), part)).collect()
+                }
+            };
+            let topics: Vec<mcap::Topic<'_>> =
+                split.iter().map(|(name, part)| mcap::Topic { name: name.clone(), table: part }).collect();
+            mcap::write_timeseries(&mcap_dir.join(MCAP_FILE), &topics, &table.metadata)?;
         }
         self.progress.inc(1);
         Ok(())
@@ -115,6 +135,32 @@ impl OutputSink {
     pub fn set_total(&self, records: usize) {
         self.progress.set_length(records as u64);
     }
+
+    /// Tells the user about something that does not stop the stage (a low-contrast template).
+    /// Stages also record warnings in the artifact's metadata, where they stay.
+    pub fn warn(&self, message: &str) {
+        let line = format!("warning: {}: {message}", self.stage_name);
+        if self.progress.is_hidden() {
+            eprintln!("{line}");
+        } else {
+            self.progress.println(line);
+        }
+    }
+}
+
+/// Rows of `table` grouped by the text column `key`, in order of first appearance.
+fn split_by(table: &Table, key: &str) -> anyhow::Result<Vec<(String, Table)>> {
+    let Some(crate::table::ColumnData::Str(keys)) = table.column(key).map(|c| &c.data) else {
+        bail!("the table has no text column `{key}` to split its MCAP topics by");
+    };
+    let mut groups: Vec<(String, Vec<usize>)> = Vec::new();
+    for (row, k) in keys.iter().enumerate() {
+        match groups.iter_mut().find(|(g, _)| g == k) {
+            Some((_, rows)) => rows.push(row),
+            None => groups.push((k.clone(), vec![row])),
+        }
+    }
+    Ok(groups.into_iter().map(|(k, rows)| (k, table.select_rows(&rows))).collect())
 }
 
 /// Hash and file count of one output of a stage: its Parquet tree plus its MCAP twin tree.

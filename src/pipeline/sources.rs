@@ -56,10 +56,12 @@ fn match_pieces(text: &str, pieces: &[Piece]) -> Option<Partition> {
 
 /// Files of a source, sorted by path, each with its partition keys: template keys first, then
 /// the source's constant keys; a plain glob gets `file=<stem>` so records stay distinct.
+/// With `folders`, directories match too (an image sequence is a folder of frames).
 pub fn resolve(
     base_dir: &Path,
     pattern: &str,
     constant: &std::collections::BTreeMap<String, String>,
+    folders: bool,
 ) -> Result<Vec<MatchedFile>, UserError> {
     let pieces = parse_template(pattern).map_err(UserError::new)?;
     let has_keys = pieces.iter().any(|p| matches!(p, Piece::Key(_)));
@@ -78,7 +80,7 @@ pub fn resolve(
     let mut files = Vec::new();
     for entry in entries {
         let path = entry.map_err(|e| UserError::new(format!("cannot read `{}`: {}", e.path().display(), e.error())))?;
-        if !path.is_file() {
+        if !(path.is_file() || folders && path.is_dir()) {
             continue;
         }
         let relative = path.strip_prefix(base_dir).unwrap_or(&path).to_string_lossy().replace('\\', "/");
@@ -118,7 +120,7 @@ mod tests {
             std::fs::write(dir.path().join(test).join("DAQ1_floors.csv"), "x").unwrap();
         }
         let constant = BTreeMap::from([("floor".to_string(), "5".to_string())]);
-        let files = resolve(dir.path(), "{motion}/DAQ1_floors.csv", &constant).unwrap();
+        let files = resolve(dir.path(), "{motion}/DAQ1_floors.csv", &constant, false).unwrap();
         let partitions: Vec<_> = files.iter().map(|f| crate::stages::partition_path(&f.partition)).collect();
         assert_eq!(partitions, ["motion=BI-1/floor=5", "motion=FB-4/floor=5"]);
     }
@@ -136,7 +138,7 @@ mod tests {
     #[test]
     fn no_match_is_a_clear_error() {
         let dir = tempfile::tempdir().unwrap();
-        let err = resolve(dir.path(), "nothing/*.AT2", &BTreeMap::new()).unwrap_err();
+        let err = resolve(dir.path(), "nothing/*.AT2", &BTreeMap::new(), false).unwrap_err();
         assert!(err.message.contains("no file matches `nothing/*.AT2`"), "{err}");
     }
 }

@@ -62,6 +62,35 @@ pub enum RecordFormat {
     /// A diagnosis case folder, named by its `equipment.yaml` (`cases/{case}/equipment.yaml`):
     /// equipment, floor record and observations, read whole by `diagnose`.
     Case,
+    /// An image sequence for `cpt_track`: a folder of PNG/JPEG frames, or a video file (through ffmpeg).
+    Frames,
+    /// Camera control points for `cpt_calibrate`: CSV with X_mm, Y_mm, Z_mm, u_px, v_px.
+    ControlPoints,
+}
+
+impl RecordFormat {
+    /// Every format, in the order the schema lists them.
+    pub const ALL: [RecordFormat; 9] = [
+        RecordFormat::Delimited,
+        RecordFormat::Csv,
+        RecordFormat::Tsv,
+        RecordFormat::At2,
+        RecordFormat::RenadicV1,
+        RecordFormat::SimcenterJson,
+        RecordFormat::Frames,
+        RecordFormat::ControlPoints,
+        RecordFormat::Case,
+    ];
+
+    /// Accelerogram formats, which `load` reads; the others feed the stage that understands them.
+    pub fn is_record(self) -> bool {
+        !matches!(self, RecordFormat::Frames | RecordFormat::ControlPoints | RecordFormat::Case)
+    }
+
+    /// The name pipelines use (`format: control_points`).
+    pub fn name(self) -> String {
+        serde_json::to_value(self).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default()
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]

@@ -6,7 +6,7 @@
 use rayon::prelude::*;
 use serde_json::{json, Value};
 
-use super::{InputKind, OutputInfo, Stage, StageContext, StageInfo, StageInput};
+use super::{InputKind, OutputInfo, Stage, StageContext, StageInfo};
 use crate::diagnose::{diagnose, Diagnosis, Settings};
 use crate::io::case::read_case;
 use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
@@ -19,7 +19,7 @@ static INFO: StageInfo = StageInfo {
     name: "diagnose",
     version: 1,
     summary: "Where the toppling model and a unit's records disagree, which physics it left out (sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt), fitted, ranked by BIC, or `unexplained`.",
-    inputs: InputKind::Sources,
+    inputs: InputKind::Files(&[RecordFormat::Case]),
     outputs: &[
         OutputInfo { name: "diagnosis", description: "per case: mismatch, verdict, window_start_s, window_end_s, rmse_before, rmse_after, explanation, candidates (JSON)", timeseries: false },
         OutputInfo { name: "accel", description: "per case: observed, baseline and model top acceleration and the residuals before/after", timeseries: true },
@@ -49,13 +49,6 @@ impl Stage for Diagnose {
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let settings = settings(ctx.params);
-        for input in ctx.inputs {
-            if let StageInput::Source { name, spec, .. } = input {
-                if spec.format != RecordFormat::Case {
-                    anyhow::bail!("source `{name}` is not a case (format: case, path: cases/{{case}}/equipment.yaml)");
-                }
-            }
-        }
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         let mut rows: Vec<(String, Diagnosis)> = parts

@@ -82,10 +82,10 @@ fn parse(spec: &SourceSpec, path: &std::path::Path) -> Result<RawRecord, UserErr
         RecordFormat::Csv => records::read_delimited(path, &delimited(delimiter.or(Some(b',')))),
         RecordFormat::Tsv => records::read_delimited(path, &delimited(delimiter.or(Some(b'\t')))),
         RecordFormat::Delimited => records::read_delimited(path, &delimited(delimiter)),
-        RecordFormat::Case => {
-            return Err(UserError::new("a `case` source is a diagnosis case folder, read by `diagnose`, not `load`")
+        RecordFormat::Frames | RecordFormat::ControlPoints | RecordFormat::Case => {
+            return Err(UserError::new(format!("`load` does not read `{}` sources", spec.format.name()))
                 .in_file(path)
-                .hint("feed it to a `diagnose` stage, or give the floor.csv of the case a csv source"))
+                .hint("a `frames` source feeds `cpt_track`, a `control_points` source `cpt_calibrate`, a `case` source `diagnose`"))
         }
     }
     .map_err(as_user_error)

@@ -1,6 +1,6 @@
 //! Stage types: one file each, registered by the name pipelines use.
 //!
-//! A stage is a thin adapter: it reads its inputs, calls pure numerics in `signal`/`physics`,
+//! A stage is a thin adapter: it reads its inputs, calls pure numerics in `signal`/`physics`/`vision`,
 //! and hands tables to the [`OutputSink`]. It never decides where files go or whether to run.
 
 use std::collections::BTreeMap;
@@ -8,9 +8,13 @@ use std::path::PathBuf;
 
 use crate::pipeline::params::{ParamSpec, Params};
 use crate::pipeline::sink::OutputSink;
-use crate::pipeline::spec::SourceSpec;
+use crate::pipeline::spec::{RecordFormat, SourceSpec};
 
 pub mod baseline;
+pub mod compare;
+pub mod cpt_calibrate;
+pub mod cpt_project;
+pub mod cpt_track;
 pub mod detect_toppling;
 pub mod diagnose;
 pub mod load;
@@ -27,6 +31,9 @@ pub enum InputKind {
     Sources,
     /// Datasets written by other stages.
     Datasets,
+    /// Sources of these non-record formats (an image sequence, control points), whose files
+    /// the stage reads itself; a `frames` source may name folders.
+    Files(&'static [RecordFormat]),
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -121,6 +128,10 @@ pub fn registry() -> &'static [&'static dyn Stage] {
         &toppling_fragility::TopplingFragility,
         &diagnose::Diagnose,
         &report::Report,
+        &cpt_calibrate::CptCalibrate,
+        &cpt_track::CptTrack,
+        &cpt_project::CptProject,
+        &compare::Compare,
     ]
 }
 

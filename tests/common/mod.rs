@@ -125,3 +125,97 @@ pub fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     out.sort();
     out
 }
+
+/// Runs the binary with extra environment variables.
+pub fn shakeflow_env(args: &[&str], cwd: &Path, env: &[(&str, &str)]) -> Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_shakeflow"));
+    command.args(args).current_dir(cwd);
+    for (k, v) in env {
+        command.env(k, v);
+    }
+    command.output().expect("the shakeflow binary runs")
+}
+
+/// A small camera (80 × 60 px, f = 70 px) for CPT test projects.
+pub fn cpt_test_camera() -> shakeflow::vision::camera::Camera {
+    use shakeflow::vision::camera::{Camera, Intrinsics};
+    let k = Intrinsics { fx: 70.0, fy: 70.0, skew: 0.0, cx: 40.0, cy: 30.0 };
+    Camera::look_at(k, [200.0, -3000.0, 2000.0], [0.0, 0.0, 300.0], 0.0, 0.0)
+}
+
+pub const CPT_PIPELINE: &str = "\
+version: 1
+output_dir: out
+inputs:
+  survey:
+    format: control_points
+    path: control_points.csv
+  video:
+    format: frames
+    path: frames
+stages:
+  calibrate:
+    type: cpt_calibrate
+    inputs: [survey]
+  track:
+    type: cpt_track
+    inputs: [video]
+    params:
+      fps: 30
+      points: \"40,30\"
+      window_px: 12
+      search_px: 30
+  project:
+    type: cpt_project
+    inputs: [track, calibrate.calibration]
+    params:
+      plane: \"0,0,1,0\"
+";
+
+/// Writes `n` speckle frames (80 × 60) whose centre plate moves by 0.25 px per frame.
+pub fn write_cpt_frames(dir: &Path, n: usize) {
+    use shakeflow::vision::synthetic::{Layer, SpeckleScene};
+    std::fs::create_dir_all(dir).unwrap();
+    let scene = SpeckleScene::with_textures(80, 60, 2, 5);
+    for k in 0..n {
+        let plate = Layer { texture: 1, rect: Some([20.0, 15.0, 60.0, 45.0]), shift: [0.25 * k as f64, 0.0] };
+        let image = scene.render(&[Layer::background([0.0, 0.0]), plate], 1.0, k as u64);
+        let mut png = Vec::new();
+        {
+            let mut encoder = png::Encoder::new(&mut png, 80, 60);
+            encoder.set_color(png::ColorType::Grayscale);
+            let mut writer = encoder.write_header().unwrap();
+            writer.write_image_data(&image.pixels).unwrap();
+        }
+        std::fs::write(dir.join(format!("f{k:04}.png")), png).unwrap();
+    }
+}
+
+/// A CPT project: 12 control points seen by `cpt_test_camera`, 6 frames, the pipeline above.
+pub fn cpt_project() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let camera = cpt_test_camera();
+    let mut text = String::from("point,X_mm,Y_mm,Z_mm,u_px,v_px\n");
+    let world = [
+        [-800.0, -600.0, 0.0],
+        [0.0, -900.0, 0.0],
+        [800.0, -500.0, 0.0],
+        [-700.0, 600.0, 0.0],
+        [700.0, 700.0, 0.0],
+        [0.0, 200.0, 0.0],
+        [-900.0, 1000.0, 900.0],
+        [0.0, 1000.0, 1200.0],
+        [900.0, 1000.0, 600.0],
+        [-400.0, 0.0, 700.0],
+        [500.0, -200.0, 500.0],
+        [200.0, 500.0, 1000.0],
+    ];
+    for (k, w) in world.iter().enumerate() {
+        let [u, v] = camera.project(w).unwrap();
+        text.push_str(&format!("C{},{},{},{},{u:.4},{v:.4}\n", k + 1, w[0], w[1], w[2]));
+    }
+    std::fs::write(dir.path().join("control_points.csv"), text).unwrap();
+    write_cpt_frames(&dir.path().join("frames"), 6);
+    std::fs::write(dir.path().join("pipeline.yaml"), CPT_PIPELINE).unwrap();
+    dir
+}
