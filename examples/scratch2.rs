@@ -3,7 +3,7 @@ use shakeflow::physics::rocking::{Method, Options};
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let case = shakeflow::io::case::read_case(std::path::Path::new(&args[1])).unwrap();
-    let effect = effects::library().iter().find(|e| e.name() == "flexibility").unwrap();
+    let effect = effects::library().iter().find(|e| e.name() == "obstacle_impact").unwrap();
     let opts = case.nominal_options();
     let base = case.with_sensitivity(|c| Ok(c.simulate(&c.block, &opts)?.1)).unwrap();
     let (_, var) = case
@@ -14,14 +14,14 @@ fn main() {
         .unwrap();
     let ev = Evidence::new(&case, &base, &var, Settings::default().exceedance_sigma);
     let w = ev.window(&base).unwrap();
-    for f in [4.78, 4.80, 4.81, 4.815, 4.82, 4.825, 4.83, 4.85] {
-        let row: Vec<String> = [0.022, 0.025, 0.0265, 0.028, 0.031]
+    for a in [0.125, 0.13, 0.1308, 0.135, 0.1384, 0.14, 0.145] {
+        let row: Vec<String> = [0.2, 0.3, 0.33, 0.366, 0.4, 0.5]
             .iter()
-            .map(|z| {
-                let p = effect.predict(&case, &[f, *z]).unwrap();
+            .map(|e| {
+                let p = effect.predict(&case, &[-1.0, a, *e]).unwrap();
                 format!("{:8.0}", ev.misfit_until(&p, w.0 + 1.5).chi2)
             })
             .collect();
-        println!("f {f}: {}", row.join(" "));
+        println!("a {a}: {}", row.join(" "));
     }
 }

@@ -22,10 +22,14 @@ use super::{Case, Prediction};
 /// Grid points a local search starts from.
 const STARTS: usize = 4;
 const MAX_ITERATIONS: u64 = 60;
+/// Fresh simplices per horizon at most.
+const RESTARTS: usize = 4;
 /// Horizons after the start of the disagreement (s), the last the whole record, each with the
-/// size of the first simplex (a fraction of the ranges): coarse while the landscape is smooth,
-/// fine once a longer horizon makes it rugged.
-const HORIZONS: [(f64, f64); 4] = [(1.5, 0.04), (4.0, 0.008), (10.0, 0.002), (f64::INFINITY, 0.0005)];
+/// half-width of the first local grid (a fraction of the ranges) and how many times it zooms in:
+/// coarse while the landscape is smooth, fine once a longer horizon makes it rugged.
+const HORIZONS: [(f64, f64, usize); 4] = [(1.5, 0.05, 4), (4.0, 0.01, 3), (10.0, 0.003, 2), (f64::INFINITY, 0.001, 2)];
+/// Each zoom shrinks the local grid to this fraction.
+const ZOOM: f64 = 0.4;
 
 pub struct Fit {
     pub params: Vec<f64>,
@@ -87,7 +91,7 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
     let evaluations = AtomicUsize::new(0);
     let objective = Objective { effect, case, evidence, evaluations: &evaluations };
     let bounds = effect.bounds(case, window);
-    let horizons = HORIZONS.map(|(h, step)| (window.0 + h, step));
+    let horizons = HORIZONS.map(|(h, span, levels)| (window.0 + h, span, levels));
     let grid = effect.grid(case, window);
     let scored: Vec<(f64, Vec<f64>)> = grid.into_par_iter().map(|p| (objective.chi2(&p, horizons[0].0), p)).collect();
     let mut order: Vec<usize> = (0..scored.len()).collect();
@@ -103,8 +107,10 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
             let mut params = start;
             let mut found = vec![params.clone()];
             if !continuous.is_empty() {
-                for &(until, step) in &horizons {
-                    params = search(&objective, &bounds, &continuous, &params, until, step).unwrap_or(params);
+                for &(until, span, levels) in &horizons {
+                    params = zoom(&objective, &bounds, &continuous, &params, until, span, levels);
+                    params = search(&objective, &bounds, &continuous, &params, until, span * ZOOM.powi(levels as i32))
+                        .unwrap_or(params);
                     found.push(params.clone());
                 }
             }
@@ -128,7 +134,57 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
     Fit { params, misfit, prediction, evaluations: evaluations.into_inner() }
 }
 
-/// Nelder–Mead from `start` over the continuous parameters, judged on the records up to `until`.
+/// A local grid around `start` (±`span` of each range, 5 points per parameter, 9 for one),
+/// moved to its best point and shrunk, `levels` times: unlike a simplex, it steps over the small
+/// jumps an impact that happens or not puts into the misfit.
+fn zoom(
+    objective: &Objective<'_>,
+    bounds: &[(f64, f64)],
+    continuous: &[usize],
+    start: &[f64],
+    until: f64,
+    span: f64,
+    levels: usize,
+) -> Vec<f64> {
+    let mut best = (objective.chi2(start, until), start.to_vec());
+    let per_axis = if continuous.len() == 1 { 9 } else { 5 };
+    let mut span = span;
+    for _ in 0..levels {
+        let axes: Vec<Vec<f64>> = continuous
+            .iter()
+            .map(|&i| {
+                let (lo, hi) = bounds[i];
+                super::effects::linspace(-span, span, per_axis)
+                    .into_iter()
+                    .map(|d| (best.1[i] + d * (hi - lo)).clamp(lo, hi))
+                    .collect()
+            })
+            .collect();
+        let points: Vec<Vec<f64>> = super::effects::product(&axes)
+            .into_iter()
+            .map(|values| {
+                let mut p = best.1.clone();
+                for (&i, v) in continuous.iter().zip(values) {
+                    p[i] = v;
+                }
+                p
+            })
+            .collect();
+        let scored: Vec<(f64, Vec<f64>)> = points.into_par_iter().map(|p| (objective.chi2(&p, until), p)).collect();
+        for candidate in scored {
+            if candidate.0 < best.0 {
+                best = candidate;
+            }
+        }
+        span *= ZOOM;
+    }
+    best.1
+}
+
+/// Nelder–Mead from `start` over the continuous parameters, judged on the records up to
+/// `until`, restarted with a fresh simplex while it keeps improving: a simplex that has shrunk
+/// inside a narrow curved valley (angle and restitution of an obstacle trade off) stalls, a new
+/// one walks on.
 fn search(
     objective: &Objective<'_>,
     bounds: &[(f64, f64)],
@@ -137,6 +193,25 @@ fn search(
     until: f64,
     step: f64,
 ) -> Option<Vec<f64>> {
+    let mut best = (objective.chi2(start, until), start.to_vec());
+    for _ in 0..RESTARTS {
+        let Some(found) = simplex_search(objective, bounds, continuous, &best.1, until, step) else { break };
+        if found.0 >= best.0 * (1.0 - 1e-6) {
+            break;
+        }
+        best = found;
+    }
+    (best.1 != start).then_some(best.1)
+}
+
+fn simplex_search(
+    objective: &Objective<'_>,
+    bounds: &[(f64, f64)],
+    continuous: &[usize],
+    start: &[f64],
+    until: f64,
+    step: f64,
+) -> Option<(f64, Vec<f64>)> {
     let problem = Scaled { objective, until, bounds, template: start, continuous };
     let u0: Vec<f64> = continuous
         .iter()
@@ -160,8 +235,8 @@ fn search(
     let result = Executor::new(problem, solver).configure(|s| s.max_iters(MAX_ITERATIONS)).run().ok()?;
     let state = result.state();
     let u = state.get_best_param()?.clone();
-    (state.get_best_cost() <= start_cost)
-        .then(|| Scaled { objective, until, bounds, template: start, continuous }.params(&u))
+    let cost = state.get_best_cost();
+    (cost <= start_cost).then(|| (cost, Scaled { objective, until, bounds, template: start, continuous }.params(&u)))
 }
 
 /// What a model that cannot run predicts: nothing (every residual is NaN, never accepted).
@@ -173,5 +248,6 @@ fn failed(case: &Case) -> Prediction {
         overturn: None,
         top_ax_uncertainty_mps2: vec![0.0; n],
         theta_uncertainty_rad: vec![0.0; n],
+        events: Vec::new(),
     }
 }

@@ -63,6 +63,15 @@ pub struct Prediction {
     /// The model's own uncertainty of θ (rad): zero until chaos makes the prediction depend on
     /// details below anything measured (see [`Case::with_sensitivity`]).
     pub theta_uncertainty_rad: Vec<f64>,
+    /// When the model's regimes change (uplift, impact, wall contact, slip, ...).
+    pub events: Vec<(f64, rocking::EventKind)>,
+}
+
+impl Prediction {
+    /// The first event of one of these kinds.
+    pub fn first(&self, kinds: &[rocking::EventKind]) -> Option<f64> {
+        self.events.iter().find(|(_, k)| kinds.contains(k)).map(|(t, _)| *t)
+    }
 }
 
 /// Relative change of the floor record that probes how sensitive a prediction is: far below
@@ -115,6 +124,7 @@ impl Case {
             overturn: response.overturn,
             top_ax_uncertainty_mps2: uncertainty,
             theta_uncertainty_rad: vec![0.0; n],
+            events: response.events.iter().map(|e| (e.time_s, e.kind)).collect(),
         };
         Ok((response, prediction))
     }
@@ -295,10 +305,14 @@ pub fn diagnose(case: &Case, settings: &Settings) -> Result<Diagnosis, String> {
         && (best.flagged as f64) <= settings.max_remaining_flagged * flagged_before;
     let (verdict, model, window) = if accepted {
         let best = &candidates[1];
-        // The accepted model is the best estimate of the noise-free records: the baseline
-        // disagrees with them from the moment the model departs from it by one noise standard
-        // deviation, usually earlier than the data alone can show.
-        let onset = departure(case, &best.prediction, &baseline).unwrap_or(window.0);
+        // The accepted physics says when the nominal model stops being true: when it first acts
+        // (the first uplift of a tilting sensor, the first impact, contact, slip, the moment of a
+        // mass change), usually before its effect grows beyond the noise. A physics that acts all
+        // along (a flexible mount) begins where the data first show it.
+        let effect =
+            effects::library().iter().find(|e| e.name() == best.effect).expect("candidates come from the library");
+        let parameters: Vec<f64> = best.params.iter().map(|p| p.1).collect();
+        let onset = effect.onset(&parameters, &best.prediction).unwrap_or(window.0);
         (best.effect, best.prediction.clone(), (onset.min(window.0), window.1))
     } else {
         ("unexplained", baseline.clone(), window)
@@ -324,16 +338,6 @@ pub fn diagnose(case: &Case, settings: &Settings) -> Result<Diagnosis, String> {
         model,
         evidence,
     })
-}
-
-/// The first time `model` and `baseline` differ by one noise standard deviation of a sensor.
-fn departure(case: &Case, model: &Prediction, baseline: &Prediction) -> Option<f64> {
-    (0..model.top_ax_mps2.len())
-        .find(|&k| {
-            (model.top_ax_mps2[k] - baseline.top_ax_mps2[k]).abs() > case.accel_noise_mps2
-                || (model.theta_rad[k] - baseline.theta_rad[k]).abs() > case.camera_noise_rad
-        })
-        .map(|k| case.t0_s + k as f64 * case.dt_s)
 }
 
 fn explain_none(case: &Case, evidence: &Evidence, rmse: f64) -> String {

@@ -63,4 +63,8 @@ impl Effect for MassChange {
             new.alpha_rad
         )
     }
+
+    fn onset(&self, params: &[f64], _prediction: &Prediction) -> Option<f64> {
+        Some(params[0])
+    }
 }

@@ -26,6 +26,10 @@ pub trait Effect: Sync {
     fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, String>;
     /// One clause for the explanation, with the fitted values in engineering terms.
     fn explain(&self, case: &Case, params: &[f64]) -> String;
+    /// When the effect first acts in this prediction; None when it acts all along.
+    fn onset(&self, _params: &[f64], _prediction: &Prediction) -> Option<f64> {
+        None
+    }
 }
 
 pub fn library() -> &'static [&'static dyn Effect] {

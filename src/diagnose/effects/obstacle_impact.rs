@@ -3,6 +3,7 @@
 //! WSU1 on PS1).
 
 use super::{linspace, product, Case, Effect, Prediction};
+use crate::physics::rocking::EventKind;
 use crate::physics::rocking::{Obstacle, Options};
 
 pub struct ObstacleImpact;
@@ -48,5 +49,9 @@ impl Effect for ObstacleImpact {
             100.0 * params[1] / case.block.alpha_rad,
             params[2]
         )
+    }
+
+    fn onset(&self, _params: &[f64], prediction: &Prediction) -> Option<f64> {
+        prediction.first(&[EventKind::WallImpact, EventKind::WallLean])
     }
 }

@@ -2,6 +2,7 @@
 //! (a soft or sticky contact, a base that is not a flat rigid line): one coefficient e.
 
 use super::{linspace, Case, Effect, Prediction};
+use crate::physics::rocking::EventKind;
 use crate::physics::rocking::Options;
 
 pub struct Restitution;
@@ -36,5 +37,9 @@ impl Effect for Restitution {
             if e < eq24 { "dissipates" } else { "dissipates only" },
             100.0 * (1.0 - e * e)
         )
+    }
+
+    fn onset(&self, _params: &[f64], prediction: &Prediction) -> Option<f64> {
+        prediction.first(&[EventKind::Impact, EventKind::Rest])
     }
 }

@@ -4,6 +4,7 @@
 //! −s(a_v + g). No parameter: the rotation the camera sees fixes it.
 
 use super::{Case, Effect, Prediction};
+use crate::physics::rocking::EventKind;
 
 pub struct SensorTilt;
 
@@ -38,5 +39,9 @@ impl Effect for SensorTilt {
 
     fn explain(&self, _: &Case, _: &[f64]) -> String {
         "the top accelerometer turns with the unit and senses g·sin θ as it tilts (about 1 m/s^2 at 6°), and g itself once the unit lies on its side".into()
+    }
+
+    fn onset(&self, _params: &[f64], prediction: &Prediction) -> Option<f64> {
+        prediction.first(&[EventKind::Uplift])
     }
 }

@@ -3,6 +3,7 @@
 //! acceleration at μ(g + a_v), which its top accelerometer shows as flat-topped peaks.
 
 use super::{linspace, Case, Effect, Prediction};
+use crate::physics::rocking::EventKind;
 use crate::physics::rocking::Options;
 
 pub struct Sliding;
@@ -37,5 +38,9 @@ impl Effect for Sliding {
             case.block.alpha_rad.tan(),
             params[0] * case.block.g_mps2
         )
+    }
+
+    fn onset(&self, _params: &[f64], prediction: &Prediction) -> Option<f64> {
+        prediction.first(&[EventKind::SlideStart])
     }
 }
