@@ -162,8 +162,11 @@ def conceal_unexplained(s: Setting) -> Concealed | None:
     rng, base, floor = s.rng, s.base, s.floor
     t = floor.t
     kind = ["clock_offset", "gain_change", "camera_drift", "clipping"][rng.integers(4)]
+    # t0 near the first uplift and, if the block overturns, a second before: a sensor fault on a
+    # block lying on its side shows only in the small vertical floor motion.
     uplift = base.first("uplift")
-    t0 = rng.uniform(max(0.5, uplift - 2.0), max(1.0, min(uplift + 4.0, t[-1] - 5.0)))
+    latest = min(uplift + 4.0, t[-1] - 5.0, base.overturn[0] - 1.0 if base.overturn else np.inf)
+    t0 = rng.uniform(max(0.5, uplift - 2.0), max(0.6, latest))
     after = t >= t0
     if kind == "clock_offset":
         offset = rng.uniform(0.05, 0.3)
