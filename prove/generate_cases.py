@@ -139,34 +139,44 @@ def build_case(rng: np.random.Generator, effect: str, records, buildings) -> Cas
     for tries in range(1, MAX_TRIES + 1):
         record = make_floor(rng, records, buildings, threshold, rng.uniform(1.2, ratio_hi))
         floor = Floor(1.0 / FS, record.ax, record.az)
-        base = simulate(block, floor)
-        if np.abs(base.theta).max() < MIN_ROCKING_RAD:
+        try:
+            base = simulate(block, floor)
+            if np.abs(base.theta).max() < MIN_ROCKING_RAD:
+                continue
+            # Steer toward the drawn outcome for the first tries (most floors at these ratios overturn).
+            if tries <= 8 and (base.overturn is not None) != (target == "overturn"):
+                if target == "no_overturn":
+                    ratio_hi = max(1.3, 0.85 * ratio_hi)
+                continue
+            found = conceal_on_floor(rng, effect, block, floor, base)
+        except RuntimeError:      # impact chatter that did not settle: not a floor to test on
             continue
-        # Steer toward the drawn outcome for the first tries (most floors at these ratios overturn).
-        if tries <= 8 and (base.overturn is not None) != (target == "overturn"):
-            if target == "no_overturn":
-                ratio_hi = max(1.3, 0.85 * ratio_hi)
-            continue
-        alt, sensitive = solver_sensitivity(block, floor, base)
-        if not same_outcome(base, alt) or sensitive.mean() > MAX_SENSITIVE_FRACTION:
-            continue
-        base_kin = kinematics(base, floor)
-        for _ in range(EFFECT_DRAWS_PER_FLOOR):
-            concealed = CONCEAL[effect](Setting(rng, block, floor, base))
-            if concealed is None:
-                break
-            theta_obs = concealed.response.theta
-            if concealed.camera_fault:
-                theta_obs = concealed.camera_fault(concealed.response.t_out, theta_obs)
-            accel_obs = concealed.reading()
-            if concealed.accel_fault:
-                accel_obs = concealed.accel_fault(accel_obs)
-            div = divergence(theta_obs[::OUT_PER_SAMPLE], accel_obs, base_kin.theta, base_kin.top_ax)
-            robust = div.flags & ~sensitive
-            if effect == "none" or robust.sum() >= WINDOW_COUNT:
-                return Case(name, desc, block, record, floor, base, base_kin, sensitive, alt, concealed,
-                            theta_obs, accel_obs, div, target, tries)
+        if found is not None:
+            return Case(name, desc, block, record, floor, base, *found, target, tries)
     raise RuntimeError(f"no fair {effect} case in {MAX_TRIES} tries")
+
+
+def conceal_on_floor(rng: np.random.Generator, effect: str, block: Block, floor: Floor, base: Response):
+    """The effect on this floor, if the baseline is a robust reference and the effect shows."""
+    alt, sensitive = solver_sensitivity(block, floor, base)
+    if not same_outcome(base, alt) or sensitive.mean() > MAX_SENSITIVE_FRACTION:
+        return None
+    base_kin = kinematics(base, floor)
+    for _ in range(EFFECT_DRAWS_PER_FLOOR):
+        concealed = CONCEAL[effect](Setting(rng, block, floor, base))
+        if concealed is None:
+            return None
+        theta_obs = concealed.response.theta
+        if concealed.camera_fault:
+            theta_obs = concealed.camera_fault(concealed.response.t_out, theta_obs)
+        accel_obs = concealed.reading()
+        if concealed.accel_fault:
+            accel_obs = concealed.accel_fault(accel_obs)
+        div = divergence(theta_obs[::OUT_PER_SAMPLE], accel_obs, base_kin.theta, base_kin.top_ax)
+        robust = div.flags & ~sensitive
+        if effect == "none" or robust.sum() >= WINDOW_COUNT:
+            return base_kin, sensitive, alt, concealed, theta_obs, accel_obs, div
+    return None
 
 
 # -- observations ----------------------------------------------------------------------------------

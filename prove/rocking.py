@@ -275,7 +275,7 @@ class _Run:
             self.events.append(("uplift", te, s))
             return te, "rock", s, 0.0
         self.events.append(("slide_start", te, s))
-        return te, "slide", 0, s * 1e-300
+        return te, "slide", 0, s * 1e-300   # an infinitesimal relative velocity: the slide direction
 
     def slide(self, t: float, t_lim: float, v: float):
         """Coulomb sliding with relative velocity v: v' = -a_x - sign(v) mu (g + a_z), exact for a
@@ -293,6 +293,9 @@ class _Run:
             ax_t = self.ax_list[k] + (t - k * dt) * ax_rate
             az_t = self.az_list[k] + (t - k * dt) * az_rate
             c1 = -ax_t - d * mu * (g + az_t)
+            if abs(v) <= 1e-300:
+                # A slide starts where the floor's drag turns toward d: rounding must not flip it.
+                c1 = d * max(d * c1, 0.0)
             c2 = 0.5 * (-ax_rate - d * mu * az_rate)
             span = t1 - t
             stop = _first_stop(v, c1, c2, span)
@@ -304,7 +307,10 @@ class _Run:
                 self.events.append(("uplift", tu, s))
                 return tu, "rock", s, 0.0
             if stop is not None:
-                ts = t + stop
+                # A slide the floor only grazes stops within rounding of its start: stick just
+                # after it, where the floor no longer drags the block, so that rest does not
+                # restart it at the same instant.
+                ts = max(t + stop, math.nextafter(t, math.inf))
                 self.fill(ts, 0.0, SLIDE, slide_dir=d)
                 self.events.append(("stick", ts, 0))
                 return ts, "rest", 0, 0.0
