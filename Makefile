@@ -12,12 +12,14 @@ VENV_PY := $(VENV)/bin/python
 PY_STAMP := $(VENV)/.requirements-$(shell cksum < tests/reference/requirements.txt | cut -d' ' -f1)
 BIN := $(CARGO_TARGET_DIR)/release/shakeflow
 
-.PHONY: all demo test bench release schema fmt lint clean help
+.PHONY: all demo test bench prove prove-check release schema fmt lint clean help
 
 help:
 	@echo "make demo    build (release) and run the demo study: runs/demo-archive -> runs/demo"
 	@echo "make test    build and run the whole test suite (installs the Python references it needs)"
 	@echo "make bench   load+baseline and the whole demo study vs numpy/scipy/pyarrow scripts; the rocking model vs scipy and RK4; CPT matching and 1080p tracking vs OpenCV"
+	@echo "make prove   fresh concealed-effect cases (prove/generate_cases.py) scored against shakeflow diagnose"
+	@echo "             [SEED=n] [PER_EFFECT=5] [PROVE_JOBS=2]; make prove-check re-checks the generator's physics"
 	@echo "make schema  regenerate schemas/pipeline.schema.json from the stage registry"
 
 release:
@@ -44,6 +46,20 @@ bench: release $(PY_STAMP)
 	$(VENV_PY) bench/rocking.py --shakeflow $(BIN)
 	$(CARGO) build --release --locked --example cpt_match
 	$(VENV_PY) bench/cpt.py --shakeflow $(BIN) --matcher $(CARGO_TARGET_DIR)/release/examples/cpt_match
+
+# The proof: a fresh set of concealed-effect cases (new seed unless SEED is given), diagnosed and scored.
+PROVE_DIR ?= runs/prove
+PER_EFFECT ?= 5
+PROVE_JOBS ?= 2
+SEED ?=
+
+prove: release $(PY_STAMP)
+	rm -rf $(PROVE_DIR)
+	$(VENV_PY) prove/generate_cases.py $(PROVE_DIR)/cases --per-effect $(PER_EFFECT) --jobs $(PROVE_JOBS) $(if $(SEED),--seed $(SEED))
+	$(VENV_PY) prove/score.py $(PROVE_DIR)/cases --shakeflow $(BIN) --jobs $(PROVE_JOBS)
+
+prove-check: $(PY_STAMP)
+	$(VENV_PY) prove/check_generator.py
 
 schema:
 	$(CARGO) run --quiet --locked -- schema > schemas/pipeline.schema.json
