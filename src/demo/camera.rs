@@ -11,6 +11,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::physics::rocking::{simulate, Block, Excitation, Options, Shape};
 use crate::signal::synthetic_motion::{seed_from_label, SplitMix64};
 use crate::vision::camera::{Camera, Intrinsics};
 use crate::vision::linalg::{self, Mat3, Vec3};
@@ -56,11 +57,8 @@ pub struct DemoMotions {
     pub rolling_yaw_rad: Vec<f64>,
 }
 
-/// THE source of the demo's motions. For now a synthetic stand-in: free rocking of PS2 released
-/// from 0.12 rad (Eq. 22 without ground motion, impacts at θ = 0 with the rectangle's restitution),
-/// and a smooth planar drift and turn of the cart. To show the study's physics instead, replace
-/// the body with the toppling model's θ(t) and the rolling model's x(t), y(t), yaw(t), sampled at
-/// `frame_times()`.
+/// THE source of the demo's motions: PS2 rocking freely after a release from 0.12 rad, by the
+/// toppling model (`physics::rocking`), and a smooth planar drift and turn of the cart.
 pub fn demo_motions() -> DemoMotions {
     let time_s = frame_times();
     let rocking_theta_rad = free_rocking(0.12, &time_s);
@@ -77,38 +75,20 @@ pub fn frame_times() -> Vec<f64> {
     (0..FRAMES).map(|k| k as f64 / FRAME_RATE_HZ).collect()
 }
 
-/// Free rocking of a rectangular block from rest at `theta0`: θ̈ = −p² sin(α sgnθ − θ), and at
-/// each impact (θ = 0) the angular velocity is multiplied by e = 1 − 1.5 sin²α.
+/// PS2 (the study's Table 5 rectangle, as drawn) released from rest at `theta0` on a still floor,
+/// by the toppling model: rocking by Eq. 22, impacts at θ = 0 with Eq. 24's restitution.
 fn free_rocking(theta0: f64, times: &[f64]) -> Vec<f64> {
-    let (b, h) = (ROCKING_B_MM / 1000.0, ROCKING_H_MM / 1000.0);
-    let alpha = (b / h).atan();
-    let r = 0.5 * (b * b + h * h).sqrt();
-    let p = (3.0 * 9.81 / (4.0 * r)).sqrt();
-    let e = 1.0 - 1.5 * alpha.sin().powi(2);
-    let accel = |theta: f64| -p * p * (alpha * theta.signum() - theta).sin();
-    // Steps that land exactly on the frame times.
-    let steps_per_frame = 400;
-    let dt = 1.0 / FRAME_RATE_HZ / steps_per_frame as f64;
-    let (mut theta, mut omega) = (theta0, 0.0);
-    let mut out = Vec::with_capacity(times.len());
-    for k in 0..times.len() {
-        if k > 0 {
-            for _ in 0..steps_per_frame {
-                let (t0, w0) = (theta, omega);
-                let k1 = (w0, accel(t0));
-                let k2 = (w0 + 0.5 * dt * k1.1, accel(t0 + 0.5 * dt * k1.0));
-                let k3 = (w0 + 0.5 * dt * k2.1, accel(t0 + 0.5 * dt * k2.0));
-                let k4 = (w0 + dt * k3.1, accel(t0 + dt * k3.0));
-                theta = t0 + dt / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
-                omega = w0 + dt / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
-                if theta.signum() != t0.signum() && t0 != 0.0 {
-                    omega *= e;
-                }
-            }
-        }
-        out.push(theta);
-    }
-    out
+    let block = Block::new(
+        Shape::Rectangular { b_m: ROCKING_B_MM / 1000.0, h_m: ROCKING_H_MM / 1000.0, f: 0.085 },
+        150.0,
+        9.81,
+    )
+    .expect("PS2 is a valid block");
+    let still = vec![0.0; times.len()];
+    let excitation =
+        Excitation { t0_s: times[0], dt_s: 1.0 / FRAME_RATE_HZ, horizontal_mps2: &still, vertical_mps2: None };
+    let options = Options { initial_theta_rad: theta0, ..Options::default() };
+    simulate(&block, &excitation, &options).expect("free rocking of a valid block").theta_rad
 }
 
 /// The demo camera: 960 × 540, f = 700 px, mild barrel distortion, ceiling-mounted and tilted.
