@@ -64,13 +64,13 @@ pub struct Prediction {
     /// details below anything measured (see [`Case::with_sensitivity`]).
     pub theta_uncertainty_rad: Vec<f64>,
     /// When the model's regimes change (uplift, impact, wall contact, slip, ...).
-    pub events: Vec<(f64, rocking::EventKind)>,
+    pub events: Vec<rocking::Event>,
 }
 
 impl Prediction {
     /// The first event of one of these kinds.
     pub fn first(&self, kinds: &[rocking::EventKind]) -> Option<f64> {
-        self.events.iter().find(|(_, k)| kinds.contains(k)).map(|(t, _)| *t)
+        self.events.iter().find(|e| kinds.contains(&e.kind)).map(|e| e.time_s)
     }
 }
 
@@ -124,7 +124,7 @@ impl Case {
             overturn: response.overturn,
             top_ax_uncertainty_mps2: uncertainty,
             theta_uncertainty_rad: vec![0.0; n],
-            events: response.events.iter().map(|e| (e.time_s, e.kind)).collect(),
+            events: response.events.clone(),
         };
         Ok((response, prediction))
     }

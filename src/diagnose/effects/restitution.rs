@@ -39,7 +39,9 @@ impl Effect for Restitution {
         )
     }
 
+    /// The first impact the block rebounds from (a touch-down from micro-rocking that ends in
+    /// rest is not one: no restitution law changes it).
     fn onset(&self, _params: &[f64], prediction: &Prediction) -> Option<f64> {
-        prediction.first(&[EventKind::Impact, EventKind::Rest])
+        prediction.first(&[EventKind::Impact])
     }
 }
