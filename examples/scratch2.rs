@@ -1,27 +1,22 @@
-use shakeflow::diagnose::{effects, evidence::Evidence, Settings};
-use shakeflow::physics::rocking::{Method, Options};
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let case = shakeflow::io::case::read_case(std::path::Path::new(&args[1])).unwrap();
-    let effect = effects::library().iter().find(|e| e.name() == "obstacle_impact").unwrap();
     let opts = case.nominal_options();
-    let base = case.with_sensitivity(|c| Ok(c.simulate(&c.block, &opts)?.1)).unwrap();
-    let (_, var) = case
-        .simulate(
-            &case.block,
-            &Options { rest_amplitude_rad: 1e-5, method: Method::Adaptive { rtol: 1e-8, atol_rad: 1e-10 }, ..opts },
-        )
-        .unwrap();
-    let ev = Evidence::new(&case, &base, &var, Settings::default().exceedance_sigma);
-    let w = ev.window(&base).unwrap();
-    for a in [0.125, 0.13, 0.1308, 0.135, 0.1384, 0.14, 0.145] {
-        let row: Vec<String> = [0.2, 0.3, 0.33, 0.366, 0.4, 0.5]
-            .iter()
-            .map(|e| {
-                let p = effect.predict(&case, &[-1.0, a, *e]).unwrap();
-                format!("{:8.0}", ev.misfit_until(&p, w.0 + 1.5).chi2)
-            })
-            .collect();
-        println!("a {a}: {}", row.join(" "));
+    let (r, p) = case.simulate(&case.block, &opts).unwrap();
+    let twin = case.with_sensitivity(|c| Ok(c.simulate(&c.block, &opts)?.1)).unwrap();
+    let obs = case.accel.as_ref().unwrap();
+    let cam = case.camera.as_ref().unwrap();
+    println!("overturn {:?}", r.overturn);
+    for k in (3300..3640).step_by(10) {
+        println!(
+            "t {:.3} theta {:.5} obs {:.4} model {:.4} unc {:.4} thunc {:.5}",
+            k as f64 * case.dt_s,
+            p.theta_rad[k],
+            obs.value[k],
+            p.top_ax_mps2[k],
+            twin.top_ax_uncertainty_mps2[k],
+            twin.theta_uncertainty_rad[k]
+        );
     }
+    let _ = cam;
 }

@@ -15,6 +15,7 @@
 //! before use so the manifest states exactly what was applied.
 
 use crate::demo::camera;
+use crate::demo::cases;
 use crate::demo::study::{Base, Equipment, FrequencySet, Motion, EQUIPMENT, MOTIONS};
 use crate::physics::sdof::Sdof;
 use crate::physics::shear_building::ShearBuilding;
@@ -292,6 +293,7 @@ fn expected_files(ids: &[&str]) -> Vec<String> {
     out.push(CPT_CONTROL_POINTS_FILE.to_string());
     out.push(CPT_TRUTH_FILE.to_string());
     out.extend((0..camera::FRAMES).map(frame_file));
+    out.extend(cases::file_names());
     out
 }
 
@@ -502,6 +504,9 @@ struct GeneratedTest {
     entry: TestEntry,
     daq1_csv: String,
     daq2_csv: String,
+    /// The physical floor motion at DAQ1's rate in m/s² (no sensor offset or noise): floors 4
+    /// and 5, each (E-W, vertical), for the diagnosis cases.
+    floors_mps2: [[Vec<f64>; 2]; 2],
 }
 
 fn generate_test(plan: &TestPlan) -> GeneratedTest {
@@ -655,7 +660,11 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
         equipment,
         toppling: topples,
     };
-    GeneratedTest { entry, daq1_csv, daq2_csv }
+    let physical = |fi: usize, ci: usize| -> Vec<f64> {
+        resample(&floors[fi][ci], dt, 0.0, f64::from(DAQ1_RATE_HZ), n1).iter().map(|g| g * crate::units::G0).collect()
+    };
+    let floors_mps2 = [[physical(0, 0), physical(0, 2)], [physical(1, 0), physical(1, 2)]];
+    GeneratedTest { entry, daq1_csv, daq2_csv, floors_mps2 }
 }
 
 fn channel_name(eq: &Equipment) -> String {
@@ -749,10 +758,12 @@ fn write_contents(dir: &Path) -> io::Result<Vec<FileEntry>> {
     let mut files = Vec::new();
     let mut tests = Vec::new();
     let mut csvs = Vec::new();
+    let mut floors = std::collections::BTreeMap::new();
     for plan in plans() {
         let g = generate_test(&plan);
         tests.push(g.entry);
         csvs.push((plan.id, g.daq1_csv, g.daq2_csv));
+        floors.insert(plan.id, g.floors_mps2);
     }
     let readme_text = readme(&tests);
     fs::write(dir.join(README_FILE), &readme_text)?;
@@ -767,6 +778,18 @@ fn write_contents(dir: &Path) -> io::Result<Vec<FileEntry>> {
     let (cpt_files, cpt) = cpt_contents()?;
     fs::create_dir_all(dir.join(CPT_FRAMES_DIR))?;
     for (path, bytes) in cpt_files {
+        fs::write(dir.join(&path), &bytes)?;
+        files.push(FileEntry { path, bytes: bytes.len() as u64 });
+    }
+    let case_files = cases::case_files(|test, floor| {
+        let [ew, ud] = &floors[test][usize::from(floor - 4)];
+        (ew.clone(), ud.clone())
+    })
+    .map_err(io::Error::other)?;
+    for (path, bytes) in case_files {
+        if let Some(parent) = Path::new(&path).parent() {
+            fs::create_dir_all(dir.join(parent))?;
+        }
         fs::write(dir.join(&path), &bytes)?;
         files.push(FileEntry { path, bytes: bytes.len() as u64 });
     }

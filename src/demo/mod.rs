@@ -1,4 +1,5 @@
 //! Synthetic demo archive shaped like the NEES-2009-0722 UCSD BNCS test data.
 pub mod archive;
 pub mod camera;
+pub mod cases;
 pub mod study;

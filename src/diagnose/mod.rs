@@ -74,9 +74,11 @@ impl Prediction {
     }
 }
 
-/// Relative change of the floor record that probes how sensitive a prediction is: far below
-/// any measurement's accuracy, above the integrator's.
+/// Relative change of the floor record that probes how sensitive a prediction is: the
+/// calibration accuracy of a good floor accelerometer (0.1 %), far above the integrator's.
 const SENSITIVITY_PROBE: f64 = 1e-3;
+/// The least uncertainty (s) of a predicted overturn's time.
+const OVERTURN_TIMING_S: f64 = 0.05;
 
 /// Rocking whose amplitude stays below this (rad) around a sample is micro-rocking.
 const MICRO_ROCKING_RAD: f64 = 1e-3;
@@ -146,10 +148,32 @@ impl Case {
     ) -> Result<Prediction, String> {
         let mut prediction = predict(self)?;
         let twin = predict(&self.probed())?;
-        for k in 0..prediction.top_ax_mps2.len() {
+        let n = prediction.top_ax_mps2.len();
+        for k in 0..n {
             let spread = (prediction.top_ax_mps2[k] - twin.top_ax_mps2[k]).abs();
             prediction.top_ax_uncertainty_mps2[k] = prediction.top_ax_uncertainty_mps2[k].max(spread);
             prediction.theta_uncertainty_rad[k] = (prediction.theta_rad[k] - twin.theta_rad[k]).abs();
+        }
+        // The overturn's time is as uncertain as the two runs disagree on it (at least 50 ms): near
+        // it, a prediction may be off by a whole fall. If only one of them overturns, everything
+        // after its overturn is uncertain.
+        let timing = match (prediction.overturn, twin.overturn) {
+            (Some((a, _)), Some((b, _))) => Some((a.min(b), a.max(b), (a - b).abs() + OVERTURN_TIMING_S)),
+            (Some((a, _)), None) | (None, Some((a, _))) => Some((a, self.t0_s + self.duration_s(), OVERTURN_TIMING_S)),
+            (None, None) => None,
+        };
+        if let Some((first, last, spread)) = timing {
+            let index = |t: f64| (((t - self.t0_s) / self.dt_s).round().max(0.0) as usize).min(n - 1);
+            let reach = (spread / self.dt_s).ceil() as usize;
+            let (from, to) = (index(first - spread), index(last + spread));
+            let (theta, top) = (prediction.theta_rad.clone(), prediction.top_ax_mps2.clone());
+            for k in from..=to {
+                let around = k.saturating_sub(reach)..(k + reach + 1).min(n);
+                let theta_range = theta[around.clone()].iter().map(|v| (v - theta[k]).abs()).fold(0.0, f64::max);
+                let top_range = top[around].iter().map(|v| (v - top[k]).abs()).fold(0.0, f64::max);
+                prediction.theta_uncertainty_rad[k] = prediction.theta_uncertainty_rad[k].max(theta_range);
+                prediction.top_ax_uncertainty_mps2[k] = prediction.top_ax_uncertainty_mps2[k].max(top_range);
+            }
         }
         Ok(prediction)
     }

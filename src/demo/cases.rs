@@ -1,0 +1,251 @@
+//! Diagnosis cases in the demo archive: a unit of the study on a floor of the archive, recorded
+//! by a top accelerometer (200 Hz, σ 0.02 m/s²) and a camera (θ at 30 Hz, σ 0.002 rad, one
+//! dropout), with one effect concealed — the study's own stories where it told one (WSU1 lost
+//! its water bottles in FB-4 and fell onto PS1 in FB-5; the beds' ~3 Hz frames). Made with
+//! shakeflow's models, so they show the diagnosis at work; `make prove` checks it on cases from
+//! an independent generator. `cases/truth/` says what was concealed; the tool never reads it.
+
+use std::fmt::Write as _;
+
+use crate::physics::rocking::{self, Block, Excitation, IsolatedBase, MassChange, Obstacle, Options, Response, Shape};
+use crate::signal::synthetic_motion::{seed_from_label, SplitMix64};
+
+pub const CASES_DIR: &str = "cases";
+const FS_HZ: f64 = 200.0;
+const CAMERA_HZ: f64 = 30.0;
+const ACCEL_NOISE_MPS2: f64 = 0.02;
+const CAMERA_NOISE_RAD: f64 = 0.002;
+/// The overturn impact as a top accelerometer records it: a damped 30 Hz ring of 5 g.
+const SPIKE_G: f64 = 5.0;
+const SPIKE_HZ: f64 = 30.0;
+const SPIKE_DECAY_S: f64 = 0.012;
+
+#[derive(Clone, Copy, Debug)]
+enum Effect {
+    None,
+    SensorTilt,
+    MassChange,
+    Obstacle,
+    Flexibility,
+}
+
+impl Effect {
+    fn name(self) -> &'static str {
+        match self {
+            Effect::None => "none",
+            Effect::SensorTilt => "sensor_tilt",
+            Effect::MassChange => "mass_change",
+            Effect::Obstacle => "obstacle_impact",
+            Effect::Flexibility => "flexibility",
+        }
+    }
+}
+
+struct Plan {
+    id: &'static str,
+    unit: &'static str,
+    test: &'static str,
+    floor: u8,
+    effect: Effect,
+    story: &'static str,
+}
+
+const PLANS: [Plan; 5] = [
+    Plan {
+        id: "PS2_FB-2",
+        unit: "PS2",
+        test: "FB-2",
+        floor: 5,
+        effect: Effect::None,
+        story: "the locked stretcher as the model describes it",
+    },
+    Plan {
+        id: "PS2_FB-3",
+        unit: "PS2",
+        test: "FB-3",
+        floor: 5,
+        effect: Effect::SensorTilt,
+        story: "its top accelerometer is bolted to the frame and turns with it",
+    },
+    Plan {
+        id: "WSU1_FB-4",
+        unit: "WSU1",
+        test: "FB-4",
+        floor: 5,
+        effect: Effect::MassChange,
+        story: "the shelving loses its water bottles while it rocks (the study's FB-4)",
+    },
+    Plan {
+        id: "WSU1_FB-5",
+        unit: "WSU1",
+        test: "FB-5",
+        floor: 5,
+        effect: Effect::Obstacle,
+        story: "the shelving rocks into the stretcher beside it (the study's FB-5, onto PS1)",
+    },
+    Plan {
+        id: "PB1_FB-3",
+        unit: "PB1",
+        test: "FB-3",
+        floor: 4,
+        effect: Effect::Flexibility,
+        story: "the bed's frame is a 3.1 Hz spring, not a rigid block (Table 3)",
+    },
+];
+
+/// The test and floor each case stands on, to take from the archive's floor motions.
+pub fn floors_needed() -> Vec<(&'static str, u8)> {
+    PLANS.iter().map(|p| (p.test, p.floor)).collect()
+}
+
+/// Files of the cases, relative to the archive.
+pub fn file_names() -> Vec<String> {
+    let mut out = Vec::new();
+    for p in &PLANS {
+        for name in
+            [crate::io::case::EQUIPMENT, crate::io::case::FLOOR, crate::io::case::ACCEL, crate::io::case::CAMERA]
+        {
+            out.push(format!("{CASES_DIR}/{}/{name}", p.id));
+        }
+    }
+    out.extend(PLANS.iter().map(|p| format!("{CASES_DIR}/truth/{}.yaml", p.id)));
+    out
+}
+
+/// Every case's files (path in the archive, bytes), in `file_names()` order. `floor` gives the
+/// physical floor motion (m/s², 200 Hz from t = 0: horizontal E-W, vertical) of a test and floor.
+pub fn case_files(floor: impl Fn(&str, u8) -> (Vec<f64>, Vec<f64>)) -> Result<Vec<(String, Vec<u8>)>, String> {
+    let mut cases = Vec::new();
+    let mut truths = Vec::new();
+    for plan in &PLANS {
+        let (ax, az) = floor(plan.test, plan.floor);
+        let (files, truth) = make_case(plan, &ax, &az)?;
+        cases.extend(files);
+        truths.push((format!("{CASES_DIR}/truth/{}.yaml", plan.id), truth.into_bytes()));
+    }
+    cases.extend(truths);
+    Ok(cases)
+}
+
+fn make_case(plan: &Plan, ax: &[f64], az: &[f64]) -> Result<(Vec<(String, Vec<u8>)>, String), String> {
+    let (shape, mass) = rocking::preset(plan.unit).ok_or("unknown unit")?;
+    let block = Block::new(shape, mass, 9.81)?;
+    let excitation = Excitation { t0_s: 0.0, dt_s: 1.0 / FS_HZ, horizontal_mps2: ax, vertical_mps2: Some(az) };
+    let baseline = rocking::simulate(&block, &excitation, &Options::default())?;
+    let first_uplift =
+        baseline.events.iter().find(|e| e.kind == rocking::EventKind::Uplift).map(|e| (e.time_s, e.side));
+    let (options, parameters) = match plan.effect {
+        Effect::None | Effect::SensorTilt => (Options::default(), String::new()),
+        Effect::MassChange => {
+            let (t0, _) = first_uplift.ok_or("the unit never rocks")?;
+            let t0 = t0 + 0.4;
+            // 20 % of the mass at 0.8 H leaves: the centre of mass drops.
+            let (hc, h) = (block.cm_height_m, block.height_m);
+            let hc_after = (hc - 0.2 * 0.8 * h) / 0.8;
+            let Shape::Rectangular { b_m, h_m, .. } = shape else { return Err("a rectangle".into()) };
+            let after = Block::new(Shape::Rectangular { b_m, h_m, f: hc_after / h - 0.5 }, 0.8 * mass, 9.81)?;
+            (
+                Options { mass_change: Some(MassChange { time_s: t0, after }), ..Options::default() },
+                format!(
+                    "  t0_s: {t0:.4}\n  mass_fraction_lost: 0.2\n  lost_mass_height_m: {:.4}\n  f_after: {:.6}\n",
+                    0.8 * h,
+                    hc_after / h - 0.5
+                ),
+            )
+        }
+        Effect::Obstacle => {
+            let (_, side) = first_uplift.ok_or("the unit never rocks")?;
+            let angle = 0.6 * block.alpha_rad;
+            (
+                Options { obstacle: Some(Obstacle { side, angle_rad: angle, restitution: 0.5 }), ..Options::default() },
+                format!("  side: {side}\n  angle_rad: {angle:.6}\n  restitution: 0.5\n"),
+            )
+        }
+        Effect::Flexibility => (
+            Options {
+                isolated_base: Some(IsolatedBase { period_s: 1.0 / 3.1, damping_ratio: 0.04 }),
+                ..Options::default()
+            },
+            "  frequency_hz: 3.1\n  damping_ratio: 0.04\n".to_string(),
+        ),
+    };
+    let truth = rocking::simulate(&block, &excitation, &options)?;
+    let mut top = match plan.effect {
+        Effect::SensorTilt => tilted(&truth, block.g_mps2),
+        _ => truth.top_ax_mps2.clone(),
+    };
+    let mut rng = SplitMix64::new(seed_from_label(&format!("case:{}", plan.id)));
+    if let Some((t, _)) = truth.overturn {
+        for (k, v) in top.iter_mut().enumerate() {
+            let s = k as f64 / FS_HZ - t;
+            if s >= 0.0 {
+                *v += SPIKE_G * 9.81 * (-s / SPIKE_DECAY_S).exp() * (std::f64::consts::TAU * SPIKE_HZ * s).sin();
+            }
+        }
+    }
+    let n = ax.len();
+    let mut floor_csv = String::from("time_s,ax_mps2,ay_mps2,az_mps2\n");
+    let mut accel_csv = String::from("time_s,top_ax_mps2\n");
+    for k in 0..n {
+        let t = k as f64 / FS_HZ;
+        let _ = writeln!(floor_csv, "{t:.3},{:.6},0.000000,{:.6}", ax[k], az[k]);
+        let _ = writeln!(accel_csv, "{t:.3},{:.5}", top[k] + ACCEL_NOISE_MPS2 * rng.normal());
+    }
+    // The camera: θ at 30 Hz, with one dropout of a second.
+    let duration = (n - 1) as f64 / FS_HZ;
+    let dropout = rng.uniform(0.2, 0.8) * duration;
+    let mut camera_csv = String::from("time_s,theta_rad\n");
+    let mut j = 0;
+    while (j as f64) / CAMERA_HZ <= duration {
+        let t = j as f64 / CAMERA_HZ;
+        let x = t * FS_HZ;
+        let k = (x.floor() as usize).min(n - 2);
+        let w = x - k as f64;
+        let theta = truth.theta_rad[k] * (1.0 - w) + truth.theta_rad[k + 1] * w + CAMERA_NOISE_RAD * rng.normal();
+        if (dropout..dropout + 1.0).contains(&t) {
+            let _ = writeln!(camera_csv, "{t:.4},");
+        } else {
+            let _ = writeln!(camera_csv, "{t:.4},{theta:.6}");
+        }
+        j += 1;
+    }
+    let Shape::Rectangular { b_m, h_m, f } = shape else { return Err("the demo cases are rectangles".into()) };
+    let equipment = format!(
+        "name: {unit}\ndescription: {what} ({test}, floor {floor}); synthetic demo case\nshape: rectangular\nB_m: {b_m}\nH_m: {h_m}\nf: {f}\nmass_kg: {mass}\ng_mps2: 9.81\nsensors:\n  accelerometer:\n    file: observed_accel.csv\n    position: top centre (x=0, height H)\n    rate_hz: {FS_HZ}\n    noise_sd_mps2: {ACCEL_NOISE_MPS2}\n  camera:\n    file: observed_cpt.csv\n    quantity: rotation theta, rad\n    rate_hz: {CAMERA_HZ}\n    noise_sd_rad: {CAMERA_NOISE_RAD}\nconventions: theta > 0 = rotation about the +x corner, top moving toward +x\n",
+        unit = plan.unit,
+        what = match plan.unit {
+            "PS2" => "locked stretcher",
+            "PB1" => "locked patient bed",
+            _ => "free-standing wire shelving",
+        },
+        test = plan.test,
+        floor = plan.floor,
+    );
+    let dir = format!("{CASES_DIR}/{}", plan.id);
+    let files = vec![
+        (format!("{dir}/{}", crate::io::case::EQUIPMENT), equipment.into_bytes()),
+        (format!("{dir}/{}", crate::io::case::FLOOR), floor_csv.into_bytes()),
+        (format!("{dir}/{}", crate::io::case::ACCEL), accel_csv.into_bytes()),
+        (format!("{dir}/{}", crate::io::case::CAMERA), camera_csv.into_bytes()),
+    ];
+    let overturn = truth.overturn.map_or("null".to_string(), |(t, s)| format!("{{time_s: {t:.4}, side: {s}}}"));
+    let truth_yaml = format!(
+        "case_id: {id}\nstory: {story}\neffect: {effect}\nexpected_verdict: {effect}\nparameters:{params}\nfirst_uplift_s: {uplift}\noverturn: {overturn}\nmade_by: shakeflow's own models (src/demo/cases.rs); make prove uses an independent generator\n",
+        id = plan.id,
+        story = plan.story,
+        effect = plan.effect.name(),
+        params = if parameters.is_empty() { " {}\n".to_string() } else { format!("\n{parameters}") },
+        uplift = first_uplift.map_or("null".to_string(), |u| format!("{:.4}", u.0)),
+    );
+    Ok((files, truth_yaml))
+}
+
+/// What a top accelerometer fixed to the body reads: its axis turns with θ and senses gravity.
+fn tilted(r: &Response, g: f64) -> Vec<f64> {
+    (0..r.theta_rad.len())
+        .map(|k| {
+            let (sin, cos) = r.theta_rad[k].sin_cos();
+            r.sensor_ax_mps2[k] * cos - (r.sensor_az_mps2[k] + g) * sin
+        })
+        .collect()
+}
