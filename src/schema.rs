@@ -14,15 +14,32 @@ fn param_schema(p: &ParamSpec) -> Value {
         ParamKind::Str => json!({"type": "string"}),
         ParamKind::Choice(options) => json!({"enum": options}),
         ParamKind::StrList => json!({"type": "array", "items": {"type": "string"}}),
+        ParamKind::FloatList(n) => json!({"type": "array", "items": {"type": "number"}, "minItems": n, "maxItems": n}),
+        ParamKind::Path => json!({"type": "string"}),
     };
+    // A null default means "not given": null must validate too.
+    if p.default == Some("null") {
+        if let Some(options) = s.get_mut("enum").and_then(Value::as_array_mut) {
+            options.push(Value::Null);
+        } else if let Some(kind) = s.get("type").cloned() {
+            s["type"] = json!([kind, "null"]);
+        }
+    }
     let unit = if p.unit.is_empty() { String::new() } else { format!(" [{}]", p.unit) };
     s["description"] = Value::from(format!("{}{unit}", p.description));
     if let Some(default) = p.default {
         s["default"] = serde_json::from_str(default).expect("defaults are valid JSON");
     }
-    if let (Some((lo, hi)), ParamKind::Float | ParamKind::Int) = (p.range, p.kind) {
-        s["minimum"] = json!(lo);
-        s["maximum"] = json!(hi);
+    match (p.range, p.kind) {
+        (Some((lo, hi)), ParamKind::Float | ParamKind::Int) => {
+            s["minimum"] = json!(lo);
+            s["maximum"] = json!(hi);
+        }
+        (Some((lo, hi)), ParamKind::FloatList(_)) => {
+            s["items"]["minimum"] = json!(lo);
+            s["items"]["maximum"] = json!(hi);
+        }
+        _ => {}
     }
     s
 }

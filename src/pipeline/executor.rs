@@ -177,12 +177,34 @@ fn describe_param_changes(old: &serde_json::Value, new: &serde_json::Value) -> S
         .join(", ")
 }
 
+/// Per stage, the content hashes of the files its `Path` parameters name, keyed
+/// `params.<name> (<path as written>)`: editing such a file reruns the stage.
+fn param_file_hashes(plan: &Plan) -> Result<BTreeMap<String, BTreeMap<String, String>>, UserError> {
+    plan.stages
+        .values()
+        .map(|stage| {
+            let hashes = stage
+                .files
+                .iter()
+                .map(|(name, path)| {
+                    let written = stage.params[name].as_str().unwrap_or_default();
+                    let hash = hash::hash_file(path)
+                        .map_err(|e| plan.file.error_at(&["stages", &stage.name, "params", name], format!("{e:#}")))?;
+                    Ok((format!("params.{name} ({written})"), hash))
+                })
+                .collect::<Result<_, UserError>>()?;
+            Ok((stage.name.clone(), hashes))
+        })
+        .collect()
+}
+
 fn input_hashes_for(
     stage: &PlannedStage,
     sources: &BTreeMap<String, ResolvedSource>,
     produced: &BTreeMap<String, Produced>,
+    files: &BTreeMap<String, BTreeMap<String, String>>,
 ) -> Option<BTreeMap<String, String>> {
-    stage
+    let mut hashes: BTreeMap<String, String> = stage
         .inputs
         .iter()
         .map(|input| {
@@ -192,7 +214,9 @@ fn input_hashes_for(
             };
             Some((input.label(), hash))
         })
-        .collect()
+        .collect::<Option<_>>()?;
+    hashes.extend(files.get(&stage.name).into_iter().flatten().map(|(k, v)| (k.clone(), v.clone())));
+    Some(hashes)
 }
 
 fn stage_inputs(
@@ -253,10 +277,11 @@ pub fn status(plan: &Plan) -> Result<Vec<StatusLine>, UserError> {
     let output_dir = plan.file.output_dir();
     let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
     let sources = resolve_sources(plan)?;
+    let files = param_file_hashes(plan)?;
     let mut produced: BTreeMap<String, Produced> = BTreeMap::new();
     let mut lines = Vec::new();
     for stage in plan.stages.values() {
-        let hashes = input_hashes_for(stage, &sources, &produced);
+        let hashes = input_hashes_for(stage, &sources, &produced, &files);
         let assessment =
             assess(stage, hashes.as_ref(), &lock, &output_dir).map_err(|e| UserError::new(format!("{e:#}")))?;
         if assessment.reasons.is_empty() {
@@ -299,6 +324,7 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
     })?;
     let lock = LockFile::read(&lock_file)?;
     let sources = resolve_sources(plan)?;
+    let files = param_file_hashes(plan)?;
     let staging = output_dir.join(format!(".staging-{}", std::process::id()));
     std::fs::create_dir(&staging).map_err(|e| {
         output_dir_error(
@@ -306,7 +332,7 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
             "fix its permissions or choose another `output_dir`",
         )
     })?;
-    let result = run_stages(plan, &forced, &lock, &sources, &output_dir, &staging, reporter);
+    let result = run_stages(plan, &forced, &lock, &sources, &files, &output_dir, &staging, reporter);
     let committed = result.and_then(|(reports, new_lock, rerun)| {
         for name in &rerun {
             crate::io::atomic::replace_dir(&staging.join(name), &output_dir.join(name))
@@ -321,11 +347,13 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
 
 type StagesResult = (Vec<StageReport>, LockFile, Vec<String>);
 
+#[allow(clippy::too_many_arguments)]
 fn run_stages(
     plan: &Plan,
     forced: &BTreeSet<String>,
     lock: &LockFile,
     sources: &BTreeMap<String, ResolvedSource>,
+    files: &BTreeMap<String, BTreeMap<String, String>>,
     output_dir: &Path,
     staging: &Path,
     reporter: &Reporter,
@@ -346,7 +374,7 @@ fn run_stages(
         remaining = waiting;
         ready.par_iter().try_for_each(|stage| -> anyhow::Result<()> {
             let snapshot = produced.lock().expect("no poisoned lock").clone();
-            let hashes = input_hashes_for(stage, sources, &snapshot).expect("upstream stages finished");
+            let hashes = input_hashes_for(stage, sources, &snapshot, files).expect("upstream stages finished");
             let assessment = assess(stage, Some(&hashes), lock, output_dir)?;
             let info = stage.stage.info();
             let (done, report) = if assessment.reasons.is_empty() && !forced.contains(&stage.name) {
@@ -364,7 +392,14 @@ fn run_stages(
                 let bar = reporter.stage_bar(&stage.name, records as u64);
                 reporter.line(&format!("{:<18} running ({why})", stage.name));
                 let sink = OutputSink::new(&dir, &stage.name, info, &stage.params, &hashes, bar.clone());
-                let ctx = StageContext { stage_name: &stage.name, params: &stage.params, inputs: &inputs, sink: &sink };
+                let base_dir = plan.file.base_dir();
+                let ctx = StageContext {
+                    stage_name: &stage.name,
+                    params: &stage.params,
+                    inputs: &inputs,
+                    sink: &sink,
+                    base_dir: &base_dir,
+                };
                 stage.stage.run(&ctx).with_context(|| {
                     format!("stage `{}` (type `{}`) failed; nothing was changed on disk", stage.name, info.name)
                 })?;

@@ -16,6 +16,10 @@ pub enum ParamKind {
     Choice(&'static [&'static str]),
     /// A list of names (e.g. columns); empty means "all".
     StrList,
+    /// A list of exactly this many numbers (e.g. one per caster).
+    FloatList(usize),
+    /// A file path, relative to the pipeline file; the file's content is part of the cache key.
+    Path,
 }
 
 impl ParamKind {
@@ -27,6 +31,8 @@ impl ParamKind {
             ParamKind::Str => "text".into(),
             ParamKind::Choice(options) => options.join("|"),
             ParamKind::StrList => "list of names".into(),
+            ParamKind::FloatList(n) => format!("list of {n} numbers"),
+            ParamKind::Path => "file path (relative to the pipeline file)".into(),
         }
     }
 }
@@ -126,7 +132,26 @@ fn check(spec: &ParamSpec, value: Value) -> Result<Value, String> {
             Value::Array(items) if items.iter().all(Value::is_string) => value,
             _ => return Err("expected a list of names".into()),
         },
+        ParamKind::FloatList(n) => match value.as_array() {
+            Some(items) if items.len() == n && items.iter().all(Value::is_number) => {
+                Value::from(items.iter().map(|v| v.as_f64().expect("checked numbers")).collect::<Vec<f64>>())
+            }
+            _ => {
+                return Err(format!(
+                    "expected a list of {n} numbers, like [{}], found {value}",
+                    vec!["0"; n].join(", ")
+                ))
+            }
+        },
+        ParamKind::Path => value.as_str().map(Value::from).ok_or("expected a file path")?,
     };
+    if let (Some((lo, hi)), ParamKind::FloatList(_)) = (spec.range, spec.kind) {
+        if let Some(x) =
+            checked.as_array().into_iter().flatten().filter_map(Value::as_f64).find(|x| !(lo..=hi).contains(x))
+        {
+            return Err(format!("{x} is outside the allowed range {lo} to {hi}"));
+        }
+    }
     if let (Some((lo, hi)), Some(x)) = (spec.range, checked.as_f64()) {
         if !(lo..=hi).contains(&x) {
             return Err(format!("{x} is outside the allowed range {lo} to {hi}"));
@@ -155,6 +180,10 @@ pub trait ParamsExt {
     fn bool_of(&self, key: &str) -> bool;
     fn str_of(&self, key: &str) -> &str;
     fn list_of(&self, key: &str) -> Vec<String>;
+    /// None when the parameter is null (its "not given" default).
+    fn opt_f64(&self, key: &str) -> Option<f64>;
+    fn opt_str(&self, key: &str) -> Option<&str>;
+    fn f64_list_of(&self, key: &str) -> Option<Vec<f64>>;
 }
 
 impl ParamsExt for Params {
@@ -175,6 +204,15 @@ impl ParamsExt for Params {
             .as_array()
             .map(|a| a.iter().filter_map(|v| v.as_str().map(String::from)).collect())
             .unwrap_or_default()
+    }
+    fn opt_f64(&self, key: &str) -> Option<f64> {
+        self[key].as_f64()
+    }
+    fn opt_str(&self, key: &str) -> Option<&str> {
+        self[key].as_str()
+    }
+    fn f64_list_of(&self, key: &str) -> Option<Vec<f64>> {
+        self[key].as_array().map(|a| a.iter().filter_map(Value::as_f64).collect())
     }
 }
 
@@ -221,6 +259,24 @@ mod tests {
     fn type_and_range_are_checked() {
         assert!(normalize(SPECS, "b", [("order", json!("three"))]).unwrap_err().message.contains("whole number"));
         assert!(normalize(SPECS, "b", [("order", json!(11))]).unwrap_err().message.contains("outside"));
+    }
+
+    #[test]
+    fn number_lists_have_their_length_and_range() {
+        let specs = [ParamSpec {
+            name: "steer0_deg",
+            kind: ParamKind::FloatList(4),
+            default: Some("null"),
+            unit: "deg",
+            description: "one per caster",
+            range: Some((-360.0, 360.0)),
+        }];
+        let ok = normalize(&specs, "s", [("steer0_deg", parse_set("steer0_deg=[80,0,0,80]").unwrap().1)]).unwrap();
+        assert_eq!(ok["steer0_deg"], json!([80.0, 0.0, 0.0, 80.0]));
+        assert_eq!(normalize(&specs, "s", []).unwrap()["steer0_deg"], Value::Null);
+        let short = normalize(&specs, "s", [("steer0_deg", json!([1, 2]))]).unwrap_err();
+        assert!(short.message.contains("list of 4 numbers"), "{}", short.message);
+        assert!(normalize(&specs, "s", [("steer0_deg", json!([1, 2, 3, 400]))]).unwrap_err().message.contains("400"));
     }
 
     #[test]

@@ -4,9 +4,9 @@
 //! and hands tables to the [`OutputSink`]. It never decides where files go or whether to run.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use crate::pipeline::params::{ParamSpec, Params};
+use crate::pipeline::params::{ParamError, ParamSpec, Params};
 use crate::pipeline::sink::OutputSink;
 use crate::pipeline::spec::SourceSpec;
 
@@ -14,6 +14,7 @@ pub mod baseline;
 pub mod detect_toppling;
 pub mod load;
 pub mod report;
+pub mod simulate_rolling;
 pub mod synchronize;
 pub mod transfer_function;
 
@@ -90,11 +91,20 @@ pub struct StageContext<'a> {
     pub params: &'a Params,
     pub inputs: &'a [StageInput],
     pub sink: &'a OutputSink,
+    /// What relative `Path` parameters are relative to: the pipeline file's folder (the current
+    /// folder for `shakeflow stage`).
+    pub base_dir: &'a Path,
 }
 
 pub trait Stage: Sync + Send {
     fn info(&self) -> &'static StageInfo;
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()>;
+
+    /// Checks that need several parameters at once, or the files they name, before anything
+    /// runs (so `shakeflow validate` reports them at the parameter's line).
+    fn check(&self, _params: &Params, _base_dir: &Path) -> Result<(), ParamError> {
+        Ok(())
+    }
 }
 
 pub fn registry() -> &'static [&'static dyn Stage] {
@@ -105,6 +115,7 @@ pub fn registry() -> &'static [&'static dyn Stage] {
         &transfer_function::TransferFunction,
         &detect_toppling::DetectToppling,
         &report::Report,
+        &simulate_rolling::SimulateRolling,
     ]
 }
 
