@@ -12,13 +12,14 @@ VENV_PY := $(VENV)/bin/python
 PY_STAMP := $(VENV)/.requirements-$(shell cksum < tests/reference/requirements.txt | cut -d' ' -f1)
 BIN := $(CARGO_TARGET_DIR)/release/shakeflow
 
-.PHONY: all demo test bench release schema fmt lint clean help
+.PHONY: all demo test bench release schema fmt lint clean help rolling-findings
 
 help:
 	@echo "make demo    build (release) and run the demo study: runs/demo-archive -> runs/demo"
 	@echo "make test    build and run the whole test suite (installs the Python references it needs)"
 	@echo "make bench   load+baseline, then the whole demo study, vs equivalent numpy/scipy/pyarrow scripts"
 	@echo "make schema  regenerate schemas/pipeline.schema.json from the stage registry"
+	@echo "make rolling-findings  the study's rolling findings on the demo archive, as tables (README.md)"
 
 release:
 	$(CARGO) build --release --locked
@@ -28,6 +29,8 @@ demo: release
 	$(BIN) run pipelines/demo.yaml
 	@echo "Study summary (runs/demo/report/summary/data.parquet):"
 	@$(BIN) show runs/demo/report/summary/data.parquet
+	@echo "Rolling units (runs/demo/report/rolling/data.parquet; figures in runs/demo/rolling_*/figures/):"
+	@$(BIN) show runs/demo/report/rolling/data.parquet
 
 $(PY_STAMP): tests/reference/requirements.txt
 	$(PYTHON) -m venv $(VENV)
@@ -44,6 +47,9 @@ bench: release $(PY_STAMP)
 
 schema:
 	$(CARGO) run --quiet --locked -- schema > schemas/pipeline.schema.json
+
+rolling-findings:
+	$(CARGO) test --release --locked --test rolling_findings -- --nocapture
 
 fmt:
 	$(CARGO) fmt
