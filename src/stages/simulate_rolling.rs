@@ -405,14 +405,15 @@ impl Setup {
         if n < 2 {
             return Err(format!("{n} sample(s): the simulation needs at least 2"));
         }
-        let dt = (time[n - 1] - time[0]) / (n - 1) as f64;
-        if let Some(k) = (1..n).find(|&k| ((time[k] - time[k - 1]) - dt).abs() > 1e-6 * dt) {
+        let step = time[1] - time[0];
+        if let Some(k) = (1..n).find(|&k| ((time[k] - time[k - 1]) - step).abs() > 1e-6 * step.abs()) {
             return Err(format!(
-                "time is not uniformly sampled: step {} s at t = {} s against a mean of {dt} s; resample the record (a source's `non_uniform: resample`)",
-                time[k] - time[k - 1],
-                time[k - 1]
+                "time is not uniformly sampled: the step at t = {} s is {} s, the record's first step {step} s; resample the record (a source's `non_uniform: resample`)",
+                time[k - 1],
+                time[k] - time[k - 1]
             ));
         }
+        let dt = (time[n - 1] - time[0]) / (n - 1) as f64;
         let excitation = Excitation { t0_s: time[0], dt_s: dt, ax_mps2: ax, ay_mps2: ay };
         let response = simulate(&self.cart, &self.friction, &excitation, &self.options)?;
         let trajectory = self.trajectory(time, ax, ay, &response, x_name, y_name);
@@ -672,7 +673,8 @@ fn table4_values(row: &rolling::Table4) -> Map<String, Value> {
 /// An equipment file: a YAML mapping of model keys, checked like stage parameters. Errors name
 /// the file and the line of the offending key.
 fn read_equipment(path: &Path) -> Result<Map<String, Value>, ParamError> {
-    let shown = path.display();
+    let normal = crate::pipeline::spec::lexically_normal(path);
+    let shown = normal.display();
     let hint = format!(
         "an equipment file holds model keys only: {}",
         PARAMS[..MODEL_KEYS].iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
