@@ -142,7 +142,7 @@ static PARAMS: [ParamSpec; MODEL_KEYS + 15] = [
     ParamSpec {
         name: "rtol",
         kind: ParamKind::Float,
-        default: Some("1e-7"),
+        default: Some("1e-8"),
         unit: "",
         description: "relative tolerance of the adaptive integrator",
         range: Some((1e-14, 1e-2)),
@@ -150,7 +150,7 @@ static PARAMS: [ParamSpec; MODEL_KEYS + 15] = [
     ParamSpec {
         name: "atol",
         kind: ParamKind::Float,
-        default: Some("1e-9"),
+        default: Some("1e-10"),
         unit: "m",
         description: "absolute tolerance on positions (m) and angles (rad); ten times it on velocities",
         range: Some((1e-16, 1e-2)),

@@ -130,7 +130,9 @@ fn dot3(a: &[f64; 3], b: &[f64; 3]) -> f64 {
 
 /// Friction with its regularised sign: coefficient × capacity × tanh(v/ε), signed like v.
 fn friction_force(law: &super::Stribeck, normal_n: f64, speed: f64, eps: f64) -> f64 {
-    law.coefficient(speed) * normal_n * (speed / eps).tanh()
+    // tanh|x| = −expm1(−2|x|)/(2 + expm1(−2|x|)): one call, exact near zero, odd by copysign.
+    let m = (-2.0 * speed.abs() / eps).exp_m1();
+    law.coefficient(speed) * normal_n * (-m / (2.0 + m)).copysign(speed)
 }
 
 /// The constrained model: no lateral slip, 3 platform DOF, 10 states.

@@ -119,7 +119,9 @@ impl Stribeck {
 
     pub fn coefficient(&self, speed_mps: f64) -> f64 {
         let speed = speed_mps.abs();
-        let sech = 1.0 / (self.beta_spm * speed).cosh();
+        // sech x = 2e^(−x)/(1 + e^(−2x)): one exp, and no overflow for large βv.
+        let e = (-self.beta_spm * speed).exp();
+        let sech = 2.0 * e / (1.0 + e * e);
         let viscous = if self.gamma_n == 0.0 {
             0.0
         } else if self.p == 1.0 {
@@ -127,7 +129,7 @@ impl Stribeck {
         } else {
             self.gamma_n * speed.powf(self.p)
         };
-        self.mu_s * sech + self.mu_k * (1.0 - sech) + viscous
+        self.mu_k + (self.mu_s - self.mu_k) * sech + viscous
     }
 
     fn check(&self, what: &str) -> Result<(), String> {
@@ -196,7 +198,7 @@ pub enum Method {
 
 impl Default for Method {
     fn default() -> Self {
-        Method::Adaptive { rtol: 1e-7, atol: 1e-9 }
+        Method::Adaptive { rtol: 1e-8, atol: 1e-10 }
     }
 }
 
