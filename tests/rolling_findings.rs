@@ -59,7 +59,12 @@ fn model(table: &Table4) -> (Cart, rolling::Friction, Options) {
 }
 
 fn run(table: &Table4, floor: &Floor, method: Method) -> Response {
-    let (cart, friction, options) = model(table);
+    run_with(table, floor, method, |_| {})
+}
+
+fn run_with(table: &Table4, floor: &Floor, method: Method, adjust: impl Fn(&mut Cart)) -> Response {
+    let (mut cart, friction, options) = model(table);
+    adjust(&mut cart);
     let excitation = Excitation { t0_s: 0.0, dt_s: floor.dt, ax_mps2: &floor.x, ay_mps2: &floor.y };
     simulate(&cart, &friction, &excitation, &Options { method, ..options }).unwrap()
 }
@@ -189,5 +194,52 @@ fn the_studys_rolling_findings_hold_on_the_demo_archive() {
             .map(|key| changes[&key].0.abs())
             .fold(0.0, f64::max);
         assert!(effect > 0.05 && effect > 20.0 * noise, "{}: the largest change is {effect} m", variations[pair.0].0);
+    }
+
+    // 4. The caster trail (no source gives one; default 0.3 × wheel diameter), on BI-1 and FB-4.
+    // A caster realigns within a few trails of travel, so a short trail completes more flips at
+    // each reversal: fewer flips with a longer trail, for every unit.
+    println!("\n4. Caster trail d: peak displacement [m] / peak yaw [°] / caster flips / breakaway [s]");
+    let trails = [0.15, 0.3, 0.5];
+    let cases: Vec<(usize, &str, u8, &str)> = [0, 2]
+        .into_iter()
+        .flat_map(|s| UNITS.iter().flat_map(move |&(u, f)| ["BI-1", "FB-4"].into_iter().map(move |m| (s, u, f, m))))
+        .collect();
+    let summary = |r: &Response| {
+        (r.peak_displacement().0, r.peak_yaw().0.to_degrees(), r.flips().iter().sum::<usize>(), start(r))
+    };
+    let mut sweep: BTreeMap<(usize, &str, &str), (f64, f64, usize, f64)> = cases
+        .par_iter()
+        .map(|&(s, unit, floor, motion)| {
+            let table = rolling::preset(unit).unwrap();
+            let r = run_with(&table, &floors[&(motion.to_string(), floor)], Method::default(), |c| {
+                c.trail_m = (trails[s] * c.wheel_diameter_m).max(rolling::MIN_DEFAULT_TRAIL_M);
+            });
+            ((s, unit, motion), summary(&r))
+        })
+        .collect();
+    for (unit, _) in UNITS {
+        for motion in ["BI-1", "FB-4"] {
+            sweep.insert((1, unit, motion), summary(&runs[&(unit, motion)]));
+        }
+    }
+    for motion in ["BI-1", "FB-4"] {
+        print!("{motion:<22}");
+        for (unit, _) in UNITS {
+            print!("{unit:>27}");
+        }
+        println!();
+        for (s, per_diameter) in trails.iter().enumerate() {
+            print!("{:<22}", format!("d = {per_diameter} D"));
+            for (unit, _) in UNITS {
+                let (d, y, f, b) = sweep[&(s, unit, motion)];
+                print!("{:>27}", format!("{d:.3} / {y:.1} / {f} / {b:.2}"));
+            }
+            println!();
+        }
+        for (unit, _) in UNITS {
+            let (short, long) = (sweep[&(0, unit, motion)].2, sweep[&(2, unit, motion)].2);
+            assert!(short > long, "{unit} {motion}: {short} flips with d = 0.15 D, {long} with 0.5 D");
+        }
     }
 }
