@@ -17,7 +17,7 @@ BIN := $(CARGO_TARGET_DIR)/release/shakeflow
 help:
 	@echo "make demo    build (release) and run the demo study: runs/demo-archive -> runs/demo"
 	@echo "make test    build and run the whole test suite (installs the Python references it needs)"
-	@echo "make bench   load+baseline, then the whole demo study, vs equivalent numpy/scipy/pyarrow scripts"
+	@echo "make bench   load+baseline, the whole demo study, the rolling model, vs numpy/scipy/pyarrow scripts and RK4"
 	@echo "make schema  regenerate schemas/pipeline.schema.json from the stage registry"
 	@echo "make rolling-findings  the study's rolling findings on the demo archive, as tables (README.md)"
 
@@ -44,6 +44,7 @@ bench: release $(PY_STAMP)
 	$(BIN) demo-archive runs/demo-archive
 	$(VENV_PY) bench/load_baseline.py --shakeflow $(BIN) --archive runs/demo-archive
 	$(VENV_PY) bench/demo_study.py --shakeflow $(BIN) --archive runs/demo-archive
+	$(VENV_PY) bench/rolling.py --shakeflow $(BIN)
 
 schema:
 	$(CARGO) run --quiet --locked -- schema > schemas/pipeline.schema.json
