@@ -137,7 +137,7 @@ pub fn render_png_with_side(
         let (stack, right) = body.split_horizontally(width - side_width);
         if !panels.is_empty() {
             for (panel, area) in panels.iter().zip(stack.split_evenly((panels.len(), 1)).iter()) {
-                draw_panel(&root, &area, panel)?;
+                draw_panel(&root, area, panel)?;
             }
         }
         let (xr, yr) = equal_aspect_ranges(side, right.dim_in_pixel());

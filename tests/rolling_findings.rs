@@ -18,6 +18,11 @@ const MOTIONS: [&str; 10] = ["BI-1", "BI-2", "BI-3", "BI-4", "BI-5", "BI-6", "FB
 const UNITS: [(&str, u8); 4] = [("PS1", 5), ("PB2", 4), ("MC2", 4), ("UI3", 4)];
 const G: f64 = 9.80665;
 
+/// A named change to a Table 4 row.
+type Variation = (&'static str, Box<dyn Fn(&mut Table4) + Sync>);
+/// Peak displacement (m), peak yaw (°), caster flips, breakaway time (s).
+type Summary = (f64, f64, usize, f64);
+
 struct Floor {
     dt: f64,
     x: Vec<f64>,
@@ -140,7 +145,7 @@ fn the_studys_rolling_findings_hold_on_the_demo_archive() {
 
     // 3. Sensitivity on BI-1 (the motion of the study's Figure 11), against the numerical noise.
     println!("\n3. Sensitivity on BI-1: change of peak displacement [m] / peak yaw [°] from the Table 4 run");
-    let variations: Vec<(&str, Box<dyn Fn(&mut Table4) + Sync>)> = vec![
+    let variations: Vec<Variation> = vec![
         ("rtol 1e-9 (numerical noise)", Box::new(|_| {})),
         ("yaw0 + 5°", Box::new(|t| t.yaw0_deg += 5.0)),
         ("yaw0 − 5°", Box::new(|t| t.yaw0_deg -= 5.0)),
@@ -205,10 +210,10 @@ fn the_studys_rolling_findings_hold_on_the_demo_archive() {
         .into_iter()
         .flat_map(|s| UNITS.iter().flat_map(move |&(u, f)| ["BI-1", "FB-4"].into_iter().map(move |m| (s, u, f, m))))
         .collect();
-    let summary = |r: &Response| {
+    let summary = |r: &Response| -> Summary {
         (r.peak_displacement().0, r.peak_yaw().0.to_degrees(), r.flips().iter().sum::<usize>(), start(r))
     };
-    let mut sweep: BTreeMap<(usize, &str, &str), (f64, f64, usize, f64)> = cases
+    let mut sweep: BTreeMap<(usize, &str, &str), Summary> = cases
         .par_iter()
         .map(|&(s, unit, floor, motion)| {
             let table = rolling::preset(unit).unwrap();

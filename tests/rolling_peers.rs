@@ -61,8 +61,8 @@ fn differences(ours: &Response, peer: &Value, dt: f64, until_s: f64) -> (f64, f6
     for (j, &k) in samples.iter().enumerate().filter(|(_, &k)| k as f64 * dt < until_s) {
         position = position.max((ours.x_m[k] - x[j]).abs()).max((ours.y_m[k] - y[j]).abs());
         angle = angle.max((ours.yaw_rad[k] - yaw[j]).abs());
-        for i in 0..4 {
-            angle = angle.max((ours.delta_rad[i][k] - deltas[i][j]).abs());
+        for (delta, peer_delta) in ours.delta_rad.iter().zip(&deltas) {
+            angle = angle.max((delta[k] - peer_delta[j]).abs());
         }
     }
     (position, angle)

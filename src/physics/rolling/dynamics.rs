@@ -23,12 +23,14 @@ pub trait Dynamics<const N: usize> {
     fn power(&self, y: &[f64; N], floor: [f64; 2]) -> Power;
     /// δ̇ of each caster.
     fn swivel_rates(&self, y: &[f64; N]) -> [f64; 4];
-    /// The generalised force of the floor's inertial load at rest, as a 3×2 map of ü, and the
-    /// static-friction generators (each the force direction times its capacity), for the exact
-    /// stick of the platform; None when the model cannot stick exactly.
-    fn rest_forces(&self, y: &[f64; N]) -> Option<([[f64; 2]; 3], [[f64; 3]; 8])>;
+    /// The forces on the cart at rest, for its exact stick; None when the model cannot stick exactly.
+    fn rest_forces(&self, y: &[f64; N]) -> Option<RestForces>;
     fn derived(&self) -> &Derived;
 }
+
+/// At rest: the generalised force of the floor's inertial load as a 3×2 map of ü, and the
+/// static-friction generators (each a friction element's force direction times its capacity).
+pub type RestForces = ([[f64; 2]; 3], [[f64; 3]; 8]);
 
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Power {
@@ -240,7 +242,7 @@ impl Dynamics<10> for NoSlip {
         frames(&self.derived, y[2], &y[3..7]).map(|f| dot3(&f.b(), &nu) / self.derived.trail_m - nu[2])
     }
 
-    fn rest_forces(&self, y: &[f64; 10]) -> Option<([[f64; 2]; 3], [[f64; 3]; 8])> {
+    fn rest_forces(&self, y: &[f64; 10]) -> Option<RestForces> {
         let dv = &self.derived;
         let (m_p, m_w, d) = (dv.platform_mass_kg, dv.wheel_mass_kg, dv.trail_m);
         let mut load = [[-m_p, 0.0], [0.0, -m_p], [0.0, 0.0]];
@@ -388,7 +390,7 @@ impl Dynamics<14> for Slip {
         std::array::from_fn(|i| y[10 + i] - y[9])
     }
 
-    fn rest_forces(&self, _: &[f64; 14]) -> Option<([[f64; 2]; 3], [[f64; 3]; 8])> {
+    fn rest_forces(&self, _: &[f64; 14]) -> Option<RestForces> {
         None
     }
 
@@ -415,15 +417,15 @@ fn solve3(m: &[[f64; 3]; 3], q: &[f64; 3]) -> [f64; 3] {
 fn cholesky_solve<const K: usize>(mut m: [[f64; K]; K], mut q: [f64; K]) -> [f64; K] {
     for j in 0..K {
         let mut diag = m[j][j];
-        for k in 0..j {
-            diag -= m[j][k] * m[j][k];
+        for v in &m[j][..j] {
+            diag -= v * v;
         }
         let diag = diag.sqrt();
         m[j][j] = diag;
         for i in j + 1..K {
             let mut v = m[i][j];
-            for k in 0..j {
-                v -= m[i][k] * m[j][k];
+            for (a, b) in m[i][..j].iter().zip(&m[j][..j]) {
+                v -= a * b;
             }
             m[i][j] = v / diag;
         }

@@ -349,8 +349,8 @@ fn mirrored_input_gives_the_mirrored_response() {
             .max((ra.x_m[k] - rb.x_m[k]).abs())
             .max((ra.y_m[k] + rb.y_m[k]).abs())
             .max((ra.yaw_rad[k] + rb.yaw_rad[k]).abs());
-        for i in 0..4 {
-            worst = worst.max((ra.delta_rad[i][k] + rb.delta_rad[swap[i]][k]).abs());
+        for (delta, &mirror) in ra.delta_rad.iter().zip(&swap) {
+            worst = worst.max((delta[k] + rb.delta_rad[mirror][k]).abs());
         }
     }
     eprintln!("check 5: mirror mismatch {worst:.1e} over 3 s");
