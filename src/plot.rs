@@ -250,6 +250,14 @@ fn panel_ranges(p: &Panel<'_>) -> ((f64, f64), (f64, f64)) {
     ((x0, x1), (y0, y1))
 }
 
+fn snap_to_zero(v: f64, tiny: f64) -> f64 {
+    if v.abs() < tiny {
+        0.0
+    } else {
+        v
+    }
+}
+
 /// Compact tick label.
 fn fmt_num(v: f64) -> String {
     if v == 0.0 {
@@ -300,6 +308,10 @@ where
         .build_cartesian_2d(xr.clone(), yr)
         .map_err(err)?;
 
+    // A tick at zero can come out of the range arithmetic as ±2e-16: label it 0.
+    let (xs, ys) = (chart.x_range(), chart.y_range());
+    let x_tiny = 1e-9 * xs.start.abs().max(xs.end.abs());
+    let y_tiny = if p.log_y { 0.0 } else { 1e-9 * ys.start.abs().max(ys.end.abs()) };
     chart
         .configure_mesh()
         .light_line_style(RGBColor(235, 235, 235))
@@ -309,8 +321,8 @@ where
         .y_desc(p.y_label.as_str())
         .x_labels(10)
         .y_labels(8)
-        .x_label_formatter(&|v| fmt_num(*v))
-        .y_label_formatter(&|v| fmt_num(*v))
+        .x_label_formatter(&|v| fmt_num(snap_to_zero(*v, x_tiny)))
+        .y_label_formatter(&|v| fmt_num(snap_to_zero(*v, y_tiny)))
         .label_style(("sans-serif", 13).into_font().color(&BLACK))
         .axis_desc_style(("sans-serif", 15).into_font().color(&BLACK))
         .draw()
