@@ -15,7 +15,11 @@
 //!   path within 3 cm during the strong pulse (first 4 s).
 //!
 //! Long peer runs are stored (rolling_kane_rinaldi.json: ~2 min; rolling_mujoco_rinaldi.json:
-//! ~20 s) and one short run of each peer is regenerated here.
+//! ~20 s) and one short run of each peer is regenerated here. To regenerate them (from
+//! tests/reference/, with the venv of `make test`):
+//!   python rolling_kane.py --floor rolling_floor_rinaldi.csv --units PS1,PB2,MC2,UI3 --every 5 --out rolling_kane_rinaldi.json
+//!   python rolling_mujoco.py --floor rolling_floor_rinaldi.csv --units PS1,PB2,MC2,UI3 --every 5 --out rolling_mujoco_rinaldi.json
+//! and the floor records with `SHAKEFLOW_WRITE_REFERENCE=1 cargo test --test rolling_peers stored_floor`.
 
 mod common;
 #[path = "rolling_common/mod.rs"]
