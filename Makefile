@@ -12,15 +12,16 @@ VENV_PY := $(VENV)/bin/python
 PY_STAMP := $(VENV)/.requirements-$(shell cksum < tests/reference/requirements.txt | cut -d' ' -f1)
 BIN := $(CARGO_TARGET_DIR)/release/shakeflow
 
-.PHONY: all demo test bench prove prove-check release schema fmt lint clean help
+.PHONY: all demo test bench prove prove-check release schema fmt lint clean help rolling-findings
 
 help:
 	@echo "make demo    build (release) and run the demo study: runs/demo-archive -> runs/demo"
 	@echo "make test    build and run the whole test suite (installs the Python references it needs)"
-	@echo "make bench   load+baseline and the whole demo study vs numpy/scipy/pyarrow scripts; the rocking model vs scipy and RK4; CPT matching and 1080p tracking vs OpenCV"
+	@echo "make bench   load+baseline and the whole demo study vs numpy/scipy/pyarrow scripts; the rocking and rolling models vs scipy and RK4; CPT matching and 1080p tracking vs OpenCV"
 	@echo "make prove   fresh concealed-effect cases (prove/generate_cases.py) scored against shakeflow diagnose"
 	@echo "             [SEED=n] [PER_EFFECT=5] [PROVE_JOBS=2]; make prove-check re-checks the generator's physics"
 	@echo "make schema  regenerate schemas/pipeline.schema.json from the stage registry"
+	@echo "make rolling-findings  the study's rolling findings on the demo archive, as tables (README.md)"
 
 release:
 	$(CARGO) build --release --locked
@@ -30,6 +31,8 @@ demo: release
 	$(BIN) run pipelines/demo.yaml
 	@echo "Study summary (runs/demo/report/summary/data.parquet):"
 	@$(BIN) show runs/demo/report/summary/data.parquet
+	@echo "Rolling units (runs/demo/report/rolling/data.parquet; figures in runs/demo/rolling_*/figures/):"
+	@$(BIN) show runs/demo/report/rolling/data.parquet
 
 $(PY_STAMP): tests/reference/requirements.txt
 	$(PYTHON) -m venv $(VENV)
@@ -44,6 +47,7 @@ bench: release $(PY_STAMP)
 	$(VENV_PY) bench/load_baseline.py --shakeflow $(BIN) --archive runs/demo-archive
 	$(VENV_PY) bench/demo_study.py --shakeflow $(BIN) --archive runs/demo-archive
 	$(VENV_PY) bench/rocking.py --shakeflow $(BIN)
+	$(VENV_PY) bench/rolling.py --shakeflow $(BIN)
 	$(CARGO) build --release --locked --example cpt_match
 	$(VENV_PY) bench/cpt.py --shakeflow $(BIN) --matcher $(CARGO_TARGET_DIR)/release/examples/cpt_match
 
@@ -63,6 +67,9 @@ prove-check: $(PY_STAMP)
 
 schema:
 	$(CARGO) run --quiet --locked -- schema > schemas/pipeline.schema.json
+
+rolling-findings:
+	$(CARGO) test --release --locked --test rolling_findings -- --nocapture
 
 fmt:
 	$(CARGO) fmt

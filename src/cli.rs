@@ -346,8 +346,9 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
         }
         InputKind::Datasets => {
             let given = assignments.iter().map(|(k, v)| (k.as_str(), v.clone()));
-            let params = params::normalize(info.params, info.name, given)
-                .map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;
+            let refuse = |e: params::ParamError| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint);
+            let params = params::normalize(info.params, info.name, given).map_err(refuse)?;
+            stage.check(&params, Path::new(".")).map_err(refuse)?;
             let mut stage_inputs = Vec::new();
             for path in inputs {
                 let parts = if path.is_dir() {
@@ -378,10 +379,11 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
             )
         })
         .collect();
-    let base_dir = PathBuf::from(".");
-    for (key, path) in params::file_params(info.params, &params) {
-        let hash = hash::hash_file(&base_dir.join(path)).with_context(|| format!("`--set {key}={path}`"))?;
-        input_hashes.insert(params::file_param_label(key), hash);
+    for (name, path) in crate::pipeline::plan::param_files(info.params, &params, Path::new("."), info.name)
+        .map_err(|e| anyhow::anyhow!("{}", e.message))?
+    {
+        input_hashes
+            .insert(format!("params.{name} ({})", params[&name].as_str().unwrap_or_default()), hash::hash_file(&path)?);
     }
     let parent = output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     std::fs::create_dir_all(parent).with_context(|| format!("cannot create `{}`", parent.display()))?;
@@ -389,8 +391,13 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
     let reporter = Reporter::new(false);
     let records: usize = stage_inputs.iter().map(|i| i.parts().len()).sum();
     let sink = OutputSink::new(&staging, name, info, &params, &input_hashes, reporter.stage_bar(name, records as u64));
-    let ctx =
-        StageContext { stage_name: name, params: &params, inputs: &stage_inputs, sink: &sink, base_dir: &base_dir };
+    let ctx = StageContext {
+        stage_name: name,
+        params: &params,
+        inputs: &stage_inputs,
+        sink: &sink,
+        base_dir: Path::new("."),
+    };
     let result = stage.run(&ctx).and_then(|()| {
         for o in info.outputs {
             std::fs::create_dir_all(staging.join(o.name))?;

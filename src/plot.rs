@@ -102,6 +102,80 @@ pub fn render_png(title: &str, panels: &[Panel<'_>], width: u32, height: u32) ->
     encode_png(&buf, width, height)
 }
 
+/// Like [`render_png`], with one more panel to the right of the stack, drawn with equal scales
+/// on both axes (an x–y trajectory, say) and filling the figure's height. `side_width` is its
+/// share of the width in pixels. Markers of the side panel are ignored (they are vertical lines).
+pub fn render_png_with_side(
+    title: &str,
+    panels: &[Panel<'_>],
+    side: &Panel<'_>,
+    side_width: u32,
+    width: u32,
+    height: u32,
+) -> Result<Vec<u8>, String> {
+    if width < 16 || height < 16 || side_width + 16 > width {
+        return Err(format!("figure size {width}x{height} with a {side_width} px side panel is too small"));
+    }
+    for (pi, p) in panels.iter().chain(std::iter::once(side)).enumerate() {
+        for s in &p.series {
+            if s.x.len() != s.y.len() {
+                return Err(format!(
+                    "panel {pi} series '{}': x has {} points but y has {}",
+                    s.label,
+                    s.x.len(),
+                    s.y.len()
+                ));
+            }
+        }
+    }
+    ensure_font();
+    let mut buf = vec![0u8; width as usize * height as usize * 3];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (width, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(err)?;
+        let body = if title.is_empty() {
+            root.clone()
+        } else {
+            root.titled(title, ("sans-serif", 24).into_font().color(&BLACK)).map_err(err)?
+        };
+        let (stack, right) = body.split_horizontally(width - side_width);
+        if !panels.is_empty() {
+            for (panel, area) in panels.iter().zip(stack.split_evenly((panels.len(), 1)).iter()) {
+                draw_panel(&root, area, panel)?;
+            }
+        }
+        let (xr, yr) = equal_aspect_ranges(side, right.dim_in_pixel());
+        let side = Panel { markers: Vec::new(), log_y: false, ..clone_panel(side) };
+        draw_panel_with(&root, &right, &side, xr.0..xr.1, yr.0..yr.1)?;
+        root.present().map_err(err)?;
+    }
+    encode_png(&buf, width, height)
+}
+
+fn clone_panel<'a>(p: &Panel<'a>) -> Panel<'a> {
+    Panel {
+        title: p.title.clone(),
+        x_label: p.x_label.clone(),
+        y_label: p.y_label.clone(),
+        series: p.series.iter().map(|s| Series { label: s.label.clone(), x: s.x, y: s.y }).collect(),
+        markers: Vec::new(),
+        log_y: false,
+        spans: Vec::new(),
+    }
+}
+
+/// Data ranges widened so one unit spans as many pixels on x as on y, given the panel's size
+/// (less the axis label areas of [`draw_panel_with`]).
+fn equal_aspect_ranges(p: &Panel<'_>, (w, h): (u32, u32)) -> ((f64, f64), (f64, f64)) {
+    let ((x0, x1), (y0, y1)) = panel_ranges(&Panel { log_y: false, ..clone_panel(p) });
+    let plot_w = (f64::from(w) - 70.0 - 28.0).max(1.0);
+    let plot_h = (f64::from(h) - 40.0 - 50.0).max(1.0);
+    let scale = ((x1 - x0) / plot_w).max((y1 - y0) / plot_h);
+    let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    let (hx, hy) = (0.5 * scale * plot_w, 0.5 * scale * plot_h);
+    ((cx - hx, cx + hx), (cy - hy, cy + hy))
+}
+
 fn err<E: std::fmt::Debug>(e: E) -> String {
     format!("plot error: {e:?}")
 }
@@ -181,6 +255,14 @@ fn panel_ranges(p: &Panel<'_>) -> ((f64, f64), (f64, f64)) {
     ((x0, x1), (y0, y1))
 }
 
+fn snap_to_zero(v: f64, tiny: f64) -> f64 {
+    if v.abs() < tiny {
+        0.0
+    } else {
+        v
+    }
+}
+
 /// Compact tick label.
 fn fmt_num(v: f64) -> String {
     if v == 0.0 {
@@ -231,6 +313,10 @@ where
         .build_cartesian_2d(xr.clone(), yr)
         .map_err(err)?;
 
+    // A tick at zero can come out of the range arithmetic as ±2e-16: label it 0.
+    let (xs, ys) = (chart.x_range(), chart.y_range());
+    let x_tiny = 1e-9 * xs.start.abs().max(xs.end.abs());
+    let y_tiny = if p.log_y { 0.0 } else { 1e-9 * ys.start.abs().max(ys.end.abs()) };
     chart
         .configure_mesh()
         .light_line_style(RGBColor(235, 235, 235))
@@ -240,8 +326,8 @@ where
         .y_desc(p.y_label.as_str())
         .x_labels(10)
         .y_labels(8)
-        .x_label_formatter(&|v| fmt_num(*v))
-        .y_label_formatter(&|v| fmt_num(*v))
+        .x_label_formatter(&|v| fmt_num(snap_to_zero(*v, x_tiny)))
+        .y_label_formatter(&|v| fmt_num(snap_to_zero(*v, y_tiny)))
         .label_style(("sans-serif", 13).into_font().color(&BLACK))
         .axis_desc_style(("sans-serif", 15).into_font().color(&BLACK))
         .draw()
@@ -405,6 +491,41 @@ mod tests {
         for c in [PALETTE[0], PALETTE[1]] {
             assert!(colors.contains(&(c.0, c.1, c.2)), "series colour {c:?} missing");
         }
+    }
+
+    #[test]
+    fn a_side_panel_keeps_its_data_in_view_with_equal_scales() {
+        // An ellipse 4 × 2 m in a tall side panel: both axes get the same metres per pixel, and
+        // the whole ellipse stays in view.
+        let t: Vec<f64> = (0..200).map(|i| i as f64 * 0.0314).collect();
+        let (x, y): (Vec<f64>, Vec<f64>) = t.iter().map(|a| (2.0 * a.cos(), a.sin())).unzip();
+        let orbit = Panel {
+            title: "orbit".into(),
+            x_label: "x [m]".into(),
+            y_label: "y [m]".into(),
+            series: vec![Series { label: "path".into(), x: &x, y: &y }],
+            markers: vec![],
+            log_y: false,
+            spans: Vec::new(),
+        };
+        let ((x0, x1), (y0, y1)) = equal_aspect_ranges(&orbit, (400, 700));
+        assert!(((x1 - x0) / (400.0 - 98.0) - (y1 - y0) / (700.0 - 90.0)).abs() < 1e-12);
+        let lo = |v: &[f64]| v.iter().fold(f64::INFINITY, |m, &a| m.min(a));
+        let hi = |v: &[f64]| v.iter().fold(f64::NEG_INFINITY, |m, &a| m.max(a));
+        assert!(x0 <= lo(&x) && x1 >= hi(&x) && y0 <= lo(&y) && y1 >= hi(&y));
+        let stack = || Panel {
+            title: "t".into(),
+            x_label: "t".into(),
+            y_label: "x".into(),
+            series: vec![Series { label: "x".into(), x: &t, y: &x }],
+            markers: vec![],
+            log_y: false,
+            spans: Vec::new(),
+        };
+        let png = render_png_with_side("figure", &[stack()], &orbit, 400, 1200, 700).unwrap();
+        assert!(png.starts_with(b"\x89PNG"));
+        assert_eq!(png, render_png_with_side("figure", &[stack()], &orbit, 400, 1200, 700).unwrap(), "deterministic");
+        assert!(render_png_with_side("figure", &[stack()], &orbit, 1190, 1200, 700).is_err());
     }
 
     #[test]

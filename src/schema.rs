@@ -12,11 +12,23 @@ fn param_schema(p: &ParamSpec) -> Value {
         ParamKind::Float => json!({"type": "number"}),
         ParamKind::Int => json!({"type": "integer"}),
         ParamKind::Bool => json!({"type": "boolean"}),
-        ParamKind::Str | ParamKind::File => json!({"type": "string"}),
+        ParamKind::Str => json!({"type": "string"}),
         ParamKind::Choice(options) => json!({"enum": options}),
         ParamKind::StrList => json!({"type": "array", "items": {"type": "string"}}),
-        ParamKind::FloatList => json!({"type": "array", "items": {"type": "number"}}),
+        ParamKind::FloatList(Some(n)) => {
+            json!({"type": "array", "items": {"type": "number"}, "minItems": n, "maxItems": n})
+        }
+        ParamKind::FloatList(None) => json!({"type": "array", "items": {"type": "number"}}),
+        ParamKind::Path => json!({"type": "string"}),
     };
+    // A null default means "not given": null must validate too.
+    if p.default == Some("null") {
+        if let Some(options) = s.get_mut("enum").and_then(Value::as_array_mut) {
+            options.push(Value::Null);
+        } else if let Some(kind) = s.get("type").cloned() {
+            s["type"] = json!([kind, "null"]);
+        }
+    }
     let unit = if p.unit.is_empty() { String::new() } else { format!(" [{}]", p.unit) };
     s["description"] = Value::from(format!("{}{unit}", p.description));
     if let Some(default) = p.default {
@@ -27,7 +39,10 @@ fn param_schema(p: &ParamSpec) -> Value {
             s["minimum"] = json!(lo);
             s["maximum"] = json!(hi);
         }
-        (Some((lo, hi)), ParamKind::FloatList) => s["items"] = json!({"type": "number", "minimum": lo, "maximum": hi}),
+        (Some((lo, hi)), ParamKind::FloatList(_)) => {
+            s["items"]["minimum"] = json!(lo);
+            s["items"]["maximum"] = json!(hi);
+        }
         _ => {}
     }
     s

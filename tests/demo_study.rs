@@ -53,6 +53,7 @@ fn demo_pipeline_recovers_the_archive_truth() {
     }
     let shown = common::shakeflow(&["show", "runs/demo/report/summary/data.parquet"], work.path());
     assert!(common::stdout(&shown).contains("FB-4"), "{}", common::stdout(&shown));
+    rolling_results_exist_and_are_sane(&runs);
 
     check_camera_projection(&runs, &archive, &manifest);
 
@@ -167,5 +168,39 @@ fn check_camera_projection(runs: &Path, archive: &Path, manifest: &Value) {
     ] {
         let png = std::fs::read(runs.join(figure)).unwrap();
         assert!(png.starts_with(b"\x89PNG") && png.len() > 10_000, "{figure} is not a drawn PNG");
+
+/// The four rolling units over the ten motions the study's model is valid for: the report's
+/// rolling table, and per simulation a trajectory on the input time base (Parquet + MCAP), its
+/// events and a figure. Sane: every unit rolls (a few cm to a few m) and stays with the floor
+/// until it breaks away (creep below 1 mm).
+fn rolling_results_exist_and_are_sane(runs: &Path) {
+    let motions = ["BI-1", "BI-2", "BI-3", "BI-4", "BI-5", "BI-6", "FB-1", "FB-2", "FB-3", "FB-4"];
+    let rolling = read_table(&runs.join("report/rolling/data.parquet")).unwrap();
+    let units = str_column(&rolling, "unit");
+    assert_eq!(units.len(), 40);
+    let peaks = rolling.f64_column("peak_displacement_m").unwrap();
+    let yaws = rolling.f64_column("peak_yaw_rad").unwrap();
+    let starts = opt_column(&rolling, "breakaway_time_s");
+    for (i, (unit, motion)) in units.iter().zip(str_column(&rolling, "motion")).enumerate() {
+        assert_eq!((unit.as_str(), motion.as_str()), (["PS1", "PB2", "MC2", "UI3"][i / 10], motions[i % 10]));
+        assert!(peaks[i] > 0.01 && peaks[i] < 10.0, "{unit} {motion}: peak displacement {} m", peaks[i]);
+        assert!(yaws[i].is_finite() && yaws[i] < std::f64::consts::PI, "{unit} {motion}: peak yaw {} rad", yaws[i]);
+        let start = starts[i].unwrap_or_else(|| panic!("{unit} {motion} never broke away"));
+        let dir = runs.join(format!("rolling_{unit}"));
+        let trajectory = read_table(&dir.join(format!("trajectory/motion={motion}/data.parquet"))).unwrap();
+        let floor = read_table(&runs.join(format!("synchronize/records/motion={motion}/data.parquet"))).unwrap();
+        let time = trajectory.f64_column("time_s").unwrap();
+        assert_eq!(time, floor.f64_column("time_s").unwrap(), "{unit} {motion}: the input's time base");
+        for column in ["x_m", "y_m", "yaw_rad", "delta1_rad", "delta2_rad", "delta3_rad", "delta4_rad"] {
+            assert!(trajectory.f64_column(column).unwrap().iter().all(|v| v.is_finite()), "{unit} {motion}: {column}");
+        }
+        let (x, y) = (trajectory.f64_column("x_m").unwrap(), trajectory.f64_column("y_m").unwrap());
+        for k in (0..time.len()).filter(|&k| time[k] < start) {
+            assert!(x[k].hypot(y[k]) < 1e-3, "{unit} {motion}: moved {} m before breaking away", x[k].hypot(y[k]));
+        }
+        assert!(dir.join(format!("mcap/trajectory/motion={motion}/data.mcap")).is_file());
+        assert!(dir.join(format!("events/motion={motion}/data.parquet")).is_file());
+        let png = std::fs::read(dir.join(format!("figures/motion={motion}.png"))).unwrap();
+        assert!(png.starts_with(b"\x89PNG\r\n\x1a\n") && png.len() > 10_000);
     }
 }

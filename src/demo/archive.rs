@@ -466,6 +466,13 @@ fn floor_dof(base: Base, floor: u8) -> usize {
     }
 }
 
+/// Absolute acceleration of `floor` (2..5, 6 = roof) of the demo building under a ground
+/// acceleration sampled at `dt` (same units out as in), as the archive's floor records are made;
+/// for checks that put real records through the demo building.
+pub fn floor_response(base: Base, floor: u8, ground: &[f64], dt: f64) -> Vec<f64> {
+    building(base).absolute_accelerations(ground, dt).swap_remove(floor_dof(base, floor))
+}
+
 fn building(base: Base) -> ShearBuilding {
     let fb = ShearBuilding::fixed_base(&FLOOR_MASSES, &STOREY_STIFFNESS_SHAPE, FIXED_BASE_PERIOD_S, FIXED_BASE_DAMPING);
     match base {

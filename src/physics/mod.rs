@@ -1,6 +1,8 @@
 //! Physical models: linear structures that synthesise floor and equipment responses, the rocking
-//! block of the toppling model, and the integrators they share (pure numerics, no I/O).
+//! block of the toppling model, the caster cart of the rolling model, and the integrators they
+//! share (pure numerics, no I/O).
 pub mod ode;
 pub mod rocking;
+pub mod rolling;
 pub mod sdof;
 pub mod shear_building;

@@ -192,27 +192,32 @@ fn describe_param_changes(old: &serde_json::Value, new: &serde_json::Value) -> S
         .join(", ")
 }
 
-/// Content hashes of the files that stages' `File` parameters name, per stage.
-fn resolve_param_files(plan: &Plan) -> Result<BTreeMap<String, BTreeMap<String, String>>, UserError> {
-    let base = plan.file.base_dir();
-    let mut all = BTreeMap::new();
-    for stage in plan.stages.values() {
-        let mut hashes = BTreeMap::new();
-        for (key, path) in super::params::file_params(stage.stage.info().params, &stage.params) {
-            let hash = hash::hash_file(&base.join(path))
-                .map_err(|e| plan.file.error_at(&["stages", &stage.name, "params", key], format!("`{key}`: {e:#}")))?;
-            hashes.insert(super::params::file_param_label(key), hash);
-        }
-        all.insert(stage.name.clone(), hashes);
-    }
-    Ok(all)
+/// Per stage, the content hashes of the files its `Path` parameters name, keyed
+/// `params.<name> (<path as written>)`: editing such a file reruns the stage.
+fn param_file_hashes(plan: &Plan) -> Result<BTreeMap<String, BTreeMap<String, String>>, UserError> {
+    plan.stages
+        .values()
+        .map(|stage| {
+            let hashes = stage
+                .files
+                .iter()
+                .map(|(name, path)| {
+                    let written = stage.params[name].as_str().unwrap_or_default();
+                    let hash = hash::hash_file(path)
+                        .map_err(|e| plan.file.error_at(&["stages", &stage.name, "params", name], format!("{e:#}")))?;
+                    Ok((format!("params.{name} ({written})"), hash))
+                })
+                .collect::<Result<_, UserError>>()?;
+            Ok((stage.name.clone(), hashes))
+        })
+        .collect()
 }
 
 fn input_hashes_for(
     stage: &PlannedStage,
     sources: &BTreeMap<String, ResolvedSource>,
-    param_files: &BTreeMap<String, BTreeMap<String, String>>,
     produced: &BTreeMap<String, Produced>,
+    files: &BTreeMap<String, BTreeMap<String, String>>,
 ) -> Option<BTreeMap<String, String>> {
     let mut hashes: BTreeMap<String, String> = stage
         .inputs
@@ -225,7 +230,7 @@ fn input_hashes_for(
             Some((input.label(), hash))
         })
         .collect::<Option<_>>()?;
-    hashes.extend(param_files.get(&stage.name).cloned().unwrap_or_default());
+    hashes.extend(files.get(&stage.name).into_iter().flatten().map(|(k, v)| (k.clone(), v.clone())));
     Some(hashes)
 }
 
@@ -287,11 +292,11 @@ pub fn status(plan: &Plan) -> Result<Vec<StatusLine>, UserError> {
     let output_dir = plan.file.output_dir();
     let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
     let sources = resolve_sources(plan)?;
-    let param_files = resolve_param_files(plan)?;
+    let files = param_file_hashes(plan)?;
     let mut produced: BTreeMap<String, Produced> = BTreeMap::new();
     let mut lines = Vec::new();
     for stage in plan.stages.values() {
-        let hashes = input_hashes_for(stage, &sources, &param_files, &produced);
+        let hashes = input_hashes_for(stage, &sources, &produced, &files);
         let assessment =
             assess(stage, hashes.as_ref(), &lock, &output_dir).map_err(|e| UserError::new(format!("{e:#}")))?;
         if assessment.reasons.is_empty() {
@@ -334,7 +339,7 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
     })?;
     let lock = LockFile::read(&lock_file)?;
     let sources = resolve_sources(plan)?;
-    let param_files = resolve_param_files(plan)?;
+    let files = param_file_hashes(plan)?;
     let staging = output_dir.join(format!(".staging-{}", std::process::id()));
     std::fs::create_dir(&staging).map_err(|e| {
         output_dir_error(
@@ -342,7 +347,7 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
             "fix its permissions or choose another `output_dir`",
         )
     })?;
-    let result = run_stages(plan, &forced, &lock, (&sources, &param_files), &output_dir, &staging, reporter);
+    let result = run_stages(plan, &forced, &lock, &sources, &files, &output_dir, &staging, reporter);
     let committed = result.and_then(|(reports, new_lock, rerun)| {
         for name in &rerun {
             crate::io::atomic::replace_dir(&staging.join(name), &output_dir.join(name))
@@ -357,16 +362,17 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
 
 type StagesResult = (Vec<StageReport>, LockFile, Vec<String>);
 
+#[allow(clippy::too_many_arguments)]
 fn run_stages(
     plan: &Plan,
     forced: &BTreeSet<String>,
     lock: &LockFile,
-    (sources, param_files): (&BTreeMap<String, ResolvedSource>, &BTreeMap<String, BTreeMap<String, String>>),
+    sources: &BTreeMap<String, ResolvedSource>,
+    files: &BTreeMap<String, BTreeMap<String, String>>,
     output_dir: &Path,
     staging: &Path,
     reporter: &Reporter,
 ) -> anyhow::Result<StagesResult> {
-    let base_dir = plan.file.base_dir();
     let produced: Mutex<BTreeMap<String, Produced>> = Mutex::new(BTreeMap::new());
     let entries: Mutex<BTreeMap<String, StageLock>> = Mutex::new(BTreeMap::new());
     let reports: Mutex<BTreeMap<String, StageReport>> = Mutex::new(BTreeMap::new());
@@ -383,7 +389,7 @@ fn run_stages(
         remaining = waiting;
         ready.par_iter().try_for_each(|stage| -> anyhow::Result<()> {
             let snapshot = produced.lock().expect("no poisoned lock").clone();
-            let hashes = input_hashes_for(stage, sources, param_files, &snapshot).expect("upstream stages finished");
+            let hashes = input_hashes_for(stage, sources, &snapshot, files).expect("upstream stages finished");
             let assessment = assess(stage, Some(&hashes), lock, output_dir)?;
             let info = stage.stage.info();
             let (done, report) = if assessment.reasons.is_empty() && !forced.contains(&stage.name) {
@@ -401,6 +407,7 @@ fn run_stages(
                 let bar = reporter.stage_bar(&stage.name, records as u64);
                 reporter.line(&format!("{:<18} running ({why})", stage.name));
                 let sink = OutputSink::new(&dir, &stage.name, info, &stage.params, &hashes, bar.clone());
+                let base_dir = plan.file.base_dir();
                 let ctx = StageContext {
                     stage_name: &stage.name,
                     params: &stage.params,

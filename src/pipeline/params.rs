@@ -16,11 +16,11 @@ pub enum ParamKind {
     Choice(&'static [&'static str]),
     /// A list of names (e.g. columns); empty means "all".
     StrList,
-    /// A list of numbers (e.g. scale factors).
-    FloatList,
-    /// A file the stage reads (e.g. an equipment description), relative to the pipeline file.
-    /// Its content is hashed into the stage's inputs, so editing the file reruns the stage.
-    File,
+    /// A list of numbers (e.g. scale factors), of exactly this many when given.
+    FloatList(Option<usize>),
+    /// A file path, relative to the pipeline file; the file's content is part of the cache key,
+    /// so editing the file reruns the stage.
+    Path,
 }
 
 impl ParamKind {
@@ -32,8 +32,9 @@ impl ParamKind {
             ParamKind::Str => "text".into(),
             ParamKind::Choice(options) => options.join("|"),
             ParamKind::StrList => "list of names".into(),
-            ParamKind::FloatList => "list of numbers".into(),
-            ParamKind::File => "path of a file, relative to the pipeline file".into(),
+            ParamKind::FloatList(Some(n)) => format!("list of {n} numbers"),
+            ParamKind::FloatList(None) => "list of numbers".into(),
+            ParamKind::Path => "file path (relative to the pipeline file)".into(),
         }
     }
 }
@@ -123,21 +124,32 @@ fn check(spec: &ParamSpec, value: Value) -> Result<Value, String> {
         ParamKind::Float => value.as_f64().map(Value::from).ok_or("expected a number")?,
         ParamKind::Int => value.as_i64().map(Value::from).ok_or("expected a whole number")?,
         ParamKind::Bool => value.as_bool().map(Value::from).ok_or("expected true or false")?,
-        ParamKind::Str | ParamKind::File => value.as_str().map(Value::from).ok_or("expected text")?,
+        ParamKind::Str => value.as_str().map(Value::from).ok_or("expected text")?,
         ParamKind::Choice(options) => match value.as_str() {
             Some(s) if options.contains(&s) => Value::from(s),
             _ => return Err(format!("expected one of {}, found {value}", options.join(", "))),
-        },
-        ParamKind::FloatList => match &value {
-            Value::Number(_) => Value::from(vec![value.clone()]),
-            Value::Array(items) if items.iter().all(Value::is_number) => value,
-            _ => return Err("expected a list of numbers".into()),
         },
         ParamKind::StrList => match &value {
             Value::String(s) => Value::from(vec![s.clone()]),
             Value::Array(items) if items.iter().all(Value::is_string) => value,
             _ => return Err("expected a list of names".into()),
         },
+        ParamKind::FloatList(len) => match &value {
+            // A single number is a list of one where any length will do.
+            Value::Number(_) if len.is_none() => Value::from(vec![value.clone()]),
+            Value::Array(items) if items.iter().all(Value::is_number) && len.is_none_or(|n| items.len() == n) => {
+                Value::from(items.iter().map(|v| v.as_f64().expect("checked numbers")).collect::<Vec<f64>>())
+            }
+            _ => {
+                return Err(match len {
+                    Some(n) => {
+                        format!("expected a list of {n} numbers, like [{}], found {value}", vec!["0"; n].join(", "))
+                    }
+                    None => format!("expected a list of numbers, like [1, 2.5], found {value}"),
+                })
+            }
+        },
+        ParamKind::Path => value.as_str().map(Value::from).ok_or("expected a file path")?,
     };
     if let Some((lo, hi)) = spec.range {
         let numbers = match &checked {
@@ -164,20 +176,6 @@ pub fn parse_set(assignment: &str) -> Result<(String, Value), String> {
     Ok((key.trim().to_string(), yaml_to_json(&yaml)))
 }
 
-/// The files named by `File` parameters (set, not null), as (parameter, path relative to `base`).
-pub fn file_params<'p>(specs: &[ParamSpec], params: &'p Params) -> Vec<(&'static str, &'p str)> {
-    specs
-        .iter()
-        .filter(|s| s.kind == ParamKind::File)
-        .filter_map(|s| params.get(s.name).and_then(Value::as_str).map(|path| (s.name, path)))
-        .collect()
-}
-
-/// The input label under which a file parameter's content hash is recorded.
-pub fn file_param_label(name: &str) -> String {
-    format!("params.{name}")
-}
-
 /// Typed access for stage implementations; the values were checked by `normalize`.
 pub trait ParamsExt {
     fn f64_of(&self, key: &str) -> f64;
@@ -185,7 +183,10 @@ pub trait ParamsExt {
     fn bool_of(&self, key: &str) -> bool;
     fn str_of(&self, key: &str) -> &str;
     fn list_of(&self, key: &str) -> Vec<String>;
-    fn f64_list_of(&self, key: &str) -> Vec<f64>;
+    /// None when the parameter is null (its "not given" default).
+    fn opt_f64(&self, key: &str) -> Option<f64>;
+    fn opt_str(&self, key: &str) -> Option<&str>;
+    fn f64_list_of(&self, key: &str) -> Option<Vec<f64>>;
 }
 
 impl ParamsExt for Params {
@@ -201,14 +202,20 @@ impl ParamsExt for Params {
     fn str_of(&self, key: &str) -> &str {
         self[key].as_str().unwrap_or_else(|| panic!("parameter `{key}` was normalised as text"))
     }
-    fn f64_list_of(&self, key: &str) -> Vec<f64> {
-        self[key].as_array().map(|a| a.iter().filter_map(Value::as_f64).collect()).unwrap_or_default()
-    }
     fn list_of(&self, key: &str) -> Vec<String> {
         self[key]
             .as_array()
             .map(|a| a.iter().filter_map(|v| v.as_str().map(String::from)).collect())
             .unwrap_or_default()
+    }
+    fn opt_f64(&self, key: &str) -> Option<f64> {
+        self[key].as_f64()
+    }
+    fn opt_str(&self, key: &str) -> Option<&str> {
+        self[key].as_str()
+    }
+    fn f64_list_of(&self, key: &str) -> Option<Vec<f64>> {
+        self[key].as_array().map(|a| a.iter().filter_map(Value::as_f64).collect())
     }
 }
 
@@ -255,6 +262,24 @@ mod tests {
     fn type_and_range_are_checked() {
         assert!(normalize(SPECS, "b", [("order", json!("three"))]).unwrap_err().message.contains("whole number"));
         assert!(normalize(SPECS, "b", [("order", json!(11))]).unwrap_err().message.contains("outside"));
+    }
+
+    #[test]
+    fn number_lists_have_their_length_and_range() {
+        let specs = [ParamSpec {
+            name: "steer0_deg",
+            kind: ParamKind::FloatList(Some(4)),
+            default: Some("null"),
+            unit: "deg",
+            description: "one per caster",
+            range: Some((-360.0, 360.0)),
+        }];
+        let ok = normalize(&specs, "s", [("steer0_deg", parse_set("steer0_deg=[80,0,0,80]").unwrap().1)]).unwrap();
+        assert_eq!(ok["steer0_deg"], json!([80.0, 0.0, 0.0, 80.0]));
+        assert_eq!(normalize(&specs, "s", []).unwrap()["steer0_deg"], Value::Null);
+        let short = normalize(&specs, "s", [("steer0_deg", json!([1, 2]))]).unwrap_err();
+        assert!(short.message.contains("list of 4 numbers"), "{}", short.message);
+        assert!(normalize(&specs, "s", [("steer0_deg", json!([1, 2, 3, 400]))]).unwrap_err().message.contains("400"));
     }
 
     #[test]

@@ -2,6 +2,7 @@
 //! resolvable, no cycles; stages in an order where each comes after what it reads.
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
 
 use indexmap::IndexMap;
 
@@ -32,6 +33,8 @@ pub struct PlannedStage {
     pub inputs: Vec<InputRef>,
     /// Partition filter on every input: key → accepted values.
     pub select: BTreeMap<String, Vec<String>>,
+    /// Files named by `Path` parameters (parameter → path): their contents are inputs too.
+    pub files: BTreeMap<String, PathBuf>,
 }
 
 impl PlannedStage {
@@ -63,24 +66,20 @@ impl Plan {
             })?;
             let info = stage.info();
             let given = spec.params.iter().map(|(k, v)| (k.as_str(), params::yaml_to_json(v)));
-            let params = params::normalize(info.params, info.name, given).map_err(|e| {
+            let located = |e: params::ParamError| {
                 let position = match &e.key {
                     Some(key) => super::locate::key_position(&file.text, &["stages", name, "params", key]),
                     None => super::locate::key_position(&file.text, &["stages", name]),
                 };
                 UserError::new(e.message).in_file(&file.path).at(position).hint(e.hint)
-            })?;
-            for (key, path) in params::file_params(info.params, &params) {
-                if !file.base_dir().join(path).is_file() {
-                    return Err(file
-                        .error_at(&["stages", name, "params", key], format!("`{key}`: no file `{path}`"))
-                        .hint("paths in parameters are relative to the pipeline file"));
-                }
-            }
+            };
+            let params = params::normalize(info.params, info.name, given).map_err(located)?;
+            let files = param_files(info.params, &params, &file.base_dir(), info.name).map_err(located)?;
+            stage.check(&params, &file.base_dir()).map_err(located)?;
             let inputs = resolve_inputs(&file, name, &spec.inputs, info.inputs)?;
             planned.insert(
                 name.clone(),
-                PlannedStage { name: name.clone(), stage, params, inputs, select: spec.select.clone() },
+                PlannedStage { name: name.clone(), stage, params, inputs, select: spec.select.clone(), files },
             );
         }
         let order = topological_order(&file, &planned)?;
@@ -104,6 +103,29 @@ impl Plan {
         }
         set
     }
+}
+
+/// The files `Path` parameters name, resolved against the pipeline's folder; each must exist.
+pub fn param_files(
+    specs: &[params::ParamSpec],
+    params: &params::Params,
+    base_dir: &Path,
+    stage_type: &str,
+) -> Result<BTreeMap<String, PathBuf>, params::ParamError> {
+    let mut files = BTreeMap::new();
+    for spec in specs.iter().filter(|s| s.kind == params::ParamKind::Path) {
+        let Some(relative) = params.get(spec.name).and_then(|v| v.as_str()) else { continue };
+        let path = base_dir.join(relative);
+        if !path.is_file() {
+            return Err(params::ParamError {
+                key: Some(spec.name.to_string()),
+                message: format!("parameter `{}` of `{stage_type}`: no file `{}`", spec.name, path.display()),
+                hint: format!("paths are relative to the pipeline file's folder — {}", spec.description),
+            });
+        }
+        files.insert(spec.name.to_string(), path);
+    }
+    Ok(files)
 }
 
 fn check_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<(), UserError> {

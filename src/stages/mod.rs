@@ -4,9 +4,9 @@
 //! and hands tables to the [`OutputSink`]. It never decides where files go or whether to run.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use crate::pipeline::params::{ParamSpec, Params};
+use crate::pipeline::params::{ParamError, ParamSpec, Params};
 use crate::pipeline::sink::OutputSink;
 use crate::pipeline::spec::{RecordFormat, SourceSpec};
 
@@ -19,6 +19,7 @@ pub mod detect_toppling;
 pub mod diagnose;
 pub mod load;
 pub mod report;
+pub mod simulate_rolling;
 pub mod simulate_toppling;
 pub mod synchronize;
 pub mod toppling_fragility;
@@ -100,13 +101,13 @@ pub struct StageContext<'a> {
     pub params: &'a Params,
     pub inputs: &'a [StageInput],
     pub sink: &'a OutputSink,
-    /// Where relative paths in parameters point from: the pipeline file's folder (or the
-    /// working directory for `shakeflow stage`).
-    pub base_dir: &'a std::path::Path,
+    /// What relative `Path` parameters are relative to: the pipeline file's folder (the current
+    /// folder for `shakeflow stage`).
+    pub base_dir: &'a Path,
 }
 
 impl StageContext<'_> {
-    /// A `File` parameter resolved against the base directory; None when it is null.
+    /// A `Path` parameter resolved against the base directory; None when it is null.
     pub fn file_param(&self, key: &str) -> Option<PathBuf> {
         self.params.get(key).and_then(|v| v.as_str()).map(|p| self.base_dir.join(p))
     }
@@ -115,6 +116,12 @@ impl StageContext<'_> {
 pub trait Stage: Sync + Send {
     fn info(&self) -> &'static StageInfo;
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()>;
+
+    /// Checks that need several parameters at once, or the files they name, before anything
+    /// runs (so `shakeflow validate` reports them at the parameter's line).
+    fn check(&self, _params: &Params, _base_dir: &Path) -> Result<(), ParamError> {
+        Ok(())
+    }
 }
 
 pub fn registry() -> &'static [&'static dyn Stage] {
@@ -132,6 +139,7 @@ pub fn registry() -> &'static [&'static dyn Stage] {
         &cpt_track::CptTrack,
         &cpt_project::CptProject,
         &compare::Compare,
+        &simulate_rolling::SimulateRolling,
     ]
 }
 

@@ -1,6 +1,8 @@
 //! `report`: the study's summary per unit — identified frequencies per white-noise test and the
 //! toppling events — as one small table, and per unit a PNG: floor vs top acceleration in one
-//! motion (toppling impacts marked) over the transfer functions with their picked peaks.
+//! motion (toppling impacts marked) over the transfer functions with their picked peaks. Given
+//! `simulate_rolling` event tables too, a second table summarises each rolling unit per motion
+//! (kept apart so the first table's columns stay as they were).
 
 use std::collections::BTreeMap;
 
@@ -13,11 +15,12 @@ pub struct Report;
 
 static INFO: StageInfo = StageInfo {
     name: "report",
-    version: 1,
-    summary: "Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time, confidence).",
+    version: 2,
+    summary: "Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time, confidence); rolling units' peak displacement, yaw and caster flips per motion.",
     inputs: InputKind::Datasets,
     outputs: &[
         OutputInfo { name: "summary", description: "one row per unit and toppling event (or one row when none)", timeseries: false },
+        OutputInfo { name: "rolling", description: "one row per rolling unit and motion: peak_displacement_m, peak_yaw_rad, caster_flips, breakaway_time_s (from simulate_rolling.events inputs)", timeseries: false },
         OutputInfo { name: "figures", description: "<unit>.png: floor vs top acceleration, transfer functions with picked peaks", timeseries: false },
     ],
     params: &[
@@ -46,13 +49,22 @@ impl Stage for Report {
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let (identified, events, figure_inputs) = match ctx.inputs {
-            [identified, events] => (identified, events, None),
-            [identified, events, spectra, records] => (identified, events, Some((spectra, records))),
+        let mut rolling = Vec::new();
+        let mut others = Vec::new();
+        for input in ctx.inputs {
+            match rolling_events(input)? {
+                Some(tables) => rolling.extend(tables),
+                None => others.push(input),
+            }
+        }
+        let (identified, events, figure_inputs) = match others.as_slice() {
+            [identified, events] => (*identified, *events, None),
+            [identified, events, spectra, records] => (*identified, *events, Some((*spectra, *records))),
             _ => anyhow::bail!(
-                "`report` reads [transfer_function.identified, detect_toppling.events] and, for figures, also [transfer_function.spectra, synchronize.records]"
+                "`report` reads [transfer_function.identified, detect_toppling.events] and, for figures, also [transfer_function.spectra, synchronize.records]; any number of simulate_rolling.events besides"
             ),
         };
+        ctx.sink.write("rolling", &Vec::new(), summarize_rolling(&rolling)?)?;
         ctx.sink.set_total(1);
         let (identified, events) = (read_all(identified)?, read_all(events)?);
         let suffix = ctx.params.str_of("unit_suffix");
@@ -157,6 +169,74 @@ fn figures(
         out.push((unit, png));
     }
     Ok(out)
+}
+
+/// The event tables of a `simulate_rolling` dataset with their unit and motion, or None when
+/// the input is something else (told by the stage type its files record).
+fn rolling_events(input: &StageInput) -> anyhow::Result<Option<Vec<(String, String, Table)>>> {
+    let mut out = Vec::new();
+    for part in input.parts() {
+        let table = parquet::read_table(&part.path)?;
+        if table.metadata.get("shakeflow.stage_type").map(String::as_str) != Some("simulate_rolling") {
+            return Ok(None);
+        }
+        let facts: serde_json::Value =
+            serde_json::from_str(table.metadata.get("shakeflow.rolling").map_or("{}", |s| s))?;
+        let unit = facts["unit"].as_str().unwrap_or("cart").to_string();
+        out.push((unit, motion_of(part), table));
+    }
+    Ok(Some(out))
+}
+
+/// One row per rolling unit and motion, in input order.
+fn summarize_rolling(rolling: &[(String, String, Table)]) -> anyhow::Result<Table> {
+    let (mut units, mut motions, mut peaks, mut yaws, mut flips, mut breakaways) =
+        (vec![], vec![], vec![], vec![], vec![], vec![]);
+    for (unit, motion, table) in rolling {
+        let kinds = strings(table, "event")?;
+        let time = table.f64_column("time_s").ok_or_else(|| anyhow::anyhow!("rolling events without time_s"))?;
+        let at = |kind: &str, column: &str| -> anyhow::Result<Option<f64>> {
+            let values =
+                table.f64_column(column).ok_or_else(|| anyhow::anyhow!("rolling events without `{column}`"))?;
+            Ok(kinds.iter().position(|k| k == kind).map(|i| values[i]))
+        };
+        units.push(unit.clone());
+        motions.push(motion.clone());
+        peaks.push(at("peak_displacement", "displacement_m")?.unwrap_or(0.0));
+        yaws.push(at("peak_yaw", "yaw_rad")?.map_or(0.0, f64::abs));
+        flips.push(kinds.iter().filter(|k| *k == "flip").count() as i64);
+        breakaways.push(kinds.iter().position(|k| k == "breakaway").map(|i| time[i]));
+    }
+    let text = |name: &str, description: &str, v: Vec<String>| Column {
+        name: name.into(),
+        unit: String::new(),
+        description: description.into(),
+        data: ColumnData::Str(v),
+    };
+    let mut table = Table::new();
+    table.push(text("unit", "rolling unit (simulate_rolling)", units));
+    table.push(text("motion", "test motion", motions));
+    table.push(Column::f64(
+        "peak_displacement_m",
+        "m",
+        "largest distance of the platform centre from its start",
+        peaks,
+    ));
+    table.push(Column::f64("peak_yaw_rad", "rad", "largest platform yaw change |θ − θ₀|", yaws));
+    table.push(Column {
+        name: "caster_flips".into(),
+        unit: String::new(),
+        description: "caster flips (a caster swinging past 135° from the direction it trailed), all four casters"
+            .into(),
+        data: ColumnData::I64(flips),
+    });
+    table.push(Column {
+        name: "breakaway_time_s".into(),
+        unit: "s".into(),
+        description: "when the unit first started to roll (null: never)".into(),
+        data: ColumnData::OptF64(breakaways),
+    });
+    Ok(table)
 }
 
 /// Every part of a dataset with the partition path that names it (`motion=WN-1`).

@@ -20,7 +20,7 @@ macro_rules! rocking_params {
     ($($extra:expr),* $(,)?) => {
         &[
             ParamSpec { name: "preset", kind: ParamKind::Choice(crate::physics::rocking::PRESETS), default: Some("null"), unit: "", description: "a unit of the study (Table 5 rectangles PS2, PB1 and their trapezoids; WSU1 from Table 2)", range: None },
-            ParamSpec { name: "equipment", kind: ParamKind::File, default: Some("null"), unit: "", description: "a YAML file with shape, B_m, H_m, f, mass_kg (B1_m, B2_m), like the cases' equipment.yaml; overrides the preset", range: None },
+            ParamSpec { name: "equipment", kind: ParamKind::Path, default: Some("null"), unit: "", description: "a YAML file with shape, B_m, H_m, f, mass_kg (B1_m, B2_m), like the cases' equipment.yaml; overrides the preset", range: None },
             ParamSpec { name: "shape", kind: ParamKind::Choice(&["rectangular", "trapezoidal"]), default: Some("null"), unit: "", description: "block shape; overrides preset and equipment file", range: None },
             ParamSpec { name: "B_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "rectangle: base width B (in the shaking plane)", range: Some((1e-6, 1e3)) },
             ParamSpec { name: "H_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "height H", range: Some((1e-6, 1e3)) },

@@ -25,8 +25,8 @@ static INFO: StageInfo = StageInfo {
     ],
     params: rocking_params![
         ParamSpec { name: "im", kind: ParamKind::Choice(&["pfa", "pfv"]), default: Some("\"pfa\""), unit: "", description: "intensity measure: peak floor acceleration (m/s^2) or peak floor velocity (m/s, trapezoidal integral of the horizontal record)", range: None },
-        ParamSpec { name: "scales", kind: ParamKind::FloatList, default: Some("[]"), unit: "", description: "scale factors applied to every record (horizontal and vertical alike); or use im_levels", range: Some((0.0, 1e3)) },
-        ParamSpec { name: "im_levels", kind: ParamKind::FloatList, default: Some("[]"), unit: "", description: "target intensities (m/s^2 for pfa, m/s for pfv): each record is scaled to each level", range: Some((0.0, 1e3)) },
+        ParamSpec { name: "scales", kind: ParamKind::FloatList(None), default: Some("[]"), unit: "", description: "scale factors applied to every record (horizontal and vertical alike); or use im_levels", range: Some((0.0, 1e3)) },
+        ParamSpec { name: "im_levels", kind: ParamKind::FloatList(None), default: Some("[]"), unit: "", description: "target intensities (m/s^2 for pfa, m/s for pfv): each record is scaled to each level", range: Some((0.0, 1e3)) },
     ],
 };
 
@@ -37,7 +37,10 @@ impl Stage for TopplingFragility {
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let (block, options) = model_from_params(ctx.params, ctx.file_param("equipment").as_deref())?;
-        let (scales, levels) = (ctx.params.f64_list_of("scales"), ctx.params.f64_list_of("im_levels"));
+        let (scales, levels) = (
+            ctx.params.f64_list_of("scales").unwrap_or_default(),
+            ctx.params.f64_list_of("im_levels").unwrap_or_default(),
+        );
         if scales.is_empty() == levels.is_empty() {
             anyhow::bail!("give either `scales` or `im_levels` (exactly one of them, non-empty)");
         }

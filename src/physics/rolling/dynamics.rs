@@ -1,0 +1,464 @@
+//! Equations of motion of the caster cart, in the floor frame (which only translates, so the
+//! floor's acceleration ü enters as the inertial load −m ü on every mass).
+//!
+//! State layout shared by both models: y[0..3] = (x, y, θ), y[3..7] = δ₁..δ₄ (unwrapped),
+//! y[7..10] = ν = (ẋ, ẏ, ω). The lateral-slip model adds y[10..14] = ψ̇₁..ψ̇₄.
+//!
+//! Per caster i (4WMC-NOTES.md): pivot rᵢ = R(θ)pᵢ from the platform centre, heading
+//! eᵢ = (cos ψᵢ, sin ψᵢ), nᵢ = k × eᵢ, aᵢ = [eᵢ; rᵢ×eᵢ], bᵢ = [nᵢ; rᵢ×nᵢ], so that e·v_pivot = aᵢᵀν
+//! and n·v_pivot = bᵢᵀν. Without lateral slip the wheel centre moves along eᵢ at aᵢᵀν, the wheel
+//! spins at aᵢᵀν/r and the caster yaws at ψ̇ᵢ = bᵢᵀν/d; Kane's equations (generalised speeds ν)
+//! give M(q)ν̇ = Q_floor + Q_friction − Σ Jᵀm J̇ν with
+//! M = diag(m_p, m_p, I_p) + Σ (m_w + I_s/r²) aᵢaᵢᵀ + (I_z/d²) bᵢbᵢᵀ and, with ėᵢ = ψ̇ᵢnᵢ and
+//! ṙᵢ = ω k×rᵢ, ȧᵢᵀν = (bᵢᵀν)²/d − ω²(rᵢ·eᵢ), ḃᵢᵀν = −(aᵢᵀν)(bᵢᵀν)/d − ω²(rᵢ·nᵢ).
+
+use super::{Cart, Friction, LateralSlip, PIVOT_SIGNS};
+
+/// What a model offers the simulation driver.
+pub trait Dynamics<const N: usize> {
+    /// dy/dt under the floor acceleration `floor` = (ü_X, ü_Y).
+    fn rhs(&self, y: &[f64; N], floor: [f64; 2]) -> [f64; N];
+    fn kinetic_energy(&self, y: &[f64; N]) -> f64;
+    /// Power of the floor's inertial loads and of friction (negative: dissipated).
+    fn power(&self, y: &[f64; N], floor: [f64; 2]) -> Power;
+    /// δ̇ of each caster.
+    fn swivel_rates(&self, y: &[f64; N]) -> [f64; 4];
+    /// The forces on the cart at rest, for its exact stick; None when the model cannot stick exactly.
+    fn rest_forces(&self, y: &[f64; N]) -> Option<RestForces>;
+    fn derived(&self) -> &Derived;
+}
+
+/// At rest: the generalised force of the floor's inertial load as a 3×2 map of ü, and the
+/// static-friction generators (each a friction element's force direction times its capacity).
+pub type RestForces = ([[f64; 2]; 3], [[f64; 3]; 8]);
+
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Power {
+    pub floor_w: f64,
+    pub friction_w: f64,
+}
+
+/// Constants the equations use.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Derived {
+    pub half_length_m: f64,
+    pub half_width_m: f64,
+    pub wheel_radius_m: f64,
+    pub trail_m: f64,
+    pub swivel_arm_m: f64,
+    pub platform_mass_kg: f64,
+    pub wheel_mass_kg: f64,
+    /// Platform yaw inertia m_p(a² + b²)/3.
+    pub platform_inertia: f64,
+    /// Wheel spin inertia ½ m_w r².
+    pub spin_inertia: f64,
+    /// Wheel inertia about a vertical diameter m_w(3r² + w²)/12.
+    pub yaw_inertia: f64,
+    /// Normal load per wheel (m_w + m_p/4) g, as in the study.
+    pub normal_n: f64,
+    pub total_mass_kg: f64,
+    /// Pivots in body coordinates, wheel order 1..4.
+    pub pivots: [[f64; 2]; 4],
+}
+
+impl Derived {
+    pub fn new(cart: &Cart, g_mps2: f64) -> Self {
+        let (a, b) = (0.5 * cart.length_m, 0.5 * cart.width_m);
+        let r = 0.5 * cart.wheel_diameter_m;
+        let (m_p, m_w) = (cart.platform_mass_kg, cart.wheel_mass_kg);
+        Derived {
+            half_length_m: a,
+            half_width_m: b,
+            wheel_radius_m: r,
+            trail_m: cart.trail_m,
+            swivel_arm_m: cart.swivel_arm_m,
+            platform_mass_kg: m_p,
+            wheel_mass_kg: m_w,
+            platform_inertia: m_p * (a * a + b * b) / 3.0,
+            spin_inertia: 0.5 * m_w * r * r,
+            yaw_inertia: m_w * (3.0 * r * r + cart.wheel_width_m * cart.wheel_width_m) / 12.0,
+            normal_n: (m_w + 0.25 * m_p) * g_mps2,
+            total_mass_kg: m_p + 4.0 * m_w,
+            pivots: PIVOT_SIGNS.map(|(sx, sy)| [sx * a, sy * b]),
+        }
+    }
+}
+
+/// One caster's kinematic frame at the current pose.
+#[derive(Clone, Copy, Debug)]
+struct Frame {
+    e: [f64; 2],
+    n: [f64; 2],
+    r: [f64; 2],
+    r_cross_e: f64,
+    r_cross_n: f64,
+    r_dot_e: f64,
+    r_dot_n: f64,
+}
+
+impl Frame {
+    fn a(&self) -> [f64; 3] {
+        [self.e[0], self.e[1], self.r_cross_e]
+    }
+    fn b(&self) -> [f64; 3] {
+        [self.n[0], self.n[1], self.r_cross_n]
+    }
+}
+
+fn frames(derived: &Derived, theta: f64, deltas: &[f64]) -> [Frame; 4] {
+    let (s_th, c_th) = theta.sin_cos();
+    std::array::from_fn(|i| {
+        let (s_d, c_d) = deltas[i].sin_cos();
+        // ψ = θ + δ by the angle-sum formulas: one sin_cos per caster instead of two.
+        let e = [c_th * c_d - s_th * s_d, s_th * c_d + c_th * s_d];
+        let n = [-e[1], e[0]];
+        let [px, py] = derived.pivots[i];
+        let r = [c_th * px - s_th * py, s_th * px + c_th * py];
+        Frame {
+            e,
+            n,
+            r,
+            r_cross_e: r[0] * e[1] - r[1] * e[0],
+            r_cross_n: r[0] * n[1] - r[1] * n[0],
+            r_dot_e: r[0] * e[0] + r[1] * e[1],
+            r_dot_n: r[0] * n[0] + r[1] * n[1],
+        }
+    })
+}
+
+fn dot3(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Friction with its regularised sign: coefficient × capacity × tanh(v/ε), signed like v.
+fn friction_force(law: &super::Stribeck, normal_n: f64, speed: f64, eps: f64) -> f64 {
+    // tanh|x| = −expm1(−2|x|)/(2 + expm1(−2|x|)): one call, exact near zero, odd by copysign.
+    let m = (-2.0 * speed.abs() / eps).exp_m1();
+    law.coefficient(speed) * normal_n * (-m / (2.0 + m)).copysign(speed)
+}
+
+/// The constrained model: no lateral slip, 3 platform DOF, 10 states.
+#[derive(Clone, Copy, Debug)]
+pub struct NoSlip {
+    pub derived: Derived,
+    pub friction: Friction,
+    /// m_w + I_s/r²: the inertia a caster adds along its heading.
+    k_roll: f64,
+    /// I_z/d²: the caster's yaw inertia seen by the pivot's sideways speed.
+    k_yaw: f64,
+}
+
+impl NoSlip {
+    pub fn new(cart: &Cart, friction: &Friction, g_mps2: f64) -> Self {
+        let derived = Derived::new(cart, g_mps2);
+        let r = derived.wheel_radius_m;
+        let d = derived.trail_m;
+        NoSlip {
+            derived,
+            friction: *friction,
+            k_roll: derived.wheel_mass_kg + derived.spin_inertia / (r * r),
+            k_yaw: derived.yaw_inertia / (d * d),
+        }
+    }
+
+    /// Rolling-friction force and swivel-friction torque opposing the motion of caster i.
+    fn caster_friction(&self, roll_speed: f64, swivel_rate: f64) -> (f64, f64) {
+        let f = &self.friction;
+        let n = self.derived.normal_n;
+        let rho = self.derived.swivel_arm_m;
+        let roll = friction_force(&f.roll, n, roll_speed, f.eps_mps);
+        let torque = rho * friction_force(&f.swivel, n, rho * swivel_rate, f.eps_mps);
+        (roll, torque)
+    }
+
+    /// Mass matrix, the right-hand side Q − Σ Jᵀm J̇ν, and δ̇.
+    fn assemble(&self, y: &[f64; 10], floor: [f64; 2]) -> ([[f64; 3]; 3], [f64; 3], [f64; 4]) {
+        let dv = &self.derived;
+        let d = dv.trail_m;
+        let nu = [y[7], y[8], y[9]];
+        let w = nu[2];
+        let fr = frames(dv, y[2], &y[3..7]);
+        let mut m = [[dv.platform_mass_kg, 0.0, 0.0], [0.0, dv.platform_mass_kg, 0.0], [0.0, 0.0, dv.platform_inertia]];
+        let mut q = [-dv.platform_mass_kg * floor[0], -dv.platform_mass_kg * floor[1], 0.0];
+        let mut delta_dot = [0.0; 4];
+        for (i, f) in fr.iter().enumerate() {
+            let (a, b) = (f.a(), f.b());
+            let (va, vb) = (dot3(&a, &nu), dot3(&b, &nu));
+            delta_dot[i] = vb / d - w;
+            let a_dot_nu = vb * vb / d - w * w * f.r_dot_e;
+            let b_dot_nu = -va * vb / d - w * w * f.r_dot_n;
+            let (roll, torque) = self.caster_friction(va, delta_dot[i]);
+            // The wheel's inertial load along its heading; the sideways part goes into the floor.
+            let floor_along = f.e[0] * floor[0] + f.e[1] * floor[1];
+            let along_a = -self.k_roll * a_dot_nu - dv.wheel_mass_kg * floor_along - roll;
+            // The swivel torque acts on the caster (yaw rate bᵀν/d) and back on the platform (ω).
+            let along_b = -self.k_yaw * b_dot_nu - torque / d;
+            q[2] += torque;
+            for j in 0..3 {
+                q[j] += along_a * a[j] + along_b * b[j];
+                for k in 0..3 {
+                    m[j][k] += self.k_roll * a[j] * a[k] + self.k_yaw * b[j] * b[k];
+                }
+            }
+        }
+        (m, q, delta_dot)
+    }
+}
+
+impl Dynamics<10> for NoSlip {
+    fn rhs(&self, y: &[f64; 10], floor: [f64; 2]) -> [f64; 10] {
+        let (m, q, delta_dot) = self.assemble(y, floor);
+        let acc = solve3(&m, &q);
+        [y[7], y[8], y[9], delta_dot[0], delta_dot[1], delta_dot[2], delta_dot[3], acc[0], acc[1], acc[2]]
+    }
+
+    fn kinetic_energy(&self, y: &[f64; 10]) -> f64 {
+        let dv = &self.derived;
+        let nu = [y[7], y[8], y[9]];
+        let mut t = dv.platform_mass_kg * (nu[0] * nu[0] + nu[1] * nu[1]) + dv.platform_inertia * nu[2] * nu[2];
+        for f in &frames(dv, y[2], &y[3..7]) {
+            let (va, vb) = (dot3(&f.a(), &nu), dot3(&f.b(), &nu));
+            t += self.k_roll * va * va + self.k_yaw * vb * vb;
+        }
+        0.5 * t
+    }
+
+    fn power(&self, y: &[f64; 10], floor: [f64; 2]) -> Power {
+        let dv = &self.derived;
+        let nu = [y[7], y[8], y[9]];
+        let mut p = Power { floor_w: -dv.platform_mass_kg * (floor[0] * nu[0] + floor[1] * nu[1]), friction_w: 0.0 };
+        for f in &frames(dv, y[2], &y[3..7]) {
+            let (va, vb) = (dot3(&f.a(), &nu), dot3(&f.b(), &nu));
+            let delta_dot = vb / dv.trail_m - nu[2];
+            p.floor_w -= dv.wheel_mass_kg * va * (f.e[0] * floor[0] + f.e[1] * floor[1]);
+            let (roll, torque) = self.caster_friction(va, delta_dot);
+            p.friction_w -= roll * va + torque * delta_dot;
+        }
+        p
+    }
+
+    fn swivel_rates(&self, y: &[f64; 10]) -> [f64; 4] {
+        let nu = [y[7], y[8], y[9]];
+        frames(&self.derived, y[2], &y[3..7]).map(|f| dot3(&f.b(), &nu) / self.derived.trail_m - nu[2])
+    }
+
+    fn rest_forces(&self, y: &[f64; 10]) -> Option<RestForces> {
+        let dv = &self.derived;
+        let (m_p, m_w, d) = (dv.platform_mass_kg, dv.wheel_mass_kg, dv.trail_m);
+        let mut load = [[-m_p, 0.0], [0.0, -m_p], [0.0, 0.0]];
+        let mut generators = [[0.0; 3]; 8];
+        let roll_capacity = self.friction.roll.mu_s * dv.normal_n;
+        let swivel_capacity = self.friction.swivel.mu_s * dv.normal_n * dv.swivel_arm_m;
+        for (i, f) in frames(dv, y[2], &y[3..7]).iter().enumerate() {
+            let (a, b) = (f.a(), f.b());
+            for j in 0..3 {
+                load[j][0] -= m_w * a[j] * f.e[0];
+                load[j][1] -= m_w * a[j] * f.e[1];
+            }
+            generators[2 * i] = a.map(|v| v * roll_capacity);
+            generators[2 * i + 1] = [b[0] / d, b[1] / d, b[2] / d - 1.0].map(|v| v * swivel_capacity);
+        }
+        Some((load, generators))
+    }
+
+    fn derived(&self) -> &Derived {
+        &self.derived
+    }
+}
+
+/// The lateral-slip model: each caster's heading rate ψ̇ᵢ is a degree of freedom (14 states),
+/// and the floor resists the wheel's sideways slip n·v_wheel with a regularised Coulomb force.
+#[derive(Clone, Copy, Debug)]
+pub struct Slip {
+    pub derived: Derived,
+    pub friction: Friction,
+    pub lateral: LateralSlip,
+}
+
+impl Slip {
+    pub fn new(cart: &Cart, friction: &Friction, lateral: &LateralSlip, g_mps2: f64) -> Self {
+        Slip { derived: Derived::new(cart, g_mps2), friction: *friction, lateral: *lateral }
+    }
+
+    /// Rolling force, swivel torque and sideways force opposing caster i's motion.
+    fn caster_friction(&self, roll_speed: f64, swivel_rate: f64, side_speed: f64) -> (f64, f64, f64) {
+        let f = &self.friction;
+        let n = self.derived.normal_n;
+        let rho = self.derived.swivel_arm_m;
+        (
+            friction_force(&f.roll, n, roll_speed, f.eps_mps),
+            rho * friction_force(&f.swivel, n, rho * swivel_rate, f.eps_mps),
+            self.lateral.mu * n * (side_speed / self.lateral.eps_mps).tanh(),
+        )
+    }
+
+    /// Per caster: its frame, wheel-centre velocity, rolling, sideways and swivel speeds.
+    fn kinematics(&self, y: &[f64; 14]) -> [(Frame, [f64; 2], f64, f64, f64); 4] {
+        let dv = &self.derived;
+        let w = y[9];
+        let fr = frames(dv, y[2], &y[3..7]);
+        std::array::from_fn(|i| {
+            let f = fr[i];
+            let psi_dot = y[10 + i];
+            let pivot = [y[7] - w * f.r[1], y[8] + w * f.r[0]];
+            let centre = [pivot[0] - dv.trail_m * psi_dot * f.n[0], pivot[1] - dv.trail_m * psi_dot * f.n[1]];
+            let roll = f.e[0] * pivot[0] + f.e[1] * pivot[1];
+            let side = f.n[0] * centre[0] + f.n[1] * centre[1];
+            (f, centre, roll, side, psi_dot - w)
+        })
+    }
+}
+
+impl Dynamics<14> for Slip {
+    fn rhs(&self, y: &[f64; 14], floor: [f64; 2]) -> [f64; 14] {
+        let dv = &self.derived;
+        let (d, m_w) = (dv.trail_m, dv.wheel_mass_kg);
+        let w = y[9];
+        let k_spin = dv.spin_inertia / (dv.wheel_radius_m * dv.wheel_radius_m);
+        let mut m = [[0.0; 7]; 7];
+        m[0][0] = dv.platform_mass_kg;
+        m[1][1] = dv.platform_mass_kg;
+        m[2][2] = dv.platform_inertia;
+        let mut q = [0.0; 7];
+        q[0] = -dv.platform_mass_kg * floor[0];
+        q[1] = -dv.platform_mass_kg * floor[1];
+        let mut out = [0.0; 14];
+        out[..3].copy_from_slice(&y[7..10]);
+        let nu3 = [y[7], y[8], w];
+        for (i, (f, _, roll_speed, side_speed, delta_dot)) in self.kinematics(y).into_iter().enumerate() {
+            let psi_dot = y[10 + i];
+            out[3 + i] = delta_dot;
+            let col = 3 + i;
+            // Wheel centre: v_C = J_C u with columns (1,0), (0,1), k×r, −d n (at ψ̇ᵢ).
+            let jc = [[1.0, 0.0], [0.0, 1.0], [-f.r[1], f.r[0]], [-d * f.n[0], -d * f.n[1]]];
+            let idx = [0, 1, 2, col];
+            // J̇_C u = −ω² r + d ψ̇² e; the wheel's inertial load is −m_w(ü + J̇_C u).
+            let bias =
+                [-w * w * f.r[0] + d * psi_dot * psi_dot * f.e[0], -w * w * f.r[1] + d * psi_dot * psi_dot * f.e[1]];
+            let load = [-m_w * (floor[0] + bias[0]), -m_w * (floor[1] + bias[1])];
+            for (jj, cj) in idx.iter().zip(&jc) {
+                q[*jj] += cj[0] * load[0] + cj[1] * load[1];
+                for (kk, ck) in idx.iter().zip(&jc) {
+                    m[*jj][*kk] += m_w * (cj[0] * ck[0] + cj[1] * ck[1]);
+                }
+            }
+            // Spin about the axle at e·v_C / r; ė = ψ̇ n gives ȧᵀu = ψ̇ (bᵀν) − ω² (r·e).
+            let (a, b) = (f.a(), f.b());
+            let a_dot_u = psi_dot * dot3(&b, &nu3) - w * w * f.r_dot_e;
+            let (roll, torque, side) = self.caster_friction(roll_speed, delta_dot, side_speed);
+            let along_a = -k_spin * a_dot_u - roll;
+            for j in 0..3 {
+                q[j] += along_a * a[j] - side * b[j];
+                for k in 0..3 {
+                    m[j][k] += k_spin * a[j] * a[k];
+                }
+            }
+            // The sideways force acts at the contact, a trail d behind the pivot: ℓ = [n; r×n; −d].
+            q[col] += side * d - torque;
+            q[2] += torque;
+            m[col][col] += dv.yaw_inertia;
+        }
+        let acc = cholesky_solve(m, q);
+        out[7..14].copy_from_slice(&acc);
+        out
+    }
+
+    fn kinetic_energy(&self, y: &[f64; 14]) -> f64 {
+        let dv = &self.derived;
+        let k_spin = dv.spin_inertia / (dv.wheel_radius_m * dv.wheel_radius_m);
+        let mut t = dv.platform_mass_kg * (y[7] * y[7] + y[8] * y[8]) + dv.platform_inertia * y[9] * y[9];
+        for (i, (_, centre, roll_speed, _, _)) in self.kinematics(y).into_iter().enumerate() {
+            t += dv.wheel_mass_kg * (centre[0] * centre[0] + centre[1] * centre[1])
+                + k_spin * roll_speed * roll_speed
+                + dv.yaw_inertia * y[10 + i] * y[10 + i];
+        }
+        0.5 * t
+    }
+
+    fn power(&self, y: &[f64; 14], floor: [f64; 2]) -> Power {
+        let dv = &self.derived;
+        let mut p = Power { floor_w: -dv.platform_mass_kg * (floor[0] * y[7] + floor[1] * y[8]), friction_w: 0.0 };
+        for (_, centre, roll_speed, side_speed, delta_dot) in self.kinematics(y) {
+            p.floor_w -= dv.wheel_mass_kg * (floor[0] * centre[0] + floor[1] * centre[1]);
+            let (roll, torque, side) = self.caster_friction(roll_speed, delta_dot, side_speed);
+            p.friction_w -= roll * roll_speed + torque * delta_dot + side * side_speed;
+        }
+        p
+    }
+
+    fn swivel_rates(&self, y: &[f64; 14]) -> [f64; 4] {
+        std::array::from_fn(|i| y[10 + i] - y[9])
+    }
+
+    fn rest_forces(&self, _: &[f64; 14]) -> Option<RestForces> {
+        None
+    }
+
+    fn derived(&self) -> &Derived {
+        &self.derived
+    }
+}
+
+/// Solves the symmetric positive-definite 3×3 system by Cramer's rule (fixed operation order).
+fn solve3(m: &[[f64; 3]; 3], q: &[f64; 3]) -> [f64; 3] {
+    let c00 = m[1][1] * m[2][2] - m[1][2] * m[2][1];
+    let c01 = m[1][2] * m[2][0] - m[1][0] * m[2][2];
+    let c02 = m[1][0] * m[2][1] - m[1][1] * m[2][0];
+    let det = m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02;
+    let inv = [
+        [c00, m[0][2] * m[2][1] - m[0][1] * m[2][2], m[0][1] * m[1][2] - m[0][2] * m[1][1]],
+        [c01, m[0][0] * m[2][2] - m[0][2] * m[2][0], m[0][2] * m[1][0] - m[0][0] * m[1][2]],
+        [c02, m[0][1] * m[2][0] - m[0][0] * m[2][1], m[0][0] * m[1][1] - m[0][1] * m[1][0]],
+    ];
+    std::array::from_fn(|i| (inv[i][0] * q[0] + inv[i][1] * q[1] + inv[i][2] * q[2]) / det)
+}
+
+/// Solves a symmetric positive-definite system by Cholesky factorisation.
+fn cholesky_solve<const K: usize>(mut m: [[f64; K]; K], mut q: [f64; K]) -> [f64; K] {
+    for j in 0..K {
+        let mut diag = m[j][j];
+        for v in &m[j][..j] {
+            diag -= v * v;
+        }
+        let diag = diag.sqrt();
+        m[j][j] = diag;
+        for i in j + 1..K {
+            let mut v = m[i][j];
+            for (a, b) in m[i][..j].iter().zip(&m[j][..j]) {
+                v -= a * b;
+            }
+            m[i][j] = v / diag;
+        }
+    }
+    for i in 0..K {
+        for k in 0..i {
+            q[i] -= m[i][k] * q[k];
+        }
+        q[i] /= m[i][i];
+    }
+    for i in (0..K).rev() {
+        for k in i + 1..K {
+            q[i] -= m[k][i] * q[k];
+        }
+        q[i] /= m[i][i];
+    }
+    q
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn linear_solvers_invert_a_known_system() {
+        let m = [[4.0, 1.0, 0.5], [1.0, 3.0, 0.2], [0.5, 0.2, 2.0]];
+        let x = [1.0, -2.0, 0.5];
+        let q: [f64; 3] = std::array::from_fn(|i| (0..3).map(|k| m[i][k] * x[k]).sum());
+        for (got, want) in solve3(&m, &q).iter().zip(&x) {
+            assert!((got - want).abs() < 1e-14);
+        }
+        for (got, want) in cholesky_solve(m, q).iter().zip(&x) {
+            assert!((got - want).abs() < 1e-14);
+        }
+    }
+}

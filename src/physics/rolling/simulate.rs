@@ -1,0 +1,441 @@
+//! The simulation driver: the floor is sampled data, linear between samples, and the model
+//! advances one sample interval at a time with the shared steppers (`physics::ode`), so every
+//! output lands on the input time base. Events are located on the steppers' dense output:
+//! caster flips, the first motion, and (exact stick) the moment the cart slows enough to stick.
+
+use std::f64::consts::PI;
+
+use super::dynamics::{Dynamics, NoSlip, Slip};
+use super::holding::HoldingSet;
+use super::{Cart, Friction, FrictionLaw, Method, Options};
+use crate::physics::ode::{Advance, Dopri5, Rk4, Stats, Stepper};
+
+/// Floor acceleration sampled at a constant step, two horizontal components (floor X, Y).
+#[derive(Clone, Copy, Debug)]
+pub struct Excitation<'a> {
+    pub t0_s: f64,
+    pub dt_s: f64,
+    pub ax_mps2: &'a [f64],
+    pub ay_mps2: &'a [f64],
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum EventKind {
+    /// The cart starts to move: it leaves exact rest (stick-slip), or its speed √(2T/m) first
+    /// exceeds 1 mm/s (regularised friction, where "rest" is a creep below that).
+    Breakaway,
+    /// The cart sticks (stick-slip law only).
+    Rest,
+    /// A caster swings around: its steering angle passes 135° from the body direction it was
+    /// last aligned with, ending within 45° of the opposite one.
+    Flip,
+}
+
+impl EventKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            EventKind::Breakaway => "breakaway",
+            EventKind::Rest => "rest",
+            EventKind::Flip => "flip",
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Event {
+    pub time_s: f64,
+    pub kind: EventKind,
+    /// 0-based caster index for flips.
+    pub caster: Option<usize>,
+    /// The state at the event: x, y, θ, δ₁..δ₄.
+    pub pose: [f64; 7],
+}
+
+/// Time series on the input time base, and the events.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Response {
+    pub x_m: Vec<f64>,
+    pub y_m: Vec<f64>,
+    pub yaw_rad: Vec<f64>,
+    pub delta_rad: [Vec<f64>; 4],
+    pub vx_mps: Vec<f64>,
+    pub vy_mps: Vec<f64>,
+    pub yaw_rate_radps: Vec<f64>,
+    /// Wheel-centre speed along the wheel heading (rolling speed × r).
+    pub roll_speed_mps: [Vec<f64>; 4],
+    pub swivel_rate_radps: [Vec<f64>; 4],
+    /// Absolute acceleration of the platform centre (floor + relative), floor X and Y.
+    pub ax_abs_mps2: Vec<f64>,
+    pub ay_abs_mps2: Vec<f64>,
+    pub kinetic_energy_j: Vec<f64>,
+    pub resting: Vec<bool>,
+    pub events: Vec<Event>,
+    pub stats: Stats,
+}
+
+impl Response {
+    /// Largest distance of the platform centre from its start, and the sample where it occurs.
+    pub fn peak_displacement(&self) -> (f64, usize) {
+        let (x0, y0) = (self.x_m[0], self.y_m[0]);
+        peak(self.x_m.iter().zip(&self.y_m).map(|(x, y)| (x - x0).hypot(y - y0)))
+    }
+
+    /// Largest |θ − θ₀| and its sample.
+    pub fn peak_yaw(&self) -> (f64, usize) {
+        let yaw0 = self.yaw_rad[0];
+        peak(self.yaw_rad.iter().map(|y| (y - yaw0).abs()))
+    }
+
+    pub fn flips(&self) -> [usize; 4] {
+        std::array::from_fn(|i| self.events.iter().filter(|e| e.kind == EventKind::Flip && e.caster == Some(i)).count())
+    }
+
+    pub fn count(&self, kind: EventKind) -> usize {
+        self.events.iter().filter(|e| e.kind == kind).count()
+    }
+}
+
+fn peak(values: impl Iterator<Item = f64>) -> (f64, usize) {
+    values.enumerate().fold((0.0, 0), |(best, at), (k, v)| if v > best { (v, k) } else { (best, at) })
+}
+
+/// Speed below which a regularised cart counts as not moving (its creep stays below it).
+const MOVING_SPEED_MPS: f64 = 1e-3;
+/// A caster's flip index changes when δ passes this far from its last aligned direction.
+const FLIP_ANGLE: f64 = 0.75 * PI;
+/// Events and regime changes allowed within one sample interval before the run is declared stuck.
+const MAX_TRANSITIONS_PER_SAMPLE: usize = 1000;
+
+/// Simulates the cart under the floor motion; outputs are on the input time base.
+pub fn simulate(
+    cart: &Cart,
+    friction: &Friction,
+    excitation: &Excitation<'_>,
+    options: &Options,
+) -> Result<Response, String> {
+    let n = excitation.ax_mps2.len();
+    if n < 2 {
+        return Err(format!("the floor record has {n} sample(s); at least 2 are needed"));
+    }
+    if excitation.ay_mps2.len() != n {
+        return Err(format!("the X and Y floor records differ in length ({n} vs {})", excitation.ay_mps2.len()));
+    }
+    if !(excitation.dt_s.is_finite() && excitation.dt_s > 0.0) {
+        return Err(format!("the sample interval must be positive, got {} s", excitation.dt_s));
+    }
+    if let Some(k) = (0..n).find(|&k| !(excitation.ax_mps2[k].is_finite() && excitation.ay_mps2[k].is_finite())) {
+        return Err(format!(
+            "sample {k} (t = {} s) is not a finite number",
+            excitation.t0_s + k as f64 * excitation.dt_s
+        ));
+    }
+    cart.check(options.lateral_slip.is_some())?;
+    friction.check()?;
+    let mut y0 = [0.0; 14];
+    y0[2] = options.yaw0_rad;
+    y0[3..7].copy_from_slice(&options.steer0_rad);
+    match options.lateral_slip {
+        None => {
+            let model = NoSlip::new(cart, friction, options.g_mps2);
+            let y: [f64; 10] = std::array::from_fn(|i| y0[i]);
+            dispatch(&model, y, excitation, friction, options.method)
+        }
+        Some(lateral) => {
+            if friction.law == FrictionLaw::StickSlip {
+                return Err("the exact stick-slip law is available for the no-slip model only; use the regularised law with lateral slip".into());
+            }
+            if !(lateral.mu.is_finite() && lateral.mu > 0.0 && lateral.eps_mps.is_finite() && lateral.eps_mps > 0.0) {
+                return Err(format!(
+                    "lateral slip needs a positive friction coefficient and ε, got μ = {}, ε = {}",
+                    lateral.mu, lateral.eps_mps
+                ));
+            }
+            let model = Slip::new(cart, friction, &lateral, options.g_mps2);
+            dispatch(&model, y0, excitation, friction, options.method)
+        }
+    }
+}
+
+fn dispatch<const N: usize, D: Dynamics<N>>(
+    model: &D,
+    y0: [f64; N],
+    excitation: &Excitation<'_>,
+    friction: &Friction,
+    method: Method,
+) -> Result<Response, String> {
+    let (law, eps_mps) = (friction.law, friction.eps_mps);
+    let run = Run::new(model, excitation, law, eps_mps);
+    match method {
+        Method::Adaptive { rtol, atol } => {
+            // Positions and angles to `atol`, velocities to 10·atol per second.
+            let tolerances: [f64; N] = std::array::from_fn(|i| if i < 7 { atol } else { 10.0 * atol });
+            run.run(Dopri5::new(rtol, tolerances, excitation.dt_s), y0)
+        }
+        Method::Rk4 { dt_s } => run.run(Rk4::new(dt_s), y0),
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Regime {
+    /// Exactly at rest (stick-slip law): velocities zero, pose fixed.
+    Rest,
+    /// Rolling. `snap_armed`: whether slowing below the rest speed triggers a stick check; it is
+    /// disarmed after a failed check until the cart speeds up again, so the check cannot repeat
+    /// at one instant.
+    Moving { snap_armed: bool },
+}
+
+struct Run<'a, const N: usize, D: Dynamics<N>> {
+    model: &'a D,
+    excitation: &'a Excitation<'a>,
+    /// Exact stick of the whole cart (the stick-slip law).
+    stick: bool,
+    /// Kinetic energies that stand for the speeds √(2T/m_total) of the thresholds: the first
+    /// motion of a regularised cart, and the speed (2ε) below which a stick-slip cart may stick.
+    energy_moving: f64,
+    energy_rest: f64,
+}
+
+/// The floor inside one sample interval: linear in time.
+#[derive(Clone, Copy, Debug)]
+struct Segment {
+    t0: f64,
+    a0: [f64; 2],
+    rate: [f64; 2],
+}
+
+impl Segment {
+    fn at(&self, t: f64) -> [f64; 2] {
+        let s = t - self.t0;
+        [self.a0[0] + self.rate[0] * s, self.a0[1] + self.rate[1] * s]
+    }
+}
+
+/// Event function slots: 0..4 caster flips, then stick check, its re-arming, the first motion.
+const EVENTS: usize = 7;
+const SNAP: usize = 4;
+const REARM: usize = 5;
+const FIRST_MOTION: usize = 6;
+
+impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
+    fn new(model: &'a D, excitation: &'a Excitation<'a>, law: FrictionLaw, eps_mps: f64) -> Self {
+        let mass = model.derived().total_mass_kg;
+        let rest_speed = 2.0 * eps_mps;
+        Run {
+            model,
+            excitation,
+            stick: law == FrictionLaw::StickSlip,
+            energy_moving: 0.5 * mass * MOVING_SPEED_MPS * MOVING_SPEED_MPS,
+            energy_rest: 0.5 * mass * rest_speed * rest_speed,
+        }
+    }
+
+    fn segment(&self, k: usize) -> Segment {
+        let exc = self.excitation;
+        let n = exc.ax_mps2.len();
+        let k1 = (k + 1).min(n - 1);
+        Segment {
+            t0: exc.t0_s + k as f64 * exc.dt_s,
+            a0: [exc.ax_mps2[k], exc.ay_mps2[k]],
+            rate: [(exc.ax_mps2[k1] - exc.ax_mps2[k]) / exc.dt_s, (exc.ay_mps2[k1] - exc.ay_mps2[k]) / exc.dt_s],
+        }
+    }
+
+    fn run<S: Stepper<N>>(self, mut stepper: S, mut y: [f64; N]) -> Result<Response, String> {
+        let exc = self.excitation;
+        let n = exc.ax_mps2.len();
+        let dt = exc.dt_s;
+        let stick = self.stick;
+        let mut response = Response::default();
+        let mut flip_index: [f64; 4] = std::array::from_fn(|i| (y[3 + i] / PI).round());
+        let mut moved = false;
+        let mut holding: Option<HoldingSet> = None;
+        let mut regime = Regime::Moving { snap_armed: false };
+        if stick {
+            let set = self.holding_set(&y);
+            if set.holds(&self.load(&y, self.segment(0).at(exc.t0_s))) {
+                regime = Regime::Rest;
+                holding = Some(set);
+            }
+        }
+        let push = |response: &mut Response, time_s: f64, kind: EventKind, caster: Option<usize>, y: &[f64; N]| {
+            response.events.push(Event { time_s, kind, caster, pose: std::array::from_fn(|i| y[i]) });
+        };
+        if stick && regime != Regime::Rest {
+            moved = true;
+            push(&mut response, exc.t0_s, EventKind::Breakaway, None, &y);
+        }
+        self.record(&mut response, 0, regime, &y);
+        for k in 0..n - 1 {
+            let seg = self.segment(k);
+            let t_end = exc.t0_s + (k + 1) as f64 * dt;
+            let mut t = seg.t0;
+            let mut transitions = 0;
+            while t < t_end {
+                transitions += 1;
+                if transitions > MAX_TRANSITIONS_PER_SAMPLE {
+                    return Err(format!(
+                        "more than {MAX_TRANSITIONS_PER_SAMPLE} events within the sample at t = {t:.4} s: the run does not settle (raise friction_eps)"
+                    ));
+                }
+                match regime {
+                    Regime::Rest => {
+                        let set = holding.get_or_insert_with(|| self.holding_set(&y));
+                        let (q0, q1) = (self.load(&y, seg.at(t)), self.load_rate(&y, &seg));
+                        match set.exit_time(&q0, &q1, t_end - t) {
+                            None => t = t_end,
+                            Some(s) => {
+                                t += s;
+                                regime = Regime::Moving { snap_armed: false };
+                                holding = None;
+                                moved = true;
+                                stepper.reset();
+                                push(&mut response, t, EventKind::Breakaway, None, &y);
+                            }
+                        }
+                    }
+                    Regime::Moving { snap_armed } => {
+                        let model = self.model;
+                        let f = |time: f64, state: &[f64; N]| model.rhs(state, seg.at(time));
+                        let g = |_: f64, state: &[f64; N]| {
+                            self.event_functions(state, &flip_index, stick, snap_armed, moved)
+                        };
+                        match stepper.advance(&f, t, y, t_end, &g) {
+                            Advance::Reached(y1) => {
+                                y = y1;
+                                t = t_end;
+                            }
+                            Advance::Event { index, t: te, y: ye } => {
+                                t = te;
+                                y = ye;
+                                match index {
+                                    i if i < 4 => {
+                                        flip_index[i] += if y[3 + i] > flip_index[i] * PI { 1.0 } else { -1.0 };
+                                        push(&mut response, te, EventKind::Flip, Some(i), &y);
+                                    }
+                                    SNAP => {
+                                        let set = self.holding_set(&y);
+                                        if set.holds(&self.load(&y, seg.at(te))) {
+                                            self.stop(&mut y);
+                                            holding = Some(set);
+                                            regime = Regime::Rest;
+                                            push(&mut response, te, EventKind::Rest, None, &y);
+                                        } else {
+                                            regime = Regime::Moving { snap_armed: false };
+                                        }
+                                    }
+                                    REARM => regime = Regime::Moving { snap_armed: true },
+                                    _ => {
+                                        moved = true;
+                                        push(&mut response, te, EventKind::Breakaway, None, &y);
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            // A slow cart that the floor no longer pushes beyond static friction sticks here even
+            // if it never sped up enough to re-arm the located check.
+            if stick && regime != Regime::Rest && self.model.kinetic_energy(&y) < self.energy_rest {
+                let set = self.holding_set(&y);
+                if set.holds(&self.load(&y, seg.at(t_end))) {
+                    self.stop(&mut y);
+                    holding = Some(set);
+                    regime = Regime::Rest;
+                    stepper.reset();
+                    push(&mut response, t_end, EventKind::Rest, None, &y);
+                }
+            }
+            self.record(&mut response, k + 1, regime, &y);
+        }
+        response.stats = stepper.stats();
+        Ok(response)
+    }
+
+    fn event_functions(
+        &self,
+        y: &[f64; N],
+        flip_index: &[f64; 4],
+        stick: bool,
+        snap_armed: bool,
+        moved: bool,
+    ) -> [f64; EVENTS] {
+        let mut g = [1.0; EVENTS];
+        for i in 0..4 {
+            let centre = flip_index[i] * PI;
+            g[i] = (y[3 + i] - (centre - FLIP_ANGLE)).min(centre + FLIP_ANGLE - y[3 + i]);
+        }
+        let needs_energy = stick || !moved;
+        if needs_energy {
+            let energy = self.model.kinetic_energy(y);
+            if stick {
+                if snap_armed {
+                    g[SNAP] = energy - self.energy_rest;
+                } else {
+                    g[REARM] = 4.0 * self.energy_rest - energy;
+                }
+            }
+            if !moved {
+                g[FIRST_MOTION] = self.energy_moving - energy;
+            }
+        }
+        g
+    }
+
+    fn holding_set(&self, y: &[f64; N]) -> HoldingSet {
+        let (_, generators) = self.model.rest_forces(y).expect("only models that can stick reach here");
+        HoldingSet::new(&generators)
+    }
+
+    /// The floor's inertial load on the resting cart, as a generalised force.
+    fn load(&self, y: &[f64; N], floor: [f64; 2]) -> [f64; 3] {
+        let (map, _) = self.model.rest_forces(y).expect("only models that can stick reach here");
+        map.map(|row| row[0] * floor[0] + row[1] * floor[1])
+    }
+
+    fn load_rate(&self, y: &[f64; N], seg: &Segment) -> [f64; 3] {
+        let (map, _) = self.model.rest_forces(y).expect("only models that can stick reach here");
+        map.map(|row| row[0] * seg.rate[0] + row[1] * seg.rate[1])
+    }
+
+    fn stop(&self, y: &mut [f64; N]) {
+        for v in &mut y[7..] {
+            *v = 0.0;
+        }
+    }
+
+    fn record(&self, response: &mut Response, k: usize, regime: Regime, y: &[f64; N]) {
+        let exc = self.excitation;
+        let floor = [exc.ax_mps2[k], exc.ay_mps2[k]];
+        let acc = match regime {
+            Regime::Rest => [0.0, 0.0],
+            Regime::Moving { .. } => {
+                let ydot = self.model.rhs(y, floor);
+                [ydot[7], ydot[8]]
+            }
+        };
+        response.x_m.push(y[0]);
+        response.y_m.push(y[1]);
+        response.yaw_rad.push(y[2]);
+        response.vx_mps.push(y[7]);
+        response.vy_mps.push(y[8]);
+        response.yaw_rate_radps.push(y[9]);
+        let swivel = self.model.swivel_rates(y);
+        let (s_th, c_th) = y[2].sin_cos();
+        for i in 0..4 {
+            response.delta_rad[i].push(y[3 + i]);
+            response.swivel_rate_radps[i].push(swivel[i]);
+            let psi = y[2] + y[3 + i];
+            let (s_psi, c_psi) = psi.sin_cos();
+            let [px, py] = self.model.derived().pivots[i];
+            let r = [c_th * px - s_th * py, s_th * px + c_th * py];
+            let pivot = [y[7] - y[9] * r[1], y[8] + y[9] * r[0]];
+            response.roll_speed_mps[i].push(c_psi * pivot[0] + s_psi * pivot[1]);
+        }
+        response.ax_abs_mps2.push(floor[0] + acc[0]);
+        response.ay_abs_mps2.push(floor[1] + acc[1]);
+        response.kinetic_energy_j.push(self.model.kinetic_energy(y));
+        response.resting.push(regime == Regime::Rest);
+    }
+}

@@ -1,0 +1,463 @@
+//! The invariants and closed forms of 4WMC-NOTES.md, each with the tolerance it needs and why.
+
+use std::f64::consts::PI;
+
+use super::dynamics::{Dynamics, NoSlip, Slip};
+use super::*;
+use crate::physics::ode::{Advance, Dopri5, Stepper};
+
+/// The notes' prototype cart: m_p = 60 kg, m_w = 1 kg, 1.0 × 0.6 m, r = 0.05 m, d = 0.03 m.
+fn prototype() -> Cart {
+    Cart {
+        length_m: 1.0,
+        width_m: 0.6,
+        platform_mass_kg: 60.0,
+        wheel_diameter_m: 0.1,
+        wheel_width_m: 0.03,
+        wheel_mass_kg: 1.0,
+        trail_m: 0.03,
+        swivel_arm_m: 0.02,
+    }
+}
+
+fn frictionless() -> Friction {
+    Friction {
+        roll: Stribeck::coulomb(0.0),
+        swivel: Stribeck::coulomb(0.0),
+        eps_mps: DEFAULT_FRICTION_EPS_MPS,
+        law: FrictionLaw::Regularised,
+    }
+}
+
+/// MC2's Table 4 friction (Stribeck on both, swivel equal to rolling).
+fn table4_friction(name: &str) -> Friction {
+    let t = preset(name).unwrap();
+    Friction {
+        roll: Stribeck { mu_s: t.mu_s_roll, mu_k: t.mu_k_roll, beta_spm: t.beta_spm, gamma_n: t.gamma_n, p: t.p },
+        swivel: Stribeck { mu_s: t.mu_s_swivel, mu_k: t.mu_k_swivel, beta_spm: t.beta_spm, gamma_n: t.gamma_n, p: t.p },
+        eps_mps: DEFAULT_FRICTION_EPS_MPS,
+        law: FrictionLaw::Regularised,
+    }
+}
+
+fn no_events<const N: usize>(_: f64, _: &[f64; N]) -> [f64; 0] {
+    []
+}
+
+/// Integrates y' = f(t, y) to t_end with tight tolerances, in 5 ms legs like the driver.
+fn integrate<const N: usize>(f: impl Fn(f64, &[f64; N]) -> [f64; N], y0: [f64; N], t_end: f64, rtol: f64) -> [f64; N] {
+    let mut solver = Dopri5::new(rtol, [rtol * 1e-2; N], 0.005);
+    let mut y = y0;
+    let legs = (t_end / 0.005).round() as usize;
+    for k in 0..legs {
+        let Advance::Reached(next) = solver.advance(&f, k as f64 * 0.005, y, (k + 1) as f64 * 0.005, &no_events) else {
+            unreachable!()
+        };
+        y = next;
+    }
+    y
+}
+
+fn two_component_floor(n: usize, dt: f64, scale: f64) -> (Vec<f64>, Vec<f64>) {
+    let t = |k: usize| k as f64 * dt;
+    let ax = (0..n)
+        .map(|k| {
+            scale * ((2.0 * PI * 1.1 * t(k)).sin() + 0.4 * (2.0 * PI * 2.7 * t(k) + 0.3).sin()) * (1.0 - (-t(k)).exp())
+        })
+        .collect();
+    let ay = (0..n).map(|k| scale * 0.6 * (2.0 * PI * 0.8 * t(k) + 1.0).sin() * (1.0 - (-t(k)).exp())).collect();
+    (ax, ay)
+}
+
+fn run(cart: &Cart, friction: &Friction, ax: &[f64], ay: &[f64], dt: f64, options: &Options) -> Response {
+    simulate(cart, friction, &Excitation { t0_s: 0.0, dt_s: dt, ax_mps2: ax, ay_mps2: ay }, options).unwrap()
+}
+
+#[test]
+fn frictionless_unforced_cart_keeps_its_kinetic_energy_but_not_its_momentum() {
+    // 4WMC-NOTES.md check 1: T conserved (the prototype drifted 1e-7 in 3 s with DOP853 and a
+    // finite-difference J̇); the J̇ terms here are exact, so the bound is the integration
+    // tolerance: 1e-11 relative at rtol 1e-11 (measured: 3e-14).
+    let model = NoSlip::new(&prototype(), &frictionless(), G_MPS2);
+    let y0 = [0.0, 0.0, 0.1, 0.3, -1.0, 2.0, 0.5, 0.4, 0.2, 0.5];
+    let y = integrate(|_, y| model.rhs(y, [0.0, 0.0]), y0, 3.0, 1e-11);
+    let (t0, t1) = (model.kinetic_energy(&y0), model.kinetic_energy(&y));
+    eprintln!("check 1: relative kinetic energy drift {:.1e} over 3 s", ((t1 - t0) / t0).abs());
+    assert!(((t1 - t0) / t0).abs() < 1e-11, "T {t0} → {t1}");
+    // The floor pushes sideways on the wheels: the platform's velocity changes (by about 5 %
+    // in the prototype), so momentum is not an invariant of this model.
+    let change = ((y[7] - y0[7]).powi(2) + (y[8] - y0[8]).powi(2)).sqrt();
+    assert!(change > 0.01, "platform velocity barely changed: {:?}", &y[7..]);
+}
+
+/// The no-slip state plus the floor's work and the friction work, integrated alongside.
+fn energy_balance_error<const N: usize, const M: usize, D: Dynamics<N>>(model: &D, y0: [f64; N]) -> (f64, f64) {
+    let floor = |t: f64| [1.2 * (2.0 * PI * 1.3 * t).sin(), 0.7 * (2.0 * PI * 0.7 * t + 0.4).cos()];
+    let f = |t: f64, z: &[f64; M]| {
+        let y: [f64; N] = std::array::from_fn(|i| z[i]);
+        let dy = model.rhs(&y, floor(t));
+        let p = model.power(&y, floor(t));
+        std::array::from_fn(|i| {
+            if i < N {
+                dy[i]
+            } else if i == N {
+                p.floor_w
+            } else {
+                p.friction_w
+            }
+        })
+    };
+    let z0: [f64; M] = std::array::from_fn(|i| if i < N { y0[i] } else { 0.0 });
+    let z = integrate(f, z0, 4.0, 1e-11);
+    let y: [f64; N] = std::array::from_fn(|i| z[i]);
+    let gained = model.kinetic_energy(&y) - model.kinetic_energy(&y0);
+    ((gained - z[N] - z[N + 1]).abs(), -z[N + 1])
+}
+
+#[test]
+fn kinetic_energy_changes_by_the_floor_work_less_the_friction_losses() {
+    // Check 2: T(t) − T(0) = ∫ floor power − ∫ dissipation, to the integration tolerance
+    // (rtol 1e-11 on energies of ~10 J: 1e-10 J; measured 1e-12), with MC2's friction (Table 4,
+    // ρ = 0.02 m).
+    let mut cart = prototype();
+    cart.trail_m = 0.04;
+    let model = NoSlip::new(&cart, &table4_friction("MC2"), G_MPS2);
+    let (error, dissipated) =
+        energy_balance_error::<10, 12, _>(&model, [0.0, 0.0, 0.2, 0.4, -0.5, 1.0, 2.0, 0.3, -0.2, 0.4]);
+    eprintln!("check 2: energy balance error {error:.1e} J of {dissipated:.2} J dissipated");
+    assert!(dissipated > 1.0, "friction must do real work here: {dissipated} J");
+    assert!(error < 1e-10, "energy balance off by {error} J");
+    let slip = Slip::new(&cart, &table4_friction("MC2"), &LateralSlip { mu: 0.6, eps_mps: 0.01 }, G_MPS2);
+    let (error, dissipated) = energy_balance_error::<14, 16, _>(
+        &slip,
+        [0.0, 0.0, 0.2, 0.4, -0.5, 1.0, 2.0, 0.3, -0.2, 0.4, 0.0, 0.0, 0.0, 0.0],
+    );
+    eprintln!("check 2 (lateral slip): energy balance error {error:.1e} J of {dissipated:.2} J dissipated");
+    assert!(dissipated > 1.0 && error < 1e-10, "slip model: balance off by {error} J, dissipated {dissipated} J");
+}
+
+#[test]
+fn zero_input_leaves_the_cart_exactly_at_rest() {
+    // Check 7: exactly, every output, for both friction laws and both models.
+    let zeros = vec![0.0; 400];
+    let t = preset("PS1").unwrap();
+    let options = Options {
+        yaw0_rad: t.yaw0_deg.to_radians(),
+        steer0_rad: t.steer0_deg.map(f64::to_radians),
+        ..Options::default()
+    };
+    let mut cart = prototype();
+    cart.trail_m = 0.0;
+    for (law, slip) in
+        [(FrictionLaw::Regularised, false), (FrictionLaw::StickSlip, false), (FrictionLaw::Regularised, true)]
+    {
+        let friction = Friction { law, ..table4_friction("PS1") };
+        let mut opts = options;
+        let mut c = prototype();
+        if slip {
+            opts.lateral_slip = Some(LateralSlip { mu: 0.5, eps_mps: 1e-3 });
+            c = cart;
+        }
+        let r = run(&c, &friction, &zeros, &zeros, 0.005, &opts);
+        assert!(r.x_m.iter().chain(&r.y_m).chain(&r.vx_mps).chain(&r.ax_abs_mps2).all(|&v| v == 0.0), "{law:?}");
+        assert!(r.yaw_rad.iter().all(|&v| v == options.yaw0_rad));
+        for i in 0..4 {
+            assert!(r.delta_rad[i].iter().all(|&v| v == options.steer0_rad[i]));
+        }
+        assert!(r.events.is_empty(), "{:?}", r.events);
+    }
+}
+
+/// Casters aligned with body x, platform yaw 0, a constant floor acceleration along x.
+fn aligned_constant_push(friction: &Friction, accel: f64, seconds: f64, method: Method) -> Response {
+    let n = (seconds / 0.005) as usize + 1;
+    run(&prototype(), friction, &vec![accel; n], &vec![0.0; n], 0.005, &Options { method, ..Options::default() })
+}
+
+/// Tight enough to resolve the start from rest with ε = 1e-8 m/s.
+const TIGHT: Method = Method::Adaptive { rtol: 1e-10, atol: 1e-12 };
+
+#[test]
+fn below_the_static_rolling_threshold_nothing_moves() {
+    // Check 3 (below): the static threshold is μ_s g exactly (4 wheels carry m_tot g).
+    let mu = 0.045;
+    let friction =
+        Friction { roll: Stribeck { mu_s: mu, mu_k: 0.005, beta_spm: 20.0, gamma_n: 0.0, p: 1.0 }, ..frictionless() };
+    let threshold = mu * G_MPS2;
+    // Exact stick: not a single bit of motion at 99.9 % of the threshold.
+    let stick = Friction { law: FrictionLaw::StickSlip, ..friction };
+    let r = aligned_constant_push(&stick, 0.999 * threshold, 1.0, Method::default());
+    assert!(r.x_m.iter().chain(&r.y_m).all(|&v| v == 0.0), "moved {:?}", r.x_m.last());
+    assert!(r.resting.iter().all(|&s| s) && r.events.is_empty());
+    // Just above, it breaks away at once.
+    let r = aligned_constant_push(&stick, 1.001 * threshold, 1.0, Method::default());
+    assert_eq!(r.events[0].kind, EventKind::Breakaway);
+    assert_eq!(r.events[0].time_s, 0.0);
+    assert!(*r.x_m.last().unwrap() < -1e-5);
+    // Regularised: a creep at ε·atanh(load/capacity) (the notes: 1.5e-4 m in 1 s at 0.9 μg with
+    // ε = 1e-4 m/s). The wheels' spin inertia makes the start-up transient negligible.
+    let r = aligned_constant_push(&friction, 0.9 * threshold, 1.0, Method::default());
+    let creep = DEFAULT_FRICTION_EPS_MPS * 0.9f64.atanh();
+    let x = -*r.x_m.last().unwrap();
+    eprintln!("check 3: regularised creep {x:.4e} m in 1 s at 0.9 μ_s g, ε·atanh(0.9)·1 s = {creep:.4e} m");
+    assert!((x - creep).abs() < 0.02 * creep, "creep {x} m vs ε·atanh(0.9)·1 s = {creep} m");
+    assert_eq!(r.count(EventKind::Breakaway), 0, "a creep below 1 mm/s is no breakaway");
+}
+
+#[test]
+fn constant_acceleration_rolling_matches_its_closed_form() {
+    // Check 3 (above): x = −½ (|a| − μ_k g) m_tot/m_eff t², m_eff = m_tot + 4 I_s/r², for Coulomb
+    // friction. The regularised sign lets the cart gain ≈ ε·ln2·μg/(|a| − μg) of extra speed while
+    // it starts from rest: with ε = 1e-8 m/s, 1e-8 m after 1 s.
+    let mu = 0.02;
+    let friction = Friction { roll: Stribeck::coulomb(mu), eps_mps: 1e-8, ..frictionless() };
+    let accel = 1.5 * mu * G_MPS2;
+    let r = aligned_constant_push(&friction, accel, 1.0, TIGHT);
+    let cart = prototype();
+    let m_tot = cart.platform_mass_kg + 4.0 * cart.wheel_mass_kg;
+    // I_s/r² = ½ m_w for a uniform disc.
+    let m_eff = m_tot + 4.0 * 0.5 * cart.wheel_mass_kg;
+    let expected = -0.5 * (accel - mu * G_MPS2) * m_tot / m_eff;
+    let x = *r.x_m.last().unwrap();
+    eprintln!("check 3: constant push, x(1 s) {x:.9} m vs closed form {expected:.9} m (Δ {:.1e})", x - expected);
+    assert!((x - expected).abs() < 1e-7, "x(1 s) = {x} m, closed form {expected} m");
+    assert!(r.y_m.iter().chain(&r.yaw_rad).all(|&v| v == 0.0), "a symmetric push stays straight");
+
+    // With the study's Stribeck law, the same motion solves m_eff v̇ = m_tot (|a| − g μ(v)): a
+    // one-degree-of-freedom reduction, integrated here by a plain RK4 at 1 µs.
+    let stribeck = Stribeck { mu_s: 0.044, mu_k: 0.0044, beta_spm: 6.05, gamma_n: 0.00044, p: 1.0 };
+    let friction = Friction { roll: stribeck, eps_mps: 1e-8, ..frictionless() };
+    let accel = 1.2 * stribeck.mu_s * G_MPS2;
+    let r = aligned_constant_push(&friction, accel, 1.0, TIGHT);
+    let vdot = |v: f64| m_tot / m_eff * (accel - G_MPS2 * stribeck.coefficient(v));
+    let (mut v, mut s, h) = (0.0, 0.0, 1e-6);
+    for _ in 0..1_000_000 {
+        let (k1, k2) = (vdot(v), vdot(v + 0.5 * h * vdot(v)));
+        let k3 = vdot(v + 0.5 * h * k2);
+        let k4 = vdot(v + h * k3);
+        s += h * v + h * h / 6.0 * (k1 + k2 + k3);
+        v += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
+    }
+    let x = -*r.x_m.last().unwrap();
+    eprintln!("check 3 (Stribeck): {x:.9} m vs the 1-DOF reduction {s:.9} m (relative {:.1e})", (x - s).abs() / s);
+    assert!((x - s).abs() < 1e-6 * s, "Stribeck: {x} m vs 1-DOF reduction {s} m");
+}
+
+#[test]
+fn perpendicular_casters_break_away_where_swivel_friction_gives_in() {
+    // Casters across the push (δ = 90°) roll nowhere; the push must turn them against the swivel
+    // friction torque μ_δ N ρ at a lever d: m_p a = 4 μ_δ N ρ / d, i.e.
+    // a* = μ_δ g ρ (m_tot/m_p) / d (the notes: "roughly μ_sw g ρ/d"). A slow ramp finds it.
+    let cart = prototype();
+    let mu_sw = 0.05;
+    let friction = Friction {
+        roll: Stribeck::coulomb(0.3),
+        swivel: Stribeck::coulomb(mu_sw),
+        law: FrictionLaw::StickSlip,
+        ..frictionless()
+    };
+    let m_tot = cart.platform_mass_kg + 4.0 * cart.wheel_mass_kg;
+    let critical = mu_sw * G_MPS2 * cart.swivel_arm_m * m_tot / cart.platform_mass_kg / cart.trail_m;
+    let rate = 0.5; // m/s² per s
+    let n = 2000;
+    let ax: Vec<f64> = (0..n).map(|k| rate * k as f64 * 0.005).collect();
+    let options = Options { steer0_rad: [PI / 2.0; 4], ..Options::default() };
+    let r = run(&cart, &friction, &ax, &vec![0.0; n], 0.005, &options);
+    let breakaway = r.events.iter().find(|e| e.kind == EventKind::Breakaway).expect("breaks away");
+    eprintln!("check 3 (swivel): breakaway at {:.12} s, closed form {:.12} s", breakaway.time_s, critical / rate);
+    assert!(
+        (breakaway.time_s - critical / rate).abs() < 1e-9,
+        "at {} s, closed form {} s",
+        breakaway.time_s,
+        critical / rate
+    );
+}
+
+#[test]
+fn a_driven_caster_self_aligns_by_the_half_angle_law() {
+    // Check 4: with the pivot driven straight at speed V along χ, tan((ψ−χ)/2) decays as
+    // e^(−Vt/d). A platform of 1e12 kg keeps its velocity to ~1e-13, so the law holds to the
+    // integration tolerance (1e-9 rad here).
+    let mut cart = prototype();
+    cart.platform_mass_kg = 1e12;
+    let model = NoSlip::new(&cart, &frictionless(), G_MPS2);
+    let (speed, chi): (f64, f64) = (0.3, 0.4);
+    let deltas = [0.0, 1.0, -2.5, 3.0];
+    let y0 = [0.0, 0.0, 0.0, deltas[0], deltas[1], deltas[2], deltas[3], speed * chi.cos(), speed * chi.sin(), 0.0];
+    let mut worst: f64 = 0.0;
+    for t_end in [0.05, 0.2, 0.5] {
+        let y = integrate(|_, y| model.rhs(y, [0.0, 0.0]), y0, t_end, 1e-12);
+        for i in 0..4 {
+            let expected = 2.0 * (((deltas[i] - chi) / 2.0).tan() * (-speed * t_end / cart.trail_m).exp()).atan() + chi;
+            let got = y[3 + i];
+            // Compare as angles: the unwrapped δ may differ from the closed form by 2π.
+            let diff = (got - expected + PI).rem_euclid(2.0 * PI) - PI;
+            worst = worst.max(diff.abs());
+            assert!(diff.abs() < 1e-9, "t = {t_end}: caster {} at {got} rad, closed form {expected} rad", i + 1);
+        }
+    }
+    eprintln!("check 4: self-alignment against tan((ψ−χ)/2) = tan((ψ₀−χ)/2)·e^(−Vt/d): worst {worst:.1e} rad");
+}
+
+#[test]
+fn casters_flip_when_the_motion_reverses() {
+    // The floor pushes the cart toward +x (casters trailing, stable), then back toward −x: the
+    // four casters swing through 180°. While trailing, a caster's misalignment decays as
+    // e^(−s/d) with the distance s travelled; after the reversal it grows back at the same rate,
+    // so the flip comes when the distance rolled back has undone the decay (check 4's law run
+    // backwards): here within 2 s of the reversal, and every caster ends aligned the other way.
+    let cart = prototype();
+    let friction = Friction { roll: Stribeck::coulomb(0.005), swivel: Stribeck::coulomb(0.005), ..frictionless() };
+    let n = 1600;
+    let ax: Vec<f64> = (0..n).map(|k| if k < 200 { -1.0 } else { 1.0 }).collect();
+    let options = Options { steer0_rad: [0.01, -0.01, 0.01, -0.01], ..Options::default() };
+    let r = run(&cart, &friction, &ax, &vec![0.0; n], 0.005, &options);
+    assert_eq!(r.flips(), [1, 1, 1, 1], "{:?}", r.events);
+    let reversal = (1..n).find(|&k| r.vx_mps[k] < 0.0).unwrap() as f64 * 0.005;
+    for e in r.events.iter().filter(|e| e.kind == EventKind::Flip) {
+        assert!(e.time_s > reversal && e.time_s < reversal + 2.0, "flip at {} s, reversal at {reversal} s", e.time_s);
+        let caster = e.caster.unwrap();
+        // At the event the caster stands at 135° from its trailing direction.
+        assert!((e.pose[3 + caster].abs() - 0.75 * PI).abs() < 1e-9, "{:?}", e);
+    }
+    for i in 0..4 {
+        let last = *r.delta_rad[i].last().unwrap();
+        assert!((last.abs() - PI).abs() < 1e-3, "caster {} ends at {last} rad", i + 1);
+    }
+}
+
+/// Runs the response mirrored about floor X: y, θ, δ and ü_Y change sign and casters swap
+/// 1↔4, 2↔3 (pivots (+,+), (−,+), (−,−), (+,−)).
+#[test]
+fn mirrored_input_gives_the_mirrored_response() {
+    // Check 5: to round-off, which the caster flips amplify (a flip's timing depends on the
+    // logarithm of the residual misalignment, so differences grow ~e^(2.3 t) here: 1e-14 after
+    // 1 s, 1e-9 after 3 s, 1e-7 after 8 s). The step sequence sees permuted sums: 3 s, 1e-8.
+    let cart = prototype();
+    let friction = table4_friction("MC2");
+    let (ax, ay) = two_component_floor(600, 0.005, 2.0);
+    let method = Method::Adaptive { rtol: 1e-10, atol: 1e-12 };
+    let a = Options { yaw0_rad: 0.3, steer0_rad: [0.2, -1.0, 2.0, 0.7], method, ..Options::default() };
+    let b = Options { yaw0_rad: -0.3, steer0_rad: [-0.7, -2.0, 1.0, -0.2], method, ..Options::default() };
+    let ay_mirrored: Vec<f64> = ay.iter().map(|v| -v).collect();
+    let (ra, rb) = (run(&cart, &friction, &ax, &ay, 0.005, &a), run(&cart, &friction, &ax, &ay_mirrored, 0.005, &b));
+    assert!(ra.peak_displacement().0 > 0.05 && ra.peak_yaw().0 > 0.05, "the test must move and turn the cart");
+    let swap = [3, 2, 1, 0];
+    let mut worst: f64 = 0.0;
+    for k in 0..ax.len() {
+        worst = worst
+            .max((ra.x_m[k] - rb.x_m[k]).abs())
+            .max((ra.y_m[k] + rb.y_m[k]).abs())
+            .max((ra.yaw_rad[k] + rb.yaw_rad[k]).abs());
+        for (delta, &mirror) in ra.delta_rad.iter().zip(&swap) {
+            worst = worst.max((delta[k] + rb.delta_rad[mirror][k]).abs());
+        }
+    }
+    eprintln!("check 5: mirror mismatch {worst:.1e} over 3 s");
+    assert!(worst < 1e-8, "mirror mismatch {worst}");
+    assert_eq!(ra.flips(), swap.map(|i| rb.flips()[i]));
+}
+
+#[test]
+fn rotating_the_floor_and_the_cart_rotates_the_response() {
+    // Check 6: rotate θ₀ and the input by α; positions rotate by α, θ shifts by α, δ is unchanged.
+    // Tolerances act per component, so the rotated run takes other steps (rtol 1e-10) whose
+    // differences the flips amplify as in the mirror check: 3 s, 1e-7.
+    let cart = prototype();
+    let friction = table4_friction("MC2");
+    let (ax, ay) = two_component_floor(600, 0.005, 2.0);
+    let alpha: f64 = 0.7;
+    let (s, c) = alpha.sin_cos();
+    let axr: Vec<f64> = ax.iter().zip(&ay).map(|(x, y)| c * x - s * y).collect();
+    let ayr: Vec<f64> = ax.iter().zip(&ay).map(|(x, y)| s * x + c * y).collect();
+    let method = Method::Adaptive { rtol: 1e-10, atol: 1e-12 };
+    let a = Options { yaw0_rad: 0.3, steer0_rad: [0.2, -1.0, 2.0, 0.7], method, ..Options::default() };
+    let b = Options { yaw0_rad: 0.3 + alpha, ..a };
+    let (ra, rb) = (run(&cart, &friction, &ax, &ay, 0.005, &a), run(&cart, &friction, &axr, &ayr, 0.005, &b));
+    let mut worst: f64 = 0.0;
+    for k in 0..ax.len() {
+        let (x, y) = (c * ra.x_m[k] - s * ra.y_m[k], s * ra.x_m[k] + c * ra.y_m[k]);
+        worst = worst
+            .max((x - rb.x_m[k]).abs())
+            .max((y - rb.y_m[k]).abs())
+            .max((ra.yaw_rad[k] + alpha - rb.yaw_rad[k]).abs());
+        for i in 0..4 {
+            worst = worst.max((ra.delta_rad[i][k] - rb.delta_rad[i][k]).abs());
+        }
+    }
+    eprintln!("check 6: rotation mismatch {worst:.1e} over 3 s");
+    assert!(worst < 1e-7, "rotation mismatch {worst}");
+}
+
+#[test]
+fn rk4_converges_to_the_adaptive_solution() {
+    // Check 8 on MC2 under a strong synthetic two-component floor (10 s, 6 caster flips each):
+    // reference = Dormand–Prince at rtol 1e-11. RK4 at the study's dt = 1e-4 s is off by about
+    // 1 mm in peak displacement here (the regularised friction's creep mode, μg/ε ≈ 4300 s⁻¹, is
+    // resolved only coarsely at that step); halving dt cuts the error by more than 8 (fourth
+    // order, less near sticking), and the default adaptive tolerance beats RK4 at 1e-4 s with
+    // 1/10 of the right-hand-side evaluations.
+    let t = preset("MC2").unwrap();
+    let cart = t.cart(Cart::default_trail_m(t.wheel_diameter_m), DEFAULT_SWIVEL_ARM_M);
+    let (ax, ay) = two_component_floor(2000, 0.005, 2.5);
+    let options = Options { yaw0_rad: t.yaw0_deg.to_radians(), ..Options::default() };
+    let friction = table4_friction("MC2");
+    let with = |method| run(&cart, &friction, &ax, &ay, 0.005, &Options { method, ..options });
+    let reference = with(Method::Adaptive { rtol: 1e-11, atol: 1e-13 });
+    let error = |r: &Response| {
+        (
+            (r.peak_displacement().0 - reference.peak_displacement().0).abs(),
+            (r.peak_yaw().0 - reference.peak_yaw().0).abs(),
+        )
+    };
+    let (default, rk4, rk4_half) =
+        (with(Method::default()), with(Method::Rk4 { dt_s: 1e-4 }), with(Method::Rk4 { dt_s: 5e-5 }));
+    assert!(
+        reference.peak_displacement().0 > 0.1 && reference.flips().iter().all(|&f| f >= 5),
+        "the cart must roll and flip"
+    );
+    let (e_default, e_rk4, e_half) = (error(&default), error(&rk4), error(&rk4_half));
+    eprintln!(
+        "check 8: peak displacement [m] / yaw [rad] errors against rtol 1e-11: default adaptive {:.1e} / {:.1e} ({} evaluations), RK4 1e-4 s {:.1e} / {:.1e} ({}), RK4 5e-5 s {:.1e} / {:.1e}",
+        e_default.0, e_default.1, default.stats.rhs_evals, e_rk4.0, e_rk4.1, rk4.stats.rhs_evals, e_half.0, e_half.1
+    );
+    assert!(e_rk4.0 < 2e-3 && e_rk4.1 < 5e-3, "RK4 at 1e-4 s: {e_rk4:?}");
+    assert!(e_half.0 < e_rk4.0 / 8.0 && e_half.1 < e_rk4.1 / 8.0, "RK4 {e_rk4:?} → {e_half:?} when halving dt");
+    assert!(e_default.0 < e_rk4.0 && e_default.1 < e_rk4.1, "default adaptive {e_default:?} vs RK4 {e_rk4:?}");
+    assert!(default.stats.rhs_evals * 10 < rk4.stats.rhs_evals, "{:?} vs {:?}", default.stats, rk4.stats);
+}
+
+#[test]
+fn lateral_slip_converges_to_the_no_slip_model_and_covers_zero_trail() {
+    // With a side friction far from saturation, the sideways slip speed is ~ε_lat·(load/capacity):
+    // the slip model tends to the constrained one as ε_lat → 0 (the error drops ~10× per decade).
+    let cart = prototype();
+    let friction = table4_friction("MC2");
+    let (ax, ay) = two_component_floor(200, 0.005, 2.0);
+    let options = Options { yaw0_rad: 0.2, steer0_rad: [0.3, -0.4, 1.0, 0.0], ..Options::default() };
+    let reference = run(&cart, &friction, &ax, &ay, 0.005, &options);
+    let error = |eps: f64| {
+        let slip = Options { lateral_slip: Some(LateralSlip { mu: 3.0, eps_mps: eps }), ..options };
+        let r = run(&cart, &friction, &ax, &ay, 0.005, &slip);
+        (0..ax.len()).map(|k| (r.x_m[k] - reference.x_m[k]).hypot(r.y_m[k] - reference.y_m[k])).fold(0.0, f64::max)
+    };
+    let (coarse, fine) = (error(1e-2), error(1e-3));
+    assert!(reference.peak_displacement().0 > 0.01);
+    assert!(
+        fine < 0.2 * coarse && fine < 1e-3 * reference.peak_displacement().0.max(0.1),
+        "errors {coarse} → {fine} m"
+    );
+
+    // The study's literal zero trail: nothing turns the casters (δ stays put while the platform
+    // does not yaw) and the wheels skid sideways once the load exceeds μ_lat g.
+    let zero_trail = Cart { trail_m: 0.0, ..cart };
+    let lateral = LateralSlip { mu: 0.3, eps_mps: 1e-3 };
+    let options = Options { steer0_rad: [PI / 2.0; 4], lateral_slip: Some(lateral), ..Options::default() };
+    let push = vec![0.5 * G_MPS2; 200];
+    let r = run(&zero_trail, &frictionless(), &push, &vec![0.0; 200], 0.005, &options);
+    assert!(r.delta_rad.iter().all(|d| d.iter().all(|&v| (v - PI / 2.0).abs() < 1e-12)));
+    let t = 199.0 * 0.005;
+    let expected = -0.5 * (0.5 - 0.3) * G_MPS2 * t * t;
+    let x = *r.x_m.last().unwrap();
+    assert!((x - expected).abs() < 0.01 * expected.abs(), "skid {x} m vs {expected} m");
+}

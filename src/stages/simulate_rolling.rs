@@ -1,0 +1,767 @@
+//! `simulate_rolling`: equipment on four swivel casters under two horizontal floor components
+//! (the study's 4WMC model made well posed; `physics::rolling`). Parameters come in layers: a
+//! Table 4 `preset`, then an `equipment` file of the same keys, then the stage's own values.
+
+use std::path::Path;
+
+use rayon::prelude::*;
+use serde_json::{json, Map, Value};
+
+use super::{partition_path, InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use crate::io::parquet;
+use crate::physics::rolling::{
+    self, simulate, Cart, EventKind, Excitation, Friction, FrictionLaw, LateralSlip, Method, Options, Response,
+    Stribeck,
+};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params, ParamsExt};
+use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
+
+pub struct SimulateRolling;
+
+/// The model's keys: what a preset or an equipment file may give (the first `MODEL_KEYS` specs).
+const MODEL_KEYS: usize = 18;
+const MAX_LENGTH_M: f64 = 100.0;
+
+const fn model_key(name: &'static str, unit: &'static str, description: &'static str, max: f64) -> ParamSpec {
+    ParamSpec { name, kind: ParamKind::Float, default: Some("null"), unit, description, range: Some((0.0, max)) }
+}
+
+static PARAMS: [ParamSpec; MODEL_KEYS + 15] = [
+    model_key("length_m", "m", "platform length 2a (body x; caster pivots at its corners)", MAX_LENGTH_M),
+    model_key("width_m", "m", "platform width 2b (body y)", MAX_LENGTH_M),
+    model_key("platform_mass_kg", "kg", "platform mass m_p (centre of mass at the platform's centre)", 1e6),
+    model_key("wheel_diameter_m", "m", "caster wheel diameter", 10.0),
+    model_key("wheel_width_m", "m", "caster wheel width", 10.0),
+    model_key("wheel_mass_kg", "kg", "mass of one caster wheel", 1e4),
+    ParamSpec {
+        name: "yaw0_deg",
+        kind: ParamKind::Float,
+        default: Some("null"),
+        unit: "deg",
+        description: "initial yaw θ of the platform's length axis from floor X (null: 0)",
+        range: Some((-360.0, 360.0)),
+    },
+    ParamSpec {
+        name: "steer0_deg",
+        kind: ParamKind::FloatList(Some(4)),
+        default: Some("null"),
+        unit: "deg",
+        description: "initial steering angles δ from the length axis, wheels 1 (+a,+b) front left, 2 (−a,+b) rear left, 3 (−a,−b) rear right, 4 (+a,−b) front right; δ = 0 trails for motion toward +x (null: 0)",
+        range: Some((-360.0, 360.0)),
+    },
+    model_key("mu_s_roll", "", "static rolling friction coefficient μ_sφ (Eq. 13)", 10.0),
+    model_key("mu_s_swivel", "", "static swivel friction coefficient μ_sδ (Eq. 14)", 10.0),
+    model_key("mu_k_roll", "", "kinetic rolling friction coefficient μ_kφ", 10.0),
+    model_key("mu_k_swivel", "", "kinetic swivel friction coefficient μ_kδ", 10.0),
+    model_key("beta_spm", "s/m", "Stribeck transition sharpness β (on sliding speeds)", 1e6),
+    model_key("gamma_n", "s/m", "viscous friction term γ_n (for p = 1)", 1e6),
+    model_key("p", "", "velocity exponent of the viscous term (null: 1)", 10.0),
+    model_key("trail_m", "m", "caster trail d (the study gives none; null: 0.3 × wheel diameter, at least 5 mm; 0 needs lateral_slip)", 10.0),
+    model_key("swivel_arm_m", "m", "lever arm ρ of the swivel friction torque μ_δ N ρ (null: 0.02, a swivel bearing's radius; 1 reproduces the study's numbers literally)", 10.0),
+    model_key("friction_eps", "m/s", "ε of the regularised friction sign tanh(v/ε) (null: 1e-4)", 1.0),
+    ParamSpec {
+        name: "preset",
+        kind: ParamKind::Choice(rolling::PRESETS),
+        default: Some("null"),
+        unit: "",
+        description: "Table 4 of the study: the model keys of the stretcher PS1, patient bed PB2, metal cart MC2 or ultrasound imager UI3",
+        range: None,
+    },
+    ParamSpec {
+        name: "equipment",
+        kind: ParamKind::Path,
+        default: Some("null"),
+        unit: "",
+        description: "YAML file of model keys (length_m … friction_eps), over the preset; the stage's own values win",
+        range: None,
+    },
+    ParamSpec {
+        name: "unit",
+        kind: ParamKind::Str,
+        default: Some("null"),
+        unit: "",
+        description: "name of the unit in tables and figures (null: the preset, the equipment file's stem, or `cart`)",
+        range: None,
+    },
+    ParamSpec {
+        name: "x_channel",
+        kind: ParamKind::Str,
+        default: Some("\"ax_mps2\""),
+        unit: "m/s^2",
+        description: "input column of the floor acceleration along X (E-W)",
+        range: None,
+    },
+    ParamSpec {
+        name: "y_channel",
+        kind: ParamKind::Str,
+        default: Some("\"ay_mps2\""),
+        unit: "m/s^2",
+        description: "input column of the floor acceleration along Y (N-S)",
+        range: None,
+    },
+    ParamSpec {
+        name: "friction_law",
+        kind: ParamKind::Choice(&["regularised", "stick_slip"]),
+        default: Some("\"regularised\""),
+        unit: "",
+        description: "regularised: tanh(v/ε) sign everywhere (resting becomes a creep); stick_slip: the cart rests exactly while static friction holds it and breaks away exactly where it cannot",
+        range: None,
+    },
+    ParamSpec {
+        name: "lateral_slip",
+        kind: ParamKind::Bool,
+        default: Some("false"),
+        unit: "",
+        description: "let the wheels slip sideways against a regularised Coulomb force (each caster heading becomes free; allows trail_m = 0)",
+        range: None,
+    },
+    ParamSpec {
+        name: "mu_lateral",
+        kind: ParamKind::Float,
+        default: Some("0.5"),
+        unit: "",
+        description: "sideways friction coefficient of the wheels (lateral_slip)",
+        range: Some((0.0, 10.0)),
+    },
+    ParamSpec {
+        name: "lateral_eps",
+        kind: ParamKind::Float,
+        default: Some("0.001"),
+        unit: "m/s",
+        description: "ε of the sideways friction tanh(v/ε) (lateral_slip; smaller is stiffer and slower)",
+        range: Some((0.0, 1.0)),
+    },
+    ParamSpec {
+        name: "integrator",
+        kind: ParamKind::Choice(&["adaptive", "rk4"]),
+        default: Some("\"adaptive\""),
+        unit: "",
+        description: "adaptive: Dormand–Prince 5(4); rk4: classical RK4 at rk4_dt_s (the study's)",
+        range: None,
+    },
+    ParamSpec {
+        name: "rtol",
+        kind: ParamKind::Float,
+        default: Some("1e-8"),
+        unit: "",
+        description: "relative tolerance of the adaptive integrator",
+        range: Some((1e-14, 1e-2)),
+    },
+    ParamSpec {
+        name: "atol",
+        kind: ParamKind::Float,
+        default: Some("1e-10"),
+        unit: "m",
+        description: "absolute tolerance on positions (m) and angles (rad); ten times it on velocities",
+        range: Some((1e-16, 1e-2)),
+    },
+    ParamSpec {
+        name: "rk4_dt_s",
+        kind: ParamKind::Float,
+        default: Some("1e-4"),
+        unit: "s",
+        description: "RK4 step (integrator: rk4)",
+        range: Some((1e-7, 1.0)),
+    },
+    ParamSpec {
+        name: "figure",
+        kind: ParamKind::Bool,
+        default: Some("true"),
+        unit: "",
+        description: "draw a PNG per record like the study's Figure 11",
+        range: None,
+    },
+    ParamSpec {
+        name: "mcap",
+        kind: ParamKind::Bool,
+        default: Some("true"),
+        unit: "",
+        description: "also write the trajectory as MCAP for Foxglove",
+        range: None,
+    },
+];
+
+static INFO: StageInfo = StageInfo {
+    name: "simulate_rolling",
+    version: 1,
+    summary: "Rolling, turning and pivot steering of equipment on four swivel casters under the two horizontal floor components (the study's 4WMC, made well posed).",
+    inputs: InputKind::Datasets,
+    outputs: &[
+        OutputInfo { name: "trajectory", description: "on the input time base: time_s, x_m, y_m, yaw_rad, delta1_rad…delta4_rad, velocities, roll1_mps…roll4_mps, swivel rates, the platform's absolute acceleration ax_abs_mps2/ay_abs_mps2, the floor input", timeseries: true },
+        OutputInfo { name: "events", description: "breakaway, rest and caster flip times, the peak displacement and the peak yaw: time_s, event, caster, displacement_m, yaw_rad, delta_rad", timeseries: false },
+        OutputInfo { name: "figures", description: "<partition>.png: floor inputs, x/y displacement, yaw with the four caster angles, and the x–y orbit (the study's Figure 11)", timeseries: false },
+    ],
+    params: &PARAMS,
+};
+
+impl Stage for SimulateRolling {
+    fn info(&self) -> &'static StageInfo {
+        &INFO
+    }
+
+    fn check(&self, params: &Params, base_dir: &Path) -> Result<(), ParamError> {
+        Setup::resolve(params, base_dir).map(|_| ())
+    }
+
+    fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
+        let setup = Setup::resolve(ctx.params, ctx.base_dir)
+            .map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;
+        let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
+        ctx.sink.set_total(parts.len());
+        parts.par_iter().try_for_each(|part| {
+            let table = parquet::read_table(&part.path)?;
+            let outputs = setup.simulate(&table, ctx.params).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
+            let (mut trajectory, mut events, png) = outputs;
+            for t in [&mut trajectory, &mut events] {
+                t.metadata.extend(super::record_provenance(part));
+            }
+            ctx.sink.write("trajectory", &part.partition, trajectory)?;
+            ctx.sink.write("events", &part.partition, events)?;
+            if let Some(png) = png {
+                let name = match partition_path(&part.partition) {
+                    p if p.is_empty() => setup.unit.clone(),
+                    p => p.replace('/', "_"),
+                };
+                ctx.sink.write_file("figures", &format!("{name}.png"), &png)?;
+            }
+            Ok(())
+        })
+    }
+}
+
+/// The model as the parameters resolve it.
+struct Setup {
+    unit: String,
+    cart: Cart,
+    friction: Friction,
+    options: Options,
+    /// Every model key with the value used (for the metadata).
+    resolved: Map<String, Value>,
+}
+
+fn refuse(key: &str, message: String, hint: impl Into<String>) -> ParamError {
+    ParamError { key: Some(key.to_string()), message, hint: hint.into() }
+}
+
+impl Setup {
+    fn resolve(params: &Params, base_dir: &Path) -> Result<Setup, ParamError> {
+        let mut values: Map<String, Value> = Map::new();
+        let preset = params.opt_str("preset");
+        if let Some(name) = preset {
+            let row = rolling::preset(name).expect("the preset was checked against the list");
+            values.extend(table4_values(&row));
+        }
+        let equipment = params.opt_str("equipment");
+        if let Some(relative) = equipment {
+            values.extend(read_equipment(&base_dir.join(relative))?);
+        }
+        for spec in &PARAMS[..MODEL_KEYS] {
+            if !params[spec.name].is_null() {
+                values.insert(spec.name.to_string(), params[spec.name].clone());
+            }
+        }
+        let number = |key: &str| values.get(key).and_then(Value::as_f64);
+        let required = |key: &str| {
+            number(key).ok_or_else(|| {
+                refuse(
+                    key,
+                    format!("`simulate_rolling` needs `{key}`"),
+                    format!(
+                        "set `{key}`, a `preset` ({}) or an `equipment` file that gives it",
+                        rolling::PRESETS.join(", ")
+                    ),
+                )
+            })
+        };
+        let diameter = required("wheel_diameter_m")?;
+        let lateral_slip = params.bool_of("lateral_slip");
+        let cart = Cart {
+            length_m: required("length_m")?,
+            width_m: required("width_m")?,
+            platform_mass_kg: required("platform_mass_kg")?,
+            wheel_diameter_m: diameter,
+            wheel_width_m: required("wheel_width_m")?,
+            wheel_mass_kg: required("wheel_mass_kg")?,
+            trail_m: number("trail_m").unwrap_or_else(|| Cart::default_trail_m(diameter)),
+            swivel_arm_m: number("swivel_arm_m").unwrap_or(rolling::DEFAULT_SWIVEL_ARM_M),
+        };
+        cart.check(lateral_slip).map_err(|message| {
+            let key = [
+                "trail_m",
+                "length_m",
+                "width_m",
+                "platform_mass_kg",
+                "wheel_diameter_m",
+                "wheel_width_m",
+                "wheel_mass_kg",
+                "swivel_arm_m",
+            ]
+            .into_iter()
+            .find(|k| message.starts_with(k) || (*k == "trail_m" && message.contains("trail")))
+            .unwrap_or("length_m");
+            refuse(key, format!("`simulate_rolling`: {message}"), "see `shakeflow stages simulate_rolling`")
+        })?;
+        let p = number("p").unwrap_or(1.0);
+        let (beta, gamma) = (required("beta_spm")?, required("gamma_n")?);
+        let stribeck = |s: f64, k: f64| Stribeck { mu_s: s, mu_k: k, beta_spm: beta, gamma_n: gamma, p };
+        let law = match params.str_of("friction_law") {
+            "stick_slip" => FrictionLaw::StickSlip,
+            _ => FrictionLaw::Regularised,
+        };
+        if lateral_slip && law == FrictionLaw::StickSlip {
+            return Err(refuse(
+                "friction_law",
+                "`simulate_rolling`: the exact stick-slip law needs casters that cannot slip sideways".into(),
+                "use `friction_law: regularised` with `lateral_slip: true`",
+            ));
+        }
+        let friction = Friction {
+            roll: stribeck(required("mu_s_roll")?, required("mu_k_roll")?),
+            swivel: stribeck(required("mu_s_swivel")?, required("mu_k_swivel")?),
+            eps_mps: number("friction_eps").unwrap_or(rolling::DEFAULT_FRICTION_EPS_MPS),
+            law,
+        };
+        friction.check().map_err(|m| {
+            refuse(
+                "friction_eps",
+                format!("`simulate_rolling`: {m}"),
+                "friction values must be zero or positive, ε positive",
+            )
+        })?;
+        let steer: Vec<f64> = values
+            .get("steer0_deg")
+            .and_then(Value::as_array)
+            .map(|a| a.iter().filter_map(Value::as_f64).collect())
+            .unwrap_or_else(|| vec![0.0; 4]);
+        let lateral = lateral_slip
+            .then(|| LateralSlip { mu: params.f64_of("mu_lateral"), eps_mps: params.f64_of("lateral_eps") });
+        if let Some(l) = lateral {
+            if !(l.mu > 0.0 && l.eps_mps > 0.0) {
+                return Err(refuse(
+                    "mu_lateral",
+                    "`simulate_rolling`: lateral slip needs mu_lateral > 0 and lateral_eps > 0".into(),
+                    "e.g. mu_lateral: 0.5, lateral_eps: 0.001",
+                ));
+            }
+        }
+        let method = match params.str_of("integrator") {
+            "rk4" => Method::Rk4 { dt_s: params.f64_of("rk4_dt_s") },
+            _ => Method::Adaptive { rtol: params.f64_of("rtol"), atol: params.f64_of("atol") },
+        };
+        let options = Options {
+            yaw0_rad: number("yaw0_deg").unwrap_or(0.0).to_radians(),
+            steer0_rad: [steer[0], steer[1], steer[2], steer[3]].map(f64::to_radians),
+            lateral_slip: lateral,
+            method,
+            g_mps2: rolling::G_MPS2,
+        };
+        let unit = params
+            .opt_str("unit")
+            .or(preset)
+            .map(String::from)
+            .or_else(|| equipment.and_then(|e| Path::new(e).file_stem()).map(|s| s.to_string_lossy().into_owned()))
+            .unwrap_or_else(|| "cart".into());
+        let mut resolved = Map::new();
+        resolved.insert("unit".into(), json!(unit));
+        for (key, value) in [
+            ("length_m", cart.length_m),
+            ("width_m", cart.width_m),
+            ("platform_mass_kg", cart.platform_mass_kg),
+            ("wheel_diameter_m", cart.wheel_diameter_m),
+            ("wheel_width_m", cart.wheel_width_m),
+            ("wheel_mass_kg", cart.wheel_mass_kg),
+            ("yaw0_deg", number("yaw0_deg").unwrap_or(0.0)),
+            ("mu_s_roll", friction.roll.mu_s),
+            ("mu_s_swivel", friction.swivel.mu_s),
+            ("mu_k_roll", friction.roll.mu_k),
+            ("mu_k_swivel", friction.swivel.mu_k),
+            ("beta_spm", beta),
+            ("gamma_n", gamma),
+            ("p", p),
+            ("trail_m", cart.trail_m),
+            ("swivel_arm_m", cart.swivel_arm_m),
+            ("friction_eps", friction.eps_mps),
+        ] {
+            resolved.insert(key.into(), json!(value));
+        }
+        resolved.insert("steer0_deg".into(), json!(steer));
+        resolved.sort_keys();
+        Ok(Setup { unit, cart, friction, options, resolved })
+    }
+
+    fn simulate(&self, table: &Table, params: &Params) -> Result<(Table, Table, Option<Vec<u8>>), String> {
+        let time = table.f64_column(TIME_COLUMN).ok_or("no time_s column")?;
+        let column = |name: &str| {
+            table.f64_column(name).ok_or_else(|| {
+                format!(
+                    "no float column `{name}` (set x_channel / y_channel); columns: {}",
+                    table.column_names().join(", ")
+                )
+            })
+        };
+        let (x_name, y_name) = (params.str_of("x_channel"), params.str_of("y_channel"));
+        let (ax, ay) = (column(x_name)?, column(y_name)?);
+        let n = time.len();
+        if n < 2 {
+            return Err(format!("{n} sample(s): the simulation needs at least 2"));
+        }
+        let step = time[1] - time[0];
+        if let Some(k) = (1..n).find(|&k| ((time[k] - time[k - 1]) - step).abs() > 1e-6 * step.abs()) {
+            return Err(format!(
+                "time is not uniformly sampled: the step at t = {} s is {} s, the record's first step {step} s; resample the record (a source's `non_uniform: resample`)",
+                time[k - 1],
+                time[k] - time[k - 1]
+            ));
+        }
+        let dt = (time[n - 1] - time[0]) / (n - 1) as f64;
+        let excitation = Excitation { t0_s: time[0], dt_s: dt, ax_mps2: ax, ay_mps2: ay };
+        let response = simulate(&self.cart, &self.friction, &excitation, &self.options)?;
+        let trajectory = self.trajectory(time, ax, ay, &response, x_name, y_name);
+        let events = self.events(time, &response);
+        let png = if params.bool_of("figure") {
+            Some(self.figure(time, ax, ay, &response).map_err(|e| format!("drawing the figure: {e}"))?)
+        } else {
+            None
+        };
+        Ok((trajectory, events, png))
+    }
+
+    fn metadata(&self, response: &Response) -> String {
+        let (peak, _) = response.peak_displacement();
+        let (yaw, _) = response.peak_yaw();
+        let stats = response.stats;
+        json!({
+            "unit": self.unit,
+            "model": self.resolved,
+            "friction_law": match self.friction.law { FrictionLaw::Regularised => "regularised", FrictionLaw::StickSlip => "stick_slip" },
+            "lateral_slip": self.options.lateral_slip.map(|l| json!({"mu": l.mu, "eps_mps": l.eps_mps})),
+            "method": match self.options.method {
+                Method::Adaptive { rtol, atol } => json!({"integrator": "adaptive", "rtol": rtol, "atol": atol}),
+                Method::Rk4 { dt_s } => json!({"integrator": "rk4", "dt_s": dt_s}),
+            },
+            "wheel_order": "1 (+a,+b) front left, 2 (-a,+b) rear left, 3 (-a,-b) rear right, 4 (+a,-b) front right",
+            "peak_displacement_m": peak,
+            "peak_yaw_rad": yaw,
+            "caster_flips": response.flips(),
+            "steps": {"accepted": stats.accepted, "rejected": stats.rejected, "rhs_evals": stats.rhs_evals},
+        })
+        .to_string()
+    }
+
+    fn trajectory(&self, time: &[f64], ax: &[f64], ay: &[f64], r: &Response, x_name: &str, y_name: &str) -> Table {
+        let mut t = Table::new();
+        t.push(Column::f64(TIME_COLUMN, "s", "time (the input's time base)", time.to_vec()));
+        t.push(Column::f64("x_m", "m", "platform centre, floor X, from its start", r.x_m.clone()));
+        t.push(Column::f64("y_m", "m", "platform centre, floor Y, from its start", r.y_m.clone()));
+        t.push(Column::f64(
+            "yaw_rad",
+            "rad",
+            "platform yaw θ: its length axis from floor X (unwrapped)",
+            r.yaw_rad.clone(),
+        ));
+        for i in 0..4 {
+            t.push(Column::f64(
+                &format!("delta{}_rad", i + 1),
+                "rad",
+                &format!("caster {} steering angle δ from the length axis (unwrapped; 0 trails toward +x)", i + 1),
+                r.delta_rad[i].clone(),
+            ));
+        }
+        t.push(Column::f64(
+            "vx_mps",
+            "m/s",
+            "platform centre velocity, floor X, relative to the floor",
+            r.vx_mps.clone(),
+        ));
+        t.push(Column::f64(
+            "vy_mps",
+            "m/s",
+            "platform centre velocity, floor Y, relative to the floor",
+            r.vy_mps.clone(),
+        ));
+        t.push(Column::f64("yaw_rate_radps", "rad/s", "platform yaw rate", r.yaw_rate_radps.clone()));
+        for i in 0..4 {
+            t.push(Column::f64(
+                &format!("roll{}_mps", i + 1),
+                "m/s",
+                &format!("caster {} rolling speed: wheel centre along its heading", i + 1),
+                r.roll_speed_mps[i].clone(),
+            ));
+        }
+        for i in 0..4 {
+            t.push(Column::f64(
+                &format!("swivel{}_radps", i + 1),
+                "rad/s",
+                &format!("caster {} swivel rate dδ/dt", i + 1),
+                r.swivel_rate_radps[i].clone(),
+            ));
+        }
+        t.push(Column::f64("ax_abs_mps2", "m/s^2", "absolute acceleration of the platform centre along floor X (E-W): what a top accelerometer on the unit would record", r.ax_abs_mps2.clone()));
+        t.push(Column::f64(
+            "ay_abs_mps2",
+            "m/s^2",
+            "absolute acceleration of the platform centre along floor Y",
+            r.ay_abs_mps2.clone(),
+        ));
+        t.push(Column::f64("floor_ax_mps2", "m/s^2", &format!("floor acceleration X (input `{x_name}`)"), ax.to_vec()));
+        t.push(Column::f64("floor_ay_mps2", "m/s^2", &format!("floor acceleration Y (input `{y_name}`)"), ay.to_vec()));
+        t.metadata.insert("shakeflow.rolling".into(), self.metadata(r));
+        t
+    }
+
+    fn events(&self, time: &[f64], r: &Response) -> Table {
+        let (x0, y0, yaw0) = (r.x_m[0], r.y_m[0], r.yaw_rad[0]);
+        let mut rows: Vec<(f64, &str, i64, [f64; 7])> =
+            r.events.iter().map(|e| (e.time_s, e.kind.name(), e.caster.map_or(0, |c| c as i64 + 1), e.pose)).collect();
+        let pose_at = |k: usize| -> [f64; 7] {
+            [
+                r.x_m[k],
+                r.y_m[k],
+                r.yaw_rad[k],
+                r.delta_rad[0][k],
+                r.delta_rad[1][k],
+                r.delta_rad[2][k],
+                r.delta_rad[3][k],
+            ]
+        };
+        let (_, k_disp) = r.peak_displacement();
+        let (_, k_yaw) = r.peak_yaw();
+        rows.push((time[k_disp], "peak_displacement", 0, pose_at(k_disp)));
+        rows.push((time[k_yaw], "peak_yaw", 0, pose_at(k_yaw)));
+        let mut t = Table::new();
+        t.push(Column::f64(
+            TIME_COLUMN,
+            "s",
+            "when (events located on the integrator's continuous output; peaks at samples)",
+            rows.iter().map(|r| r.0).collect(),
+        ));
+        t.push(Column {
+            name: "event".into(),
+            unit: String::new(),
+            description: "breakaway (starts to move: leaves exact rest, or first exceeds 1 mm/s), rest (sticks; stick_slip only), flip (a caster swings past 135° from the direction it trailed), peak_displacement, peak_yaw".into(),
+            data: ColumnData::Str(rows.iter().map(|r| r.1.to_string()).collect()),
+        });
+        t.push(Column {
+            name: "caster".into(),
+            unit: String::new(),
+            description: "caster 1-4 (wheel order of steer0_deg) for flips; 0 for the whole cart".into(),
+            data: ColumnData::I64(rows.iter().map(|r| r.2).collect()),
+        });
+        t.push(Column::f64(
+            "displacement_m",
+            "m",
+            "distance of the platform centre from its start",
+            rows.iter().map(|r| (r.3[0] - x0).hypot(r.3[1] - y0)).collect(),
+        ));
+        t.push(Column::f64(
+            "yaw_rad",
+            "rad",
+            "platform yaw change θ − θ₀",
+            rows.iter().map(|r| r.3[2] - yaw0).collect(),
+        ));
+        t.push(Column {
+            name: "delta_rad".into(),
+            unit: "rad".into(),
+            description: "the caster's steering angle δ at a flip (null for whole-cart events)".into(),
+            data: ColumnData::OptF64(rows.iter().map(|r| (r.2 > 0).then(|| r.3[2 + r.2 as usize])).collect()),
+        });
+        t.metadata.insert("shakeflow.rolling".into(), self.metadata(r));
+        t
+    }
+
+    fn figure(&self, time: &[f64], ax: &[f64], ay: &[f64], r: &Response) -> Result<Vec<u8>, String> {
+        use crate::plot::{render_png_with_side, Marker, Panel, Series};
+        let degrees = |v: &[f64]| v.iter().map(|x| x.to_degrees()).collect::<Vec<f64>>();
+        let yaw = degrees(&r.yaw_rad);
+        let deltas: Vec<Vec<f64>> = r.delta_rad.iter().map(|d| degrees(d)).collect();
+        let flips: Vec<Marker> = r
+            .events
+            .iter()
+            .filter(|e| e.kind == EventKind::Flip)
+            .map(|e| Marker { x: e.time_s, label: format!("{}", e.caster.map_or(0, |c| c + 1)) })
+            .collect();
+        let breakaway: Vec<Marker> = r
+            .events
+            .iter()
+            .filter(|e| e.kind == EventKind::Breakaway)
+            .take(1)
+            .map(|e| Marker { x: e.time_s, label: "breakaway".into() })
+            .collect();
+        let wheel = ["δ1 front left", "δ2 rear left", "δ3 rear right", "δ4 front right"];
+        let mut angle_series = vec![Series { label: "θ platform".into(), x: time, y: &yaw }];
+        for (i, d) in deltas.iter().enumerate() {
+            angle_series.push(Series { label: wheel[i].into(), x: time, y: d });
+        }
+        let panels = [
+            Panel {
+                title: "floor acceleration (input)".into(),
+                x_label: "time [s]".into(),
+                y_label: "[m/s^2]".into(),
+                series: vec![
+                    Series { label: "X (E-W)".into(), x: time, y: ax },
+                    Series { label: "Y (N-S)".into(), x: time, y: ay },
+                ],
+                markers: breakaway,
+                log_y: false,
+                spans: Vec::new(),
+            },
+            Panel {
+                title: "platform displacement relative to the floor".into(),
+                x_label: "time [s]".into(),
+                y_label: "[m]".into(),
+                series: vec![
+                    Series { label: "x".into(), x: time, y: &r.x_m },
+                    Series { label: "y".into(), x: time, y: &r.y_m },
+                ],
+                markers: Vec::new(),
+                log_y: false,
+                spans: Vec::new(),
+            },
+            Panel {
+                title: "platform yaw and caster steering angles (dashed: caster flips, by caster)".into(),
+                x_label: "time [s]".into(),
+                y_label: "[deg]".into(),
+                series: angle_series,
+                markers: flips,
+                log_y: false,
+                spans: Vec::new(),
+            },
+        ];
+        let orbit = Panel {
+            title: "x–y orbit of the platform centre".into(),
+            x_label: "x [m]".into(),
+            y_label: "y [m]".into(),
+            series: vec![Series { label: String::new(), x: &r.x_m, y: &r.y_m }],
+            markers: Vec::new(),
+            log_y: false,
+            spans: Vec::new(),
+        };
+        let (peak, _) = r.peak_displacement();
+        let (peak_yaw, _) = r.peak_yaw();
+        let title = format!(
+            "{}: peak displacement {:.3} m, peak yaw {:.1}°, caster flips {:?}",
+            self.unit,
+            peak,
+            peak_yaw.to_degrees(),
+            r.flips()
+        );
+        render_png_with_side(&title, &panels, &orbit, 600, 1700, 1100)
+    }
+}
+
+/// A Table 4 row as model-key values.
+fn table4_values(row: &rolling::Table4) -> Map<String, Value> {
+    let mut m = Map::new();
+    for (key, value) in [
+        ("length_m", row.length_m),
+        ("width_m", row.width_m),
+        ("platform_mass_kg", row.platform_mass_kg),
+        ("wheel_diameter_m", row.wheel_diameter_m),
+        ("wheel_width_m", row.wheel_width_m),
+        ("wheel_mass_kg", row.wheel_mass_kg),
+        ("yaw0_deg", row.yaw0_deg),
+        ("mu_s_roll", row.mu_s_roll),
+        ("mu_s_swivel", row.mu_s_swivel),
+        ("mu_k_roll", row.mu_k_roll),
+        ("mu_k_swivel", row.mu_k_swivel),
+        ("beta_spm", row.beta_spm),
+        ("gamma_n", row.gamma_n),
+        ("p", row.p),
+    ] {
+        m.insert(key.into(), json!(value));
+    }
+    m.insert("steer0_deg".into(), json!(row.steer0_deg));
+    m
+}
+
+/// An equipment file: a YAML mapping of model keys, checked like stage parameters. Errors name
+/// the file and the line of the offending key.
+fn read_equipment(path: &Path) -> Result<Map<String, Value>, ParamError> {
+    let normal = crate::pipeline::spec::lexically_normal(path);
+    let shown = normal.display();
+    let hint = format!(
+        "an equipment file holds model keys only: {}",
+        PARAMS[..MODEL_KEYS].iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+    );
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| refuse("equipment", format!("cannot read the equipment file `{shown}`: {e}"), hint.clone()))?;
+    let yaml: serde_yaml::Value = serde_yaml::from_str(&text).map_err(|e| {
+        let at = e.location().map(|l| format!(":{}:{}", l.line(), l.column())).unwrap_or_default();
+        refuse("equipment", format!("equipment file `{shown}`{at}: not valid YAML: {e}"), hint.clone())
+    })?;
+    let Some(mapping) = yaml.as_mapping() else {
+        return Err(refuse("equipment", format!("equipment file `{shown}`: expected a mapping of model keys"), hint));
+    };
+    let mut given = Vec::new();
+    for (key, value) in mapping {
+        let Some(key) = key.as_str() else {
+            return Err(refuse(
+                "equipment",
+                format!("equipment file `{shown}`: keys must be text, found {key:?}"),
+                hint,
+            ));
+        };
+        given.push((key.to_string(), params::yaml_to_json(value)));
+    }
+    let normalized =
+        params::normalize(&PARAMS[..MODEL_KEYS], "equipment file", given.iter().map(|(k, v)| (k.as_str(), v.clone())))
+            .map_err(|e| {
+                let at = e
+                    .key
+                    .as_deref()
+                    .and_then(|k| crate::pipeline::locate::key_position(&text, &[k]))
+                    .map(|(l, c)| format!(":{l}:{c}"))
+                    .unwrap_or_default();
+                let message =
+                    e.message.replace(" for stage type `equipment file`", "").replace(" of `equipment file`", "");
+                refuse("equipment", format!("equipment file `{shown}`{at}: {message}"), e.hint)
+            })?;
+    Ok(normalized.into_iter().filter(|(_, v)| !v.is_null()).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params(given: Value) -> Params {
+        let given = given.as_object().unwrap().clone();
+        params::normalize(INFO.params, INFO.name, given.iter().map(|(k, v)| (k.as_str(), v.clone()))).unwrap()
+    }
+
+    #[test]
+    fn layers_resolve_preset_then_file_then_stage_values() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("mc2.yaml"), "# heavier\nplatform_mass_kg: 200\ntrail_m: 0.05\n").unwrap();
+        let setup =
+            Setup::resolve(&params(json!({"preset": "MC2", "equipment": "mc2.yaml", "trail_m": 0.04})), dir.path())
+                .unwrap();
+        assert_eq!(setup.cart.platform_mass_kg, 200.0, "the file overrides the preset");
+        assert_eq!(setup.cart.trail_m, 0.04, "the stage's value overrides the file");
+        assert_eq!(setup.cart.length_m, 0.65, "the preset fills the rest");
+        assert_eq!(setup.friction.roll.mu_s, 0.044);
+        assert_eq!(setup.unit, "MC2");
+        let plain = Setup::resolve(&params(json!({"preset": "PS1"})), dir.path()).unwrap();
+        assert_eq!(plain.cart.trail_m, 0.06, "default trail 0.3 × 0.20 m");
+        assert_eq!(plain.options.steer0_rad[0], 80f64.to_radians());
+    }
+
+    #[test]
+    fn missing_values_and_bad_files_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let err = Setup::resolve(&params(json!({})), dir.path()).err().unwrap();
+        assert!(err.message.contains("needs `wheel_diameter_m`") && err.hint.contains("preset"), "{err:?}");
+        std::fs::write(dir.path().join("bad.yaml"), "length_m: 1.0\nlenght_m: 2.0\n").unwrap();
+        let err = Setup::resolve(&params(json!({"preset": "UI3", "equipment": "bad.yaml"})), dir.path()).err().unwrap();
+        assert_eq!(err.key.as_deref(), Some("equipment"));
+        assert!(
+            err.message.contains("bad.yaml`:2:1: unknown parameter `lenght_m`") && err.hint.contains("length_m"),
+            "{err:?}"
+        );
+        let err = Setup::resolve(&params(json!({"preset": "UI3", "trail_m": 0.0})), dir.path()).err().unwrap();
+        assert_eq!(err.key.as_deref(), Some("trail_m"));
+        assert!(err.message.contains("lateral_slip"), "{err:?}");
+        assert!(
+            Setup::resolve(&params(json!({"preset": "UI3", "trail_m": 0.0, "lateral_slip": true})), dir.path()).is_ok()
+        );
+    }
+}
