@@ -168,6 +168,8 @@ fn check_camera_projection(runs: &Path, archive: &Path, manifest: &Value) {
     ] {
         let png = std::fs::read(runs.join(figure)).unwrap();
         assert!(png.starts_with(b"\x89PNG") && png.len() > 10_000, "{figure} is not a drawn PNG");
+    }
+}
 
 /// The four rolling units over the ten motions the study's model is valid for: the report's
 /// rolling table, and per simulation a trajectory on the input time base (Parquet + MCAP), its
