@@ -33,6 +33,8 @@ demo: release
 	@$(BIN) show runs/demo/report/summary/data.parquet
 	@echo "Rolling units (runs/demo/report/rolling/data.parquet; figures in runs/demo/rolling_*/figures/):"
 	@$(BIN) show runs/demo/report/rolling/data.parquet
+	@echo "Mismatch diagnosis of the archive's cases (runs/demo/diagnosis/: diagnosis.json and a figure per case in reports/):"
+	@$(BIN) show runs/demo/diagnosis/diagnosis/data.parquet --columns case,verdict,window_start_s,window_end_s,rmse_before,rmse_after
 
 $(PY_STAMP): tests/reference/requirements.txt
 	$(PYTHON) -m venv $(VENV)

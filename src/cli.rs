@@ -99,6 +99,9 @@ enum Command {
         /// Rows to print at most.
         #[arg(long, default_value_t = 100)]
         rows: usize,
+        /// Only these columns, in this order (comma-separated).
+        #[arg(long, value_delimiter = ',')]
+        columns: Vec<String>,
     },
     /// Diagnose a unit: where the toppling model and its records disagree, which physics explains it.
     ///
@@ -207,8 +210,8 @@ pub fn main() -> anyhow::Result<ExitCode> {
             print!("{}", crate::inspect::describe(&artifact, rows)?);
             Ok(ExitCode::SUCCESS)
         }
-        Command::Show { table, rows } => {
-            print!("{}", crate::inspect::show(&table, rows)?);
+        Command::Show { table, rows, columns } => {
+            print!("{}", crate::inspect::show(&table, rows, &columns)?);
             Ok(ExitCode::SUCCESS)
         }
         Command::DemoArchive { dir, force } => {

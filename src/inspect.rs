@@ -93,11 +93,19 @@ fn describe_parquet(path: &Path, preview_rows: usize) -> anyhow::Result<String> 
 }
 
 /// A whole (small) Parquet table as aligned text, for summaries printed at the end of a run.
-pub fn show(path: &Path, max_rows: usize) -> anyhow::Result<String> {
+/// Prints a small table; `columns` (when not empty) picks and orders the columns shown.
+pub fn show(path: &Path, max_rows: usize, columns: &[String]) -> anyhow::Result<String> {
     let file = File::open(path).map_err(|e| anyhow::anyhow!("cannot open `{}`: {e}", path.display()))?;
-    let frame = ParquetReader::new(file)
+    let mut frame = ParquetReader::new(file)
         .finish()
         .map_err(|e| anyhow::anyhow!("polars could not read `{}`: {e}", path.display()))?;
+    if !columns.is_empty() {
+        let names: Vec<String> = frame.get_column_names().iter().map(|n| n.to_string()).collect();
+        if let Some(missing) = columns.iter().find(|c| !names.contains(c)) {
+            anyhow::bail!("`{}` has no column `{missing}`; it has {}", path.display(), names.join(", "));
+        }
+        frame = frame.select(columns.iter().map(String::as_str))?;
+    }
     // polars reads its display limits from the environment; set them for this process only.
     std::env::set_var("POLARS_FMT_MAX_ROWS", max_rows.to_string());
     std::env::set_var("POLARS_FMT_MAX_COLS", "30");

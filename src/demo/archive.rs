@@ -31,7 +31,7 @@ use std::path::{Path, PathBuf};
 
 pub const GENERATOR_NAME: &str = "shakeflow demo-archive";
 /// Bump whenever the bytes written change, so `is_current` rejects older archives.
-pub const GENERATOR_VERSION: &str = "1.3.0";
+pub const GENERATOR_VERSION: &str = "1.4.0";
 pub const README_FILE: &str = "README.txt";
 pub const MANIFEST_FILE: &str = "manifest.json";
 pub const DAQ1_FILE: &str = "DAQ1_floors.csv";

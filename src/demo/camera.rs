@@ -12,6 +12,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::physics::rocking::{simulate, Block, Excitation, Options, Shape};
+use crate::physics::rolling;
 use crate::signal::synthetic_motion::{seed_from_label, SplitMix64};
 use crate::vision::camera::{Camera, Intrinsics};
 use crate::vision::linalg::{self, Mat3, Vec3};
@@ -58,17 +59,35 @@ pub struct DemoMotions {
 }
 
 /// THE source of the demo's motions: PS2 rocking freely after a release from 0.12 rad, by the
-/// toppling model (`physics::rocking`), and a smooth planar drift and turn of the cart.
+/// toppling model (`physics::rocking`), and the cart MC2 rolling on the shaking floor, by the
+/// rolling model (`physics::rolling`).
 pub fn demo_motions() -> DemoMotions {
     let time_s = frame_times();
     let rocking_theta_rad = free_rocking(0.12, &time_s);
-    let rolling_x_mm = time_s
-        .iter()
-        .map(|&t| 110.0 * (std::f64::consts::TAU * 0.45 * t + 0.3).sin() - 110.0 * 0.3f64.sin() + 35.0 * t)
-        .collect();
-    let rolling_y_mm = time_s.iter().map(|&t| 70.0 * (1.0 - (std::f64::consts::TAU * 0.3 * t).cos())).collect();
-    let rolling_yaw_rad = time_s.iter().map(|&t| 0.3 * (std::f64::consts::TAU * 0.25 * t).sin()).collect();
-    DemoMotions { time_s, rocking_theta_rad, rolling_x_mm, rolling_y_mm, rolling_yaw_rad }
+    let cart = rolling_cart(&time_s);
+    DemoMotions {
+        time_s,
+        rocking_theta_rad,
+        rolling_x_mm: cart.x_m.iter().map(|x| 1000.0 * x).collect(),
+        rolling_y_mm: cart.y_m.iter().map(|y| 1000.0 * y).collect(),
+        rolling_yaw_rad: cart.yaw_rad,
+    }
+}
+
+/// The metal cart MC2 (Table 4) on unlocked casters under a few seconds of two-component floor
+/// shaking (2.0 m/s² at 0.7 Hz along x, 0.8 m/s² at 0.5 Hz along y; cosines, so the floor's
+/// velocity has no mean and the cart does not drift out of view), by the rolling model, sampled
+/// at the frame times.
+fn rolling_cart(times: &[f64]) -> rolling::Response {
+    let table = rolling::preset("MC2").expect("MC2 is a Table 4 unit");
+    let cart = table.cart(rolling::Cart::default_trail_m(table.wheel_diameter_m), 0.02);
+    let friction = table.friction(1e-4, rolling::FrictionLaw::Regularised);
+    let (yaw0_rad, steer0_rad) = table.initial_pose();
+    let ax: Vec<f64> = times.iter().map(|&t| 2.0 * (std::f64::consts::TAU * 0.7 * t).cos()).collect();
+    let ay: Vec<f64> = times.iter().map(|&t| 0.8 * (std::f64::consts::TAU * 0.5 * t).cos()).collect();
+    let excitation = rolling::Excitation { t0_s: times[0], dt_s: 1.0 / FRAME_RATE_HZ, ax_mps2: &ax, ay_mps2: &ay };
+    let options = rolling::Options { yaw0_rad, steer0_rad, ..rolling::Options::default() };
+    rolling::simulate(&cart, &friction, &excitation, &options).expect("MC2 under a smooth floor motion")
 }
 
 pub fn frame_times() -> Vec<f64> {
