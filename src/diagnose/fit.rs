@@ -55,24 +55,44 @@ impl Objective<'_> {
     }
 }
 
-/// Nelder–Mead over the continuous parameters, in [0, 1] coordinates of their bounds.
-struct Scaled<'a> {
+/// Where a local search moves: the continuous parameters, within their bounds.
+struct Space<'a> {
     objective: &'a Objective<'a>,
-    until: f64,
     bounds: &'a [(f64, f64)],
-    /// The full parameter vector; the continuous entries are replaced from the search point.
-    template: &'a [f64],
     continuous: &'a [usize],
+}
+
+/// Nelder–Mead's view of a search: the continuous parameters in [0, 1] coordinates of their
+/// bounds, judged on the records up to `until`, the others held at `template`'s values.
+struct Scaled<'a> {
+    space: &'a Space<'a>,
+    until: f64,
+    template: &'a [f64],
 }
 
 impl Scaled<'_> {
     fn params(&self, u: &[f64]) -> Vec<f64> {
         let mut p = self.template.to_vec();
-        for (&i, &ui) in self.continuous.iter().zip(u) {
-            let (lo, hi) = self.bounds[i];
+        for (&i, &ui) in self.space.continuous.iter().zip(u) {
+            let (lo, hi) = self.space.bounds[i];
             p[i] = lo + ui.clamp(0.0, 1.0) * (hi - lo);
         }
         p
+    }
+
+    fn unit(&self) -> Vec<f64> {
+        self.space
+            .continuous
+            .iter()
+            .map(|&i| {
+                let (lo, hi) = self.space.bounds[i];
+                if hi > lo {
+                    (self.template[i] - lo) / (hi - lo)
+                } else {
+                    0.0
+                }
+            })
+            .collect()
     }
 }
 
@@ -83,7 +103,7 @@ impl CostFunction for Scaled<'_> {
     fn cost(&self, u: &Vec<f64>) -> Result<f64, Error> {
         // Outside the box: the boundary's misfit plus a penalty that leads back inside.
         let outside: f64 = u.iter().map(|v| (v - v.clamp(0.0, 1.0)).abs()).sum();
-        Ok(self.objective.chi2(&self.params(u), self.until) * (1.0 + outside))
+        Ok(self.space.objective.chi2(&self.params(u), self.until) * (1.0 + outside))
     }
 }
 
@@ -98,6 +118,7 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
     order.sort_by(|&a, &b| scored[a].0.total_cmp(&scored[b].0).then(a.cmp(&b)));
     let discrete = effect.discrete();
     let continuous: Vec<usize> = (0..bounds.len()).filter(|&i| !discrete.get(i).copied().unwrap_or(false)).collect();
+    let space = Space { objective: &objective, bounds: &bounds, continuous: &continuous };
     let starts: Vec<Vec<f64>> = order.iter().take(STARTS).map(|&i| scored[i].1.clone()).collect();
     // Every start leaves its optimum after each horizon: long horizons can trade the exact
     // parameters for a lucky match of chaotic late rocking, so all of them compete at the end.
@@ -108,9 +129,8 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
             let mut found = vec![params.clone()];
             if !continuous.is_empty() {
                 for &(until, span, levels) in &horizons {
-                    params = zoom(&objective, &bounds, &continuous, &params, until, span, levels);
-                    params = search(&objective, &bounds, &continuous, &params, until, span * ZOOM.powi(levels as i32))
-                        .unwrap_or(params);
+                    params = space.zoom(&params, until, span, levels);
+                    params = space.search(&params, until, span * ZOOM.powi(levels as i32)).unwrap_or(params);
                     found.push(params.clone());
                 }
             }
@@ -134,109 +154,81 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
     Fit { params, misfit, prediction, evaluations: evaluations.into_inner() }
 }
 
-/// A local grid around `start` (±`span` of each range, 5 points per parameter, 9 for one),
-/// moved to its best point and shrunk, `levels` times: unlike a simplex, it steps over the small
-/// jumps an impact that happens or not puts into the misfit.
-fn zoom(
-    objective: &Objective<'_>,
-    bounds: &[(f64, f64)],
-    continuous: &[usize],
-    start: &[f64],
-    until: f64,
-    span: f64,
-    levels: usize,
-) -> Vec<f64> {
-    let mut best = (objective.chi2(start, until), start.to_vec());
-    let per_axis = if continuous.len() == 1 { 9 } else { 5 };
-    let mut span = span;
-    for _ in 0..levels {
-        let axes: Vec<Vec<f64>> = continuous
-            .iter()
-            .map(|&i| {
-                let (lo, hi) = bounds[i];
-                super::effects::linspace(-span, span, per_axis)
-                    .into_iter()
-                    .map(|d| (best.1[i] + d * (hi - lo)).clamp(lo, hi))
-                    .collect()
-            })
-            .collect();
-        let points: Vec<Vec<f64>> = super::effects::product(&axes)
-            .into_iter()
-            .map(|values| {
-                let mut p = best.1.clone();
-                for (&i, v) in continuous.iter().zip(values) {
-                    p[i] = v;
+impl Space<'_> {
+    /// A local grid around `start` (±`span` of each range, 5 points per parameter, 9 for one),
+    /// moved to its best point and shrunk, `levels` times: unlike a simplex, it steps over the
+    /// small jumps an impact that happens or not puts into the misfit.
+    fn zoom(&self, start: &[f64], until: f64, span: f64, levels: usize) -> Vec<f64> {
+        let mut best = (self.objective.chi2(start, until), start.to_vec());
+        let per_axis = if self.continuous.len() == 1 { 9 } else { 5 };
+        let mut span = span;
+        for _ in 0..levels {
+            let axes: Vec<Vec<f64>> = self
+                .continuous
+                .iter()
+                .map(|&i| {
+                    let (lo, hi) = self.bounds[i];
+                    super::effects::linspace(-span, span, per_axis)
+                        .into_iter()
+                        .map(|d| (best.1[i] + d * (hi - lo)).clamp(lo, hi))
+                        .collect()
+                })
+                .collect();
+            let points: Vec<Vec<f64>> = super::effects::product(&axes)
+                .into_iter()
+                .map(|values| {
+                    let mut p = best.1.clone();
+                    for (&i, v) in self.continuous.iter().zip(values) {
+                        p[i] = v;
+                    }
+                    p
+                })
+                .collect();
+            let scored: Vec<(f64, Vec<f64>)> =
+                points.into_par_iter().map(|p| (self.objective.chi2(&p, until), p)).collect();
+            for candidate in scored {
+                if candidate.0 < best.0 {
+                    best = candidate;
                 }
-                p
-            })
-            .collect();
-        let scored: Vec<(f64, Vec<f64>)> = points.into_par_iter().map(|p| (objective.chi2(&p, until), p)).collect();
-        for candidate in scored {
-            if candidate.0 < best.0 {
-                best = candidate;
             }
+            span *= ZOOM;
         }
-        span *= ZOOM;
+        best.1
     }
-    best.1
-}
 
-/// Nelder–Mead from `start` over the continuous parameters, judged on the records up to
-/// `until`, restarted with a fresh simplex while it keeps improving: a simplex that has shrunk
-/// inside a narrow curved valley (angle and restitution of an obstacle trade off) stalls, a new
-/// one walks on.
-fn search(
-    objective: &Objective<'_>,
-    bounds: &[(f64, f64)],
-    continuous: &[usize],
-    start: &[f64],
-    until: f64,
-    step: f64,
-) -> Option<Vec<f64>> {
-    let mut best = (objective.chi2(start, until), start.to_vec());
-    for _ in 0..RESTARTS {
-        let Some(found) = simplex_search(objective, bounds, continuous, &best.1, until, step) else { break };
-        if found.0 >= best.0 * (1.0 - 1e-6) {
-            break;
-        }
-        best = found;
-    }
-    (best.1 != start).then_some(best.1)
-}
-
-fn simplex_search(
-    objective: &Objective<'_>,
-    bounds: &[(f64, f64)],
-    continuous: &[usize],
-    start: &[f64],
-    until: f64,
-    step: f64,
-) -> Option<(f64, Vec<f64>)> {
-    let problem = Scaled { objective, until, bounds, template: start, continuous };
-    let u0: Vec<f64> = continuous
-        .iter()
-        .map(|&i| {
-            let (lo, hi) = bounds[i];
-            if hi > lo {
-                (start[i] - lo) / (hi - lo)
-            } else {
-                0.0
+    /// Nelder–Mead from `start`, restarted with a fresh simplex while it keeps improving: a
+    /// simplex that has shrunk inside a narrow curved valley (angle and restitution of an
+    /// obstacle trade off) stalls, a new one walks on.
+    fn search(&self, start: &[f64], until: f64, step: f64) -> Option<Vec<f64>> {
+        let mut best = (self.objective.chi2(start, until), start.to_vec());
+        for _ in 0..RESTARTS {
+            let Some(found) = self.simplex(&best.1, until, step) else { break };
+            if found.0 >= best.0 * (1.0 - 1e-6) {
+                break;
             }
-        })
-        .collect();
-    let mut simplex = vec![u0.clone()];
-    for d in 0..u0.len() {
-        let mut vertex = u0.clone();
-        vertex[d] = if vertex[d] > 0.5 { vertex[d] - step } else { vertex[d] + step };
-        simplex.push(vertex);
+            best = found;
+        }
+        (best.1 != start).then_some(best.1)
     }
-    let start_cost = objective.chi2(start, until);
-    let solver = NelderMead::new(simplex).with_sd_tolerance(1e-6 * start_cost.max(1.0)).ok()?;
-    let result = Executor::new(problem, solver).configure(|s| s.max_iters(MAX_ITERATIONS)).run().ok()?;
-    let state = result.state();
-    let u = state.get_best_param()?.clone();
-    let cost = state.get_best_cost();
-    (cost <= start_cost).then(|| (cost, Scaled { objective, until, bounds, template: start, continuous }.params(&u)))
+
+    /// One Nelder–Mead run from a simplex of `step` (in [0, 1] coordinates) around `start`.
+    fn simplex(&self, start: &[f64], until: f64, step: f64) -> Option<(f64, Vec<f64>)> {
+        let problem = Scaled { space: self, until, template: start };
+        let u0 = problem.unit();
+        let mut simplex = vec![u0.clone()];
+        for d in 0..u0.len() {
+            let mut vertex = u0.clone();
+            vertex[d] = if vertex[d] > 0.5 { vertex[d] - step } else { vertex[d] + step };
+            simplex.push(vertex);
+        }
+        let start_cost = self.objective.chi2(start, until);
+        let solver = NelderMead::new(simplex).with_sd_tolerance(1e-6 * start_cost.max(1.0)).ok()?;
+        let result = Executor::new(problem, solver).configure(|s| s.max_iters(MAX_ITERATIONS)).run().ok()?;
+        let state = result.state();
+        let u = state.get_best_param()?.clone();
+        let cost = state.get_best_cost();
+        (cost <= start_cost).then(|| (cost, Scaled { space: self, until, template: start }.params(&u)))
+    }
 }
 
 /// What a model that cannot run predicts: nothing (every residual is NaN, never accepted).
