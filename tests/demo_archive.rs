@@ -137,8 +137,15 @@ fn layout_headers_rows_and_manifest() {
     expected_top.push(README_FILE.into());
     expected_top.push(MANIFEST_FILE.into());
     expected_top.push("cpt".into());
+    expected_top.push(shakeflow::demo::cases::CASES_DIR.into());
     expected_top.sort();
     assert_eq!(listing(dir), expected_top);
+    let cases = listing(&dir.join(shakeflow::demo::cases::CASES_DIR));
+    assert_eq!(cases, ["PB1_FB-3", "PS2_FB-2", "PS2_FB-3", "WSU1_FB-4", "WSU1_FB-5", "truth"]);
+    for case in &cases[..cases.len() - 1] {
+        let files = listing(&dir.join(shakeflow::demo::cases::CASES_DIR).join(case));
+        assert_eq!(files, ["equipment.yaml", "floor.csv", "observed_accel.csv", "observed_cpt.csv"], "{case}");
+    }
     let readme = fs::read_to_string(dir.join(README_FILE)).unwrap();
     assert!(readme.contains("NOT REAL DATA"));
     assert_eq!(m.generator.name, "shakeflow demo-archive");

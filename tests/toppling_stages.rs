@@ -117,7 +117,7 @@ fn editing_the_equipment_file_reruns_what_reads_it() {
     std::fs::write(&unit, text).unwrap();
     let status = shakeflow(&["status", "pipeline.yaml"], root);
     let said = stdout(&status);
-    assert!(said.contains("input `params.equipment` changed"), "{said}");
+    assert!(said.contains("input `params.equipment (unit.yaml)` changed"), "{said}");
     let second = shakeflow(&["run", "pipeline.yaml"], root);
     let log = stderr(&second);
     assert!(second.status.success(), "{log}");
