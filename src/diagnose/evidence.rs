@@ -17,6 +17,42 @@ const SPIKE_MASK_S: (f64, f64) = (0.05, 0.3);
 const SENSITIVE_ACCEL_MPS2: f64 = 0.1;
 const SENSITIVE_THETA_RAD: f64 = 0.005;
 
+/// A twin run's spread up to this is a linear one (±, symmetric about the prediction); beyond
+/// it the twin has taken another branch (an impact more or less, an overturn or not), and the
+/// truth may lie anywhere between the two runs but not beyond both.
+const LINEAR_SPREAD_RAD: f64 = 0.05;
+const LINEAR_SPREAD_MPS2: f64 = 1.0;
+
+/// What a prediction admits at one sample besides the sensor noise.
+struct Spread {
+    /// The twin run's value, when there is one.
+    twin: Option<f64>,
+    /// Other uncertainty (standard deviation): micro-rocking, an overturn's timing.
+    other: f64,
+    /// The largest spread still taken as linear.
+    linear: f64,
+}
+
+impl Spread {
+    /// (observed − predicted)/sd and ln(sd/σ), sd combining the noise σ and the uncertainty. A
+    /// spread beyond the linear one measures the residual from the nearer of the two runs (zero
+    /// between them); its price ln(sd/σ) stays that of the whole spread, so no model buys fit
+    /// by being chaotic.
+    fn z(&self, observed: f64, predicted: f64, sigma: f64) -> (f64, f64) {
+        let spread = self.twin.map_or(0.0, |twin| (twin - predicted).abs());
+        let sd = sigma.hypot(self.other.max(spread));
+        let log_ratio = (sd / sigma).ln();
+        match self.twin {
+            Some(twin) if spread > self.linear && spread > self.other => {
+                let (lo, hi) = (predicted.min(twin), predicted.max(twin));
+                let outside = observed - observed.clamp(lo, hi);
+                (outside / sigma.hypot(self.other.max(self.linear)), log_ratio)
+            }
+            _ => ((observed - predicted) / sd, log_ratio),
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy)]
 struct Sample {
     t: f64,
@@ -45,6 +81,10 @@ pub struct Evidence {
     /// Time spans masked for the overturn impact (observed, and predicted by the nominal model).
     pub spike_masks: Vec<(f64, f64)>,
     pub sensitive_samples: usize,
+    /// Whether the records show the unit fall: the camera seeing it lie (beyond 90 % of its
+    /// lying angle), or without a camera, the accelerometer's toppling impact (a hard impact of
+    /// a unit that stays standing can look alike; the camera settles it).
+    pub observed_overturn: bool,
 }
 
 impl Evidence {
@@ -71,12 +111,16 @@ impl Evidence {
         let mut accel = samples(&case.accel);
         let mut camera = samples(&case.camera);
         let mut spike_masks = Vec::new();
+        let lying = 0.9 * case.block.lie_angle_rad;
+        let camera_sees = camera.iter().any(|s| s.valid);
+        let mut observed_overturn = camera.iter().any(|s| s.valid && s.value.abs() > lying);
         if let Some(observed) = &case.accel {
             let times: Vec<f64> = accel.iter().map(|s| s.t).collect();
             let values: Vec<f64> = accel.iter().map(|s| if s.value.is_finite() { s.value } else { 0.0 }).collect();
             if times.len() > 2 && observed.time_s.len() == times.len() {
                 let event = detect_toppling(&times, &values, None, &DetectOptions::default());
                 if let Some(t) = event.impact_time_s {
+                    observed_overturn |= !camera_sees;
                     spike_masks.push((t - SPIKE_MASK_S.0, t + SPIKE_MASK_S.1));
                 }
             }
@@ -107,28 +151,32 @@ impl Evidence {
             camera_sigma: case.camera_noise_rad,
             spike_masks,
             sensitive_samples,
+            observed_overturn,
         }
     }
 
-    /// The accelerometer's standard deviation at a sample: sensor noise and the prediction's own
-    /// uncertainty (micro-rocking), combined.
-    fn accel_sd(&self, p: &Prediction, s: &Sample) -> f64 {
-        self.accel_sigma.hypot(at(&p.top_ax_uncertainty_mps2, s))
+    /// The accelerometer's residual at a sample, normalised, and ln(sd/σ).
+    fn accel_z(&self, p: &Prediction, s: &Sample) -> (f64, f64) {
+        let twin = (!p.twin_top_ax_mps2.is_empty()).then(|| at(&p.twin_top_ax_mps2, s));
+        let spread = Spread { twin, other: at(&p.top_ax_uncertainty_mps2, s), linear: LINEAR_SPREAD_MPS2 };
+        spread.z(s.value, at(&p.top_ax_mps2, s), self.accel_sigma)
     }
 
-    fn camera_sd(&self, p: &Prediction, s: &Sample) -> f64 {
-        self.camera_sigma.hypot(at(&p.theta_uncertainty_rad, s))
+    fn camera_z(&self, p: &Prediction, s: &Sample) -> (f64, f64) {
+        let twin = (!p.twin_theta_rad.is_empty()).then(|| at(&p.twin_theta_rad, s));
+        let spread = Spread { twin, other: at(&p.theta_uncertainty_rad, s), linear: LINEAR_SPREAD_RAD };
+        spread.z(s.value, at(&p.theta_rad, s), self.camera_sigma)
     }
 
-    /// Normalised residuals (observed − predicted)/sd of the valid samples, as (time, z, ln(sd/σ)).
+    /// Normalised residuals of the valid samples, as (time, z, ln(sd/σ)).
     fn normalised<'a>(&'a self, p: &'a Prediction) -> impl Iterator<Item = (f64, f64, f64)> + 'a {
         let accel = self.accel.iter().filter(|s| s.valid).map(move |s| {
-            let sd = self.accel_sd(p, s);
-            (s.t, (s.value - at(&p.top_ax_mps2, s)) / sd, (sd / self.accel_sigma).ln())
+            let (z, log_ratio) = self.accel_z(p, s);
+            (s.t, z, log_ratio)
         });
         let camera = self.camera.iter().filter(|s| s.valid).map(move |s| {
-            let sd = self.camera_sd(p, s);
-            (s.t, (s.value - at(&p.theta_rad, s)) / sd, (sd / self.camera_sigma).ln())
+            let (z, log_ratio) = self.camera_z(p, s);
+            (s.t, z, log_ratio)
         });
         accel.chain(camera)
     }
@@ -164,16 +212,14 @@ impl Evidence {
     /// Times of the samples whose residuals exceed the threshold in clusters (both sensors).
     fn flagged_times(&self, p: &Prediction) -> Vec<f64> {
         let mut flagged = Vec::new();
-        let accel_sd = |s: &Sample| self.accel_sd(p, s);
-        let camera_sd = |s: &Sample| self.camera_sd(p, s);
-        let sensors: [(&Vec<Sample>, &dyn Fn(&Sample) -> f64, &Vec<f64>, usize); 2] = [
-            (&self.accel, &accel_sd, &p.top_ax_mps2, ACCEL_CLUSTER),
-            (&self.camera, &camera_sd, &p.theta_rad, CAMERA_CLUSTER),
-        ];
-        for (samples, sd, series, needed) in sensors {
+        let accel_z = |s: &Sample| self.accel_z(p, s).0;
+        let camera_z = |s: &Sample| self.camera_z(p, s).0;
+        let sensors: [(&Vec<Sample>, &dyn Fn(&Sample) -> f64, usize); 2] =
+            [(&self.accel, &accel_z, ACCEL_CLUSTER), (&self.camera, &camera_z, CAMERA_CLUSTER)];
+        for (samples, z, needed) in sensors {
             let exceeding: Vec<f64> = samples
                 .iter()
-                .filter(|s| s.valid && ((s.value - at(series, s)) / sd(s)).abs() > self.exceedance_sigma)
+                .filter(|s| s.valid && z(s).abs() > self.exceedance_sigma)
                 .map(|s| s.t)
                 .collect();
             // A cluster: `needed` exceedances within CLUSTER_S; all of its members are flagged.

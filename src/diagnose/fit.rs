@@ -141,8 +141,12 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
     let judged: Vec<(f64, Vec<f64>, Prediction)> = optima
         .into_par_iter()
         .filter_map(|params| {
-            evaluations.fetch_add(2, Ordering::Relaxed);
-            let prediction = case.with_sensitivity(|c| effect.predict(c, &params)).ok()?;
+            let prediction = case
+                .with_sensitivity(evidence, |c| {
+                    evaluations.fetch_add(1, Ordering::Relaxed);
+                    effect.predict(c, &params)
+                })
+                .ok()?;
             Some((evidence.misfit(&prediction).chi2, params, prediction))
         })
         .collect();
@@ -240,6 +244,8 @@ fn failed(case: &Case) -> Prediction {
         overturn: None,
         top_ax_uncertainty_mps2: vec![0.0; n],
         theta_uncertainty_rad: vec![0.0; n],
+        twin_top_ax_mps2: Vec::new(),
+        twin_theta_rad: Vec::new(),
         events: Vec::new(),
     }
 }
