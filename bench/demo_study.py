@@ -7,8 +7,9 @@ scipy.signal.resample_poly (256 -> 200 Hz) and FFT cross-correlation with parabo
 np.interp shifting, scipy.signal.csd/welch transfer functions with MATLAB tfestimate defaults for
 the white-noise tests, and a simplified STA/LTA + RMS-drop toppling check per unit channel (a port
 of the same steps for timing, not a validated detector). It skips MCAP
-and figures, so the comparison does not favour shakeflow. The rolling simulations, which the Python
-side does not do, are cut from the pipeline here (bench/rolling.py times them). Medians over
+and figures, so the comparison does not favour shakeflow. The rocking, fragility and rolling
+simulations, which the Python side does not do, are cut from the pipeline here (bench/rocking.py
+and bench/rolling.py time them). Medians over
 --repeat runs; ratios are Python / shakeflow (above 1: shakeflow is faster or leaner).
 """
 import os
@@ -68,22 +69,27 @@ for test in sorted(p for p in archive.iterdir() if (p / "DAQ1_floors.csv").is_fi
 '''
 
 
-def without_rolling(pipeline):
-    """The demo pipeline without its simulate_rolling stages and the report's use of them."""
+SIMULATIONS = ("rocking_", "fragility_", "rolling_")
+
+
+def without_simulations(pipeline):
+    """The demo pipeline without its simulation stages (rocking, fragility, rolling) and the
+    report's use of them: the Python side does not simulate (bench/rocking.py and bench/rolling.py
+    time the models against their scipy peers)."""
     kept, skipping = [], False
     for line in pipeline.splitlines(keepends=True):
-        if line.startswith("  rolling_"):
+        if line.startswith(tuple("  " + s for s in SIMULATIONS)):
             skipping = True
         elif skipping and line.startswith("  ") and not line.startswith("   "):
             skipping = False
-        if not skipping and not line.lstrip().startswith("- rolling_"):
+        if not skipping and not line.lstrip().startswith(tuple("- " + s for s in SIMULATIONS)):
             kept.append(line)
     return "".join(kept)
 
 
 def main():
     args = parse_args(__doc__)
-    args.pipeline = without_rolling(args.pipeline)
+    args.pipeline = without_simulations(args.pipeline)
     sides = ["shakeflow (demo pipeline)", "numpy/scipy script"]
     results = {side: [] for side in sides}
     for _ in range(args.repeat):
