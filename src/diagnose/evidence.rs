@@ -217,11 +217,8 @@ impl Evidence {
         let sensors: [(&Vec<Sample>, &dyn Fn(&Sample) -> f64, usize); 2] =
             [(&self.accel, &accel_z, ACCEL_CLUSTER), (&self.camera, &camera_z, CAMERA_CLUSTER)];
         for (samples, z, needed) in sensors {
-            let exceeding: Vec<f64> = samples
-                .iter()
-                .filter(|s| s.valid && z(s).abs() > self.exceedance_sigma)
-                .map(|s| s.t)
-                .collect();
+            let exceeding: Vec<f64> =
+                samples.iter().filter(|s| s.valid && z(s).abs() > self.exceedance_sigma).map(|s| s.t).collect();
             // A cluster: `needed` exceedances within CLUSTER_S; all of its members are flagged.
             let mut marked = vec![false; exceeding.len()];
             for i in 0..exceeding.len() {
