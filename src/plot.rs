@@ -68,38 +68,14 @@ pub fn render_png(title: &str, panels: &[Panel<'_>], width: u32, height: u32) ->
     if width < 16 || height < 16 {
         return Err(format!("figure size {width}x{height} is too small"));
     }
-    for (pi, p) in panels.iter().enumerate() {
-        for s in &p.series {
-            if s.x.len() != s.y.len() {
-                return Err(format!(
-                    "panel {pi} series '{}': x has {} points but y has {}",
-                    s.label,
-                    s.x.len(),
-                    s.y.len()
-                ));
-            }
-        }
-    }
-    ensure_font();
-
-    let mut buf = vec![0u8; width as usize * height as usize * 3];
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (width, height)).into_drawing_area();
-        root.fill(&WHITE).map_err(err)?;
-        let body = if title.is_empty() {
-            root.clone()
-        } else {
-            root.titled(title, ("sans-serif", 24).into_font().color(&BLACK)).map_err(err)?
-        };
+    render_canvas(title, panels.iter(), width, height, |root, body| {
         if !panels.is_empty() {
-            let areas = body.split_evenly((panels.len(), 1));
-            for (panel, area) in panels.iter().zip(areas.iter()) {
-                draw_panel(&root, area, panel)?;
+            for (panel, area) in panels.iter().zip(body.split_evenly((panels.len(), 1)).iter()) {
+                draw_panel(root, area, panel)?;
             }
         }
-        root.present().map_err(err)?;
-    }
-    encode_png(&buf, width, height)
+        Ok(())
+    })
 }
 
 /// Like [`render_png`], with one more panel to the right of the stack, drawn with equal scales
@@ -116,7 +92,29 @@ pub fn render_png_with_side(
     if width < 16 || height < 16 || side_width + 16 > width {
         return Err(format!("figure size {width}x{height} with a {side_width} px side panel is too small"));
     }
-    for (pi, p) in panels.iter().chain(std::iter::once(side)).enumerate() {
+    render_canvas(title, panels.iter().chain(std::iter::once(side)), width, height, |root, body| {
+        let (stack, right) = body.split_horizontally(width - side_width);
+        if !panels.is_empty() {
+            for (panel, area) in panels.iter().zip(stack.split_evenly((panels.len(), 1)).iter()) {
+                draw_panel(root, area, panel)?;
+            }
+        }
+        let (xr, yr) = equal_aspect_ranges(side, right.dim_in_pixel());
+        let side = Panel { markers: Vec::new(), log_y: false, ..clone_panel(side) };
+        draw_panel_with(root, &right, &side, xr.0..xr.1, yr.0..yr.1)
+    })
+}
+
+/// Checks every series of `panels`, lets `draw` fill a white canvas (the whole figure, and its
+/// body under the title when there is one) and encodes it.
+fn render_canvas<'p, 'd: 'p>(
+    title: &str,
+    panels: impl Iterator<Item = &'p Panel<'d>>,
+    width: u32,
+    height: u32,
+    draw: impl for<'b> FnOnce(&Root<'b>, &Root<'b>) -> Result<(), String>,
+) -> Result<Vec<u8>, String> {
+    for (pi, p) in panels.enumerate() {
         for s in &p.series {
             if s.x.len() != s.y.len() {
                 return Err(format!(
@@ -138,15 +136,7 @@ pub fn render_png_with_side(
         } else {
             root.titled(title, ("sans-serif", 24).into_font().color(&BLACK)).map_err(err)?
         };
-        let (stack, right) = body.split_horizontally(width - side_width);
-        if !panels.is_empty() {
-            for (panel, area) in panels.iter().zip(stack.split_evenly((panels.len(), 1)).iter()) {
-                draw_panel(&root, area, panel)?;
-            }
-        }
-        let (xr, yr) = equal_aspect_ranges(side, right.dim_in_pixel());
-        let side = Panel { markers: Vec::new(), log_y: false, ..clone_panel(side) };
-        draw_panel_with(&root, &right, &side, xr.0..xr.1, yr.0..yr.1)?;
+        draw(&root, &body)?;
         root.present().map_err(err)?;
     }
     encode_png(&buf, width, height)
