@@ -300,17 +300,7 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
             let mut stage_inputs = Vec::new();
             for path in inputs {
                 let spec = stages::load::ad_hoc_source(path, &overrides)?;
-                let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-                let partition = if inputs.len() > 1 { vec![("file".to_string(), stem)] } else { Vec::new() };
-                let part =
-                    InputPart { partition, path: path.clone(), label: file_label(path), hash: hash::hash_file(path)? };
-                let base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-                stage_inputs.push(StageInput::Source {
-                    name: path.display().to_string(),
-                    spec,
-                    base_dir,
-                    files: vec![part],
-                });
+                stage_inputs.push(ad_hoc_input(path, spec, hash::hash_file(path)?, inputs.len() > 1));
             }
             (params::normalize(info.params, info.name, []).map_err(|e| anyhow::anyhow!("{}", e.message))?, stage_inputs)
         }
@@ -333,17 +323,7 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
                 };
                 let spec: SourceSpec =
                     serde_json::from_value(serde_json::json!({"format": format, "path": path.display().to_string()}))?;
-                let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-                let partition = if inputs.len() > 1 { vec![("file".to_string(), stem)] } else { Vec::new() };
-                let part =
-                    InputPart { partition, path: path.clone(), label: file_label(path), hash: hash::hash_path(path)? };
-                let base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-                stage_inputs.push(StageInput::Source {
-                    name: path.display().to_string(),
-                    spec,
-                    base_dir,
-                    files: vec![part],
-                });
+                stage_inputs.push(ad_hoc_input(path, spec, hash::hash_path(path)?, inputs.len() > 1));
             }
             (params, stage_inputs)
         }
@@ -414,6 +394,20 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
     result?;
     eprintln!("{name}: {records} record(s) → {}", output.display());
     Ok(())
+}
+
+/// A file given to `shakeflow stage` as a source of its own; several are told apart by a `file`
+/// partition (their stems).
+fn ad_hoc_input(path: &Path, spec: SourceSpec, hash: String, several: bool) -> StageInput {
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let partition = if several { vec![("file".to_string(), stem)] } else { Vec::new() };
+    let part = InputPart { partition, path: path.to_path_buf(), label: file_label(path), hash };
+    StageInput::Source {
+        name: path.display().to_string(),
+        spec,
+        base_dir: path.parent().map(Path::to_path_buf).unwrap_or_default(),
+        files: vec![part],
+    }
 }
 
 /// A run-independent name for a file given on the command line: its file name.
