@@ -141,12 +141,11 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
     let judged: Vec<(f64, Vec<f64>, Prediction)> = optima
         .into_par_iter()
         .filter_map(|params| {
-            let prediction = case
-                .with_sensitivity(evidence, |c| {
-                    evaluations.fetch_add(1, Ordering::Relaxed);
-                    effect.predict(c, &params)
-                })
-                .ok()?;
+            let predict = |c: &Case| {
+                evaluations.fetch_add(1, Ordering::Relaxed);
+                effect.predict(c, &params)
+            };
+            let prediction = case.with_sensitivity(evidence, predict(case).ok()?, predict).ok()?;
             Some((evidence.misfit(&prediction).chi2, params, prediction))
         })
         .collect();

@@ -153,12 +153,13 @@ impl Case {
     /// calibration accuracy) shows where: the twin run travels with the prediction. A twin the
     /// records reject before they reject the prediction itself departs by more than the floor
     /// record is uncertain: the probe then shrinks tenfold, down to the records' rounding.
+    /// `prediction` is `predict(self)`, already made.
     pub fn with_sensitivity(
         &self,
         evidence: &Evidence,
+        mut prediction: Prediction,
         predict: impl Fn(&Case) -> Result<Prediction, String>,
     ) -> Result<Prediction, String> {
-        let mut prediction = predict(self)?;
         let disagrees_from = |p: &Prediction| evidence.window(p).map_or(f64::INFINITY, |w| w.0);
         let own = disagrees_from(&prediction);
         let mut twin = predict(&self.probed(SENSITIVITY_PROBES[0]))?;
@@ -274,7 +275,7 @@ pub fn diagnose(case: &Case, settings: &Settings) -> Result<Diagnosis, String> {
         },
     )?;
     let evidence = Evidence::new(case, &nominal, &variant, settings.exceedance_sigma);
-    let baseline = case.with_sensitivity(&evidence, |c| Ok(c.simulate(&c.block, &options)?.1))?;
+    let baseline = case.with_sensitivity(&evidence, nominal, |c| Ok(c.simulate(&c.block, &options)?.1))?;
     let base_misfit = evidence.misfit(&baseline);
     let window = evidence.window(&baseline);
     let n = base_misfit.samples.max(1) as f64;
