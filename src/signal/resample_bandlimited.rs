@@ -41,6 +41,7 @@
 //!   `filtfilt(padtype="odd")`).  The first/last `H` samples (≈ 0.3–0.5 s at the
 //!   default specs) are therefore less accurate than the interior.
 
+use super::dot;
 use std::f64::consts::PI;
 
 /// Filter specification.  Frequencies are fractions of a Nyquist frequency (see the
@@ -70,20 +71,29 @@ pub fn resample_to_rate(x: &[f64], fs_in: f64, fs_out: f64) -> Vec<f64> {
 
 /// [`resample_to_rate`] with an explicit spec (fractions of the Nyquist of min(fs_in, fs_out)).
 pub fn resample_to_rate_with(x: &[f64], fs_in: f64, fs_out: f64, spec: &KernelSpec) -> Vec<f64> {
+    resample_channels_with(&[x], fs_in, fs_out, spec).pop().expect("one channel in, one out")
+}
+
+/// [`resample_to_rate`] of several channels of one record (same rate and length): the filter
+/// weights are computed once per output phase and shared by every channel.
+pub fn resample_channels(channels: &[&[f64]], fs_in: f64, fs_out: f64) -> Vec<Vec<f64>> {
+    resample_channels_with(channels, fs_in, fs_out, &RESAMPLE_SPEC)
+}
+
+fn resample_channels_with(channels: &[&[f64]], fs_in: f64, fs_out: f64, spec: &KernelSpec) -> Vec<Vec<f64>> {
     assert!(fs_in.is_finite() && fs_in > 0.0, "fs_in must be finite and > 0");
     assert!(fs_out.is_finite() && fs_out > 0.0, "fs_out must be finite and > 0");
-    if x.is_empty() {
-        return Vec::new();
+    let n = common_length(channels);
+    if n == 0 {
+        return vec![Vec::new(); channels.len()];
     }
     if fs_in == fs_out {
-        return x.to_vec();
+        return channels.iter().map(|x| x.to_vec()).collect();
     }
-    let t_last = (x.len() - 1) as f64 / fs_in;
+    let t_last = (n - 1) as f64 / fs_in;
     let k_max = (t_last * fs_out + 1e-9).floor() as usize;
-    let times: Vec<f64> = (0..=k_max).map(|k| k as f64 / fs_out).collect();
-    let f_nyq = 0.5 * fs_in.min(fs_out);
-    let kernel = Kernel::new(fs_in, f_nyq, spec);
-    kernel.eval(x, fs_in, &times)
+    let kernel = Kernel::new(fs_in, 0.5 * fs_in.min(fs_out), spec);
+    kernel.eval_grid(channels, 0.0, fs_in / fs_out, k_max + 1)
 }
 
 /// Band-limited interpolation of `x` (rate `fs`, first sample at t = 0) at arbitrary
@@ -99,7 +109,24 @@ pub fn sample_at_with(x: &[f64], fs: f64, times: &[f64], spec: &KernelSpec) -> V
         return vec![f64::NAN; times.len()];
     }
     let kernel = Kernel::new(fs, 0.5 * fs, spec);
-    kernel.eval(x, fs, times)
+    let mut weights = Vec::new();
+    times.iter().map(|&t| kernel.value_at(x, t * fs, &mut weights)).collect()
+}
+
+/// [`sample_at`] of several channels (rate `fs`, same length) on the uniform grid
+/// `t0 + k/fs`, k < n: a fractional delay, so one set of filter weights serves every sample.
+pub fn sample_grid(channels: &[&[f64]], fs: f64, t0: f64, n: usize) -> Vec<Vec<f64>> {
+    assert!(fs.is_finite() && fs > 0.0, "fs must be finite and > 0");
+    if common_length(channels) == 0 {
+        return vec![vec![f64::NAN; n]; channels.len()];
+    }
+    Kernel::new(fs, 0.5 * fs, &INTERP_SPEC).eval_grid(channels, t0 * fs, 1.0, n)
+}
+
+fn common_length(channels: &[&[f64]]) -> usize {
+    let n = channels.first().map_or(0, |x| x.len());
+    assert!(channels.iter().all(|x| x.len() == n), "channels of one record must have the same length");
+    n
 }
 
 /// Zeroth-order modified Bessel function of the first kind (power series; converges
@@ -168,58 +195,117 @@ impl Kernel {
         self.win[i] + f * (self.win[i + 1] - self.win[i])
     }
 
-    fn eval(&self, x: &[f64], fs_in: f64, times: &[f64]) -> Vec<f64> {
-        let n = x.len();
-        let last = (n - 1) as f64;
-        // Repeated odd (point-symmetric) reflection about the end samples; exact for
-        // straight lines whatever the record length.
-        let get = |i: isize| -> f64 {
-            if n == 1 {
-                return x[0];
-            }
-            let (mut i, mut sign, mut off) = (i, 1.0, 0.0);
-            let top = (n - 1) as isize;
-            loop {
-                if i < 0 {
-                    off += sign * 2.0 * x[0];
-                    sign = -sign;
-                    i = -i;
-                } else if i > top {
-                    off += sign * 2.0 * x[n - 1];
-                    sign = -sign;
-                    i = 2 * top - i;
-                } else {
-                    return off + sign * x[i as usize];
-                }
-            }
-        };
+    /// Filter weights for the value at `u` (input-sample units, inside the record): fills
+    /// `weights` with the taps for samples `n0, n0+1, …` and returns `n0`.
+    fn taps(&self, u: f64, weights: &mut Vec<f64>) -> isize {
         let pc = PI * self.c;
         let (sd, cd) = pc.sin_cos(); // rotation by one sample
-        times
-            .iter()
-            .map(|&t| {
-                let u = t * fs_in;
-                if !u.is_finite() || u < -1e-9 || u > last + 1e-9 {
-                    return f64::NAN;
-                }
-                let u = u.clamp(0.0, last);
-                let n0 = (u - self.half).ceil() as isize;
-                let n1 = (u + self.half).floor() as isize;
-                // θ_k = π c (u − k); sin/cos advanced by the recurrence θ_{k+1} = θ_k − πc.
-                let (mut s, mut co) = (pc * (u - n0 as f64)).sin_cos();
-                let mut acc = 0.0;
-                for k in n0..=n1 {
-                    let d = u - k as f64;
-                    let sinc = if d.abs() < 1e-9 { 1.0 } else { s / (pc * d) };
-                    let w = self.window(d.abs());
-                    acc += get(k) * self.c * sinc * w;
-                    let s_new = s * cd - co * sd;
-                    co = co * cd + s * sd;
-                    s = s_new;
-                }
-                acc
-            })
-            .collect()
+        let n0 = (u - self.half).ceil() as isize;
+        let n1 = (u + self.half).floor() as isize;
+        // θ_k = π c (u − k); sin/cos advanced by the recurrence θ_{k+1} = θ_k − πc.
+        let (mut s, mut co) = (pc * (u - n0 as f64)).sin_cos();
+        weights.clear();
+        for k in n0..=n1 {
+            let d = u - k as f64;
+            let sinc = if d.abs() < 1e-9 { 1.0 } else { s / (pc * d) };
+            weights.push(self.c * sinc * self.window(d.abs()));
+            let s_new = s * cd - co * sd;
+            co = co * cd + s * sd;
+            s = s_new;
+        }
+        n0
+    }
+
+    /// `u` checked against the record `[0, n−1]` (1e-9 sample tolerance, then clamped).
+    fn inside(u: f64, n: usize) -> Option<f64> {
+        let last = (n - 1) as f64;
+        (u.is_finite() && u >= -1e-9 && u <= last + 1e-9).then(|| u.clamp(0.0, last))
+    }
+
+    fn value_at(&self, x: &[f64], u: f64, weights: &mut Vec<f64>) -> f64 {
+        let Some(u) = Self::inside(u, x.len()) else { return f64::NAN };
+        let n0 = self.taps(u, weights);
+        apply(x, n0, weights)
+    }
+
+    /// Every channel at `u_k = u0 + k·step` (input-sample units), k < n.  When the step is a
+    /// ratio p/q of small integers (256 → 200 Hz: 32/25; a fractional delay: 1/1) the phase
+    /// of `u_k` repeats every q outputs, so only q sets of weights are computed.
+    fn eval_grid(&self, channels: &[&[f64]], u0: f64, step: f64, n: usize) -> Vec<Vec<f64>> {
+        let last = (channels[0].len() - 1) as f64;
+        let mut out: Vec<Vec<f64>> = channels.iter().map(|_| Vec::with_capacity(n)).collect();
+        let mut emit = |u: f64, n0: isize, weights: &[f64], scratch: &mut Vec<f64>| {
+            for (x, y) in channels.iter().zip(out.iter_mut()) {
+                // Within the tolerance of an end (clamped) or outside (NaN): rare, one by one.
+                y.push(if (0.0..=last).contains(&u) { apply(x, n0, weights) } else { self.value_at(x, u, scratch) });
+            }
+        };
+        let mut scratch = Vec::new();
+        let period = (1..=MAX_PERIOD).find(|&q| {
+            let span = q as f64 * step;
+            (span - span.round()).abs() < 1e-9
+        });
+        if let Some(period) = period {
+            let jump = (period as f64 * step).round();
+            let phases: Vec<(f64, isize, Vec<f64>)> = (0..period.min(n))
+                .map(|r| {
+                    let base = u0 + r as f64 * step;
+                    let mut weights = Vec::new();
+                    let n0 = self.taps(base, &mut weights);
+                    (base, n0, weights)
+                })
+                .collect();
+            for k in 0..n {
+                let (base, n0, weights) = &phases[k % period];
+                // Shifting u by a whole number of samples shifts the taps and keeps the weights.
+                let whole = (k / period) as f64 * jump;
+                emit(base + whole, n0 + whole as isize, weights, &mut scratch);
+            }
+        } else {
+            let mut weights = Vec::new();
+            for k in 0..n {
+                let u = u0 + k as f64 * step;
+                let n0 = if (0.0..=last).contains(&u) { self.taps(u, &mut weights) } else { 0 };
+                emit(u, n0, &weights, &mut scratch);
+            }
+        }
+        out
+    }
+}
+
+/// Longest output period searched for repeating filter phases (the rate ratio's denominator).
+const MAX_PERIOD: usize = 4096;
+
+/// Σ weights[j]·x[n0 + j], with the record's odd reflection for taps beyond its ends.
+fn apply(x: &[f64], n0: isize, weights: &[f64]) -> f64 {
+    let n = x.len();
+    if n0 >= 0 && n0 as usize + weights.len() <= n {
+        return dot(&x[n0 as usize..n0 as usize + weights.len()], weights);
+    }
+    weights.iter().enumerate().map(|(j, w)| w * reflected(x, n0 + j as isize)).sum()
+}
+
+/// `x[i]` for any `i`: repeated odd (point-symmetric) reflection about the end samples, exact
+/// for straight lines whatever the record length.
+fn reflected(x: &[f64], i: isize) -> f64 {
+    let n = x.len();
+    if n == 1 {
+        return x[0];
+    }
+    let (mut i, mut sign, mut off) = (i, 1.0, 0.0);
+    let top = (n - 1) as isize;
+    loop {
+        if i < 0 {
+            off += sign * 2.0 * x[0];
+            sign = -sign;
+            i = -i;
+        } else if i > top {
+            off += sign * 2.0 * x[n - 1];
+            sign = -sign;
+            i = 2 * top - i;
+        } else {
+            return off + sign * x[i as usize];
+        }
     }
 }
 

@@ -62,7 +62,7 @@
 //! returned as is (refinement is confined to the range); widen `max_lag_s` if `|lag_s|`
 //! equals the limit.
 
-use super::resample_bandlimited::sample_at;
+use super::resample_bandlimited::sample_grid;
 use rustfft::num_complex::Complex;
 use rustfft::FftPlanner;
 use std::f64::consts::PI;
@@ -94,12 +94,17 @@ pub fn estimate_lag(reference: &[f64], target: &[f64], fs: f64, max_lag_s: Optio
 }
 
 /// Return the target on the reference clock: `y[k] = x(k/fs + lag_s)` (band-limited
-/// interpolation, [`sample_at`]).  If `target(t) ≈ reference(t − lag)` then
+/// interpolation, [`super::resample_bandlimited::sample_at`]).  If `target(t) ≈ reference(t − lag)` then
 /// `shift(target, fs, lag)[k] ≈ reference(k/fs)`.  Samples whose time `k/fs + lag_s`
 /// falls outside the record are `NaN`.  Same length as `x`.
 pub fn shift(x: &[f64], fs: f64, lag_s: f64) -> Vec<f64> {
-    let times: Vec<f64> = (0..x.len()).map(|k| k as f64 / fs + lag_s).collect();
-    sample_at(x, fs, &times)
+    shift_channels(&[x], fs, lag_s).pop().expect("one channel in, one out")
+}
+
+/// [`shift`] of several channels of one record (same length) by the same lag.
+pub fn shift_channels(channels: &[&[f64]], fs: f64, lag_s: f64) -> Vec<Vec<f64>> {
+    let n = channels.first().map_or(0, |x| x.len());
+    sample_grid(channels, fs, lag_s, n)
 }
 
 fn check_signal(name: &str, x: &[f64]) -> Result<Vec<f64>, String> {

@@ -13,8 +13,8 @@ use rayon::prelude::*;
 use super::{partition_path, InputKind, InputPart, OutputInfo, Stage, StageContext, StageInfo};
 use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
-use crate::signal::resample_bandlimited::resample_to_rate;
-use crate::signal::sync::{estimate_lag, shift};
+use crate::signal::resample_bandlimited::resample_channels;
+use crate::signal::sync::{estimate_lag, shift_channels};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct Synchronize;
@@ -128,25 +128,30 @@ fn align(
             clock.column_names().join(", ")
         )
     })?;
-    let to_reference_rate = |x: &[f64]| resample_to_rate(x, fs_target, fs);
-    let sync = target.f64_column(target_channel).ok_or_else(|| {
+    let sync_index = target.columns.iter().position(|c| c.name == target_channel && c.as_f64().is_some());
+    let sync_index = sync_index.ok_or_else(|| {
         format!("the target has no float column `{target_channel}`; columns: {}", target.column_names().join(", "))
     })?;
-    let sync = to_reference_rate(sync);
+    let float_columns: Vec<(usize, &Column, &[f64])> = (target.columns.iter().enumerate())
+        .filter(|(_, c)| c.name != TIME_COLUMN)
+        .filter_map(|(i, c)| c.as_f64().map(|v| (i, c, v)))
+        .collect();
+    // All channels at once: the filter weights are shared by the channels of a record.
+    let values: Vec<&[f64]> = float_columns.iter().map(|(_, _, v)| *v).collect();
+    let resampled = resample_channels(&values, fs_target, fs);
+    let sync = &resampled
+        [float_columns.iter().position(|(i, _, _)| *i == sync_index).expect("the sync channel is a float column")];
     let (lag_s, uncertainty, correlation, method) = match known_lag {
         Some(lag) => (lag, 0.0, None, "known"),
         None => {
-            let e = estimate_lag(reference, &sync, fs, Some(params.f64_of("max_lag_s")))?;
+            let e = estimate_lag(reference, sync, fs, Some(params.f64_of("max_lag_s")))?;
             (e.lag_s, e.uncertainty_s, Some(e.correlation), "estimated")
         }
     };
     // Aligned target on the reference grid: target value at reference time t is target(t + lag).
-    let target_columns: Vec<(&Column, Vec<f64>)> = target
-        .columns
-        .iter()
-        .filter(|c| c.name != TIME_COLUMN)
-        .filter_map(|c| c.as_f64().map(|v| (c, shift(&to_reference_rate(v), fs, lag_s))))
-        .collect();
+    let resampled: Vec<&[f64]> = resampled.iter().map(Vec::as_slice).collect();
+    let target_columns: Vec<(&Column, Vec<f64>)> =
+        float_columns.iter().map(|(_, c, _)| *c).zip(shift_channels(&resampled, fs, lag_s)).collect();
     let n_reference = references.iter().map(|(_, t)| t.num_rows()).min().unwrap_or(0);
     let valid = |k: usize| target_columns.iter().all(|(_, v)| k < v.len() && v[k].is_finite());
     let first =
