@@ -4,6 +4,8 @@
 //! records of any length; raw-seconds monomials of a 120 s record would square a condition
 //! number of ~10⁷ in the normal equations.
 
+use super::dot;
+
 /// p(t) = Σ coefficients[k] · ((t − center)/half_span)^k
 #[derive(Debug, Clone, PartialEq)]
 pub struct ScaledPolynomial {
@@ -14,7 +16,11 @@ pub struct ScaledPolynomial {
 
 impl ScaledPolynomial {
     pub fn eval(&self, t: f64) -> f64 {
-        let x = (t - self.center) / self.half_span;
+        self.eval_scaled((t - self.center) / self.half_span)
+    }
+
+    /// p at scaled time x = (t − center)/half_span.
+    pub fn eval_scaled(&self, x: f64) -> f64 {
         self.coefficients.iter().rev().fold(0.0, |acc, &c| acc * x + c)
     }
 
@@ -39,59 +45,92 @@ fn binomial(n: usize, k: usize) -> f64 {
 
 /// Fits a polynomial of `order` to (t, y) by least squares. Needs more samples than coefficients.
 pub fn fit_polynomial(t: &[f64], y: &[f64], order: usize) -> ScaledPolynomial {
-    assert_eq!(t.len(), y.len(), "time and values differ in length");
-    let n = t.len();
-    let m = order + 1;
-    assert!(n >= m, "{n} samples cannot determine {m} polynomial coefficients");
-    let (lo, hi) = t.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
-    let center = 0.5 * (lo + hi);
-    let half_span = if hi > lo { 0.5 * (hi - lo) } else { 1.0 };
-    // Column-major design matrix of scaled monomials.
-    let mut a: Vec<Vec<f64>> =
-        (0..m).map(|k| t.iter().map(|&ti| ((ti - center) / half_span).powi(k as i32)).collect()).collect();
-    let mut b = y.to_vec();
-    let coefficients = householder_least_squares(&mut a, &mut b);
-    ScaledPolynomial { center, half_span, coefficients }
-}
-
-/// Solves min‖A x − b‖ for a tall, column-major A (overwritten with R and reflectors).
-fn householder_least_squares(a: &mut [Vec<f64>], b: &mut [f64]) -> Vec<f64> {
-    let m = a.len();
-    let n = b.len();
-    let mut diag = vec![0.0; m];
-    for k in 0..m {
-        let norm = a[k][k..].iter().map(|v| v * v).sum::<f64>().sqrt();
-        let alpha = if a[k][k] > 0.0 { -norm } else { norm };
-        diag[k] = alpha;
-        a[k][k] -= alpha; // v = x − alpha e1, stored in place
-        let vnorm2: f64 = a[k][k..].iter().map(|v| v * v).sum();
-        if vnorm2 == 0.0 {
-            continue;
-        }
-        let (done, rest) = a.split_at_mut(k + 1);
-        let v = &done[k][k..];
-        for column in rest.iter_mut() {
-            let dot: f64 = v.iter().zip(&column[k..]).map(|(p, q)| p * q).sum();
-            let f = 2.0 * dot / vnorm2;
-            column[k..].iter_mut().zip(v).for_each(|(c, vi)| *c -= f * vi);
-        }
-        let dot: f64 = v.iter().zip(&b[k..n]).map(|(p, q)| p * q).sum();
-        let f = 2.0 * dot / vnorm2;
-        b[k..n].iter_mut().zip(v).for_each(|(c, vi)| *c -= f * vi);
-    }
-    let mut x = vec![0.0; m];
-    for k in (0..m).rev() {
-        let s: f64 = (k + 1..m).map(|j| a[j][k] * x[j]).sum();
-        x[k] = (b[k] - s) / diag[k];
-    }
-    x
+    PolynomialBasis::new(t, order).fit(y)
 }
 
 /// Subtracts the fitted polynomial; returns the corrected values and the fit.
 pub fn remove_polynomial(t: &[f64], y: &[f64], order: usize) -> (Vec<f64>, ScaledPolynomial) {
-    let fit = fit_polynomial(t, y, order);
-    let corrected = t.iter().zip(y).map(|(&ti, &yi)| yi - fit.eval(ti)).collect();
-    (corrected, fit)
+    PolynomialBasis::new(t, order).remove(y)
+}
+
+/// The QR factorisation of the scaled-monomial design matrix of one time base: every channel
+/// of a record shares it, so each further fit costs one pass of the reflectors over its values.
+pub struct PolynomialBasis {
+    center: f64,
+    half_span: f64,
+    /// Scaled time x = (t − center)/half_span.
+    x: Vec<f64>,
+    /// Column-major R above the diagonal and the Householder vectors on and below it.
+    reflectors: Vec<Vec<f64>>,
+    /// R's diagonal.
+    diag: Vec<f64>,
+    /// ‖v_k‖² of each Householder vector.
+    norms2: Vec<f64>,
+}
+
+impl PolynomialBasis {
+    /// Needs more samples than coefficients.
+    pub fn new(t: &[f64], order: usize) -> Self {
+        let n = t.len();
+        let m = order + 1;
+        assert!(n >= m, "{n} samples cannot determine {m} polynomial coefficients");
+        let (lo, hi) = t.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        let center = 0.5 * (lo + hi);
+        let half_span = if hi > lo { 0.5 * (hi - lo) } else { 1.0 };
+        let x: Vec<f64> = t.iter().map(|&ti| (ti - center) / half_span).collect();
+        // Column-major design matrix of scaled monomials, x^k = x^(k−1)·x.
+        let mut reflectors = vec![vec![1.0; n]];
+        for k in 1..m {
+            let next = reflectors[k - 1].iter().zip(&x).map(|(p, xi)| p * xi).collect();
+            reflectors.push(next);
+        }
+        let (mut diag, mut norms2) = (vec![0.0; m], vec![0.0; m]);
+        for k in 0..m {
+            let a = &mut reflectors;
+            let norm = dot(&a[k][k..], &a[k][k..]).sqrt();
+            let alpha = if a[k][k] > 0.0 { -norm } else { norm };
+            diag[k] = alpha;
+            a[k][k] -= alpha; // v = x − alpha e1, stored in place
+            norms2[k] = dot(&a[k][k..], &a[k][k..]);
+            let (done, rest) = a.split_at_mut(k + 1);
+            for column in rest.iter_mut() {
+                reflect(&done[k][k..], norms2[k], &mut column[k..]);
+            }
+        }
+        PolynomialBasis { center, half_span, x, reflectors, diag, norms2 }
+    }
+
+    /// The least-squares polynomial through (t, y).
+    pub fn fit(&self, y: &[f64]) -> ScaledPolynomial {
+        assert_eq!(self.x.len(), y.len(), "time and values differ in length");
+        let m = self.diag.len();
+        let mut b = y.to_vec();
+        for k in 0..m {
+            reflect(&self.reflectors[k][k..], self.norms2[k], &mut b[k..]);
+        }
+        let mut c = vec![0.0; m];
+        for k in (0..m).rev() {
+            let s: f64 = (k + 1..m).map(|j| self.reflectors[j][k] * c[j]).sum();
+            c[k] = (b[k] - s) / self.diag[k];
+        }
+        ScaledPolynomial { center: self.center, half_span: self.half_span, coefficients: c }
+    }
+
+    /// `y` minus its fitted polynomial, and the fit.
+    pub fn remove(&self, y: &[f64]) -> (Vec<f64>, ScaledPolynomial) {
+        let fit = self.fit(y);
+        let corrected = self.x.iter().zip(y).map(|(&x, &yi)| yi - fit.eval_scaled(x)).collect();
+        (corrected, fit)
+    }
+}
+
+/// Applies the Householder reflection I − 2vvᵀ/‖v‖² to `column` (a zero `v` is the identity).
+fn reflect(v: &[f64], vnorm2: f64, column: &mut [f64]) {
+    if vnorm2 == 0.0 {
+        return;
+    }
+    let f = 2.0 * dot(v, column) / vnorm2;
+    column.iter_mut().zip(v).for_each(|(c, vi)| *c -= f * vi);
 }
 
 #[cfg(test)]

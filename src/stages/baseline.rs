@@ -7,7 +7,7 @@ use serde_json::json;
 use super::{InputKind, OutputInfo, Stage, StageContext, StageInfo};
 use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
-use crate::signal::baseline::remove_polynomial;
+use crate::signal::baseline::PolynomialBasis;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct Baseline;
@@ -83,6 +83,7 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
             None => return Err(format!("no column `{name}`; columns: {}", table.column_names().join(", "))),
         }
     }
+    let basis = PolynomialBasis::new(time, order);
     let mut out = Table { columns: Vec::new(), metadata: table.metadata.clone() };
     let mut fits = serde_json::Map::new();
     for column in &table.columns {
@@ -101,7 +102,7 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
                 i + 1
             ));
         }
-        let (corrected, fit) = remove_polynomial(time, values, order);
+        let (corrected, fit) = basis.remove(values);
         let rms_removed =
             (values.iter().zip(&corrected).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / values.len() as f64).sqrt();
         fits.insert(
