@@ -36,7 +36,7 @@ impl Stage for Load {
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let jobs: Vec<(&SourceSpec, &str, &InputPart)> = ctx
+        let jobs: Vec<Job<'_>> = ctx
             .inputs
             .iter()
             .flat_map(|input| match input {
@@ -47,12 +47,44 @@ impl Stage for Load {
             })
             .collect();
         ctx.sink.set_total(jobs.len());
-        jobs.par_iter().try_for_each(|(spec, source, part)| {
-            let mut table = load_record(spec, part).map_err(anyhow::Error::new)?;
-            table.metadata.insert("shakeflow.source".into(), source.to_string());
-            table.metadata.extend(super::record_provenance(part));
-            ctx.sink.write("records", &part.partition, table)
+        // Sources that read the same file the same way (a DAQ export split into floors) share
+        // one parse.
+        let mut files: BTreeMap<(&std::path::Path, ParseKey<'_>), Vec<Job<'_>>> = BTreeMap::new();
+        for job in &jobs {
+            files.entry((job.2.path.as_path(), ParseKey::of(job.0))).or_default().push(*job);
+        }
+        files.into_par_iter().try_for_each(|((path, _), jobs)| {
+            let raw = parse(jobs[0].0, path).map_err(anyhow::Error::new)?;
+            jobs.into_par_iter().try_for_each(|(spec, source, part)| {
+                let mut table = load_parsed(spec, part, &raw).map_err(anyhow::Error::new)?;
+                table.metadata.insert("shakeflow.source".into(), source.to_string());
+                table.metadata.extend(super::record_provenance(part));
+                ctx.sink.write("records", &part.partition, table)
+            })
         })
+    }
+}
+
+/// One record file to load: the source's spec, the source's name and the file.
+type Job<'a> = (&'a SourceSpec, &'a str, &'a InputPart);
+
+/// What decides how a file parses: sources equal in these read it identically.
+#[derive(PartialEq, Eq, PartialOrd, Ord)]
+struct ParseKey<'a> {
+    format: String,
+    header_lines: usize,
+    column_names: bool,
+    delimiter: Option<&'a str>,
+}
+
+impl<'a> ParseKey<'a> {
+    fn of(spec: &'a SourceSpec) -> Self {
+        ParseKey {
+            format: spec.format.name(),
+            header_lines: spec.header_lines,
+            column_names: spec.column_names,
+            delimiter: spec.delimiter.as_deref(),
+        }
     }
 }
 
@@ -93,23 +125,27 @@ fn parse(spec: &SourceSpec, path: &std::path::Path) -> Result<RawRecord, UserErr
 
 /// Reads one file as the source spec says; every refusal names the file and, where it can, the line.
 pub fn load_record(spec: &SourceSpec, part: &InputPart) -> Result<Table, UserError> {
+    load_parsed(spec, part, &parse(spec, part.path.as_path())?)
+}
+
+/// [`load_record`] of a file already parsed as `spec` says.
+fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Table, UserError> {
     let path = part.path.as_path();
-    let mut raw = parse(spec, path)?;
     let err = |message: String| UserError::new(message).in_file(path);
 
     // Time: an explicit column, the file's own time (RENADIC), or a sample interval.
     let explicit_time: Option<(Vec<f64>, Option<usize>)> = if let Some(name) = &spec.time_column {
-        let index = raw.channels.iter().position(|c| &c.name == name).ok_or_else(|| {
-            missing_column(path, name, &raw)
-                .hint(format!("set `time_column` to one of the file's columns, or drop it and give `dt`"))
+        let channel = raw.channels.iter().find(|c| &c.name == name).ok_or_else(|| {
+            missing_column(path, name, raw)
+                .hint("set `time_column` to one of the file's columns, or drop it and give `dt`")
         })?;
-        let channel = raw.channels.remove(index);
         let factor = spec.time_unit.as_deref().and_then(units::conversion).map_or(1.0, |c| c.factor);
         Some((channel.values.iter().map(|v| v * factor).collect(), channel.first_data_line))
     } else {
-        raw.time.take().map(|t| (t, raw.channels.first().and_then(|c| c.first_data_line)))
+        raw.time.clone().map(|t| (t, raw.channels.first().and_then(|c| c.first_data_line)))
     };
-    let n = raw.channels.first().map_or(0, |c| c.values.len());
+    let is_time = |c: &records::RawChannel| spec.time_column.as_ref() == Some(&c.name);
+    let n = raw.channels.iter().find(|c| !is_time(c)).map_or(0, |c| c.values.len());
     if n < 2 {
         return Err(err(format!("the record has {n} sample(s); at least 2 are needed")));
     }
@@ -149,7 +185,7 @@ pub fn load_record(spec: &SourceSpec, part: &InputPart) -> Result<Table, UserErr
     };
 
     let selected: Vec<(String, &records::RawChannel, Option<&ColumnSpec>)> = if spec.columns.is_empty() {
-        raw.channels.iter().map(|c| (c.name.clone(), c, None)).collect()
+        raw.channels.iter().filter(|c| !is_time(c)).map(|c| (c.name.clone(), c, None)).collect()
     } else {
         spec.columns
             .iter()
@@ -158,7 +194,7 @@ pub fn load_record(spec: &SourceSpec, part: &InputPart) -> Result<Table, UserErr
                     .channels
                     .iter()
                     .find(|c| c.name == cs.file_column())
-                    .ok_or_else(|| missing_column(path, cs.file_column(), &raw))?;
+                    .ok_or_else(|| missing_column(path, cs.file_column(), raw))?;
                 Ok((out.clone(), channel, Some(cs)))
             })
             .collect::<Result<_, UserError>>()?
