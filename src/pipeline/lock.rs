@@ -68,7 +68,7 @@ impl LockFile {
 
     pub fn write(&self, path: &Path) -> anyhow::Result<()> {
         let body = serde_yaml::to_string(self)?;
-        atomic::write_file(path, |w| {
+        atomic::write_file_durable(path, |w| {
             use std::io::Write;
             w.write_all(b"# Written by `shakeflow run`; records what each stage ran with. Do not edit.\n")?;
             w.write_all(body.as_bytes())?;
