@@ -362,6 +362,38 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
 
 type StagesResult = (Vec<StageReport>, LockFile, Vec<String>);
 
+/// What every stage of one run reads and fills in.
+struct RunEnv<'a> {
+    plan: &'a Plan,
+    forced: &'a BTreeSet<String>,
+    lock: &'a LockFile,
+    sources: &'a BTreeMap<String, ResolvedSource>,
+    files: &'a BTreeMap<String, BTreeMap<String, String>>,
+    output_dir: &'a Path,
+    staging: &'a Path,
+    reporter: &'a Reporter,
+    produced: Mutex<BTreeMap<String, Produced>>,
+    entries: Mutex<BTreeMap<String, StageLock>>,
+    reports: Mutex<BTreeMap<String, StageReport>>,
+    /// Per stage, how many of its upstream stages have not finished yet.
+    waiting_on: Mutex<BTreeMap<&'a str, usize>>,
+    /// Per stage, the stages that consume its outputs.
+    dependents: BTreeMap<&'a str, Vec<&'a PlannedStage>>,
+    /// The first failure; once set, no further stage starts.
+    failure: Mutex<Option<anyhow::Error>>,
+}
+
+fn upstream_stages(stage: &PlannedStage) -> BTreeSet<&str> {
+    stage
+        .inputs
+        .iter()
+        .filter_map(|i| match i {
+            InputRef::Stage { stage, .. } => Some(stage.as_str()),
+            InputRef::Source(_) => None,
+        })
+        .collect()
+}
+
 #[allow(clippy::too_many_arguments)]
 fn run_stages(
     plan: &Plan,
@@ -373,87 +405,41 @@ fn run_stages(
     staging: &Path,
     reporter: &Reporter,
 ) -> anyhow::Result<StagesResult> {
-    let produced: Mutex<BTreeMap<String, Produced>> = Mutex::new(BTreeMap::new());
-    let entries: Mutex<BTreeMap<String, StageLock>> = Mutex::new(BTreeMap::new());
-    let reports: Mutex<BTreeMap<String, StageReport>> = Mutex::new(BTreeMap::new());
-    let mut remaining: Vec<&PlannedStage> = plan.stages.values().collect();
-    while !remaining.is_empty() {
-        // A wave: every stage whose upstream stages are all finished runs now, side by side.
-        let finished: BTreeSet<String> = produced.lock().expect("no poisoned lock").keys().cloned().collect();
-        let (ready, waiting): (Vec<&PlannedStage>, Vec<&PlannedStage>) = remaining.into_iter().partition(|s| {
-            s.inputs.iter().all(|i| match i {
-                InputRef::Source(_) => true,
-                InputRef::Stage { stage, .. } => finished.contains(stage),
-            })
-        });
-        remaining = waiting;
-        ready.par_iter().try_for_each(|stage| -> anyhow::Result<()> {
-            let snapshot = produced.lock().expect("no poisoned lock").clone();
-            let hashes = input_hashes_for(stage, sources, &snapshot, files).expect("upstream stages finished");
-            let assessment = assess(stage, Some(&hashes), lock, output_dir)?;
-            let info = stage.stage.info();
-            let (done, report) = if assessment.reasons.is_empty() && !forced.contains(&stage.name) {
-                reporter.line(&format!("{:<18} cached", stage.name));
-                let entry = lock.stages[&stage.name].clone();
-                entries.lock().expect("no poisoned lock").insert(stage.name.clone(), entry.clone());
-                (Produced { dir: output_dir.join(&stage.name), outputs: entry.outputs }, Outcome::Cached)
-            } else {
-                let why =
-                    if forced.contains(&stage.name) { "forced".to_string() } else { assessment.reasons.join("; ") };
-                let started = Instant::now();
-                let dir = staging.join(&stage.name);
-                let inputs = stage_inputs(stage, sources, &snapshot)?;
-                let records: usize = inputs.iter().map(|i| i.parts().len()).sum();
-                let bar = reporter.stage_bar(&stage.name, records as u64);
-                reporter.line(&format!("{:<18} running ({why})", stage.name));
-                let sink = OutputSink::new(&dir, &stage.name, info, &stage.params, &hashes, bar.clone());
-                let base_dir = plan.file.base_dir();
-                let ctx = StageContext {
-                    stage_name: &stage.name,
-                    params: &stage.params,
-                    inputs: &inputs,
-                    sink: &sink,
-                    base_dir: &base_dir,
-                };
-                stage.stage.run(&ctx).with_context(|| {
-                    format!("stage `{}` (type `{}`) failed; nothing was changed on disk", stage.name, info.name)
-                })?;
-                bar.finish_and_clear();
-                let mut outputs = BTreeMap::new();
-                for output in info.outputs {
-                    std::fs::create_dir_all(dir.join(output.name))?;
-                    let (hash, files) = super::sink::output_hash(&dir, output.name)?;
-                    outputs.insert(
-                        output.name.to_string(),
-                        OutputLock { path: format!("{}/{}", stage.name, output.name), hash, files },
-                    );
-                }
-                let files: usize = outputs.values().map(|o| o.files).sum();
-                let seconds = started.elapsed().as_secs_f64();
-                reporter.line(&format!(
-                    "{:<18} done in {seconds:.2} s ({records} records in, {files} files out)",
-                    stage.name
-                ));
-                let entry = StageLock {
-                    stage_type: info.name.to_string(),
-                    stage_version: info.version,
-                    key: assessment.key,
-                    params: serde_json::Value::Object(stage.params.clone()),
-                    select: stage.select.clone(),
-                    inputs: hashes,
-                    outputs: outputs.clone(),
-                };
-                entries.lock().expect("no poisoned lock").insert(stage.name.clone(), entry);
-                (Produced { dir, outputs }, Outcome::Ran { seconds, records })
-            };
-            produced.lock().expect("no poisoned lock").insert(stage.name.clone(), done);
-            reports
-                .lock()
-                .expect("no poisoned lock")
-                .insert(stage.name.clone(), StageReport { name: stage.name.clone(), outcome: report });
-            Ok(())
-        })?;
+    let mut dependents: BTreeMap<&str, Vec<&PlannedStage>> = BTreeMap::new();
+    let mut waiting_on = BTreeMap::new();
+    for stage in plan.stages.values() {
+        let upstream = upstream_stages(stage);
+        waiting_on.insert(stage.name.as_str(), upstream.len());
+        for name in upstream {
+            dependents.entry(name).or_default().push(stage);
+        }
     }
+    let env = RunEnv {
+        plan,
+        forced,
+        lock,
+        sources,
+        files,
+        output_dir,
+        staging,
+        reporter,
+        produced: Mutex::new(BTreeMap::new()),
+        entries: Mutex::new(BTreeMap::new()),
+        reports: Mutex::new(BTreeMap::new()),
+        waiting_on: Mutex::new(waiting_on),
+        dependents,
+        failure: Mutex::new(None),
+    };
+    // A stage starts as soon as its own upstream stages are done, not when a whole "wave" is.
+    rayon::scope(|scope| {
+        for stage in plan.stages.values().filter(|s| upstream_stages(s).is_empty()) {
+            start(&env, scope, stage);
+        }
+    });
+    if let Some(error) = env.failure.into_inner().map_err(|_| anyhow!("a stage panicked"))? {
+        return Err(error);
+    }
+    let (reports, entries) = (env.reports, env.entries);
     let reports = reports.into_inner().map_err(|_| anyhow!("a stage panicked"))?;
     let ordered: Vec<StageReport> = plan.stages.keys().map(|n| reports[n].clone()).collect();
     let rerun: Vec<String> =
@@ -463,4 +449,92 @@ fn run_stages(
         stages: entries.into_inner().map_err(|_| anyhow!("a stage panicked"))?,
     };
     Ok((ordered, new_lock, rerun))
+}
+
+/// Runs `stage` on the pool, then starts each dependent whose upstream stages are all done.
+fn start<'s, 'a: 's>(env: &'s RunEnv<'a>, scope: &rayon::Scope<'s>, stage: &'a PlannedStage) {
+    scope.spawn(move |scope| {
+        if env.failure.lock().expect("no poisoned lock").is_some() {
+            return;
+        }
+        if let Err(error) = run_stage(env, stage) {
+            env.failure.lock().expect("no poisoned lock").get_or_insert(error);
+            return;
+        }
+        for dependent in env.dependents.get(stage.name.as_str()).into_iter().flatten() {
+            let mut waiting_on = env.waiting_on.lock().expect("no poisoned lock");
+            let left = waiting_on.get_mut(dependent.name.as_str()).expect("every stage is counted");
+            *left -= 1;
+            if *left == 0 {
+                drop(waiting_on);
+                start(env, scope, dependent);
+            }
+        }
+    });
+}
+
+/// Checks one stage against the lockfile and runs it into the staging directory if it is stale.
+fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
+    let snapshot = env.produced.lock().expect("no poisoned lock").clone();
+    let hashes = input_hashes_for(stage, env.sources, &snapshot, env.files).expect("upstream stages finished");
+    let assessment = assess(stage, Some(&hashes), env.lock, env.output_dir)?;
+    let info = stage.stage.info();
+    let (done, report) = if assessment.reasons.is_empty() && !env.forced.contains(&stage.name) {
+        env.reporter.line(&format!("{:<18} cached", stage.name));
+        let entry = env.lock.stages[&stage.name].clone();
+        env.entries.lock().expect("no poisoned lock").insert(stage.name.clone(), entry.clone());
+        (Produced { dir: env.output_dir.join(&stage.name), outputs: entry.outputs }, Outcome::Cached)
+    } else {
+        let why = if env.forced.contains(&stage.name) { "forced".to_string() } else { assessment.reasons.join("; ") };
+        let started = Instant::now();
+        let dir = env.staging.join(&stage.name);
+        let inputs = stage_inputs(stage, env.sources, &snapshot)?;
+        let records: usize = inputs.iter().map(|i| i.parts().len()).sum();
+        let bar = env.reporter.stage_bar(&stage.name, records as u64);
+        env.reporter.line(&format!("{:<18} running ({why})", stage.name));
+        let sink = OutputSink::new(&dir, &stage.name, info, &stage.params, &hashes, bar.clone());
+        let base_dir = env.plan.file.base_dir();
+        let ctx = StageContext {
+            stage_name: &stage.name,
+            params: &stage.params,
+            inputs: &inputs,
+            sink: &sink,
+            base_dir: &base_dir,
+        };
+        stage.stage.run(&ctx).with_context(|| {
+            format!("stage `{}` (type `{}`) failed; nothing was changed on disk", stage.name, info.name)
+        })?;
+        bar.finish_and_clear();
+        let mut outputs = BTreeMap::new();
+        for output in info.outputs {
+            std::fs::create_dir_all(dir.join(output.name))?;
+            let (hash, files) = super::sink::output_hash(&dir, output.name)?;
+            outputs.insert(
+                output.name.to_string(),
+                OutputLock { path: format!("{}/{}", stage.name, output.name), hash, files },
+            );
+        }
+        let files: usize = outputs.values().map(|o| o.files).sum();
+        let seconds = started.elapsed().as_secs_f64();
+        env.reporter
+            .line(&format!("{:<18} done in {seconds:.2} s ({records} records in, {files} files out)", stage.name));
+        let entry = StageLock {
+            stage_type: info.name.to_string(),
+            stage_version: info.version,
+            key: assessment.key,
+            params: serde_json::Value::Object(stage.params.clone()),
+            select: stage.select.clone(),
+            inputs: hashes,
+            outputs: outputs.clone(),
+        };
+        env.entries.lock().expect("no poisoned lock").insert(stage.name.clone(), entry);
+        (Produced { dir, outputs }, Outcome::Ran { seconds, records })
+    };
+    env.produced.lock().expect("no poisoned lock").insert(stage.name.clone(), done);
+    env.reports
+        .lock()
+        .expect("no poisoned lock")
+        .insert(stage.name.clone(), StageReport { name: stage.name.clone(), outcome: report });
+
+    Ok(())
 }
