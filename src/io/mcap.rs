@@ -35,6 +35,8 @@ pub fn write_timeseries(path: &Path, topics: &[Topic<'_>], metadata: &BTreeMap<S
             .compression(Some(mcap::Compression::Zstd))
             // Level 1: float samples gain little from harder zstd, and the write dominates a stage.
             .compression_level(1)
+            // Records are already written in parallel (rayon); zstd's own workers only add contention.
+            .compression_threads(0)
             .profile("")
             .library(concat!("shakeflow ", env!("CARGO_PKG_VERSION")))
             .create(w)?;
