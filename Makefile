@@ -46,6 +46,7 @@ test: $(PY_STAMP)
 
 bench: release $(PY_STAMP)
 	$(BIN) demo-archive runs/demo-archive
+	$(VENV_PY) bench/parquet_encodings.py --archive runs/demo-archive
 	$(VENV_PY) bench/load_baseline.py --shakeflow $(BIN) --archive runs/demo-archive
 	$(VENV_PY) bench/demo_study.py --shakeflow $(BIN) --archive runs/demo-archive
 	$(VENV_PY) bench/rocking.py --shakeflow $(BIN)

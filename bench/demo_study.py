@@ -35,7 +35,8 @@ def read(path):
     return time, cols
 def write(path, cols):
     path.parent.mkdir(parents=True, exist_ok=True)
-    pq.write_table(pa.table(cols), path, compression="zstd")
+    floats = [k for k, v in cols.items() if np.asarray(v).dtype == np.float64]
+    pq.write_table(pa.table(cols), path, compression="lz4", use_dictionary=False, use_byte_stream_split=floats)
 def tfestimate(x, y, fs):
     L = len(x) * 2 // 9
     kw = dict(fs=fs, window=ss.get_window("hamming", L, fftbins=False), nperseg=L, noverlap=L // 2, nfft=max(256, 1 << (L - 1).bit_length()), detrend=False)
