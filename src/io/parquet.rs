@@ -1,7 +1,6 @@
 //! Tables as Parquet: units and descriptions as Arrow field metadata, provenance as file metadata.
 
 use std::collections::{BTreeMap, HashMap};
-use std::fs::File;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -76,9 +75,13 @@ fn to_record_batch(table: &Table) -> anyhow::Result<RecordBatch> {
 
 /// Reads a whole Parquet file written by any tool; units come back when the writer stored them.
 pub fn read_table(path: &Path) -> anyhow::Result<Table> {
-    let file = File::open(path).with_context(|| format!("cannot open `{}`", path.display()))?;
-    let builder = ParquetRecordBatchReaderBuilder::try_new(file)
+    // One read of the whole file: a File reader seeks and reads once per column chunk.
+    let bytes = bytes::Bytes::from(std::fs::read(path).with_context(|| format!("cannot open `{}`", path.display()))?);
+    let builder = ParquetRecordBatchReaderBuilder::try_new(bytes)
         .with_context(|| format!("`{}` is not a readable Parquet file", path.display()))?;
+    // One batch per row group: each column then arrives in one piece instead of 1024-row batches.
+    let rows = builder.metadata().row_groups().iter().map(|g| g.num_rows()).max().unwrap_or(0);
+    let builder = builder.with_batch_size((rows as usize).max(1));
     let mut metadata = BTreeMap::new();
     if let Some(kv) = builder.metadata().file_metadata().key_value_metadata() {
         for entry in kv.iter().filter(|e| e.key != ARROW_SCHEMA_KEY) {

@@ -103,13 +103,15 @@ impl OutputSink {
             let mcap_dir = self.root.join(MCAP_DIR).join(output).join(&relative);
             std::fs::create_dir_all(&mcap_dir).map_err(|e| anyhow!("cannot create `{}`: {e}", mcap_dir.display()))?;
             let split = match key {
-                None => vec![(topic, table.clone())],
+                None => Vec::new(),
                 Some(key) => {
                     split_by(&table, key)?.into_iter().map(|(value, part)| (format!("{topic}/{value}"), part)).collect()
                 }
             };
-            let topics: Vec<mcap::Topic<'_>> =
-                split.iter().map(|(name, part)| mcap::Topic { name: name.clone(), table: part }).collect();
+            let topics: Vec<mcap::Topic<'_>> = match key {
+                None => vec![mcap::Topic { name: topic, table: &table }],
+                Some(_) => split.iter().map(|(name, part)| mcap::Topic { name: name.clone(), table: part }).collect(),
+            };
             mcap::write_timeseries(&mcap_dir.join(MCAP_FILE), &topics, &table.metadata)?;
         }
         self.progress.inc(1);
