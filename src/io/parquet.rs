@@ -15,12 +15,14 @@ use parquet::file::properties::{EnabledStatistics, WriterProperties};
 use parquet::schema::types::ColumnPath;
 
 use crate::io::atomic;
+use crate::pipeline::hash::HashingWriter;
 use crate::table::{Column, ColumnData, Table};
 
 /// The Arrow schema ArrowWriter embeds for itself; not part of a table's own metadata.
 const ARROW_SCHEMA_KEY: &str = "ARROW:schema";
 
-pub fn write_table(path: &Path, table: &Table) -> anyhow::Result<()> {
+/// Writes `table` to `path` (atomically); returns the content hash of the file written.
+pub fn write_table(path: &Path, table: &Table) -> anyhow::Result<String> {
     let batch = to_record_batch(table)?;
     let kv: Vec<KeyValue> = table.metadata.iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect();
     let mut props = WriterProperties::builder()
@@ -41,13 +43,15 @@ pub fn write_table(path: &Path, table: &Table) -> anyhow::Result<()> {
         }
     }
     let props = props.build();
+    let mut hash = String::new();
     atomic::write_file(path, |w| {
-        let mut writer = ArrowWriter::try_new(w, batch.schema(), Some(props))?;
+        let mut writer = ArrowWriter::try_new(HashingWriter::new(w), batch.schema(), Some(props))?;
         writer.write(&batch)?;
-        writer.close()?;
+        hash = writer.into_inner()?.finalize();
         Ok(())
     })
-    .with_context(|| format!("writing Parquet `{}`", path.display()))
+    .with_context(|| format!("writing Parquet `{}`", path.display()))?;
+    Ok(hash)
 }
 
 fn to_record_batch(table: &Table) -> anyhow::Result<RecordBatch> {

@@ -7,14 +7,14 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use anyhow::{anyhow, Context};
 use rayon::prelude::*;
 use serde_json::json;
 
-use super::hash;
+use super::hash::{self, KnownHashes};
 use super::lock::{LockFile, OutputLock, StageLock, LOCK_FILE};
 use super::plan::{InputRef, Plan, PlannedStage};
 use super::progress::Reporter;
@@ -53,6 +53,8 @@ struct ResolvedSource {
 struct Produced {
     dir: PathBuf,
     outputs: BTreeMap<String, OutputLock>,
+    /// Hashes of the files this run wrote (empty for a cached stage).
+    written: Arc<KnownHashes>,
 }
 
 /// Why a stage must run; empty when it is up to date.
@@ -172,7 +174,7 @@ fn assess(
         let dir = output_dir.join(&out.path);
         if !dir.is_dir() {
             reasons.push(format!("output `{name}` missing ({})", dir.display()));
-        } else if super::sink::output_hash(&output_dir.join(&stage.name), name)?.0 != out.hash {
+        } else if super::sink::output_hash(&output_dir.join(&stage.name), name, &KnownHashes::new())?.0 != out.hash {
             reasons.push(format!("output `{name}` was modified on disk"));
         }
     }
@@ -251,8 +253,8 @@ fn stage_inputs(
                 Ok(input)
             }
             InputRef::Stage { stage: upstream, output } => {
-                let dir = produced[upstream].dir.join(output);
-                let mut parts = dataset_parts(&dir, &input.label())?;
+                let upstream = &produced[upstream];
+                let mut parts = dataset_parts_known(&upstream.dir.join(output), &input.label(), &upstream.written)?;
                 parts.retain(|p| stage.selects(&p.partition));
                 Ok(StageInput::Dataset { name: input.label(), parts })
             }
@@ -262,10 +264,15 @@ fn stage_inputs(
 
 /// The parts of a dataset directory: each `data.parquet` with the partition its path encodes.
 pub fn dataset_parts(dir: &Path, label: &str) -> anyhow::Result<Vec<InputPart>> {
+    dataset_parts_known(dir, label, &KnownHashes::new())
+}
+
+/// [`dataset_parts`], not reading again the files whose hashes are `known`.
+fn dataset_parts_known(dir: &Path, label: &str, known: &KnownHashes) -> anyhow::Result<Vec<InputPart>> {
     let files: Vec<String> =
         hash::list_files(dir)?.into_iter().filter(|f| f.ends_with(super::sink::DATA_FILE)).collect();
     let paths: Vec<PathBuf> = files.iter().map(|f| dir.join(f)).collect();
-    let hashes = hash::hash_files(&paths)?;
+    let hashes = hash::hash_files_known(&paths, known)?;
     Ok(files
         .iter()
         .zip(paths)
@@ -301,7 +308,8 @@ pub fn status(plan: &Plan) -> Result<Vec<StatusLine>, UserError> {
             assess(stage, hashes.as_ref(), &lock, &output_dir).map_err(|e| UserError::new(format!("{e:#}")))?;
         if assessment.reasons.is_empty() {
             let outputs = lock.stages[&stage.name].outputs.clone();
-            produced.insert(stage.name.clone(), Produced { dir: output_dir.join(&stage.name), outputs });
+            let dir = output_dir.join(&stage.name);
+            produced.insert(stage.name.clone(), Produced { dir, outputs, written: Arc::default() });
         }
         lines.push(StatusLine {
             name: stage.name.clone(),
@@ -483,7 +491,8 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
         env.reporter.line(&format!("{:<18} cached", stage.name));
         let entry = env.lock.stages[&stage.name].clone();
         env.entries.lock().expect("no poisoned lock").insert(stage.name.clone(), entry.clone());
-        (Produced { dir: env.output_dir.join(&stage.name), outputs: entry.outputs }, Outcome::Cached)
+        let dir = env.output_dir.join(&stage.name);
+        (Produced { dir, outputs: entry.outputs, written: Arc::default() }, Outcome::Cached)
     } else {
         let why = if env.forced.contains(&stage.name) { "forced".to_string() } else { assessment.reasons.join("; ") };
         let started = Instant::now();
@@ -505,10 +514,11 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
             format!("stage `{}` (type `{}`) failed; nothing was changed on disk", stage.name, info.name)
         })?;
         bar.finish_and_clear();
+        let written = sink.into_hashes();
         let mut outputs = BTreeMap::new();
         for output in info.outputs {
             std::fs::create_dir_all(dir.join(output.name))?;
-            let (hash, files) = super::sink::output_hash(&dir, output.name)?;
+            let (hash, files) = super::sink::output_hash(&dir, output.name, &written)?;
             outputs.insert(
                 output.name.to_string(),
                 OutputLock { path: format!("{}/{}", stage.name, output.name), hash, files },
@@ -528,7 +538,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
             outputs: outputs.clone(),
         };
         env.entries.lock().expect("no poisoned lock").insert(stage.name.clone(), entry);
-        (Produced { dir, outputs }, Outcome::Ran { seconds, records })
+        (Produced { dir, outputs, written: Arc::new(written) }, Outcome::Ran { seconds, records })
     };
     env.produced.lock().expect("no poisoned lock").insert(stage.name.clone(), done);
     env.reports

@@ -1,5 +1,6 @@
 //! Content hashes (blake3): what the cache compares, never timestamps.
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -37,10 +38,20 @@ pub fn list_files(dir: &Path) -> anyhow::Result<Vec<String>> {
     Ok(files)
 }
 
+/// Content hashes of files this run has just written, by path, computed from the bytes as they
+/// were written: the cache then need not read them back.
+pub type KnownHashes = HashMap<PathBuf, String>;
+
 /// Hash of a directory tree: names and contents of all its files, order-independent of the disk.
 pub fn hash_dir(dir: &Path) -> anyhow::Result<(String, usize)> {
+    hash_dir_known(dir, &KnownHashes::new())
+}
+
+/// [`hash_dir`], taking the hashes of files in `known` from there.
+pub fn hash_dir_known(dir: &Path, known: &KnownHashes) -> anyhow::Result<(String, usize)> {
     let files = list_files(dir)?;
-    let hashes: Vec<String> = files.par_iter().map(|f| hash_file(&dir.join(f))).collect::<anyhow::Result<_>>()?;
+    let paths: Vec<PathBuf> = files.iter().map(|f| dir.join(f)).collect();
+    let hashes = hash_files_known(&paths, known)?;
     let mut combined = String::new();
     for (file, hash) in files.iter().zip(&hashes) {
         combined.push_str(file);
@@ -60,9 +71,38 @@ pub fn hash_path(path: &Path) -> anyhow::Result<String> {
     }
 }
 
-/// Hashes many files in parallel, keeping their order.
-pub fn hash_files(paths: &[PathBuf]) -> anyhow::Result<Vec<String>> {
-    paths.par_iter().map(|p| hash_file(p)).collect()
+/// Hashes many files in parallel, keeping their order; those in `known` are not read.
+pub fn hash_files_known(paths: &[PathBuf], known: &KnownHashes) -> anyhow::Result<Vec<String>> {
+    paths.par_iter().map(|p| known.get(p).map_or_else(|| hash_file(p), |h| Ok(h.clone()))).collect()
+}
+
+/// A writer that hashes what passes through it, for files written front to back.
+pub struct HashingWriter<W> {
+    inner: W,
+    hasher: blake3::Hasher,
+}
+
+impl<W: std::io::Write> HashingWriter<W> {
+    pub fn new(inner: W) -> Self {
+        HashingWriter { inner, hasher: blake3::Hasher::new() }
+    }
+
+    /// The hash of every byte written, as [`hash_file`] gives it for the finished file.
+    pub fn finalize(&self) -> String {
+        self.hasher.finalize().to_hex().to_string()
+    }
+}
+
+impl<W: std::io::Write> std::io::Write for HashingWriter<W> {
+    fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+        let written = self.inner.write(bytes)?;
+        self.hasher.update(&bytes[..written]);
+        Ok(written)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.inner.flush()
+    }
 }
 
 #[cfg(test)]
@@ -80,5 +120,17 @@ mod tests {
         assert_eq!(hash_dir(a.path()).unwrap(), hash_dir(b.path()).unwrap());
         std::fs::write(b.path().join("x=1/data.parquet"), "abd").unwrap();
         assert_ne!(hash_dir(a.path()).unwrap().0, hash_dir(b.path()).unwrap().0);
+    }
+
+    #[test]
+    fn hashing_while_writing_equals_hashing_the_file() {
+        use std::io::Write;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("f.bin");
+        let mut writer = HashingWriter::new(std::fs::File::create(&path).unwrap());
+        for chunk in [&b"front"[..], &[0u8; 70_000], b"back"] {
+            writer.write_all(chunk).unwrap();
+        }
+        assert_eq!(writer.finalize(), hash_file(&path).unwrap());
     }
 }

@@ -8,6 +8,7 @@ use std::sync::Mutex;
 use anyhow::{anyhow, bail};
 
 use crate::io::{mcap, parquet};
+use crate::pipeline::hash::{self, KnownHashes};
 use crate::stages::{partition_path, OutputInfo, Partition, StageInfo};
 use crate::table::Table;
 
@@ -25,6 +26,8 @@ pub struct OutputSink {
     progress: indicatif::ProgressBar,
     /// Whether time-series outputs also get MCAP twins (the `mcap` parameter, default on).
     mcap: bool,
+    /// Hashes of the files written so far, taken from their bytes on the way out.
+    hashes: Mutex<KnownHashes>,
 }
 
 impl OutputSink {
@@ -53,6 +56,7 @@ impl OutputSink {
             written: Mutex::new(BTreeSet::new()),
             progress,
             mcap: params.get("mcap").and_then(|v| v.as_bool()).unwrap_or(true),
+            hashes: Mutex::new(KnownHashes::new()),
         }
     }
 
@@ -92,7 +96,9 @@ impl OutputSink {
         table.metadata.extend(self.provenance.clone());
         table.metadata.insert("shakeflow.output".into(), output.into());
         table.metadata.insert("shakeflow.partition".into(), relative.clone());
-        parquet::write_table(&dir.join(DATA_FILE), &table)?;
+        let path = dir.join(DATA_FILE);
+        let hash = parquet::write_table(&path, &table)?;
+        self.hashes.lock().expect("no panics while holding the lock").insert(path, hash);
         if info.timeseries && self.mcap {
             let topic = if relative.is_empty() {
                 format!("/{}/{output}", self.stage_name)
@@ -123,10 +129,18 @@ impl OutputSink {
         self.output_info(output)?;
         let dir = self.root.join(output);
         std::fs::create_dir_all(&dir).map_err(|e| anyhow!("cannot create `{}`: {e}", dir.display()))?;
-        crate::io::atomic::write_file(&dir.join(name), |w| {
+        let path = dir.join(name);
+        crate::io::atomic::write_file(&path, |w| {
             std::io::Write::write_all(w, bytes)?;
             Ok(())
-        })
+        })?;
+        self.hashes.lock().expect("no panics while holding the lock").insert(path, hash::hash_bytes(bytes));
+        Ok(())
+    }
+
+    /// The hashes of the files written (MCAP twins, which are written with seeks, are not among them).
+    pub fn into_hashes(self) -> KnownHashes {
+        self.hashes.into_inner().expect("no panics while holding the lock")
     }
 
     /// One unit of work done that writes no file of its own (e.g. one run of a sweep).
@@ -165,16 +179,14 @@ fn split_by(table: &Table, key: &str) -> anyhow::Result<Vec<(String, Table)>> {
     Ok(groups.into_iter().map(|(k, rows)| (k, table.select_rows(&rows))).collect())
 }
 
-/// Hash and file count of one output of a stage: its Parquet tree plus its MCAP twin tree.
-pub fn output_hash(stage_dir: &Path, output: &str) -> anyhow::Result<(String, usize)> {
-    let (parquet_hash, parquet_files) = crate::pipeline::hash::hash_dir(&stage_dir.join(output))?;
+/// Hash and file count of one output of a stage: its Parquet tree plus its MCAP twin tree. Files
+/// in `known` are not read again.
+pub fn output_hash(stage_dir: &Path, output: &str, known: &KnownHashes) -> anyhow::Result<(String, usize)> {
+    let (parquet_hash, parquet_files) = hash::hash_dir_known(&stage_dir.join(output), known)?;
     let mcap_dir = stage_dir.join(MCAP_DIR).join(output);
     if !mcap_dir.is_dir() {
         return Ok((parquet_hash, parquet_files));
     }
-    let (mcap_hash, mcap_files) = crate::pipeline::hash::hash_dir(&mcap_dir)?;
-    Ok((
-        crate::pipeline::hash::hash_bytes(format!("{parquet_hash}\n{mcap_hash}").as_bytes()),
-        parquet_files + mcap_files,
-    ))
+    let (mcap_hash, mcap_files) = hash::hash_dir(&mcap_dir)?;
+    Ok((hash::hash_bytes(format!("{parquet_hash}\n{mcap_hash}").as_bytes()), parquet_files + mcap_files))
 }
