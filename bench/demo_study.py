@@ -7,7 +7,8 @@ scipy.signal.resample_poly (256 -> 200 Hz) and FFT cross-correlation with parabo
 np.interp shifting, scipy.signal.csd/welch transfer functions with MATLAB tfestimate defaults for
 the white-noise tests, and a simplified STA/LTA + RMS-drop toppling check per unit channel (a port
 of the same steps for timing, not a validated detector). It skips MCAP
-and figures, so the comparison does not favour shakeflow. The rocking, fragility and rolling
+and figures, so the comparison does not favour shakeflow; a second shakeflow run without
+`synchronize`'s MCAP twins shows what they cost. The rocking, fragility and rolling
 simulations, which the Python side does not do, are cut from the pipeline here (bench/rocking.py
 and bench/rolling.py time them). Medians over
 --repeat runs; ratios are Python / shakeflow (above 1: shakeflow is faster or leaner).
@@ -91,20 +92,24 @@ def without_simulations(pipeline):
 def main():
     args = parse_args(__doc__)
     args.pipeline = without_simulations(args.pipeline)
-    sides = ["shakeflow (demo pipeline)", "numpy/scipy script"]
+    sides = ["shakeflow (demo pipeline)", "shakeflow (no MCAP twins)", "numpy/scipy script"]
     results = {side: [] for side in sides}
     for _ in range(args.repeat):
         with tempfile.TemporaryDirectory() as tmp:
             tmp = pathlib.Path(tmp)
-            pipeline = tmp / "demo.yaml"
             # The camera projection stages have their own benchmark (bench/cpt.py) against OpenCV.
             text = args.pipeline.split("  cpt_calibrate:")[0].replace("../runs/demo-archive", str(args.archive))
-            pipeline.write_text(text.replace("output_dir: ../runs/demo", f"output_dir: {tmp / 'out'}"))
-            results[sides[0]].append(measure([args.shakeflow, "run", "--quiet", str(pipeline)]))
+            sync_params = "      max_lag_s: 5.0\n"
+            assert text.count(sync_params) == 1, "the demo's synchronize stage changed; update the bench"
+            no_twins = text.replace(sync_params, sync_params + "      mcap: false\n")
+            for side, variant, name in zip(sides[:2], (text, no_twins), ("demo", "no_twins")):
+                pipeline = tmp / f"{name}.yaml"
+                pipeline.write_text(variant.replace("output_dir: ../runs/demo", f"output_dir: {tmp / name}"))
+                results[side].append(measure([args.shakeflow, "run", "--quiet", str(pipeline)]))
             script = tmp / "py_side.py"
             script.write_text(PYTHON_SIDE)
-            results[sides[1]].append(measure([sys.executable, str(script), str(args.archive), str(tmp / "py_out")]))
-    print_table(f"whole demo study on {args.archive} ({os.cpu_count()} cores), median of {args.repeat}", results, sides[1])
+            results[sides[2]].append(measure([sys.executable, str(script), str(args.archive), str(tmp / "py_out")]))
+    print_table(f"whole demo study on {args.archive} ({os.cpu_count()} cores), median of {args.repeat}", results, sides[2])
 
 
 if __name__ == "__main__":
