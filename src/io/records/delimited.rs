@@ -211,22 +211,13 @@ const EXACT_POWERS_OF_TEN: [f64; 23] = [
 /// are both exact f64s, so one correctly rounded multiply or divide gives the nearest double.
 fn short_decimal(text: &[u8]) -> Option<(f64, usize)> {
     let mut i = 0;
-    let negative = match text.first() {
-        Some(b'-') => {
-            i += 1;
-            true
-        }
-        Some(b'+') => {
-            i += 1;
-            false
-        }
-        _ => false,
-    };
+    let negative = sign(text, &mut i);
     let (mut mantissa, mut digits, mut fraction_digits, mut seen_point) = (0u64, 0u32, 0i32, false);
     while let Some(&b) = text.get(i) {
         match b {
             b'0'..=b'9' => {
-                mantissa = mantissa * 10 + u64::from(b - b'0');
+                // Wrapping: a number too long to overflow here is refused below anyway.
+                mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(b - b'0'));
                 digits += 1;
                 fraction_digits += i32::from(seen_point);
             }
@@ -241,17 +232,7 @@ fn short_decimal(text: &[u8]) -> Option<(f64, usize)> {
     let mut exponent = 0i32;
     if let Some(b'e' | b'E') = text.get(i) {
         i += 1;
-        let exponent_negative = match text.get(i) {
-            Some(b'-') => {
-                i += 1;
-                true
-            }
-            Some(b'+') => {
-                i += 1;
-                false
-            }
-            _ => false,
-        };
+        let exponent_negative = sign(text, &mut i);
         let start = i;
         while let Some(&b @ b'0'..=b'9') = text.get(i) {
             exponent = exponent.checked_mul(10)?.checked_add(i32::from(b - b'0'))?;
@@ -273,6 +254,21 @@ fn short_decimal(text: &[u8]) -> Option<(f64, usize)> {
         _ => return None,
     };
     Some((if negative { -value } else { value }, i))
+}
+
+/// Whether a sign at `text[*i]` is a minus; steps over the sign.
+fn sign(text: &[u8], i: &mut usize) -> bool {
+    match text.get(*i) {
+        Some(b'-') => {
+            *i += 1;
+            true
+        }
+        Some(b'+') => {
+            *i += 1;
+            false
+        }
+        _ => false,
+    }
 }
 
 /// A number; NaN for an empty cell, "NaN"/"nan" or "NA" (gaps are the
@@ -422,7 +418,7 @@ mod tests {
             }
         }
         assert!(fast > 100_000, "the fast path took only {fast} of 200000");
-        for odd in ["", "-", ".", "e5", "1e", "1e+", "nan", "inf", "1.2.3"] {
+        for odd in ["", "-", ".", "e5", "1e", "1e+", "nan", "inf", "1.2.3", "1234567890123456789012345.5"] {
             let fast = short_decimal(odd.as_bytes());
             assert!(fast.is_none() || fast.unwrap().1 < odd.len(), "{odd}: {fast:?}");
         }
