@@ -18,7 +18,7 @@ import pathlib
 import sys
 import tempfile
 
-from load_baseline import measure, parse_args, print_table
+from load_baseline import parse_args, print_table, run_sides
 
 PYTHON_SIDE = r'''
 import pathlib, sys
@@ -93,22 +93,22 @@ def main():
     args = parse_args(__doc__)
     args.pipeline = without_simulations(args.pipeline)
     sides = ["shakeflow (demo pipeline)", "shakeflow (no MCAP twins)", "numpy/scipy script"]
-    results = {side: [] for side in sides}
-    for _ in range(args.repeat):
-        with tempfile.TemporaryDirectory() as tmp:
-            tmp = pathlib.Path(tmp)
-            # The camera projection stages have their own benchmark (bench/cpt.py) against OpenCV.
-            text = args.pipeline.split("  cpt_calibrate:")[0].replace("../runs/demo-archive", str(args.archive))
-            sync_params = "      max_lag_s: 5.0\n"
-            assert text.count(sync_params) == 1, "the demo's synchronize stage changed; update the bench"
-            no_twins = text.replace(sync_params, sync_params + "      mcap: false\n")
-            for side, variant, name in zip(sides[:2], (text, no_twins), ("demo", "no_twins")):
-                pipeline = tmp / f"{name}.yaml"
-                pipeline.write_text(variant.replace("output_dir: ../runs/demo", f"output_dir: {tmp / name}"))
-                results[side].append(measure([args.shakeflow, "run", "--quiet", str(pipeline)]))
-            script = tmp / "py_side.py"
-            script.write_text(PYTHON_SIDE)
-            results[sides[2]].append(measure([sys.executable, str(script), str(args.archive), str(tmp / "py_out")]))
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = pathlib.Path(tmp)
+        # The camera projection stages have their own benchmark (bench/cpt.py) against OpenCV.
+        text = args.pipeline.split("  cpt_calibrate:")[0].replace("../runs/demo-archive", str(args.archive))
+        sync_params = "      max_lag_s: 5.0\n"
+        assert text.count(sync_params) == 1, "the demo's synchronize stage changed; update the bench"
+        no_twins = text.replace(sync_params, sync_params + "      mcap: false\n")
+        commands = {}
+        for side, variant, name in zip(sides[:2], (text, no_twins), ("demo", "no_twins")):
+            pipeline = tmp / f"{name}.yaml"
+            pipeline.write_text(variant.replace("output_dir: ../runs/demo", f"output_dir: {tmp / name}"))
+            commands[side] = ([args.shakeflow, "run", "--quiet", str(pipeline)], tmp / name)
+        script = tmp / "py_side.py"
+        script.write_text(PYTHON_SIDE)
+        commands[sides[2]] = ([sys.executable, str(script), str(args.archive), str(tmp / "py_out")], tmp / "py_out")
+        results = run_sides(commands, args.repeat)
     print_table(f"whole demo study on {args.archive} ({os.cpu_count()} cores), median of {args.repeat}", results, sides[2])
 
 

@@ -60,6 +60,20 @@ def measure(cmd):
     return wall, usage.ru_maxrss / 1024.0  # KiB → MiB
 
 
+def run_sides(commands, repeat):
+    """Times each side's (command, output folder) `repeat` times. The order rotates every round,
+    so no side always runs right after the same other one, and each run's output is deleted
+    before the next run starts: every run begins from the same file-system state."""
+    results = {side: [] for side in commands}
+    sides = list(commands)
+    for round_ in range(repeat):
+        for side in sides[round_ % len(sides):] + sides[:round_ % len(sides)]:
+            command, output = commands[side]
+            results[side].append(measure(command))
+            shutil.rmtree(output, ignore_errors=True)
+    return results
+
+
 def parse_args(doc):
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--shakeflow", required=True)
@@ -85,21 +99,21 @@ def main():
     args = parse_args(__doc__)
     size = sum(p.stat().st_size for p in args.archive.rglob("*.csv"))
     sides = ["shakeflow (demo pipeline)", "shakeflow (+MCAP twins)", "numpy/pyarrow script"]
-    results = {side: [] for side in sides}
-    for _ in range(args.repeat):
-        with tempfile.TemporaryDirectory() as tmp:
-            tmp = pathlib.Path(tmp)
-            # Only the load and baseline stages: cut the pipeline before `synchronize`.
-            text = args.pipeline.split("  synchronize:")[0].replace("../runs/demo-archive", str(args.archive))
-            assert text.count("mcap: false") == 2, "the demo's baseline stages no longer say `mcap: false`"
-            twins = text.replace("mcap: false", "mcap: true")
-            for side, variant, name in zip(sides[:2], (text, twins), ("demo", "twins")):
-                pipeline = tmp / f"{name}.yaml"
-                pipeline.write_text(variant.replace("output_dir: ../runs/demo", f"output_dir: {tmp / name}"))
-                results[side].append(measure([args.shakeflow, "run", "--quiet", str(pipeline)]))
-            script = tmp / "py_side.py"
-            script.write_text(PYTHON_SIDE)
-            results[sides[2]].append(measure([sys.executable, str(script), str(args.archive), str(tmp / "py_out")]))
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = pathlib.Path(tmp)
+        # Only the load and baseline stages: cut the pipeline before `synchronize`.
+        text = args.pipeline.split("  synchronize:")[0].replace("../runs/demo-archive", str(args.archive))
+        assert text.count("mcap: false") == 2, "the demo's baseline stages no longer say `mcap: false`"
+        twins = text.replace("mcap: false", "mcap: true")
+        commands = {}
+        for side, variant, name in zip(sides[:2], (text, twins), ("demo", "twins")):
+            pipeline = tmp / f"{name}.yaml"
+            pipeline.write_text(variant.replace("output_dir: ../runs/demo", f"output_dir: {tmp / name}"))
+            commands[side] = ([args.shakeflow, "run", "--quiet", str(pipeline)], tmp / name)
+        script = tmp / "py_side.py"
+        script.write_text(PYTHON_SIDE)
+        commands[sides[2]] = ([sys.executable, str(script), str(args.archive), str(tmp / "py_out")], tmp / "py_out")
+        results = run_sides(commands, args.repeat)
     print_table(f"load + baseline on {args.archive} ({size / 1e6:.1f} MB of CSV, {os.cpu_count()} cores), median of {args.repeat}", results, sides[2])
 
 
