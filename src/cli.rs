@@ -268,7 +268,7 @@ fn describe_stages(only: Option<&str>) -> anyhow::Result<String> {
         };
         writeln!(out, "  reads: {reads}")?;
         for o in info.outputs {
-            let kind = if o.timeseries { "Parquet + MCAP" } else { "Parquet" };
+            let kind = o.kind.describe();
             writeln!(out, "  output `{}` ({kind}): {}", o.name, o.description)?;
         }
         if info.params.is_empty() {

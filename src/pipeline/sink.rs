@@ -9,7 +9,7 @@ use anyhow::{anyhow, bail};
 
 use crate::io::{mcap, parquet};
 use crate::pipeline::hash::{self, KnownHashes};
-use crate::stages::{partition_path, OutputInfo, Partition, StageInfo};
+use crate::stages::{partition_path, OutputInfo, OutputKind, Partition, StageInfo};
 use crate::table::Table;
 
 pub const DATA_FILE: &str = "data.parquet";
@@ -87,6 +87,9 @@ impl OutputSink {
         key: Option<&str>,
     ) -> anyhow::Result<()> {
         let info = self.output_info(output)?;
+        if info.kind == OutputKind::Files {
+            bail!("stage type `{}` declares `{output}` as an output of files, not of tables", self.info.name);
+        }
         let relative = partition_path(partition);
         if !self.written.lock().expect("no panics while holding the lock").insert(format!("{output}/{relative}")) {
             bail!("stage `{}` wrote the record `{relative}` of `{output}` twice: two inputs share these partition keys; give the sources distinct `partition:` values", self.stage_name);
@@ -99,7 +102,7 @@ impl OutputSink {
         let path = dir.join(DATA_FILE);
         let hash = parquet::write_table(&path, &table)?;
         self.hashes.lock().expect("no panics while holding the lock").insert(path, hash);
-        if info.timeseries && self.mcap {
+        if info.kind == OutputKind::TimeSeries && self.mcap {
             let topic = if relative.is_empty() {
                 format!("/{}/{output}", self.stage_name)
             } else {
@@ -126,7 +129,9 @@ impl OutputSink {
 
     /// Writes a non-table file (a figure) under an output: `<stage>/<output>/<name>`.
     pub fn write_file(&self, output: &str, name: &str, bytes: &[u8]) -> anyhow::Result<()> {
-        self.output_info(output)?;
+        if self.output_info(output)?.kind != OutputKind::Files {
+            bail!("stage type `{}` declares `{output}` as an output of tables, not of files", self.info.name);
+        }
         let dir = self.root.join(output);
         std::fs::create_dir_all(&dir).map_err(|e| anyhow!("cannot create `{}`: {e}", dir.display()))?;
         let path = dir.join(name);

@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 use serde_json::json;
 
-use super::{InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::signal::baseline::PolynomialBasis;
@@ -20,7 +20,7 @@ static INFO: StageInfo = StageInfo {
     outputs: &[OutputInfo {
         name: "records",
         description: "the input tables with each selected channel baseline-corrected",
-        timeseries: true,
+        kind: OutputKind::TimeSeries,
     }],
     params: &[
         ParamSpec {

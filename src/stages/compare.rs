@@ -3,7 +3,7 @@
 //! units are reconciled through the columns' `unit` metadata, and the RMS and largest errors are
 //! reported per column pair, with a PNG overlay.
 
-use super::{partition_path, split_pair, InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use super::{partition_path, split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
@@ -18,8 +18,8 @@ static INFO: StageInfo = StageInfo {
     summary: "Errors of measured time series against a reference (interpolated onto the measured times, units reconciled): RMS and largest error per column pair, and a PNG overlay.",
     inputs: InputKind::Datasets,
     outputs: &[
-        OutputInfo { name: "errors", description: "per pair: measured, reference, unit, samples, missing, rms_error, max_abs_error, reference_rms", timeseries: false },
-        OutputInfo { name: "figures", description: "<partition or compare>.png: measured over reference, and their difference", timeseries: false },
+        OutputInfo { name: "errors", description: "per pair: measured, reference, unit, samples, missing, rms_error, max_abs_error, reference_rms", kind: OutputKind::Table },
+        OutputInfo { name: "figures", description: "<partition or compare>.png: measured over reference, and their difference", kind: OutputKind::Files },
     ],
     params: &[
         ParamSpec { name: "pairs", kind: ParamKind::StrList, default: None, unit: "", description: "`measured_column -> reference_column` pairs; the first input is measured, the second the reference", range: None },

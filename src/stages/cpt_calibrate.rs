@@ -6,7 +6,7 @@
 use rayon::prelude::*;
 use serde_json::json;
 
-use super::{partition_path, InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::control_points::read_control_points;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
@@ -23,9 +23,9 @@ static INFO: StageInfo = StageInfo {
     summary: "Camera calibration from control points (X_mm, Y_mm, Z_mm, u_px, v_px; ≥ 8, not coplanar): normalised DLT, Levenberg–Marquardt on the reprojection error, optional radial distortion k1 (k2).",
     inputs: InputKind::Files(&[RecordFormat::ControlPoints]),
     outputs: &[
-        OutputInfo { name: "calibration", description: "one row: p11…p34 (P scaled so ‖p31..p33‖ = 1), k1/k2 when fitted, intrinsics, camera centre, objective_px (Eq. 2), rms_px", timeseries: false },
-        OutputInfo { name: "residuals", description: "per control point: u_res_px, v_res_px, dist_px, outlier", timeseries: false },
-        OutputInfo { name: "figures", description: "calibration.png: control points with magnified residuals, and residual per point", timeseries: false },
+        OutputInfo { name: "calibration", description: "one row: p11…p34 (P scaled so ‖p31..p33‖ = 1), k1/k2 when fitted, intrinsics, camera centre, objective_px (Eq. 2), rms_px", kind: OutputKind::Table },
+        OutputInfo { name: "residuals", description: "per control point: u_res_px, v_res_px, dist_px, outlier", kind: OutputKind::Table },
+        OutputInfo { name: "figures", description: "calibration.png: control points with magnified residuals, and residual per point", kind: OutputKind::Files },
     ],
     params: &[
         ParamSpec { name: "distortion", kind: ParamKind::Choice(&["none", "k1", "k1k2"]), default: Some("\"none\""), unit: "", description: "radial lens distortion to fit (none: the study's pinhole P)", range: None },

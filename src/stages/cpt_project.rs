@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 
 use serde_json::json;
 
-use super::{partition_path, InputKind, InputPart, OutputInfo, Stage, StageContext, StageInfo};
+use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
@@ -24,9 +24,9 @@ static INFO: StageInfo = StageInfo {
     summary: "Back-project tracked pixels onto a plane aX + bY + cZ + d = 0 (Eq. 4) with a cpt_calibrate camera; for two points on one unit, its translation and in-plane rotation (rolling) or rocking angle θ (rocking).",
     inputs: InputKind::Datasets,
     outputs: &[
-        OutputInfo { name: "points", description: "per frame and point: time_s, point, X_mm, Y_mm, Z_mm (NaN when the track is lost)", timeseries: true },
-        OutputInfo { name: "motion", description: "rolling: time_s, dx_mm, dy_mm, dz_mm, yaw_rad; rocking: time_s, theta_rad, dx_mm, dy_mm, dz_mm (empty when unit_motion is none)", timeseries: true },
-        OutputInfo { name: "figures", description: "motion.png: the unit's recovered motion", timeseries: false },
+        OutputInfo { name: "points", description: "per frame and point: time_s, point, X_mm, Y_mm, Z_mm (NaN when the track is lost)", kind: OutputKind::TimeSeries },
+        OutputInfo { name: "motion", description: "rolling: time_s, dx_mm, dy_mm, dz_mm, yaw_rad; rocking: time_s, theta_rad, dx_mm, dy_mm, dz_mm (empty when unit_motion is none)", kind: OutputKind::TimeSeries },
+        OutputInfo { name: "figures", description: "motion.png: the unit's recovered motion", kind: OutputKind::Files },
     ],
     params: &[
         ParamSpec { name: "plane", kind: ParamKind::Str, default: None, unit: "mm", description: "the plane the points move in, `a,b,c,d` for aX + bY + cZ + d = 0 (Eq. 3, world mm); its normal (a, b, c) orients rotations (right-handed)", range: None },

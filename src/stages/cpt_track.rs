@@ -5,7 +5,7 @@
 
 use serde_json::json;
 
-use super::{partition_path, InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::frames::FrameReader;
 use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
@@ -23,8 +23,8 @@ static INFO: StageInfo = StageInfo {
     summary: "Track points through an image sequence (PNG/JPEG folder, or a video through ffmpeg): ZNCC or SSD template matching against a reference template, sub-pixel, lost points flagged, optional camera-shake correction.",
     inputs: InputKind::Files(&[RecordFormat::Frames]),
     outputs: &[
-        OutputInfo { name: "tracks", description: "per frame and point: frame, time_s, point, u_px, v_px, score, status (NaN positions when lost)", timeseries: true },
-        OutputInfo { name: "figures", description: "tracks.png: u, v and score of every point over time", timeseries: false },
+        OutputInfo { name: "tracks", description: "per frame and point: frame, time_s, point, u_px, v_px, score, status (NaN positions when lost)", kind: OutputKind::TimeSeries },
+        OutputInfo { name: "figures", description: "tracks.png: u, v and score of every point over time", kind: OutputKind::Files },
     ],
     params: &[
         ParamSpec { name: "points", kind: ParamKind::Str, default: None, unit: "px", description: "start points in the first frame, `u,v;u,v` or `M1=u,v;M2=u,v` (u right, v down; unnamed points are M1, M2, …)", range: None },

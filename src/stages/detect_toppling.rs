@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use super::{split_pair, InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use super::{split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::signal::toppling::{detect_toppling, DetectOptions};
@@ -17,7 +17,7 @@ static INFO: StageInfo = StageInfo {
     version: 1,
     summary: "Toppling impacts from top accelerometers: STA/LTA spike confirmed by a lasting amplitude drop; optional floor-vertical cross-check.",
     inputs: InputKind::Datasets,
-    outputs: &[OutputInfo { name: "events", description: "per channel: toppled, impact_time_s, peak_mps2, confidence, and why", timeseries: false }],
+    outputs: &[OutputInfo { name: "events", description: "per channel: toppled, impact_time_s, peak_mps2, confidence, and why", kind: OutputKind::Table }],
     params: &[
         ParamSpec { name: "channels", kind: ParamKind::StrList, default: None, unit: "", description: "top accelerometer columns, each optionally `-> floor vertical column` for the cross-check", range: None },
         ParamSpec { name: "sta_lta_on", kind: ParamKind::Float, default: Some("8.0"), unit: "", description: "trigger level of sqrt(STA/LTA) on the signal's 5 ms difference", range: Some((1.0, 1e6)) },

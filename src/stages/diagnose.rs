@@ -6,7 +6,7 @@
 use rayon::prelude::*;
 use serde_json::{json, Value};
 
-use super::{InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::diagnose::{diagnose, Diagnosis, Settings};
 use crate::io::case::read_case;
 use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
@@ -21,10 +21,10 @@ static INFO: StageInfo = StageInfo {
     summary: "Where the toppling model and a unit's records disagree, which physics it left out (sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt), fitted, ranked by BIC, or `unexplained`.",
     inputs: InputKind::Files(&[RecordFormat::Case]),
     outputs: &[
-        OutputInfo { name: "diagnosis", description: "per case: mismatch, verdict, window_start_s, window_end_s, rmse_before, rmse_after, explanation, candidates (JSON)", timeseries: false },
-        OutputInfo { name: "accel", description: "per case: observed, baseline and model top acceleration and the residuals before/after", timeseries: true },
-        OutputInfo { name: "camera", description: "per case: observed, baseline and model rotation and the residuals before/after", timeseries: true },
-        OutputInfo { name: "reports", description: "<case>.json (the diagnosis.json contract) and <case>.png (records, models, residuals, window shaded)", timeseries: false },
+        OutputInfo { name: "diagnosis", description: "per case: mismatch, verdict, window_start_s, window_end_s, rmse_before, rmse_after, explanation, candidates (JSON)", kind: OutputKind::Table },
+        OutputInfo { name: "accel", description: "per case: observed, baseline and model top acceleration and the residuals before/after", kind: OutputKind::TimeSeries },
+        OutputInfo { name: "camera", description: "per case: observed, baseline and model rotation and the residuals before/after", kind: OutputKind::TimeSeries },
+        OutputInfo { name: "reports", description: "<case>.json (the diagnosis.json contract) and <case>.png (records, models, residuals, window shaded)", kind: OutputKind::Files },
     ],
     params: &[
         ParamSpec { name: "exceedance_sigma", kind: ParamKind::Float, default: Some("4.0"), unit: "", description: "a residual beyond this many noise standard deviations counts as a disagreement (5 within 0.1 s flag a mismatch)", range: Some((2.0, 20.0)) },

@@ -7,7 +7,7 @@ use anyhow::Context;
 use rayon::prelude::*;
 use serde_json::json;
 
-use super::{InputKind, InputPart, OutputInfo, Stage, StageContext, StageInfo, StageInput};
+use super::{InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
 use crate::error::{did_you_mean, UserError};
 use crate::io::records::{self, DelimitedOptions, RawRecord};
 use crate::pipeline::spec::{ColumnSpec, GapPolicy, NonUniformPolicy, RecordFormat, SourceSpec};
@@ -25,7 +25,7 @@ static INFO: StageInfo = StageInfo {
     outputs: &[OutputInfo {
         name: "records",
         description: "one table per record file: time_s plus each channel in SI",
-        timeseries: false,
+        kind: OutputKind::Table,
     }],
     params: &[],
 };

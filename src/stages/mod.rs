@@ -41,8 +41,29 @@ pub enum InputKind {
 pub struct OutputInfo {
     pub name: &'static str,
     pub description: &'static str,
-    /// Time series are also written as MCAP for Foxglove.
-    pub timeseries: bool,
+    pub kind: OutputKind,
+}
+
+/// What an output holds, which decides how the sink writes it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutputKind {
+    /// Parquet tables, one per record.
+    Table,
+    /// Parquet tables with a `time_s` column, also written as MCAP for Foxglove.
+    TimeSeries,
+    /// Files written as they are (figures, reports).
+    Files,
+}
+
+impl OutputKind {
+    /// How `shakeflow stages` names the files of an output.
+    pub fn describe(self) -> &'static str {
+        match self {
+            OutputKind::Table => "Parquet",
+            OutputKind::TimeSeries => "Parquet + MCAP",
+            OutputKind::Files => "files",
+        }
+    }
 }
 
 #[derive(Debug)]

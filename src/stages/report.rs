@@ -6,7 +6,7 @@
 
 use std::collections::BTreeMap;
 
-use super::{partition_path, InputKind, InputPart, OutputInfo, Stage, StageContext, StageInfo, StageInput};
+use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
 use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::table::{Column, ColumnData, Table};
@@ -19,9 +19,9 @@ static INFO: StageInfo = StageInfo {
     summary: "Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time, confidence); rolling units' peak displacement, yaw and caster flips per motion.",
     inputs: InputKind::Datasets,
     outputs: &[
-        OutputInfo { name: "summary", description: "one row per unit and toppling event (or one row when none)", timeseries: false },
-        OutputInfo { name: "rolling", description: "one row per rolling unit and motion: peak_displacement_m, peak_yaw_rad, caster_flips, breakaway_time_s (from simulate_rolling.events inputs)", timeseries: false },
-        OutputInfo { name: "figures", description: "<unit>.png: floor vs top acceleration, transfer functions with picked peaks", timeseries: false },
+        OutputInfo { name: "summary", description: "one row per unit and toppling event (or one row when none)", kind: OutputKind::Table },
+        OutputInfo { name: "rolling", description: "one row per rolling unit and motion: peak_displacement_m, peak_yaw_rad, caster_flips, breakaway_time_s (from simulate_rolling.events inputs)", kind: OutputKind::Table },
+        OutputInfo { name: "figures", description: "<unit>.png: floor vs top acceleration, transfer functions with picked peaks", kind: OutputKind::Files },
     ],
     params: &[
         ParamSpec {

@@ -7,7 +7,7 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
 
-use super::{partition_path, InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::io::parquet;
 use crate::physics::rolling::{
     self, simulate, Cart, EventKind, Excitation, Friction, FrictionLaw, LateralSlip, Method, Options, Response,
@@ -187,9 +187,9 @@ static INFO: StageInfo = StageInfo {
     summary: "Rolling, turning and pivot steering of equipment on four swivel casters under the two horizontal floor components (the study's 4WMC, made well posed).",
     inputs: InputKind::Datasets,
     outputs: &[
-        OutputInfo { name: "trajectory", description: "on the input time base: time_s, x_m, y_m, yaw_rad, delta1_rad…delta4_rad, velocities, roll1_mps…roll4_mps, swivel rates, the platform's absolute acceleration ax_abs_mps2/ay_abs_mps2, the floor input", timeseries: true },
-        OutputInfo { name: "events", description: "breakaway, rest and caster flip times, the peak displacement and the peak yaw: time_s, event, caster, displacement_m, yaw_rad, delta_rad", timeseries: false },
-        OutputInfo { name: "figures", description: "<partition>.png: floor inputs, x/y displacement, yaw with the four caster angles, and the x–y orbit (the study's Figure 11)", timeseries: false },
+        OutputInfo { name: "trajectory", description: "on the input time base: time_s, x_m, y_m, yaw_rad, delta1_rad…delta4_rad, velocities, roll1_mps…roll4_mps, swivel rates, the platform's absolute acceleration ax_abs_mps2/ay_abs_mps2, the floor input", kind: OutputKind::TimeSeries },
+        OutputInfo { name: "events", description: "breakaway, rest and caster flip times, the peak displacement and the peak yaw: time_s, event, caster, displacement_m, yaw_rad, delta_rad", kind: OutputKind::Table },
+        OutputInfo { name: "figures", description: "<partition>.png: floor inputs, x/y displacement, yaw with the four caster angles, and the x–y orbit (the study's Figure 11)", kind: OutputKind::Files },
     ],
     params: &PARAMS,
 };

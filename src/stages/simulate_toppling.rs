@@ -6,7 +6,7 @@ use std::path::Path;
 
 use rayon::prelude::*;
 
-use super::{partition_path, InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::{equipment, parquet};
 use crate::physics::rocking::{self, Anchorage, Block, Excitation, IsolatedBase, Method, Options, Response, Shape};
@@ -54,9 +54,9 @@ static INFO: StageInfo = StageInfo {
     summary: "The study's 2D rigid-block toppling model on floor records: rest, uplift (Eq. 20/21), rocking (Eq. 22), impacts (Eq. 24), overturning; adaptive integration with located events.",
     inputs: InputKind::Datasets,
     outputs: &[
-        OutputInfo { name: "response", description: "per record: time_s, theta_rad, theta_dot_radps, top_ax_mps2 (what a top accelerometer records), on the input time base", timeseries: true },
-        OutputInfo { name: "events", description: "per record: uplifts, impacts, returns to rest, anchor yield/fracture, overturn; the last row (event = summary) and every row carry overturned, overturn_time_s, overturn_side", timeseries: false },
-        OutputInfo { name: "figures", description: "<record>.png: floor and top acceleration, theta with the events marked", timeseries: false },
+        OutputInfo { name: "response", description: "per record: time_s, theta_rad, theta_dot_radps, top_ax_mps2 (what a top accelerometer records), on the input time base", kind: OutputKind::TimeSeries },
+        OutputInfo { name: "events", description: "per record: uplifts, impacts, returns to rest, anchor yield/fracture, overturn; the last row (event = summary) and every row carry overturned, overturn_time_s, overturn_side", kind: OutputKind::Table },
+        OutputInfo { name: "figures", description: "<record>.png: floor and top acceleration, theta with the events marked", kind: OutputKind::Files },
     ],
     params: rocking_params![
         ParamSpec { name: "initial_theta_rad", kind: ParamKind::Float, default: Some("0.0"), unit: "rad", description: "initial rotation (free-rocking tests); 0: at rest", range: Some((-1.5, 1.5)) },

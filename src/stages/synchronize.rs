@@ -10,7 +10,7 @@
 
 use rayon::prelude::*;
 
-use super::{partition_path, InputKind, InputPart, OutputInfo, Stage, StageContext, StageInfo};
+use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::signal::resample_bandlimited::resample_channels;
@@ -25,8 +25,8 @@ static INFO: StageInfo = StageInfo {
     summary: "Align a second DAQ with the reference DAQ: band-limited resampling, FFT cross-correlation lag (sub-sample), shift onto the reference clock.",
     inputs: InputKind::Datasets,
     outputs: &[
-        OutputInfo { name: "records", description: "reference channels and aligned target channels on the reference time base", timeseries: true },
-        OutputInfo { name: "lags", description: "estimated (or given) lag per target record: channel, lag_s, lag_uncertainty_s, correlation", timeseries: false },
+        OutputInfo { name: "records", description: "reference channels and aligned target channels on the reference time base", kind: OutputKind::TimeSeries },
+        OutputInfo { name: "lags", description: "estimated (or given) lag per target record: channel, lag_s, lag_uncertainty_s, correlation", kind: OutputKind::Table },
     ],
     params: &[
         ParamSpec { name: "reference_channel", kind: ParamKind::Str, default: Some("\"ax_mps2\""), unit: "", description: "channel of the reference records the lag is measured against", range: None },

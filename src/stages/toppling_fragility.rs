@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 
 use super::simulate_toppling::{model_from_params, rocking_params, simulate_record};
-use super::{partition_path, InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::stats::fragility::{fit_lognormal, FitOutcome, LognormalFit};
@@ -19,9 +19,9 @@ static INFO: StageInfo = StageInfo {
     summary: "Overturning fragility of one unit: floor records scaled over intensities, all runs simulated in parallel, lognormal curve (median, beta) by maximum likelihood.",
     inputs: InputKind::Datasets,
     outputs: &[
-        OutputInfo { name: "runs", description: "every run: record, scale, im, overturned, overturn_time_s, overturn_side, max_abs_theta_rad", timeseries: false },
-        OutputInfo { name: "fragility", description: "one row: im_measure, median, beta, log_likelihood, n_runs, n_overturned, note", timeseries: false },
-        OutputInfo { name: "figures", description: "fragility.png: the fitted curve with the runs and the overturned fraction per level", timeseries: false },
+        OutputInfo { name: "runs", description: "every run: record, scale, im, overturned, overturn_time_s, overturn_side, max_abs_theta_rad", kind: OutputKind::Table },
+        OutputInfo { name: "fragility", description: "one row: im_measure, median, beta, log_likelihood, n_runs, n_overturned, note", kind: OutputKind::Table },
+        OutputInfo { name: "figures", description: "fragility.png: the fitted curve with the runs and the overturned fraction per level", kind: OutputKind::Files },
     ],
     params: rocking_params![
         ParamSpec { name: "im", kind: ParamKind::Choice(&["pfa", "pfv"]), default: Some("\"pfa\""), unit: "", description: "intensity measure: peak floor acceleration (m/s^2) or peak floor velocity (m/s, trapezoidal integral of the horizontal record)", range: None },

@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use super::{split_pair, InputKind, OutputInfo, Stage, StageContext, StageInfo};
+use super::{split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
 use crate::signal::welch::{identify_peak, transfer_function, Detrend, WelchOptions, Window};
@@ -18,8 +18,8 @@ static INFO: StageInfo = StageInfo {
     summary: "Welch transfer functions H1, H2 and coherence (MATLAB tfestimate defaults) and the identified fundamental frequency with half-power damping.",
     inputs: InputKind::Datasets,
     outputs: &[
-        OutputInfo { name: "identified", description: "per pair: frequency_hz, damping_ratio, peak_gain, coherence, low_coherence, note", timeseries: false },
-        OutputInfo { name: "spectra", description: "per pair and frequency: |H1|, phase, |H2|, coherence", timeseries: false },
+        OutputInfo { name: "identified", description: "per pair: frequency_hz, damping_ratio, peak_gain, coherence, low_coherence, note", kind: OutputKind::Table },
+        OutputInfo { name: "spectra", description: "per pair and frequency: |H1|, phase, |H2|, coherence", kind: OutputKind::Table },
     ],
     params: &[
         ParamSpec { name: "pairs", kind: ParamKind::StrList, default: None, unit: "", description: "input -> output column pairs, e.g. `floor4_ax_mps2 -> PB1_top_ax_mps2`", range: None },
