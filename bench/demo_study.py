@@ -14,11 +14,8 @@ and bench/rolling.py time them). Medians over
 --repeat runs; ratios are Python / shakeflow (above 1: shakeflow is faster or leaner).
 """
 import os
-import pathlib
-import sys
-import tempfile
 
-from load_baseline import parse_args, print_table, run_sides
+from load_baseline import parse_args, print_table, time_pipelines
 
 PYTHON_SIDE = r'''
 import pathlib, sys
@@ -93,22 +90,12 @@ def main():
     args = parse_args(__doc__)
     args.pipeline = without_simulations(args.pipeline)
     sides = ["shakeflow (demo pipeline)", "shakeflow (no MCAP twins)", "numpy/scipy script"]
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = pathlib.Path(tmp)
-        # The camera projection stages have their own benchmark (bench/cpt.py) against OpenCV.
-        text = args.pipeline.split("  cpt_calibrate:")[0].replace("../runs/demo-archive", str(args.archive))
-        sync_params = "      max_lag_s: 5.0\n"
-        assert text.count(sync_params) == 1, "the demo's synchronize stage changed; update the bench"
-        no_twins = text.replace(sync_params, sync_params + "      mcap: false\n")
-        commands = {}
-        for side, variant, name in zip(sides[:2], (text, no_twins), ("demo", "no_twins")):
-            pipeline = tmp / f"{name}.yaml"
-            pipeline.write_text(variant.replace("output_dir: ../runs/demo", f"output_dir: {tmp / name}"))
-            commands[side] = ([args.shakeflow, "run", "--quiet", str(pipeline)], tmp / name)
-        script = tmp / "py_side.py"
-        script.write_text(PYTHON_SIDE)
-        commands[sides[2]] = ([sys.executable, str(script), str(args.archive), str(tmp / "py_out")], tmp / "py_out")
-        results = run_sides(commands, args.repeat)
+    # The camera projection stages have their own benchmark (bench/cpt.py) against OpenCV.
+    text = args.pipeline.split("  cpt_calibrate:")[0].replace("../runs/demo-archive", str(args.archive))
+    sync_params = "      max_lag_s: 5.0\n"
+    assert text.count(sync_params) == 1, "the demo's synchronize stage changed; update the bench"
+    no_twins = text.replace(sync_params, sync_params + "      mcap: false\n")
+    results = time_pipelines(args, {sides[0]: text, sides[1]: no_twins}, sides[2], PYTHON_SIDE)
     print_table(f"whole demo study on {args.archive} ({os.cpu_count()} cores), median of {args.repeat}", results, sides[2])
 
 

@@ -74,6 +74,22 @@ def run_sides(commands, repeat):
     return results
 
 
+def time_pipelines(args, pipelines, script_side, script_source):
+    """Times each shakeflow pipeline text of `pipelines` ({side: text}) and the Python script
+    (`script_side`) with `run_sides`, each writing into its own folder of a temporary directory."""
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = pathlib.Path(tmp)
+        commands = {}
+        for i, (side, text) in enumerate(pipelines.items()):
+            pipeline, output = tmp / f"pipeline{i}.yaml", tmp / f"out{i}"
+            pipeline.write_text(text.replace("output_dir: ../runs/demo", f"output_dir: {output}"))
+            commands[side] = ([args.shakeflow, "run", "--quiet", str(pipeline)], output)
+        script = tmp / "py_side.py"
+        script.write_text(script_source)
+        commands[script_side] = ([sys.executable, str(script), str(args.archive), str(tmp / "py_out")], tmp / "py_out")
+        return run_sides(commands, args.repeat)
+
+
 def parse_args(doc):
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--shakeflow", required=True)
@@ -99,21 +115,11 @@ def main():
     args = parse_args(__doc__)
     size = sum(p.stat().st_size for p in args.archive.rglob("*.csv"))
     sides = ["shakeflow (demo pipeline)", "shakeflow (+MCAP twins)", "numpy/pyarrow script"]
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = pathlib.Path(tmp)
-        # Only the load and baseline stages: cut the pipeline before `synchronize`.
-        text = args.pipeline.split("  synchronize:")[0].replace("../runs/demo-archive", str(args.archive))
-        assert text.count("mcap: false") == 2, "the demo's baseline stages no longer say `mcap: false`"
-        twins = text.replace("mcap: false", "mcap: true")
-        commands = {}
-        for side, variant, name in zip(sides[:2], (text, twins), ("demo", "twins")):
-            pipeline = tmp / f"{name}.yaml"
-            pipeline.write_text(variant.replace("output_dir: ../runs/demo", f"output_dir: {tmp / name}"))
-            commands[side] = ([args.shakeflow, "run", "--quiet", str(pipeline)], tmp / name)
-        script = tmp / "py_side.py"
-        script.write_text(PYTHON_SIDE)
-        commands[sides[2]] = ([sys.executable, str(script), str(args.archive), str(tmp / "py_out")], tmp / "py_out")
-        results = run_sides(commands, args.repeat)
+    # Only the load and baseline stages: cut the pipeline before `synchronize`.
+    text = args.pipeline.split("  synchronize:")[0].replace("../runs/demo-archive", str(args.archive))
+    assert text.count("mcap: false") == 2, "the demo's baseline stages no longer say `mcap: false`"
+    twins = text.replace("mcap: false", "mcap: true")
+    results = time_pipelines(args, {sides[0]: text, sides[1]: twins}, sides[2], PYTHON_SIDE)
     print_table(f"load + baseline on {args.archive} ({size / 1e6:.1f} MB of CSV, {os.cpu_count()} cores), median of {args.repeat}", results, sides[2])
 
 
