@@ -187,4 +187,28 @@ fn signal_stages_run_alone_on_files() {
     let lags = shakeflow::io::parquet::read_table(&root.join("s/lags/motion=X/data.parquet")).unwrap();
     let lag = lags.f64_column("lag_s").unwrap()[0];
     assert!((lag - 0.25).abs() < 1e-3, "lag {lag}");
+    // The time column is no channel to synchronise by: a clear refusal, nothing written.
+    let refused = shakeflow(
+        &[
+            "stage",
+            "synchronize",
+            "-i",
+            "ref",
+            "-i",
+            "tgt",
+            "-o",
+            "s2",
+            "--set",
+            "reference_channel=a",
+            "--set",
+            "target_channel=time_s",
+        ],
+        root,
+    );
+    assert!(
+        !refused.status.success() && stderr(&refused).contains("no float channel `time_s`"),
+        "{}",
+        stderr(&refused)
+    );
+    assert!(!root.join("s2").exists());
 }

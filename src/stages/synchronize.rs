@@ -128,19 +128,18 @@ fn align(
             clock.column_names().join(", ")
         )
     })?;
-    let sync_index = target.columns.iter().position(|c| c.name == target_channel && c.as_f64().is_some());
-    let sync_index = sync_index.ok_or_else(|| {
-        format!("the target has no float column `{target_channel}`; columns: {}", target.column_names().join(", "))
+    let float_columns: Vec<(&Column, &[f64])> =
+        target.columns.iter().filter(|c| c.name != TIME_COLUMN).filter_map(|c| c.as_f64().map(|v| (c, v))).collect();
+    let sync_position = float_columns.iter().position(|(c, _)| c.name == target_channel).ok_or_else(|| {
+        format!(
+            "the target has no float channel `{target_channel}` (other than `{TIME_COLUMN}`); columns: {}",
+            target.column_names().join(", ")
+        )
     })?;
-    let float_columns: Vec<(usize, &Column, &[f64])> = (target.columns.iter().enumerate())
-        .filter(|(_, c)| c.name != TIME_COLUMN)
-        .filter_map(|(i, c)| c.as_f64().map(|v| (i, c, v)))
-        .collect();
     // All channels at once: the filter weights are shared by the channels of a record.
-    let values: Vec<&[f64]> = float_columns.iter().map(|(_, _, v)| *v).collect();
+    let values: Vec<&[f64]> = float_columns.iter().map(|(_, v)| *v).collect();
     let resampled = resample_channels(&values, fs_target, fs);
-    let sync = &resampled
-        [float_columns.iter().position(|(i, _, _)| *i == sync_index).expect("the sync channel is a float column")];
+    let sync = &resampled[sync_position];
     let (lag_s, uncertainty, correlation, method) = match known_lag {
         Some(lag) => (lag, 0.0, None, "known"),
         None => {
@@ -151,7 +150,7 @@ fn align(
     // Aligned target on the reference grid: target value at reference time t is target(t + lag).
     let resampled: Vec<&[f64]> = resampled.iter().map(Vec::as_slice).collect();
     let target_columns: Vec<(&Column, Vec<f64>)> =
-        float_columns.iter().map(|(_, c, _)| *c).zip(shift_channels(&resampled, fs, lag_s)).collect();
+        float_columns.iter().map(|(c, _)| *c).zip(shift_channels(&resampled, fs, lag_s)).collect();
     let n_reference = references.iter().map(|(_, t)| t.num_rows()).min().unwrap_or(0);
     let valid = |k: usize| target_columns.iter().all(|(_, v)| k < v.len() && v[k].is_finite());
     let first =
