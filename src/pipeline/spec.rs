@@ -46,7 +46,7 @@ pub struct StageSpec {
     pub select: BTreeMap<String, Vec<String>>,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Deserialize, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum RecordFormat {
     /// Delimited text: CSV, TSV or whitespace-separated columns.

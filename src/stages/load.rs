@@ -71,7 +71,7 @@ type Job<'a> = (&'a SourceSpec, &'a str, &'a InputPart);
 /// What decides how a file parses: sources equal in these read it identically.
 #[derive(PartialEq, Eq, PartialOrd, Ord)]
 struct ParseKey<'a> {
-    format: String,
+    format: RecordFormat,
     header_lines: usize,
     column_names: bool,
     delimiter: Option<&'a str>,
@@ -80,7 +80,7 @@ struct ParseKey<'a> {
 impl<'a> ParseKey<'a> {
     fn of(spec: &'a SourceSpec) -> Self {
         ParseKey {
-            format: spec.format.name(),
+            format: spec.format,
             header_lines: spec.header_lines,
             column_names: spec.column_names,
             delimiter: spec.delimiter.as_deref(),
@@ -133,19 +133,23 @@ fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<T
     let path = part.path.as_path();
     let err = |message: String| UserError::new(message).in_file(path);
 
-    // Time: an explicit column, the file's own time (RENADIC), or a sample interval.
-    let explicit_time: Option<(Vec<f64>, Option<usize>)> = if let Some(name) = &spec.time_column {
-        let channel = raw.channels.iter().find(|c| &c.name == name).ok_or_else(|| {
-            missing_column(path, name, raw)
+    // Time: an explicit column, the file's own time (RENADIC), or a sample interval. The other
+    // columns are the record's channels.
+    let all: Vec<&records::RawChannel> = raw.channels.iter().collect();
+    let (explicit_time, channels) = if let Some(name) = &spec.time_column {
+        let index = all.iter().position(|c| &c.name == name).ok_or_else(|| {
+            missing_column(path, name, &all)
                 .hint("set `time_column` to one of the file's columns, or drop it and give `dt`")
         })?;
+        let channel = all[index];
         let factor = spec.time_unit.as_deref().and_then(units::conversion).map_or(1.0, |c| c.factor);
-        Some((channel.values.iter().map(|v| v * factor).collect(), channel.first_data_line))
+        let time = channel.values.iter().map(|v| v * factor).collect();
+        let others = all.iter().enumerate().filter(|&(i, _)| i != index).map(|(_, c)| *c).collect();
+        (Some((time, channel.first_data_line)), others)
     } else {
-        raw.time.clone().map(|t| (t, raw.channels.first().and_then(|c| c.first_data_line)))
+        (raw.time.clone().map(|t| (t, raw.channels.first().and_then(|c| c.first_data_line))), all)
     };
-    let is_time = |c: &records::RawChannel| spec.time_column.as_ref() == Some(&c.name);
-    let n = raw.channels.iter().find(|c| !is_time(c)).map_or(0, |c| c.values.len());
+    let n = channels.first().map_or(0, |c| c.values.len());
     if n < 2 {
         return Err(err(format!("the record has {n} sample(s); at least 2 are needed")));
     }
@@ -185,17 +189,16 @@ fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<T
     };
 
     let selected: Vec<(String, &records::RawChannel, Option<&ColumnSpec>)> = if spec.columns.is_empty() {
-        raw.channels.iter().filter(|c| !is_time(c)).map(|c| (c.name.clone(), c, None)).collect()
+        channels.iter().map(|c| (c.name.clone(), *c, None)).collect()
     } else {
         spec.columns
             .iter()
             .map(|(out, cs)| {
-                let channel = raw
-                    .channels
+                let channel = channels
                     .iter()
                     .find(|c| c.name == cs.file_column())
-                    .ok_or_else(|| missing_column(path, cs.file_column(), raw))?;
-                Ok((out.clone(), channel, Some(cs)))
+                    .ok_or_else(|| missing_column(path, cs.file_column(), &channels))?;
+                Ok((out.clone(), *channel, Some(cs)))
             })
             .collect::<Result<_, UserError>>()?
     };
@@ -276,8 +279,8 @@ fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<T
     Ok(table)
 }
 
-fn missing_column(path: &std::path::Path, name: &str, raw: &RawRecord) -> UserError {
-    let available: Vec<&str> = raw.channels.iter().map(|c| c.name.as_str()).collect();
+fn missing_column(path: &std::path::Path, name: &str, channels: &[&records::RawChannel]) -> UserError {
+    let available: Vec<&str> = channels.iter().map(|c| c.name.as_str()).collect();
     let suggestion =
         did_you_mean(name, available.iter().copied()).map(|s| format!("did you mean `{s}`? ")).unwrap_or_default();
     UserError::new(format!("the file has no column `{name}`"))
