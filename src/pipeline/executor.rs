@@ -415,8 +415,12 @@ fn run_stages(
 ) -> anyhow::Result<StagesResult> {
     let mut dependents: BTreeMap<&str, Vec<&PlannedStage>> = BTreeMap::new();
     let mut waiting_on = BTreeMap::new();
+    let mut roots = Vec::new();
     for stage in plan.stages.values() {
         let upstream = upstream_stages(stage);
+        if upstream.is_empty() {
+            roots.push(stage);
+        }
         waiting_on.insert(stage.name.as_str(), upstream.len());
         for name in upstream {
             dependents.entry(name).or_default().push(stage);
@@ -440,7 +444,7 @@ fn run_stages(
     };
     // A stage starts as soon as its own upstream stages are done, not when a whole "wave" is.
     rayon::scope(|scope| {
-        for stage in plan.stages.values().filter(|s| upstream_stages(s).is_empty()) {
+        for stage in roots {
             start(&env, scope, stage);
         }
     });
@@ -545,6 +549,5 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
         .lock()
         .expect("no poisoned lock")
         .insert(stage.name.clone(), StageReport { name: stage.name.clone(), outcome: report });
-
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! Where a running stage puts its tables: Parquet (+ MCAP for time series) in a staging
 //! directory, each file stamped with the provenance of the run that made it.
 
+use std::borrow::Cow;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -111,16 +112,15 @@ impl OutputSink {
             // A separate tree: pyarrow.dataset and friends refuse folders that mix in non-Parquet files.
             let mcap_dir = self.root.join(MCAP_DIR).join(output).join(&relative);
             std::fs::create_dir_all(&mcap_dir).map_err(|e| anyhow!("cannot create `{}`: {e}", mcap_dir.display()))?;
-            let split = match key {
-                None => Vec::new(),
-                Some(key) => {
-                    split_by(&table, key)?.into_iter().map(|(value, part)| (format!("{topic}/{value}"), part)).collect()
-                }
+            let split: Vec<(String, Cow<'_, Table>)> = match key {
+                None => vec![(topic, Cow::Borrowed(&table))],
+                Some(key) => split_by(&table, key)?
+                    .into_iter()
+                    .map(|(value, part)| (format!("{topic}/{value}"), Cow::Owned(part)))
+                    .collect(),
             };
-            let topics: Vec<mcap::Topic<'_>> = match key {
-                None => vec![mcap::Topic { name: topic, table: &table }],
-                Some(_) => split.iter().map(|(name, part)| mcap::Topic { name: name.clone(), table: part }).collect(),
-            };
+            let topics: Vec<mcap::Topic<'_>> =
+                split.iter().map(|(name, part)| mcap::Topic { name: name.clone(), table: part }).collect();
             mcap::write_timeseries(&mcap_dir.join(MCAP_FILE), &topics, &table.metadata)?;
         }
         self.progress.inc(1);
