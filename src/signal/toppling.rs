@@ -172,6 +172,7 @@ pub fn detect_toppling(
     let Some(dt) = median_step(&t) else {
         return invalid("no positive time step".into());
     };
+    let record = Record { t: &t, x: &x, dt };
     let n_valid = x.iter().filter(|v| v.is_finite()).count();
     if (n_valid as f64) * dt < 1.0 || n_valid < 16 {
         return invalid(format!("only {n_valid} valid samples"));
@@ -217,7 +218,7 @@ pub fn detect_toppling(
                 }
             }
             if let Some(j) = j_best {
-                if let Some(c) = make_candidate(&t, &x, &d, j, lag, best_ratio, opts) {
+                if let Some(c) = make_candidate(&record, &d, j, lag, best_ratio, opts) {
                     cands.push(c);
                 }
             }
@@ -247,7 +248,8 @@ pub fn detect_toppling(
     merged.truncate(opts.max_candidates);
 
     let t_end = last_valid_time(&t, &x);
-    let evals: Vec<Evaluation> = merged.iter().map(|c| evaluate(&t, &x, floor_vertical_mps2, c, t_end, opts)).collect();
+    let evals: Vec<Evaluation> =
+        merged.iter().map(|c| evaluate(&record, floor_vertical_mps2, c, t_end, opts)).collect();
 
     // Confirmed: highest confidence, then earliest.
     let best_confirmed = evals
@@ -319,15 +321,23 @@ struct Evaluation {
     text: String,
 }
 
+/// The analysed record: filled time, acceleration (NaN where missing) and its median time step,
+/// found once (the candidates' checks need it).
+struct Record<'a> {
+    t: &'a [f64],
+    x: &'a [f64],
+    dt: f64,
+}
+
 fn make_candidate(
-    t: &[f64],
-    x: &[f64],
+    record: &Record,
     d: &[f64],
     j0: usize,
     lag: usize,
     sta_lta: f64,
     o: &DetectOptions,
 ) -> Option<Candidate> {
+    let (t, x) = (record.t, record.x);
     // Steepest step near the trigger, then the earliest step of the spike's leading edge: the
     // first step, at most 60 ms earlier, reaching EDGE_FRACTION of the steepest one.
     let steep = |a: usize, b: usize| {
@@ -352,13 +362,14 @@ fn make_candidate(
     let (pre_ss, pre_n) = detrended_ss(t, x, t_imp - o.pre_gap_s - o.pre_window_s, t_imp - o.pre_gap_s);
     let dt_pre = (t_imp - o.pre_gap_s - t[0]).min(o.pre_window_s);
     // Need at least 0.25 s of pre-impact data.
-    if pre_n < 3 || dt_pre < 0.25 || (pre_n as f64) < 0.25 / median_step(t).unwrap_or(1.0) {
+    if pre_n < 3 || dt_pre < 0.25 || (pre_n as f64) < 0.25 / record.dt {
         return None;
     }
     Some(Candidate { t_imp, sta_lta, peak_amp, pre_rms: (pre_ss / pre_n as f64).sqrt() })
 }
 
-fn evaluate(t: &[f64], x: &[f64], floor_v: Option<&[f64]>, c: &Candidate, t_end: f64, o: &DetectOptions) -> Evaluation {
+fn evaluate(record: &Record, floor_v: Option<&[f64]>, c: &Candidate, t_end: f64, o: &DetectOptions) -> Evaluation {
+    let (t, x) = (record.t, record.x);
     let pre = c.pre_rms.max(1e-12);
     let spike_r = c.peak_amp / pre;
     // Weakest of amplitude and impulsiveness, so that "score >= 0.5" matches the thresholds.
@@ -389,7 +400,7 @@ fn evaluate(t: &[f64], x: &[f64], floor_v: Option<&[f64]>, c: &Candidate, t_end:
     }
     let post_rms = window_rms(t, x, t0, (t0 + o.post_window_s).min(t_end + 1e-9));
     let drop = post_rms / pre;
-    let (persist, reached_end) = persistence(t, x, t0, t_end, o.block_s, o.drop_ratio * pre);
+    let (persist, reached_end) = persistence(record, t0, t_end, o.block_s, o.drop_ratio * pre);
     let drop_score = score(1.0 / drop.max(1e-12), 1.0 / o.drop_ratio, 10.0);
     let persist_thr = if reached_end { o.min_tail_s.min(o.min_drop_s) } else { o.min_drop_s };
     let persist_score = score(persist, persist_thr, 2.5 * o.min_drop_s);
@@ -446,8 +457,8 @@ fn score(x: f64, thr: f64, clear: f64) -> f64 {
 
 /// Duration (from t0) during which every block of `block_s` has detrended RMS ≤ `limit`;
 /// and whether that reached the end of the record. Blocks with too few valid samples are neutral.
-fn persistence(t: &[f64], x: &[f64], t0: f64, t_end: f64, block_s: f64, limit: f64) -> (f64, bool) {
-    let dt = median_step(t).unwrap_or(1.0);
+fn persistence(record: &Record, t0: f64, t_end: f64, block_s: f64, limit: f64) -> (f64, bool) {
+    let (t, x, dt) = (record.t, record.x, record.dt);
     let mut bs = t0;
     let mut good_until = t0;
     while bs < t_end {
@@ -540,12 +551,28 @@ fn running_median(x: &[f64], win: usize, step: usize) -> Vec<f64> {
     let n = x.len();
     let h = win / 2;
     let mut knots: Vec<(usize, f64)> = Vec::new();
-    let mut buf = Vec::with_capacity(win + 1);
+    // The finite values of x[lo..hi], kept sorted as the window slides: each sample is inserted
+    // and removed once (a binary search and a short move) instead of a selection per knot.
+    let mut sorted: Vec<f64> = Vec::with_capacity(win + 1);
+    let (mut lo, mut hi) = (0, 0);
+    let position = |sorted: &[f64], v: f64| sorted.partition_point(|w| w.total_cmp(&v).is_lt());
     let mut c = 0;
     while c < n {
-        buf.clear();
-        buf.extend(x[c.saturating_sub(h)..(c + h + 1).min(n)].iter().copied().filter(|v| v.is_finite()));
-        if let Some(m) = median(&mut buf) {
+        let (new_lo, new_hi) = (c.saturating_sub(h), (c + h + 1).min(n));
+        if new_lo >= hi {
+            sorted.clear();
+            (lo, hi) = (new_lo, new_lo);
+        }
+        for &v in x[lo..new_lo].iter().filter(|v| v.is_finite()) {
+            let at = position(&sorted, v);
+            sorted.remove(at);
+        }
+        for &v in x[hi..new_hi].iter().filter(|v| v.is_finite()) {
+            let at = position(&sorted, v);
+            sorted.insert(at, v);
+        }
+        (lo, hi) = (new_lo, new_hi);
+        if let Some(&m) = sorted.get(sorted.len() / 2) {
             knots.push((c, m));
         }
         if c == n - 1 {
@@ -644,6 +671,34 @@ mod tests {
         fn normal(&mut self) -> f64 {
             let (u, v) = (self.uniform().max(1e-300), self.uniform());
             (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+        }
+    }
+
+    #[test]
+    fn running_median_is_the_median_of_each_window() {
+        // The sliding sorted window against a selection over each window's finite values, with
+        // gaps, repeated values, signed zeros, windows longer than the record and steps longer
+        // than the window.
+        let mut r = Rng(7);
+        let x: Vec<f64> = (0..700)
+            .map(|i| match i % 37 {
+                0 | 1 => f64::NAN,
+                5 => 0.0,
+                6 => -0.0,
+                _ => (r.normal() * 4.0).round() / 4.0,
+            })
+            .collect();
+        for (win, step) in [(201, 10), (3, 1), (50, 7), (9, 30), (2000, 13)] {
+            let knot_at = |c: usize| {
+                let mut window: Vec<f64> =
+                    x[c.saturating_sub(win / 2)..(c + win / 2 + 1).min(x.len())].iter().copied().filter(|v| v.is_finite()).collect();
+                median(&mut window)
+            };
+            let got = running_median(&x, win, step);
+            // Knots of windows without a finite value are interpolated over, not compared.
+            for c in (0..x.len()).step_by(step).filter(|&c| knot_at(c).is_some()) {
+                assert_eq!(got[c].to_bits(), knot_at(c).unwrap().to_bits(), "window {win}, step {step}, knot {c}");
+            }
         }
     }
 
