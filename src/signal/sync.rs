@@ -98,13 +98,7 @@ pub fn estimate_lag(reference: &[f64], target: &[f64], fs: f64, max_lag_s: Optio
 /// `shift(target, fs, lag)[k] ≈ reference(k/fs)`.  Samples whose time `k/fs + lag_s`
 /// falls outside the record are `NaN`.  Same length as `x`.
 pub fn shift(x: &[f64], fs: f64, lag_s: f64) -> Vec<f64> {
-    shift_channels(&[x], fs, lag_s).pop().expect("one channel in, one out")
-}
-
-/// [`shift`] of several channels of one record (same length) by the same lag.
-pub fn shift_channels(channels: &[&[f64]], fs: f64, lag_s: f64) -> Vec<Vec<f64>> {
-    let n = channels.first().map_or(0, |x| x.len());
-    sample_grid(channels, fs, lag_s, n)
+    sample_grid(&[x], fs, lag_s, x.len()).pop().expect("one channel in, one out")
 }
 
 fn check_signal(name: &str, x: &[f64]) -> Result<Vec<f64>, String> {

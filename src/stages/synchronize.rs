@@ -1,10 +1,11 @@
 //! `synchronize`: put a second DAQ's records on the reference DAQ's clock.
 //!
 //! Per target record (e.g. one test's equipment DAQ), the reference records sharing its `join`
-//! key (e.g. the same motion's floor records) are gathered; the target is resampled to the
-//! reference rate (band-limited, anti-aliased), its lag against the reference channel found by
-//! FFT cross-correlation refined to sub-sample precision (or taken as `known_lag_s`), and all its
-//! channels shifted onto the reference time base. The output record holds the reference channels
+//! key (e.g. the same motion's floor records) are gathered; the target's sync channel is
+//! resampled to the reference rate (band-limited, anti-aliased), its lag against the reference
+//! channel found by FFT cross-correlation refined to sub-sample precision (or taken as
+//! `known_lag_s`), and all the target's channels resampled straight onto the shifted reference
+//! time base (one filter, not a resampling then a shift). The output record holds the reference channels
 //! (prefixed by their partition, e.g. `floor4_ax_mps2`) and the aligned target channels over the
 //! time both cover.
 
@@ -13,8 +14,8 @@ use rayon::prelude::*;
 use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
-use crate::signal::resample_bandlimited::resample_channels;
-use crate::signal::sync::{estimate_lag, shift_channels};
+use crate::signal::resample_bandlimited::{resample_channels, resample_grid};
+use crate::signal::sync::estimate_lag;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct Synchronize;
@@ -136,21 +137,23 @@ fn align(
             target.column_names().join(", ")
         )
     })?;
-    // All channels at once: the filter weights are shared by the channels of a record.
     let values: Vec<&[f64]> = float_columns.iter().map(|(_, v)| *v).collect();
-    let resampled = resample_channels(&values, fs_target, fs);
-    let sync = &resampled[sync_position];
     let (lag_s, uncertainty, correlation, method) = match known_lag {
         Some(lag) => (lag, 0.0, None, "known"),
         None => {
-            let e = estimate_lag(reference, sync, fs, Some(params.f64_of("max_lag_s")))?;
+            let sync = resample_channels(&[values[sync_position]], fs_target, fs).pop().expect("one channel");
+            let e = estimate_lag(reference, &sync, fs, Some(params.f64_of("max_lag_s")))?;
             (e.lag_s, e.uncertainty_s, Some(e.correlation), "estimated")
         }
     };
-    // Aligned target on the reference grid: target value at reference time t is target(t + lag).
-    let resampled: Vec<&[f64]> = resampled.iter().map(Vec::as_slice).collect();
-    let target_columns: Vec<(&Column, Vec<f64>)> =
-        float_columns.iter().map(|(c, _)| *c).zip(shift_channels(&resampled, fs, lag_s)).collect();
+    // Aligned target on the reference grid: target value at reference time t is target(t + lag),
+    // every channel resampled straight at the shifted times (one filter, weights shared).
+    let n_target = ((values[0].len() - 1) as f64 * fs / fs_target + 1e-9).floor() as usize + 1;
+    let target_columns: Vec<(&Column, Vec<f64>)> = float_columns
+        .iter()
+        .map(|(c, _)| *c)
+        .zip(resample_grid(&values, fs_target, fs, lag_s, n_target))
+        .collect();
     let n_reference = references.iter().map(|(_, t)| t.num_rows()).min().unwrap_or(0);
     let valid = |k: usize| target_columns.iter().all(|(_, v)| k < v.len() && v[k].is_finite());
     let first =
