@@ -380,6 +380,7 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
         inputs: &stage_inputs,
         sink: &sink,
         base_dir: Path::new("."),
+        memo: None,
     };
     let result = stage.run(&ctx).and_then(|()| {
         for o in info.outputs {

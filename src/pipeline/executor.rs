@@ -18,6 +18,7 @@ use super::hash::{self, KnownHashes};
 use super::lock::{LockFile, OutputLock, StageLock, LOCK_FILE};
 use super::plan::{InputRef, Plan, PlannedStage};
 use super::progress::Reporter;
+use super::memo::{TableMemo, DEFAULT_BUDGET_BYTES};
 use super::sink::OutputSink;
 use super::sources;
 use super::spec::RecordFormat;
@@ -387,6 +388,10 @@ struct RunEnv<'a> {
     waiting_on: Mutex<BTreeMap<&'a str, usize>>,
     /// Per stage, the stages that consume its outputs.
     dependents: BTreeMap<&'a str, Vec<&'a PlannedStage>>,
+    /// Tables written this run, kept for the stages that read them next.
+    memo: Arc<TableMemo>,
+    /// Per stage, how many of the stages reading its tables have not finished yet.
+    readers_left: Mutex<BTreeMap<&'a str, usize>>,
     /// The first failure; once set, no further stage starts.
     failure: Mutex<Option<anyhow::Error>>,
 }
@@ -426,6 +431,7 @@ fn run_stages(
             dependents.entry(name).or_default().push(stage);
         }
     }
+    let readers_left = Mutex::new(dependents.iter().map(|(name, readers)| (*name, readers.len())).collect());
     let env = RunEnv {
         plan,
         forced,
@@ -440,6 +446,8 @@ fn run_stages(
         reports: Mutex::new(BTreeMap::new()),
         waiting_on: Mutex::new(waiting_on),
         dependents,
+        memo: Arc::new(TableMemo::new(DEFAULT_BUDGET_BYTES)),
+        readers_left,
         failure: Mutex::new(None),
     };
     // A stage starts as soon as its own upstream stages are done, not when a whole "wave" is.
@@ -473,6 +481,7 @@ fn start<'s, 'a: 's>(env: &'s RunEnv<'a>, scope: &rayon::Scope<'s>, stage: &'a P
             env.failure.lock().expect("no poisoned lock").get_or_insert(error);
             return;
         }
+        release_read_tables(env, stage);
         for dependent in env.dependents.get(stage.name.as_str()).into_iter().flatten() {
             let mut waiting_on = env.waiting_on.lock().expect("no poisoned lock");
             let left = waiting_on.get_mut(dependent.name.as_str()).expect("every stage is counted");
@@ -483,6 +492,20 @@ fn start<'s, 'a: 's>(env: &'s RunEnv<'a>, scope: &rayon::Scope<'s>, stage: &'a P
             }
         }
     });
+}
+
+/// Forgets the kept tables of each upstream stage of `stage` that no unfinished stage reads.
+fn release_read_tables(env: &RunEnv<'_>, stage: &PlannedStage) {
+    let mut readers_left = env.readers_left.lock().expect("no poisoned lock");
+    for upstream in upstream_stages(stage) {
+        let left = readers_left.get_mut(upstream).expect("every upstream stage has readers");
+        *left -= 1;
+        if *left == 0 {
+            if let Some(done) = env.produced.lock().expect("no poisoned lock").get(upstream) {
+                env.memo.release(&done.dir);
+            }
+        }
+    }
 }
 
 /// Checks one stage against the lockfile and runs it into the staging directory if it is stale.
@@ -505,7 +528,10 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
         let records: usize = inputs.iter().map(|i| i.parts().len()).sum();
         let bar = env.reporter.stage_bar(&stage.name, records as u64);
         env.reporter.line(&format!("{:<18} running ({why})", stage.name));
-        let sink = OutputSink::new(&dir, &stage.name, info, &stage.params, &hashes, bar.clone());
+        let mut sink = OutputSink::new(&dir, &stage.name, info, &stage.params, &hashes, bar.clone());
+        if let Some(readers) = env.dependents.get(stage.name.as_str()) {
+            sink = sink.keeping_tables_in(env.memo.clone(), readers.len());
+        }
         let base_dir = env.plan.file.base_dir();
         let ctx = StageContext {
             stage_name: &stage.name,
@@ -513,6 +539,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
             inputs: &inputs,
             sink: &sink,
             base_dir: &base_dir,
+            memo: Some(&env.memo),
         };
         stage.stage.run(&ctx).with_context(|| {
             format!("stage `{}` (type `{}`) failed; nothing was changed on disk", stage.name, info.name)

@@ -4,6 +4,7 @@ pub mod executor;
 pub mod hash;
 pub mod locate;
 pub mod lock;
+pub mod memo;
 pub mod params;
 pub mod plan;
 pub mod progress;

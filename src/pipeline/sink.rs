@@ -4,12 +4,13 @@
 use std::borrow::Cow;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 use anyhow::{anyhow, bail};
 
 use crate::io::{mcap, parquet};
 use crate::pipeline::hash::{self, KnownHashes};
+use crate::pipeline::memo::TableMemo;
 use crate::stages::{partition_path, OutputInfo, OutputKind, Partition, StageInfo};
 use crate::table::Table;
 
@@ -29,6 +30,9 @@ pub struct OutputSink {
     mcap: bool,
     /// Hashes of the files written so far, taken from their bytes on the way out.
     hashes: Mutex<KnownHashes>,
+    /// Where tables stay in memory for the stages that read them next, and how many stages
+    /// those are (none: nobody reads them this run).
+    memo: Option<(Arc<TableMemo>, usize)>,
 }
 
 impl OutputSink {
@@ -58,7 +62,14 @@ impl OutputSink {
             progress,
             mcap: params.get("mcap").and_then(|v| v.as_bool()).unwrap_or(true),
             hashes: Mutex::new(KnownHashes::new()),
+            memo: None,
         }
+    }
+
+    /// Keeps every table written in `memo` too, for the `readers` stages that read them next.
+    pub fn keeping_tables_in(mut self, memo: Arc<TableMemo>, readers: usize) -> Self {
+        self.memo = Some((memo, readers));
+        self
     }
 
     fn output_info(&self, output: &str) -> anyhow::Result<&'static OutputInfo> {
@@ -102,7 +113,7 @@ impl OutputSink {
         table.metadata.insert("shakeflow.partition".into(), relative.clone());
         let path = dir.join(DATA_FILE);
         let hash = parquet::write_table(&path, &table)?;
-        self.hashes.lock().expect("no panics while holding the lock").insert(path, hash);
+        self.hashes.lock().expect("no panics while holding the lock").insert(path.clone(), hash);
         if info.kind == OutputKind::TimeSeries && self.mcap {
             let topic = if relative.is_empty() {
                 format!("/{}/{output}", self.stage_name)
@@ -122,6 +133,9 @@ impl OutputSink {
             let topics: Vec<mcap::Topic<'_>> =
                 split.iter().map(|(name, part)| mcap::Topic { name: name.clone(), table: part }).collect();
             mcap::write_timeseries(&mcap_dir.join(MCAP_FILE), &topics, &table.metadata)?;
+        }
+        if let Some((memo, readers)) = &self.memo {
+            memo.keep(&path, table, *readers);
         }
         self.progress.inc(1);
         Ok(())

@@ -5,7 +5,6 @@ use rayon::prelude::*;
 use serde_json::json;
 
 use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::signal::baseline::PolynomialBasis;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -61,7 +60,7 @@ impl Stage for Baseline {
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
-            let table = parquet::read_table(&part.path)?;
+            let table = ctx.read_table(part)?;
             let mut corrected =
                 correct(&table, order, &wanted).map_err(|e| anyhow::anyhow!("{}: {e}", part.path.display()))?;
             corrected.metadata.extend(super::record_provenance(part));

@@ -5,7 +5,6 @@
 
 use super::{partition_path, split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
-use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -63,7 +62,7 @@ impl Stage for Compare {
                     .into())
                 }
             };
-            let (m, r) = (parquet::read_table(&part.path)?, parquet::read_table(&reference_part.path)?);
+            let (m, r) = (ctx.read_table(part)?, ctx.read_table(reference_part)?);
             let (mut errors, png) = compare(&m, &r, &pairs, relative, &part.label, &reference_part.label)?;
             errors.metadata.extend(super::record_provenance(part));
             errors.metadata.insert("shakeflow.reference_file".into(), reference_part.label.clone());

@@ -2,13 +2,14 @@
 //! two points on one unit its motion: translation and in-plane rotation (rolling units), or the
 //! rocking angle θ (rocking units), ready for the diagnosis (`time_s`, `theta_rad`).
 
+use std::sync::Arc;
+
 use std::collections::BTreeMap;
 
 use serde_json::json;
 
 use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
-use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
@@ -53,10 +54,10 @@ impl Stage for CptProject {
                 .into());
         }
         let min_angle = ctx.params.f64_of("min_ray_angle_deg");
-        let mut tracks: Vec<(&InputPart, Table)> = Vec::new();
-        let mut calibrations: Vec<(&InputPart, Table)> = Vec::new();
+        let mut tracks: Vec<(&InputPart, Arc<Table>)> = Vec::new();
+        let mut calibrations: Vec<(&InputPart, Arc<Table>)> = Vec::new();
         for part in ctx.inputs.iter().flat_map(|i| i.parts()) {
-            let table = parquet::read_table(&part.path)?;
+            let table = ctx.read_table(part)?;
             if table.column("p11").is_some() {
                 calibrations.push((part, table));
             } else if table.column("u_px").is_some() && table.column("point").is_some() {

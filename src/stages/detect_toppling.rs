@@ -5,7 +5,6 @@
 use rayon::prelude::*;
 
 use super::{split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::signal::toppling::{detect_toppling, DetectOptions};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -41,7 +40,7 @@ impl Stage for DetectToppling {
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
-            let table = parquet::read_table(&part.path)?;
+            let table = ctx.read_table(part)?;
             let mut events = detect(&table, &channels, &opts).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
             events.metadata.extend(super::record_provenance(part));
             ctx.sink.write("events", &part.partition, events)

@@ -5,10 +5,13 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
+use crate::pipeline::memo::TableMemo;
 use crate::pipeline::params::{ParamError, ParamSpec, Params};
 use crate::pipeline::sink::OutputSink;
 use crate::pipeline::spec::{RecordFormat, SourceSpec};
+use crate::table::Table;
 
 pub mod baseline;
 pub mod compare;
@@ -125,9 +128,20 @@ pub struct StageContext<'a> {
     /// What relative `Path` parameters are relative to: the pipeline file's folder (the current
     /// folder for `shakeflow stage`).
     pub base_dir: &'a Path,
+    /// Tables upstream stages of this run wrote and kept in memory (none for `shakeflow stage`).
+    pub memo: Option<&'a TableMemo>,
 }
 
 impl StageContext<'_> {
+    /// The table of a Parquet input part: kept in memory by the stage that wrote it this run,
+    /// or else read from its file (the same table either way).
+    pub fn read_table(&self, part: &InputPart) -> anyhow::Result<Arc<Table>> {
+        match self.memo {
+            Some(memo) => memo.read(&part.path),
+            None => Ok(Arc::new(crate::io::parquet::read_table(&part.path)?)),
+        }
+    }
+
     /// A `Path` parameter resolved against the base directory; None when it is null.
     pub fn file_param(&self, key: &str) -> Option<PathBuf> {
         self.params.get(key).and_then(|v| v.as_str()).map(|p| self.base_dir.join(p))

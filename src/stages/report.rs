@@ -5,9 +5,9 @@
 //! (kept apart so the first table's columns stay as they were).
 
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
-use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::table::{Column, ColumnData, Table};
 
@@ -52,7 +52,7 @@ impl Stage for Report {
         let mut rolling = Vec::new();
         let mut others = Vec::new();
         for input in ctx.inputs {
-            match rolling_events(input)? {
+            match rolling_events(ctx, input)? {
                 Some(tables) => rolling.extend(tables),
                 None => others.push(input),
             }
@@ -66,15 +66,15 @@ impl Stage for Report {
         };
         ctx.sink.write("rolling", &Vec::new(), summarize_rolling(&rolling)?)?;
         ctx.sink.set_total(1);
-        let (identified, events) = (read_all(identified)?, read_all(events)?);
+        let (identified, events) = (read_all(ctx, identified)?, read_all(ctx, events)?);
         let suffix = ctx.params.str_of("unit_suffix");
         if let Some((spectra, records)) = figure_inputs {
             let motion = ctx.params.str_of("figure_motion");
-            let spectra = read_all(spectra)?;
+            let spectra = read_all(ctx, spectra)?;
             let record = records.parts().iter().find(|p| motion_of(p) == motion).ok_or_else(|| {
                 anyhow::anyhow!("no record of motion `{motion}` for the figures (set `figure_motion`)")
             })?;
-            let record = parquet::read_table(&record.path)?;
+            let record = ctx.read_table(record)?;
             for (unit, png) in figures(&identified, &events, &spectra, &record, motion, suffix)? {
                 ctx.sink.write_file("figures", &format!("{unit}.png"), &png)?;
             }
@@ -89,9 +89,9 @@ const FIGURE_MAX_HZ: f64 = 20.0;
 
 /// One PNG per unit of the identified tables.
 fn figures(
-    identified: &[(String, Table)],
-    events: &[(String, Table)],
-    spectra: &[(String, Table)],
+    identified: &[(String, Arc<Table>)],
+    events: &[(String, Arc<Table>)],
+    spectra: &[(String, Arc<Table>)],
     record: &Table,
     motion: &str,
     suffix: &str,
@@ -173,10 +173,10 @@ fn figures(
 
 /// The event tables of a `simulate_rolling` dataset with their unit and motion, or None when
 /// the input is something else (told by the stage type its files record).
-fn rolling_events(input: &StageInput) -> anyhow::Result<Option<Vec<(String, String, Table)>>> {
+fn rolling_events(ctx: &StageContext<'_>, input: &StageInput) -> anyhow::Result<Option<Vec<(String, String, Arc<Table>)>>> {
     let mut out = Vec::new();
     for part in input.parts() {
-        let table = parquet::read_table(&part.path)?;
+        let table = ctx.read_table(part)?;
         if table.metadata.get("shakeflow.stage_type").map(String::as_str) != Some("simulate_rolling") {
             return Ok(None);
         }
@@ -189,7 +189,7 @@ fn rolling_events(input: &StageInput) -> anyhow::Result<Option<Vec<(String, Stri
 }
 
 /// One row per rolling unit and motion, in input order.
-fn summarize_rolling(rolling: &[(String, String, Table)]) -> anyhow::Result<Table> {
+fn summarize_rolling(rolling: &[(String, String, Arc<Table>)]) -> anyhow::Result<Table> {
     let (mut units, mut motions, mut peaks, mut yaws, mut flips, mut breakaways) =
         (vec![], vec![], vec![], vec![], vec![], vec![]);
     for (unit, motion, table) in rolling {
@@ -240,8 +240,8 @@ fn summarize_rolling(rolling: &[(String, String, Table)]) -> anyhow::Result<Tabl
 }
 
 /// Every part of a dataset with the partition path that names it (`motion=WN-1`).
-fn read_all(input: &StageInput) -> anyhow::Result<Vec<(String, Table)>> {
-    input.parts().iter().map(|p: &InputPart| Ok((motion_of(p), parquet::read_table(&p.path)?))).collect()
+fn read_all(ctx: &StageContext<'_>, input: &StageInput) -> anyhow::Result<Vec<(String, Arc<Table>)>> {
+    input.parts().iter().map(|p: &InputPart| Ok((motion_of(p), ctx.read_table(p)?))).collect()
 }
 
 fn motion_of(part: &InputPart) -> String {
@@ -266,7 +266,7 @@ fn optionals<'a>(table: &'a Table, name: &str) -> anyhow::Result<&'a [Option<f64
     }
 }
 
-fn summarize(identified: Vec<(String, Table)>, events: Vec<(String, Table)>, suffix: &str) -> anyhow::Result<Table> {
+fn summarize(identified: Vec<(String, Arc<Table>)>, events: Vec<(String, Arc<Table>)>, suffix: &str) -> anyhow::Result<Table> {
     // channel → test → frequency; channel → [(motion, time, confidence)]
     let mut frequencies: BTreeMap<String, BTreeMap<String, Option<f64>>> = BTreeMap::new();
     let mut tests: Vec<String> = Vec::new();

@@ -8,7 +8,6 @@ use rayon::prelude::*;
 use serde_json::{json, Map, Value};
 
 use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::io::parquet;
 use crate::physics::rolling::{
     self, simulate, Cart, EventKind, Excitation, Friction, FrictionLaw, LateralSlip, Method, Options, Response,
     Stribeck,
@@ -209,7 +208,7 @@ impl Stage for SimulateRolling {
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
-            let table = parquet::read_table(&part.path)?;
+            let table = ctx.read_table(part)?;
             let outputs = setup.simulate(&table, ctx.params).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
             let (mut trajectory, mut events, png) = outputs;
             for t in [&mut trajectory, &mut events] {

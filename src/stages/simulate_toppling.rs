@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
-use crate::io::{equipment, parquet};
+use crate::io::equipment;
 use crate::physics::rocking::{self, Anchorage, Block, Excitation, IsolatedBase, Method, Options, Response, Shape};
 use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -77,7 +77,7 @@ impl Stage for SimulateToppling {
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
-            let table = parquet::read_table(&part.path)?;
+            let table = ctx.read_table(part)?;
             let (floor, response) = simulate_record(&table, &block, &options, &columns.0, columns.1)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
             let mut series = response_table(&floor, &response);

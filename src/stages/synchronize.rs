@@ -9,10 +9,11 @@
 //! (prefixed by their partition, e.g. `floor4_ax_mps2`) and the aligned target channels over the
 //! time both cover.
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
 use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::signal::resample_bandlimited::{resample_channels, resample_grid};
 use crate::signal::sync::estimate_lag;
@@ -78,12 +79,12 @@ impl Stage for Synchronize {
                     select.map(|(k, v)| format!(" and `{k}={v}`")).unwrap_or_default()
                 );
             };
-            let references: Vec<(String, Table)> = group
+            let references: Vec<(String, Arc<Table>)> = group
                 .iter()
-                .map(|r| Ok((prefix(r, join), parquet::read_table(&r.path)?)))
+                .map(|r| Ok((prefix(r, join), ctx.read_table(r)?)))
                 .collect::<anyhow::Result<_>>()?;
             let clock_table = &references[group.iter().position(|r| std::ptr::eq(*r, **clock)).expect("clock is in the group")].1;
-            let target_table = parquet::read_table(&part.path)?;
+            let target_table = ctx.read_table(part)?;
             let (aligned, lag) = align(clock_table, &references, &target_table, ctx.params, known_lag)
                 .map_err(|e| anyhow::anyhow!("{} (`{join}={key}`): {e}", part.label))?;
             let mut aligned = aligned;
@@ -114,7 +115,7 @@ fn sample_rate(table: &Table) -> Result<(f64, f64), String> {
 /// The pure part: aligned record and its one-row lag table.
 fn align(
     clock: &Table,
-    references: &[(String, Table)],
+    references: &[(String, Arc<Table>)],
     target: &Table,
     params: &crate::pipeline::params::Params,
     known_lag: Option<f64>,

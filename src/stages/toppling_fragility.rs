@@ -2,11 +2,12 @@
 //! intensities, every run simulated (in parallel), and a lognormal fragility curve fitted to
 //! overturn / no overturn by maximum likelihood.
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
 use super::simulate_toppling::{model_from_params, rocking_params, simulate_record};
 use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::stats::fragility::{fit_lognormal, FitOutcome, LognormalFit};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -51,10 +52,10 @@ impl Stage for TopplingFragility {
         if parts.is_empty() {
             anyhow::bail!("no records to scale: the stage's inputs (after `select`) are empty");
         }
-        let records: Vec<(String, Table, f64)> = parts
+        let records: Vec<(String, Arc<Table>, f64)> = parts
             .par_iter()
             .map(|part| {
-                let table = parquet::read_table(&part.path)?;
+                let table = ctx.read_table(part)?;
                 let im =
                     intensity(&table, &horizontal, by_velocity).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
                 Ok((partition_path(&part.partition), table, im))

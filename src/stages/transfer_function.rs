@@ -5,7 +5,6 @@
 use rayon::prelude::*;
 
 use super::{split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::io::parquet;
 use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
 use crate::signal::welch::{identify_peak, transfer_function, Detrend, WelchOptions, Window};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -51,7 +50,7 @@ impl Stage for TransferFunction {
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
-            let table = parquet::read_table(&part.path)?;
+            let table = ctx.read_table(part)?;
             let (mut identified, mut spectra) =
                 analyse(&table, &pairs, ctx.params).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
             identified.metadata.extend(super::record_provenance(part));
