@@ -551,11 +551,19 @@ fn running_median(x: &[f64], win: usize, step: usize) -> Vec<f64> {
     let n = x.len();
     let h = win / 2;
     let mut knots: Vec<(usize, f64)> = Vec::new();
-    // The finite values of x[lo..hi], kept sorted as the window slides: each sample is inserted
-    // and removed once (a binary search and a short move) instead of a selection per knot.
-    let mut sorted: Vec<f64> = Vec::with_capacity(win + 1);
+    // The finite values of x[lo..hi] as sortable integer keys, kept sorted as the window slides:
+    // per knot one merge pass drops the samples that left and adds those that entered (both
+    // sorted first, a few each), instead of a selection over the whole window.
+    let mut sorted: Vec<u64> = Vec::with_capacity(win + 1);
+    let (mut merged, mut leaving, mut entering) = (Vec::with_capacity(win + 1), Vec::new(), Vec::new());
+    // Sorted keys closed by u64::MAX, which no finite value has: the merge needs no bounds checks.
+    let keys = |range: &[f64], into: &mut Vec<u64>| {
+        into.clear();
+        into.extend(range.iter().filter(|v| v.is_finite()).map(|&v| order_key(v)));
+        into.sort_unstable();
+        into.push(u64::MAX);
+    };
     let (mut lo, mut hi) = (0, 0);
-    let position = |sorted: &[f64], v: f64| sorted.partition_point(|w| w.total_cmp(&v).is_lt());
     let mut c = 0;
     while c < n {
         let (new_lo, new_hi) = (c.saturating_sub(h), (c + h + 1).min(n));
@@ -563,17 +571,31 @@ fn running_median(x: &[f64], win: usize, step: usize) -> Vec<f64> {
             sorted.clear();
             (lo, hi) = (new_lo, new_lo);
         }
-        for &v in x[lo..new_lo].iter().filter(|v| v.is_finite()) {
-            let at = position(&sorted, v);
-            sorted.remove(at);
+        keys(&x[lo..new_lo], &mut leaving);
+        keys(&x[hi..new_hi], &mut entering);
+        merged.clear();
+        merged.resize(sorted.len() + entering.len() - 1, 0);
+        let (mut gone, mut added, mut filled) = (0, 0, 0);
+        for &k in &sorted {
+            if leaving[gone] == k {
+                gone += 1;
+                continue;
+            }
+            while entering[added] < k {
+                merged[filled] = entering[added];
+                (filled, added) = (filled + 1, added + 1);
+            }
+            merged[filled] = k;
+            filled += 1;
         }
-        for &v in x[hi..new_hi].iter().filter(|v| v.is_finite()) {
-            let at = position(&sorted, v);
-            sorted.insert(at, v);
-        }
+        debug_assert_eq!(gone + 1, leaving.len(), "every sample leaving the window was in it");
+        let rest = &entering[added..entering.len() - 1];
+        merged[filled..filled + rest.len()].copy_from_slice(rest);
+        merged.truncate(filled + rest.len());
+        std::mem::swap(&mut sorted, &mut merged);
         (lo, hi) = (new_lo, new_hi);
         if let Some(&m) = sorted.get(sorted.len() / 2) {
-            knots.push((c, m));
+            knots.push((c, from_order_key(m)));
         }
         if c == n - 1 {
             break;
@@ -598,6 +620,21 @@ fn running_median(x: &[f64], win: usize, step: usize) -> Vec<f64> {
         };
     }
     out
+}
+
+/// An integer whose order is `f64::total_cmp`'s: flip every bit of negatives, the sign bit of
+/// the rest.
+fn order_key(v: f64) -> u64 {
+    let bits = v.to_bits();
+    if bits >> 63 == 1 {
+        !bits
+    } else {
+        bits | 1 << 63
+    }
+}
+
+fn from_order_key(key: u64) -> f64 {
+    f64::from_bits(if key >> 63 == 1 { key & !(1 << 63) } else { !key })
 }
 
 fn median(v: &mut [f64]) -> Option<f64> {
@@ -671,6 +708,17 @@ mod tests {
         fn normal(&mut self) -> f64 {
             let (u, v) = (self.uniform().max(1e-300), self.uniform());
             (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+        }
+    }
+
+    #[test]
+    fn order_keys_sort_like_total_cmp_and_round_trip() {
+        let values = [f64::NEG_INFINITY, -1e300, -1.5, -f64::MIN_POSITIVE / 4.0, -0.0, 0.0, 5e-324, 1.0, 2.5e10, f64::INFINITY];
+        for (i, a) in values.iter().enumerate() {
+            assert_eq!(from_order_key(order_key(*a)).to_bits(), a.to_bits());
+            for b in &values[i + 1..] {
+                assert!(order_key(*a) < order_key(*b), "{a} < {b}");
+            }
         }
     }
 
