@@ -8,7 +8,9 @@ np.interp shifting, scipy.signal.csd/welch transfer functions with MATLAB tfesti
 the white-noise tests, and a simplified STA/LTA + RMS-drop toppling check per unit channel (a port
 of the same steps for timing, not a validated detector). It skips MCAP
 and figures, so the comparison does not favour shakeflow; a second shakeflow run without
-`synchronize`'s MCAP twins shows what they cost. The rocking, fragility and rolling
+`synchronize`'s MCAP twins shows what they cost. The script runs twice: writing what it needs
+(aligned records, toppling and transfer-function tables), and also writing the SI and the
+baseline-corrected records, which the pipeline keeps as artifacts of their own. The rocking, fragility and rolling
 simulations, which the Python side does not do, are cut from the pipeline here (bench/rocking.py
 and bench/rolling.py time them). Medians over
 --repeat runs; ratios are Python / shakeflow (above 1: shakeflow is faster or leaner).
@@ -23,13 +25,19 @@ import numpy as np, scipy.signal as ss
 import pyarrow as pa, pyarrow.csv as pcsv, pyarrow.parquet as pq
 G = 9.80665
 archive, out = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])
+# "records": also write the SI and the corrected records, as the pipeline's load and baseline do.
+WRITE_RECORDS = sys.argv[3:] == ["records"]
 UNITS = {"UI3": 4, "MC2": 4, "PB1": 4, "PB2": 4, "PS1": 5, "PS2": 5, "WSU1": 5}
 def read(path):
     t = pcsv.read_csv(path, read_options=pcsv.ReadOptions(skip_rows=4))
     time = t.column("Time").to_numpy()
     cols = {n: t.column(n).to_numpy() * G for n in t.column_names if n != "Time"}
+    if WRITE_RECORDS:
+        write(out / "si" / path.parent.name / path.stem / "data.parquet", {"time_s": time, **cols})
     for n, a in cols.items():
         cols[n] = a - np.polyval(np.polyfit(time, a, 3), time)
+    if WRITE_RECORDS:
+        write(out / "corrected" / path.parent.name / path.stem / "data.parquet", {"time_s": time, **cols})
     return time, cols
 def write(path, cols):
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -89,14 +97,15 @@ def without_simulations(pipeline):
 def main():
     args = parse_args(__doc__)
     args.pipeline = without_simulations(args.pipeline)
-    sides = ["shakeflow (demo pipeline)", "shakeflow (no MCAP twins)", "numpy/scipy script"]
+    sides = ["shakeflow (demo pipeline)", "shakeflow (no MCAP twins)"]
+    scripts = {"numpy/scipy, results only": [], "numpy/scipy, + SI and corrected records": ["records"]}
     # The camera projection stages have their own benchmark (bench/cpt.py) against OpenCV.
     text = args.pipeline.split("  cpt_calibrate:")[0].replace("../runs/demo-archive", str(args.archive))
     sync_params = "      max_lag_s: 5.0\n"
     assert text.count(sync_params) == 1, "the demo's synchronize stage changed; update the bench"
     no_twins = text.replace(sync_params, sync_params + "      mcap: false\n")
-    results = time_pipelines(args, {sides[0]: text, sides[1]: no_twins}, sides[2], PYTHON_SIDE)
-    print_table(f"whole demo study on {args.archive} ({os.cpu_count()} cores), median of {args.repeat}", results, sides[2])
+    results = time_pipelines(args, {sides[0]: text, sides[1]: no_twins}, scripts, PYTHON_SIDE)
+    print_table(f"whole demo study on {args.archive} ({os.cpu_count()} cores), median of {args.repeat}", results, list(scripts))
 
 
 if __name__ == "__main__":

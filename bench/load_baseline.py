@@ -4,10 +4,12 @@ Both sides read every DAQ1/DAQ2 CSV of the archive, check the time column is uni
 m/s^2, subtract a least-squares cubic from every channel and write one Parquet file per record
 (floors split into floor 4 and 5, as the demo pipeline does) in shakeflow's float encoding: no
 dictionary, byte-stream split, lz4. shakeflow also hashes every input and output for its cache
-and writes provenance. It runs twice: as the demo pipeline runs these stages (the same work as
-the script) and with `mcap: true`, adding the MCAP twins the demo leaves to `synchronize`, to show
-what they cost. Wall time and peak memory (max RSS) are medians over --repeat runs; ratios are
-Python / shakeflow (above 1: shakeflow is faster or leaner).
+and writes provenance. It runs twice: as the demo pipeline runs these stages and with
+`mcap: true`, adding the MCAP twins the demo leaves to `synchronize`, to show what they cost.
+The script runs twice too: writing the corrected records only (less than the pipeline, which
+also keeps `load`'s SI records as an artifact of their own), and writing both datasets, as the
+pipeline does. Wall time and peak memory (max RSS) are medians over --repeat runs; ratios are
+the script's / shakeflow's (above 1: shakeflow is faster or leaner).
 """
 import argparse
 import os
@@ -27,6 +29,8 @@ G = 9.80665
 # shakeflow's encoding of float columns (src/io/parquet.rs), so both sides write the same files.
 PARQUET = dict(compression="lz4", use_dictionary=False, use_byte_stream_split=True)
 archive, out = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])
+# "si": also write the SI records before the baseline, as shakeflow's `load` stage does.
+WRITE_SI = sys.argv[3:] == ["si"]
 def process(path, groups, dest):
     table = pcsv.read_csv(path, read_options=pcsv.ReadOptions(skip_rows=4))
     t = table.column("Time").to_numpy()
@@ -34,9 +38,14 @@ def process(path, groups, dest):
     if np.max(np.abs(np.diff(t) - dt)) > 1e-3 * dt + 2e-6:
         raise SystemExit(f"{path}: non-uniform time")
     for key, columns in groups.items():
-        arrays = {"time_s": t[0] + dt * np.arange(len(t))}
-        for name in columns:
-            a = table.column(name).to_numpy() * G
+        time = t[0] + dt * np.arange(len(t))
+        si = {name: table.column(name).to_numpy() * G for name in columns}
+        if WRITE_SI:
+            d = out / "si" / dest.relative_to(out) / key
+            d.mkdir(parents=True, exist_ok=True)
+            pq.write_table(pa.table({"time_s": time, **si}), d / "data.parquet", **PARQUET)
+        arrays = {"time_s": time}
+        for name, a in si.items():
             arrays[name] = a - np.polyval(np.polyfit(t, a, 3), t)
         d = dest / key
         d.mkdir(parents=True, exist_ok=True)
@@ -74,9 +83,10 @@ def run_sides(commands, repeat):
     return results
 
 
-def time_pipelines(args, pipelines, script_side, script_source):
+def time_pipelines(args, pipelines, scripts, script_source):
     """Times each shakeflow pipeline text of `pipelines` ({side: text}) and the Python script
-    (`script_side`) with `run_sides`, each writing into its own folder of a temporary directory."""
+    run with each argument list of `scripts` ({side: [arguments]}) with `run_sides`, each writing
+    into its own folder of a temporary directory."""
     with tempfile.TemporaryDirectory() as tmp:
         tmp = pathlib.Path(tmp)
         commands = {}
@@ -86,7 +96,9 @@ def time_pipelines(args, pipelines, script_side, script_source):
             commands[side] = ([args.shakeflow, "run", "--quiet", str(pipeline)], output)
         script = tmp / "py_side.py"
         script.write_text(script_source)
-        commands[script_side] = ([sys.executable, str(script), str(args.archive), str(tmp / "py_out")], tmp / "py_out")
+        for i, (side, arguments) in enumerate(scripts.items()):
+            output = tmp / f"py_out{i}"
+            commands[side] = ([sys.executable, str(script), str(args.archive), str(output), *arguments], output)
         return run_sides(commands, args.repeat)
 
 
@@ -101,26 +113,31 @@ def parse_args(doc):
     return args
 
 
-def print_table(title, results, python_side):
-    """Medians per side, and Python / side ratios (above 1: the side is faster or leaner)."""
+def print_table(title, results, python_sides):
+    """Medians per side, and each Python side's / the side's ratios (above 1: the side is faster
+    or leaner), one pair of ratio columns per Python side (named by its position: script 1, 2)."""
     median = {side: (statistics.median(w for w, _ in r), statistics.median(m for _, m in r)) for side, r in results.items()}
-    py_wall, py_mem = median[python_side]
     print(title)
-    print(f"{'':28}{'wall s':>9}{'peak MiB':>10}{'wall ratio':>12}{'mem ratio':>11}")
+    for i, side in enumerate(python_sides, 1):
+        print(f"  script {i}: {side}")
+    ratio_heads = "".join(f"{f'time vs {i}':>11}{f'mem vs {i}':>10}" for i in range(1, len(python_sides) + 1))
+    print(f"{'':40}{'wall s':>8}{'peak MiB':>10}{ratio_heads}")
     for side, (wall, mem) in median.items():
-        print(f"{side:28}{wall:>9.2f}{mem:>10.1f}{py_wall / wall:>12.2f}{py_mem / mem:>11.2f}")
+        ratios = "".join(f"{median[p][0] / wall:>11.2f}{median[p][1] / mem:>10.2f}" for p in python_sides)
+        print(f"{side:40}{wall:>8.2f}{mem:>10.1f}{ratios}")
 
 
 def main():
     args = parse_args(__doc__)
     size = sum(p.stat().st_size for p in args.archive.rglob("*.csv"))
-    sides = ["shakeflow (demo pipeline)", "shakeflow (+MCAP twins)", "numpy/pyarrow script"]
+    sides = ["shakeflow (demo pipeline)", "shakeflow (+MCAP twins)"]
+    scripts = {"numpy/pyarrow, corrected records": [], "numpy/pyarrow, SI + corrected records": ["si"]}
     # Only the load and baseline stages: cut the pipeline before `synchronize`.
     text = args.pipeline.split("  synchronize:")[0].replace("../runs/demo-archive", str(args.archive))
     assert text.count("mcap: false") == 2, "the demo's baseline stages no longer say `mcap: false`"
     twins = text.replace("mcap: false", "mcap: true")
-    results = time_pipelines(args, {sides[0]: text, sides[1]: twins}, sides[2], PYTHON_SIDE)
-    print_table(f"load + baseline on {args.archive} ({size / 1e6:.1f} MB of CSV, {os.cpu_count()} cores), median of {args.repeat}", results, sides[2])
+    results = time_pipelines(args, {sides[0]: text, sides[1]: twins}, scripts, PYTHON_SIDE)
+    print_table(f"load + baseline on {args.archive} ({size / 1e6:.1f} MB of CSV, {os.cpu_count()} cores), median of {args.repeat}", results, list(scripts))
 
 
 if __name__ == "__main__":
