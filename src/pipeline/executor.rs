@@ -16,9 +16,9 @@ use serde_json::json;
 
 use super::hash::{self, KnownHashes};
 use super::lock::{LockFile, OutputLock, StageLock, LOCK_FILE};
+use super::memo::{TableMemo, DEFAULT_BUDGET_BYTES};
 use super::plan::{InputRef, Plan, PlannedStage};
 use super::progress::Reporter;
-use super::memo::{TableMemo, DEFAULT_BUDGET_BYTES};
 use super::sink::OutputSink;
 use super::sources;
 use super::spec::RecordFormat;

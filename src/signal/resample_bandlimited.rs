@@ -507,7 +507,7 @@ mod tests {
             for i in 0..=1000 {
                 let u = 500.0 + i as f64 / 1000.0 - if i == 1000 { 1e-12 } else { 0.0 };
                 let n0 = kernel.taps(u, &mut direct);
-                        let m0 = table.taps(u, &mut tabulated);
+                let m0 = table.taps(u, &mut tabulated);
                 for (j, w) in tabulated.iter().enumerate() {
                     let k = m0 + j as isize;
                     let exact = usize::try_from(k - n0).ok().and_then(|i| direct.get(i)).copied().unwrap_or(0.0);

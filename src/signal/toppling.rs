@@ -713,7 +713,8 @@ mod tests {
 
     #[test]
     fn order_keys_sort_like_total_cmp_and_round_trip() {
-        let values = [f64::NEG_INFINITY, -1e300, -1.5, -f64::MIN_POSITIVE / 4.0, -0.0, 0.0, 5e-324, 1.0, 2.5e10, f64::INFINITY];
+        let values =
+            [f64::NEG_INFINITY, -1e300, -1.5, -f64::MIN_POSITIVE / 4.0, -0.0, 0.0, 5e-324, 1.0, 2.5e10, f64::INFINITY];
         for (i, a) in values.iter().enumerate() {
             assert_eq!(from_order_key(order_key(*a)).to_bits(), a.to_bits());
             for b in &values[i + 1..] {
@@ -738,8 +739,11 @@ mod tests {
             .collect();
         for (win, step) in [(201, 10), (3, 1), (50, 7), (9, 30), (2000, 13)] {
             let knot_at = |c: usize| {
-                let mut window: Vec<f64> =
-                    x[c.saturating_sub(win / 2)..(c + win / 2 + 1).min(x.len())].iter().copied().filter(|v| v.is_finite()).collect();
+                let mut window: Vec<f64> = x[c.saturating_sub(win / 2)..(c + win / 2 + 1).min(x.len())]
+                    .iter()
+                    .copied()
+                    .filter(|v| v.is_finite())
+                    .collect();
                 median(&mut window)
             };
             let got = running_median(&x, win, step);

@@ -7,6 +7,8 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
+use rayon::prelude::*;
+
 use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::table::{Column, ColumnData, Table};
@@ -100,80 +102,90 @@ fn figures(
     let Some((_, first)) = identified.first() else { return Ok(Vec::new()) };
     let time =
         record.f64_column(crate::table::TIME_COLUMN).ok_or_else(|| anyhow::anyhow!("the record has no time_s"))?;
-    let mut out = Vec::new();
-    for (channel, input) in strings(first, "output")?.iter().zip(strings(first, "input")?) {
-        let unit = channel.strip_suffix(suffix).unwrap_or(channel).to_string();
-        let (Some(floor), Some(top)) = (record.f64_column(input), record.f64_column(channel)) else { continue };
-        let mut impacts = Vec::new();
-        for (m, table) in events.iter().filter(|(m, _)| m == motion) {
-            let toppled = match table.column("toppled").map(|c| &c.data) {
-                Some(ColumnData::Bool(v)) => v.clone(),
-                _ => Vec::new(),
+    let pairs: Vec<(&String, &String)> = strings(first, "output")?.iter().zip(strings(first, "input")?).collect();
+    // One figure per unit, drawn and encoded in parallel: the last stage of the study has the
+    // machine to itself.
+    let figures: Vec<Option<(String, Vec<u8>)>> = pairs
+        .par_iter()
+        .map(|&(channel, input)| -> anyhow::Result<_> {
+            let unit = channel.strip_suffix(suffix).unwrap_or(channel).to_string();
+            let (Some(floor), Some(top)) = (record.f64_column(input), record.f64_column(channel)) else {
+                return Ok(None);
             };
-            let times = optionals(table, "impact_time_s")?;
-            for (i, c) in strings(table, "channel")?.iter().enumerate() {
-                if c == channel && toppled.get(i).copied().unwrap_or(false) {
-                    impacts.push(Marker { x: times[i].unwrap_or(f64::NAN), label: format!("toppled ({m})") });
+            let mut impacts = Vec::new();
+            for (m, table) in events.iter().filter(|(m, _)| m == motion) {
+                let toppled = match table.column("toppled").map(|c| &c.data) {
+                    Some(ColumnData::Bool(v)) => v.clone(),
+                    _ => Vec::new(),
+                };
+                let times = optionals(table, "impact_time_s")?;
+                for (i, c) in strings(table, "channel")?.iter().enumerate() {
+                    if c == channel && toppled.get(i).copied().unwrap_or(false) {
+                        impacts.push(Marker { x: times[i].unwrap_or(f64::NAN), label: format!("toppled ({m})") });
+                    }
                 }
             }
-        }
-        let mut spectrum_series = Vec::new();
-        let mut peaks = Vec::new();
-        let selected: Vec<(String, Vec<f64>, Vec<f64>)> = spectra
-            .iter()
-            .map(|(m, t)| {
+            let mut spectrum_series = Vec::new();
+            let mut peaks = Vec::new();
+            let selected: Vec<(String, Vec<f64>, Vec<f64>)> = spectra
+                .iter()
+                .map(|(m, t)| {
+                    let outputs = strings(t, "output")?;
+                    let f = t.f64_column("frequency_hz").unwrap_or_default();
+                    let g = t.f64_column("h1_gain").unwrap_or_default();
+                    let rows: Vec<usize> =
+                        (0..outputs.len()).filter(|&i| outputs[i] == *channel && f[i] <= FIGURE_MAX_HZ).collect();
+                    Ok((m.clone(), rows.iter().map(|&i| f[i]).collect(), rows.iter().map(|&i| g[i]).collect()))
+                })
+                .collect::<anyhow::Result<_>>()?;
+            for (m, f, g) in &selected {
+                spectrum_series.push(Series { label: format!("|H1| {m}"), x: f, y: g });
+            }
+            for (m, t) in identified {
                 let outputs = strings(t, "output")?;
-                let f = t.f64_column("frequency_hz").unwrap_or_default();
-                let g = t.f64_column("h1_gain").unwrap_or_default();
-                let rows: Vec<usize> =
-                    (0..outputs.len()).filter(|&i| outputs[i] == *channel && f[i] <= FIGURE_MAX_HZ).collect();
-                Ok((m.clone(), rows.iter().map(|&i| f[i]).collect(), rows.iter().map(|&i| g[i]).collect()))
-            })
-            .collect::<anyhow::Result<_>>()?;
-        for (m, f, g) in &selected {
-            spectrum_series.push(Series { label: format!("|H1| {m}"), x: f, y: g });
-        }
-        for (m, t) in identified {
-            let outputs = strings(t, "output")?;
-            let frequencies = optionals(t, "frequency_hz")?;
-            if let Some(i) = outputs.iter().position(|o| o == channel) {
-                if let Some(f) = frequencies[i] {
-                    peaks.push(Marker { x: f, label: format!("{m}: {f:.2} Hz") });
+                let frequencies = optionals(t, "frequency_hz")?;
+                if let Some(i) = outputs.iter().position(|o| o == channel) {
+                    if let Some(f) = frequencies[i] {
+                        peaks.push(Marker { x: f, label: format!("{m}: {f:.2} Hz") });
+                    }
                 }
             }
-        }
-        let panels = [
-            Panel {
-                title: format!("{motion}: floor and top acceleration"),
-                x_label: "time [s]".into(),
-                y_label: "acceleration [m/s^2]".into(),
-                series: vec![
-                    Series { label: input.clone(), x: time, y: floor },
-                    Series { label: channel.clone(), x: time, y: top },
-                ],
-                markers: impacts,
-                log_y: false,
-                spans: Vec::new(),
-            },
-            Panel {
-                title: format!("transfer function {input} -> {channel}"),
-                x_label: "frequency [Hz]".into(),
-                y_label: "|H1|".into(),
-                series: spectrum_series,
-                markers: peaks,
-                log_y: true,
-                spans: Vec::new(),
-            },
-        ];
-        let png = render_png(&unit, &panels, 1200, 900).map_err(anyhow::Error::msg)?;
-        out.push((unit, png));
-    }
-    Ok(out)
+            let panels = [
+                Panel {
+                    title: format!("{motion}: floor and top acceleration"),
+                    x_label: "time [s]".into(),
+                    y_label: "acceleration [m/s^2]".into(),
+                    series: vec![
+                        Series { label: input.clone(), x: time, y: floor },
+                        Series { label: channel.clone(), x: time, y: top },
+                    ],
+                    markers: impacts,
+                    log_y: false,
+                    spans: Vec::new(),
+                },
+                Panel {
+                    title: format!("transfer function {input} -> {channel}"),
+                    x_label: "frequency [Hz]".into(),
+                    y_label: "|H1|".into(),
+                    series: spectrum_series,
+                    markers: peaks,
+                    log_y: true,
+                    spans: Vec::new(),
+                },
+            ];
+            let png = render_png(&unit, &panels, 1200, 900).map_err(anyhow::Error::msg)?;
+            Ok(Some((unit, png)))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    Ok(figures.into_iter().flatten().collect())
 }
 
 /// The event tables of a `simulate_rolling` dataset with their unit and motion, or None when
 /// the input is something else (told by the stage type its files record).
-fn rolling_events(ctx: &StageContext<'_>, input: &StageInput) -> anyhow::Result<Option<Vec<(String, String, Arc<Table>)>>> {
+fn rolling_events(
+    ctx: &StageContext<'_>,
+    input: &StageInput,
+) -> anyhow::Result<Option<Vec<(String, String, Arc<Table>)>>> {
     let mut out = Vec::new();
     for part in input.parts() {
         let table = ctx.read_table(part)?;
@@ -266,7 +278,11 @@ fn optionals<'a>(table: &'a Table, name: &str) -> anyhow::Result<&'a [Option<f64
     }
 }
 
-fn summarize(identified: Vec<(String, Arc<Table>)>, events: Vec<(String, Arc<Table>)>, suffix: &str) -> anyhow::Result<Table> {
+fn summarize(
+    identified: Vec<(String, Arc<Table>)>,
+    events: Vec<(String, Arc<Table>)>,
+    suffix: &str,
+) -> anyhow::Result<Table> {
     // channel → test → frequency; channel → [(motion, time, confidence)]
     let mut frequencies: BTreeMap<String, BTreeMap<String, Option<f64>>> = BTreeMap::new();
     let mut tests: Vec<String> = Vec::new();

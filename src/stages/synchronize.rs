@@ -150,11 +150,8 @@ fn align(
     // Aligned target on the reference grid: target value at reference time t is target(t + lag),
     // every channel resampled straight at the shifted times (one filter, weights shared).
     let n_target = ((values[0].len() - 1) as f64 * fs / fs_target + 1e-9).floor() as usize + 1;
-    let target_columns: Vec<(&Column, Vec<f64>)> = float_columns
-        .iter()
-        .map(|(c, _)| *c)
-        .zip(resample_grid(&values, fs_target, fs, lag_s, n_target))
-        .collect();
+    let target_columns: Vec<(&Column, Vec<f64>)> =
+        float_columns.iter().map(|(c, _)| *c).zip(resample_grid(&values, fs_target, fs, lag_s, n_target)).collect();
     let n_reference = references.iter().map(|(_, t)| t.num_rows()).min().unwrap_or(0);
     let valid = |k: usize| target_columns.iter().all(|(_, v)| k < v.len() && v[k].is_finite());
     let first =
