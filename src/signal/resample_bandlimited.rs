@@ -74,12 +74,6 @@ pub fn resample_to_rate_with(x: &[f64], fs_in: f64, fs_out: f64, spec: &KernelSp
     resample_channels_with(&[x], fs_in, fs_out, spec).pop().expect("one channel in, one out")
 }
 
-/// [`resample_to_rate`] of several channels of one record (same rate and length): the filter
-/// weights are computed once per output phase and shared by every channel.
-pub fn resample_channels(channels: &[&[f64]], fs_in: f64, fs_out: f64) -> Vec<Vec<f64>> {
-    resample_channels_with(channels, fs_in, fs_out, &RESAMPLE_SPEC)
-}
-
 fn resample_channels_with(channels: &[&[f64]], fs_in: f64, fs_out: f64, spec: &KernelSpec) -> Vec<Vec<f64>> {
     assert!(fs_in.is_finite() && fs_in > 0.0, "fs_in must be finite and > 0");
     assert!(fs_out.is_finite() && fs_out > 0.0, "fs_out must be finite and > 0");
@@ -96,21 +90,38 @@ fn resample_channels_with(channels: &[&[f64]], fs_in: f64, fs_out: f64, spec: &K
     kernel.eval_grid(channels, 0.0, fs_in / fs_out, k_max + 1)
 }
 
-/// Several channels of one record (rate `fs_in`, first sample at t = 0) at the times
-/// `t0 + k/fs_out`, k < n: a rate conversion and a time shift in one filter (cascading two
-/// interpolations would filter twice). Different rates use [`RESAMPLE_SPEC`], equal ones
-/// [`INTERP_SPEC`] (a fractional delay, [`sample_grid`]). Times outside the record give `NaN`.
-pub fn resample_grid(channels: &[&[f64]], fs_in: f64, fs_out: f64, t0: f64, n: usize) -> Vec<Vec<f64>> {
-    assert!(fs_in.is_finite() && fs_in > 0.0, "fs_in must be finite and > 0");
-    assert!(fs_out.is_finite() && fs_out > 0.0, "fs_out must be finite and > 0");
-    if fs_in == fs_out {
-        return sample_grid(channels, fs_in, t0, n);
+/// A conversion from rate `fs_in` to `fs_out` with a time shift, for the channels of one
+/// record: its filter is built once for several calls (e.g. a record's sync channel first,
+/// then all its channels), the kernel's window and, for rates whose phases never repeat, its
+/// phase table. Different rates use [`RESAMPLE_SPEC`], equal ones [`INTERP_SPEC`] (a
+/// fractional delay, as [`sample_grid`]).
+pub struct Resampler {
+    kernel: Kernel,
+    fs_in: f64,
+    fs_out: f64,
+}
+
+impl Resampler {
+    pub fn new(fs_in: f64, fs_out: f64) -> Resampler {
+        assert!(fs_in.is_finite() && fs_in > 0.0, "fs_in must be finite and > 0");
+        assert!(fs_out.is_finite() && fs_out > 0.0, "fs_out must be finite and > 0");
+        let kernel = if fs_in == fs_out {
+            Kernel::new(fs_in, 0.5 * fs_in, &INTERP_SPEC)
+        } else {
+            Kernel::new(fs_in, 0.5 * fs_in.min(fs_out), &RESAMPLE_SPEC)
+        };
+        Resampler { kernel, fs_in, fs_out }
     }
-    if common_length(channels) == 0 {
-        return vec![vec![f64::NAN; n]; channels.len()];
+
+    /// The channels (rate `fs_in`, same length, first sample at t = 0) at the times
+    /// `t0 + k/fs_out`, k < n: a rate conversion and a time shift in one filter (cascading two
+    /// interpolations would filter twice). Times outside the record give `NaN`.
+    pub fn grid(&self, channels: &[&[f64]], t0: f64, n: usize) -> Vec<Vec<f64>> {
+        if common_length(channels) == 0 {
+            return vec![vec![f64::NAN; n]; channels.len()];
+        }
+        self.kernel.eval_grid(channels, t0 * self.fs_in, self.fs_in / self.fs_out, n)
     }
-    let kernel = Kernel::new(fs_in, 0.5 * fs_in.min(fs_out), &RESAMPLE_SPEC);
-    kernel.eval_grid(channels, t0 * fs_in, fs_in / fs_out, n)
 }
 
 /// Band-limited interpolation of `x` (rate `fs`, first sample at t = 0) at arbitrary
@@ -173,6 +184,8 @@ struct Kernel {
     half: f64,
     /// Kaiser window tabulated at |d|/half = i/WIN_TABLE.
     win: Vec<f64>,
+    /// Weights per phase, built on first use by a step whose phases never repeat.
+    phases: std::sync::OnceLock<PhaseTable>,
 }
 
 impl Kernel {
@@ -198,7 +211,7 @@ impl Kernel {
                 bessel_i0(beta * (1.0 - r * r).max(0.0).sqrt()) / i0b
             })
             .collect();
-        Kernel { c, half, win }
+        Kernel { c, half, win, phases: std::sync::OnceLock::new() }
     }
 
     #[inline]
@@ -280,7 +293,7 @@ impl Kernel {
             }
         } else {
             // A ratio that never repeats (a drifting clock): weights interpolated from a table.
-            let table = PhaseTable::new(self);
+            let table = self.phases.get_or_init(|| PhaseTable::new(self));
             let mut weights = Vec::new();
             for k in 0..n {
                 let u = u0 + k as f64 * step;
@@ -550,20 +563,20 @@ mod tests {
     }
 
     #[test]
-    fn resample_grid_is_resampling_at_shifted_times() {
+    fn resampler_grid_is_resampling_at_shifted_times() {
         // 256 → 200 Hz shifted by 0.1234 s in one filter equals the band-limited signal at the
         // shifted times (the sines themselves) as closely as plain resampling does.
         let (fa, fb, lag) = (256.0, 200.0, 0.1234);
         let comps = [(1.0, 1.3, 0.2), (0.5, 23.4, -0.4), (0.3, 61.0, 0.9)];
         let x: Vec<f64> = (0..(20.0 * fa) as usize).map(|k| sines(&comps, k as f64 / fa)).collect();
-        let y = resample_grid(&[&x], fa, fb, lag, 4000).pop().unwrap();
+        let y = Resampler::new(fa, fb).grid(&[&x], lag, 4000).pop().unwrap();
         let interior = 200..3700;
         let worst = interior.clone().map(|k| (y[k] - sines(&comps, lag + k as f64 / fb)).abs()).fold(0.0, f64::max);
         println!("256 -> 200 Hz shifted {lag} s: largest error {worst:.1e}");
         assert!(worst < 1e-4, "{worst}");
         assert!(y[3999].is_nan(), "beyond the record: NaN");
         // Equal rates: the fractional delay of sample_grid.
-        assert_eq!(resample_grid(&[&x], fa, fa, lag, 100), sample_grid(&[&x], fa, lag, 100));
+        assert_eq!(Resampler::new(fa, fa).grid(&[&x], lag, 100), sample_grid(&[&x], fa, lag, 100));
     }
 
     #[test]

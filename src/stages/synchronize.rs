@@ -15,7 +15,7 @@ use rayon::prelude::*;
 
 use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
-use crate::signal::resample_bandlimited::{resample_channels, resample_grid};
+use crate::signal::resample_bandlimited::Resampler;
 use crate::signal::sync::estimate_lag;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
@@ -139,19 +139,25 @@ fn align(
         )
     })?;
     let values: Vec<&[f64]> = float_columns.iter().map(|(_, v)| *v).collect();
+    // The target's samples on the reference rate: the same count as a plain resampling gives.
+    let n_target = ((values[0].len() - 1) as f64 * fs / fs_target + 1e-9).floor() as usize + 1;
+    let resampler = Resampler::new(fs_target, fs);
     let (lag_s, uncertainty, correlation, method) = match known_lag {
         Some(lag) => (lag, 0.0, None, "known"),
         None => {
-            let sync = resample_channels(&[values[sync_position]], fs_target, fs).pop().expect("one channel");
+            let sync = if fs_target == fs {
+                values[sync_position].to_vec()
+            } else {
+                resampler.grid(&[values[sync_position]], 0.0, n_target).pop().expect("one channel")
+            };
             let e = estimate_lag(reference, &sync, fs, Some(params.f64_of("max_lag_s")))?;
             (e.lag_s, e.uncertainty_s, Some(e.correlation), "estimated")
         }
     };
     // Aligned target on the reference grid: target value at reference time t is target(t + lag),
     // every channel resampled straight at the shifted times (one filter, weights shared).
-    let n_target = ((values[0].len() - 1) as f64 * fs / fs_target + 1e-9).floor() as usize + 1;
     let target_columns: Vec<(&Column, Vec<f64>)> =
-        float_columns.iter().map(|(c, _)| *c).zip(resample_grid(&values, fs_target, fs, lag_s, n_target)).collect();
+        float_columns.iter().map(|(c, _)| *c).zip(resampler.grid(&values, lag_s, n_target)).collect();
     let n_reference = references.iter().map(|(_, t)| t.num_rows()).min().unwrap_or(0);
     let valid = |k: usize| target_columns.iter().all(|(_, v)| k < v.len() && v[k].is_finite());
     let first =
