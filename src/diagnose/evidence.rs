@@ -214,7 +214,9 @@ impl Evidence {
         let mut flagged = Vec::new();
         let accel_z = |s: &Sample| self.accel_z(p, s).0;
         let camera_z = |s: &Sample| self.camera_z(p, s).0;
-        let sensors: [(&Vec<Sample>, &dyn Fn(&Sample) -> f64, usize); 2] =
+        // Per sensor: its samples, their residual, the exceedances a cluster needs.
+        type Residual<'a> = &'a dyn Fn(&Sample) -> f64;
+        let sensors: [(&[Sample], Residual<'_>, usize); 2] =
             [(&self.accel, &accel_z, ACCEL_CLUSTER), (&self.camera, &camera_z, CAMERA_CLUSTER)];
         for (samples, z, needed) in sensors {
             let exceeding: Vec<f64> =

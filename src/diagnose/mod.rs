@@ -286,7 +286,7 @@ pub fn diagnose(case: &Case, settings: &Settings) -> Result<Diagnosis, String> {
         bic: base_misfit.chi2,
         score: 0.0,
         flagged: evidence.flagged(&baseline),
-        misfit: base_misfit.clone(),
+        misfit: base_misfit,
         evaluations: 1,
         sentence: "the nominal rigid-block model (Eq. 20-24) as the equipment file describes it".into(),
         prediction: baseline.clone(),

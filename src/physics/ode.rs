@@ -174,6 +174,8 @@ impl<const M: usize> EventWatch<M> {
     /// between samples, a dip between three positive samples (a trajectory grazing its boundary,
     /// e.g. a small rocking excursion inside one step) is searched for its minimum, so an impact
     /// is not missed because it fell between samples.
+    // `i` indexes three arrays and a closure: an index loop is the clearest.
+    #[allow(clippy::needless_range_loop)]
     fn check<const N: usize, G, D>(
         &mut self,
         g: &G,

@@ -336,7 +336,7 @@ impl Engine {
     /// Multiply accumulated sums by `scale / nseg` and the one-sided factor.
     fn onesided_factor(&self, k: usize) -> f64 {
         let base = self.scale / self.nseg as f64;
-        let is_nyquist = self.nfft % 2 == 0 && k == self.nfft / 2;
+        let is_nyquist = self.nfft.is_multiple_of(2) && k == self.nfft / 2;
         if k == 0 || is_nyquist {
             base
         } else {
@@ -565,7 +565,7 @@ pub fn identify_peak(tf: &TransferFunction, band: (f64, f64), coherence_threshol
     }
     let mut kmax: Option<usize> = None;
     for k in first..=last {
-        if mag[k].is_finite() && kmax.map_or(true, |m| mag[k] > mag[m]) {
+        if mag[k].is_finite() && kmax.is_none_or(|m| mag[k] > mag[m]) {
             kmax = Some(k);
         }
     }

@@ -99,6 +99,8 @@ pub struct InputPart {
     pub hash: String,
 }
 
+// A handful exist per run: boxing the source spec would buy nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 pub enum StageInput {
     Source { name: String, spec: SourceSpec, base_dir: PathBuf, files: Vec<InputPart> },

@@ -180,12 +180,12 @@ fn figures(
     Ok(figures.into_iter().flatten().collect())
 }
 
+/// Per rolling run: unit, motion and its events table.
+type RollingEvents = Vec<(String, String, Arc<Table>)>;
+
 /// The event tables of a `simulate_rolling` dataset with their unit and motion, or None when
 /// the input is something else (told by the stage type its files record).
-fn rolling_events(
-    ctx: &StageContext<'_>,
-    input: &StageInput,
-) -> anyhow::Result<Option<Vec<(String, String, Arc<Table>)>>> {
+fn rolling_events(ctx: &StageContext<'_>, input: &StageInput) -> anyhow::Result<Option<RollingEvents>> {
     let mut out = Vec::new();
     for part in input.parts() {
         let table = ctx.read_table(part)?;
