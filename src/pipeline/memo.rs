@@ -13,7 +13,6 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-use crate::io::parquet;
 use crate::table::{ColumnData, Table};
 
 /// Memory a run may spend on kept tables.
@@ -52,28 +51,18 @@ impl TableMemo {
         }
     }
 
-    /// The table of the Parquet file `path`: the kept one (let go after its last reader took
-    /// it), or else decoded from the file.
-    pub fn read(&self, path: &Path) -> anyhow::Result<Arc<Table>> {
-        let kept = {
-            let mut kept = self.state.lock().expect("no panics while holding the lock");
-            match kept.tables.get_mut(path) {
-                Some(entry) if entry.readers > 1 => {
-                    entry.readers -= 1;
-                    Some(entry.table.clone())
-                }
-                Some(_) => {
-                    let entry = kept.tables.remove(path).expect("found just above");
-                    kept.bytes -= entry.bytes;
-                    Some(entry.table)
-                }
-                None => None,
-            }
-        };
-        match kept {
-            Some(table) => Ok(table),
-            None => Ok(Arc::new(parquet::read_table(path)?)),
+    /// The table kept for `path`, let go after its last reader took it; None when it was not
+    /// kept (the reader decodes the file instead).
+    pub fn take(&self, path: &Path) -> Option<Arc<Table>> {
+        let mut kept = self.state.lock().expect("no panics while holding the lock");
+        let entry = kept.tables.get_mut(path)?;
+        if entry.readers > 1 {
+            entry.readers -= 1;
+            return Some(entry.table.clone());
         }
+        let entry = kept.tables.remove(path).expect("found just above");
+        kept.bytes -= entry.bytes;
+        Some(entry.table)
     }
 
     /// Forgets the tables written under `dir` (readers still holding one keep it alive).
@@ -115,21 +104,19 @@ mod tests {
 
     #[test]
     fn keeps_within_budget_until_taken_or_released() {
-        // No files exist here: a read that is not served from memory fails.
-        let dir = tempfile::tempdir().unwrap();
-        let path = |p: &str| dir.path().join(p);
+        let path = Path::new;
         let memo = TableMemo::new(8 * 250);
-        memo.keep(&path("s1/a"), table(100), 2);
-        memo.keep(&path("s1/b"), table(200), 1); // over the budget: not kept
-        memo.keep(&path("s2/c"), table(150), 1);
-        assert!(memo.read(&path("s1/b")).is_err(), "not kept");
-        assert_eq!(*memo.read(&path("s1/a")).unwrap(), table(100));
-        assert_eq!(*memo.read(&path("s1/a")).unwrap(), table(100), "two readers");
-        assert!(memo.read(&path("s1/a")).is_err(), "let go after its last reader");
+        memo.keep(path("s1/a"), table(100), 2);
+        memo.keep(path("s1/b"), table(200), 1); // over the budget: not kept
+        memo.keep(path("s2/c"), table(150), 1);
+        assert!(memo.take(path("s1/b")).is_none(), "not kept");
+        assert_eq!(*memo.take(path("s1/a")).unwrap(), table(100));
+        assert_eq!(*memo.take(path("s1/a")).unwrap(), table(100), "two readers");
+        assert!(memo.take(path("s1/a")).is_none(), "let go after its last reader");
         // The freed bytes are free again.
-        memo.keep(&path("s1/b"), table(100), 1);
-        memo.release(&path("s1"));
-        assert!(memo.read(&path("s1/b")).is_err(), "released with its stage's folder");
-        assert_eq!(*memo.read(&path("s2/c")).unwrap(), table(150));
+        memo.keep(path("s1/b"), table(100), 1);
+        memo.release(path("s1"));
+        assert!(memo.take(path("s1/b")).is_none(), "released with its stage's folder");
+        assert_eq!(*memo.take(path("s2/c")).unwrap(), table(150));
     }
 }

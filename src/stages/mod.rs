@@ -138,8 +138,8 @@ impl StageContext<'_> {
     /// The table of a Parquet input part: kept in memory by the stage that wrote it this run,
     /// or else read from its file (the same table either way).
     pub fn read_table(&self, part: &InputPart) -> anyhow::Result<Arc<Table>> {
-        match self.memo {
-            Some(memo) => memo.read(&part.path),
+        match self.memo.and_then(|memo| memo.take(&part.path)) {
+            Some(table) => Ok(table),
             None => Ok(Arc::new(crate::io::parquet::read_table(&part.path)?)),
         }
     }
