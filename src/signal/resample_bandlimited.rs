@@ -71,27 +71,11 @@ pub fn resample_to_rate(x: &[f64], fs_in: f64, fs_out: f64) -> Vec<f64> {
 
 /// [`resample_to_rate`] with an explicit spec (fractions of the Nyquist of min(fs_in, fs_out)).
 pub fn resample_to_rate_with(x: &[f64], fs_in: f64, fs_out: f64, spec: &KernelSpec) -> Vec<f64> {
-    resample_channels_with(&[x], fs_in, fs_out, spec).pop().expect("one channel in, one out")
+    Resampler::with_spec(fs_in, fs_out, spec).resample(x)
 }
 
-fn resample_channels_with(channels: &[&[f64]], fs_in: f64, fs_out: f64, spec: &KernelSpec) -> Vec<Vec<f64>> {
-    assert!(fs_in.is_finite() && fs_in > 0.0, "fs_in must be finite and > 0");
-    assert!(fs_out.is_finite() && fs_out > 0.0, "fs_out must be finite and > 0");
-    let n = common_length(channels);
-    if n == 0 {
-        return vec![Vec::new(); channels.len()];
-    }
-    if fs_in == fs_out {
-        return channels.iter().map(|x| x.to_vec()).collect();
-    }
-    let t_last = (n - 1) as f64 / fs_in;
-    let k_max = (t_last * fs_out + 1e-9).floor() as usize;
-    let kernel = Kernel::new(fs_in, 0.5 * fs_in.min(fs_out), spec);
-    kernel.eval_grid(channels, 0.0, fs_in / fs_out, k_max + 1)
-}
-
-/// A conversion from rate `fs_in` to `fs_out` with a time shift, for the channels of one
-/// record: its filter is built once for several calls (e.g. a record's sync channel first,
+/// A conversion from rate `fs_in` to `fs_out`, optionally with a time shift, for the channels of
+/// one record: its filter is built once for several calls (e.g. a record's sync channel first,
 /// then all its channels), the kernel's window and, for rates whose phases never repeat, its
 /// phase table. Different rates use [`RESAMPLE_SPEC`], equal ones [`INTERP_SPEC`] (a
 /// fractional delay, as [`sample_grid`]).
@@ -103,14 +87,34 @@ pub struct Resampler {
 
 impl Resampler {
     pub fn new(fs_in: f64, fs_out: f64) -> Resampler {
+        Resampler::with_spec(fs_in, fs_out, if fs_in == fs_out { &INTERP_SPEC } else { &RESAMPLE_SPEC })
+    }
+
+    /// `spec` in fractions of the Nyquist of min(fs_in, fs_out). Panics if a rate is not finite
+    /// and positive.
+    fn with_spec(fs_in: f64, fs_out: f64, spec: &KernelSpec) -> Resampler {
         assert!(fs_in.is_finite() && fs_in > 0.0, "fs_in must be finite and > 0");
         assert!(fs_out.is_finite() && fs_out > 0.0, "fs_out must be finite and > 0");
-        let kernel = if fs_in == fs_out {
-            Kernel::new(fs_in, 0.5 * fs_in, &INTERP_SPEC)
-        } else {
-            Kernel::new(fs_in, 0.5 * fs_in.min(fs_out), &RESAMPLE_SPEC)
-        };
-        Resampler { kernel, fs_in, fs_out }
+        Resampler { kernel: Kernel::new(fs_in, 0.5 * fs_in.min(fs_out), spec), fs_in, fs_out }
+    }
+
+    /// How many output samples cover a record of `n` input samples, `[0, (n−1)/fs_in]`:
+    /// `floor((n−1)·fs_out/fs_in) + 1` (none for an empty record).
+    pub fn output_len(&self, n: usize) -> usize {
+        if n == 0 {
+            return 0;
+        }
+        let t_last = (n - 1) as f64 / self.fs_in;
+        (t_last * self.fs_out + 1e-9).floor() as usize + 1
+    }
+
+    /// The whole record at the output rate, sample k at time k/fs_out ([`resample_to_rate`]);
+    /// a copy when the rates are equal.
+    pub fn resample(&self, x: &[f64]) -> Vec<f64> {
+        if self.fs_in == self.fs_out {
+            return x.to_vec();
+        }
+        self.grid(&[x], 0.0, self.output_len(x.len())).pop().expect("one channel in, one out")
     }
 
     /// The channels (rate `fs_in`, same length, first sample at t = 0) at the times
@@ -144,11 +148,7 @@ pub fn sample_at_with(x: &[f64], fs: f64, times: &[f64], spec: &KernelSpec) -> V
 /// [`sample_at`] of several channels (rate `fs`, same length) on the uniform grid
 /// `t0 + k/fs`, k < n: a fractional delay, so one set of filter weights serves every sample.
 pub fn sample_grid(channels: &[&[f64]], fs: f64, t0: f64, n: usize) -> Vec<Vec<f64>> {
-    assert!(fs.is_finite() && fs > 0.0, "fs must be finite and > 0");
-    if common_length(channels) == 0 {
-        return vec![vec![f64::NAN; n]; channels.len()];
-    }
-    Kernel::new(fs, 0.5 * fs, &INTERP_SPEC).eval_grid(channels, t0 * fs, 1.0, n)
+    Resampler::new(fs, fs).grid(channels, t0, n)
 }
 
 fn common_length(channels: &[&[f64]]) -> usize {

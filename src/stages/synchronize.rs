@@ -139,17 +139,12 @@ fn align(
         )
     })?;
     let values: Vec<&[f64]> = float_columns.iter().map(|(_, v)| *v).collect();
-    // The target's samples on the reference rate: the same count as a plain resampling gives.
-    let n_target = ((values[0].len() - 1) as f64 * fs / fs_target + 1e-9).floor() as usize + 1;
     let resampler = Resampler::new(fs_target, fs);
+    let n_target = resampler.output_len(values[0].len());
     let (lag_s, uncertainty, correlation, method) = match known_lag {
         Some(lag) => (lag, 0.0, None, "known"),
         None => {
-            let sync = if fs_target == fs {
-                values[sync_position].to_vec()
-            } else {
-                resampler.grid(&[values[sync_position]], 0.0, n_target).pop().expect("one channel")
-            };
+            let sync = resampler.resample(values[sync_position]);
             let e = estimate_lag(reference, &sync, fs, Some(params.f64_of("max_lag_s")))?;
             (e.lag_s, e.uncertainty_s, Some(e.correlation), "estimated")
         }
