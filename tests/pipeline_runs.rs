@@ -166,45 +166,18 @@ fn signal_stages_run_alone_on_files() {
         std::fs::create_dir_all(root.join(to)).unwrap();
         std::fs::copy(root.join(from), root.join(to).join("data.parquet")).unwrap();
     }
-    let synced = shakeflow(
-        &[
-            "stage",
-            "synchronize",
-            "-i",
-            "ref",
-            "-i",
-            "tgt",
-            "-o",
-            "s",
-            "--set",
-            "reference_channel=a",
-            "--set",
-            "target_channel=a",
-        ],
-        root,
-    );
+    let synchronize = |output: &str, target_channel: &str| {
+        let target = format!("target_channel={target_channel}");
+        let args = ["stage", "synchronize", "-i", "ref", "-i", "tgt", "-o", output];
+        shakeflow(&[&args[..], &["--set", "reference_channel=a", "--set", &target]].concat(), root)
+    };
+    let synced = synchronize("s", "a");
     assert!(synced.status.success(), "{}", stderr(&synced));
     let lags = shakeflow::io::parquet::read_table(&root.join("s/lags/motion=X/data.parquet")).unwrap();
     let lag = lags.f64_column("lag_s").unwrap()[0];
     assert!((lag - 0.25).abs() < 1e-3, "lag {lag}");
     // The time column is no channel to synchronise by: a clear refusal, nothing written.
-    let refused = shakeflow(
-        &[
-            "stage",
-            "synchronize",
-            "-i",
-            "ref",
-            "-i",
-            "tgt",
-            "-o",
-            "s2",
-            "--set",
-            "reference_channel=a",
-            "--set",
-            "target_channel=time_s",
-        ],
-        root,
-    );
+    let refused = synchronize("s2", "time_s");
     assert!(
         !refused.status.success() && stderr(&refused).contains("no float channel `time_s`"),
         "{}",
