@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use anyhow::{anyhow, Context};
 use arrow::array::{Array, ArrayRef, BooleanArray, Float64Array, Int64Array, RecordBatch, StringArray};
+use arrow::buffer::ScalarBuffer;
 use arrow::datatypes::{DataType, Field, Schema};
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::arrow::ArrowWriter;
@@ -21,9 +22,29 @@ use crate::table::{Column, ColumnData, Table};
 /// The Arrow schema ArrowWriter embeds for itself; not part of a table's own metadata.
 const ARROW_SCHEMA_KEY: &str = "ARROW:schema";
 
-/// Writes `table` to `path` (atomically); returns the content hash of the file written.
-pub fn write_table(path: &Path, table: &Table) -> anyhow::Result<String> {
-    let batch = to_record_batch(table)?;
+/// Writes `table` to `path` (atomically); returns the content hash of the file written. `table`
+/// is mutable only because its float columns lend their buffers to Arrow for the write instead
+/// of being copied (they are most of the bytes a run writes); it comes back unchanged, whether
+/// the write succeeded or not.
+pub fn write_table(path: &Path, table: &mut Table) -> anyhow::Result<String> {
+    let (batch, lent) = to_record_batch(table)?;
+    let result = encode(path, table, &batch);
+    // The writer keeps no reference once done: the buffers are ours alone again.
+    drop(batch);
+    give_back(table, lent);
+    result
+}
+
+fn give_back(table: &mut Table, lent: Vec<Option<ScalarBuffer<f64>>>) {
+    for (column, buffer) in table.columns.iter_mut().zip(lent) {
+        if let Some(buffer) = buffer {
+            let values = buffer.into_inner().into_vec::<f64>().unwrap_or_else(|shared| shared.typed_data().to_vec());
+            column.data = ColumnData::F64(values);
+        }
+    }
+}
+
+fn encode(path: &Path, table: &Table, batch: &RecordBatch) -> anyhow::Result<String> {
     let kv: Vec<KeyValue> = table.metadata.iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect();
     let mut props = WriterProperties::builder()
         // Names, flags and counts repeat: zstd shrinks them well.
@@ -46,7 +67,7 @@ pub fn write_table(path: &Path, table: &Table) -> anyhow::Result<String> {
     let mut hash = String::new();
     atomic::write_file(path, |w| {
         let mut writer = ArrowWriter::try_new(HashingWriter::new(w), batch.schema(), Some(props))?;
-        writer.write(&batch)?;
+        writer.write(batch)?;
         hash = writer.into_inner()?.finalize();
         Ok(())
     })
@@ -54,12 +75,20 @@ pub fn write_table(path: &Path, table: &Table) -> anyhow::Result<String> {
     Ok(hash)
 }
 
-fn to_record_batch(table: &Table) -> anyhow::Result<RecordBatch> {
+/// The table as one Arrow batch; each F64 column's values move into a buffer returned beside it
+/// (the column is left empty until `write_table` gives them back).
+fn to_record_batch(table: &mut Table) -> anyhow::Result<(RecordBatch, Vec<Option<ScalarBuffer<f64>>>)> {
     let mut fields = Vec::with_capacity(table.columns.len());
     let mut arrays: Vec<ArrayRef> = Vec::with_capacity(table.columns.len());
-    for column in &table.columns {
-        let (data_type, nullable, array): (DataType, bool, ArrayRef) = match &column.data {
-            ColumnData::F64(v) => (DataType::Float64, false, Arc::new(Float64Array::from(v.clone()))),
+    let mut lent = Vec::with_capacity(table.columns.len());
+    for column in &mut table.columns {
+        let mut borrowed = None;
+        let (data_type, nullable, array): (DataType, bool, ArrayRef) = match &mut column.data {
+            ColumnData::F64(v) => {
+                let buffer = ScalarBuffer::from(std::mem::take(v));
+                borrowed = Some(buffer.clone());
+                (DataType::Float64, false, Arc::new(Float64Array::new(buffer, None)))
+            }
             ColumnData::OptF64(v) => (DataType::Float64, true, Arc::new(Float64Array::from(v.clone()))),
             ColumnData::I64(v) => (DataType::Int64, false, Arc::new(Int64Array::from(v.clone()))),
             ColumnData::Bool(v) => (DataType::Boolean, false, Arc::new(BooleanArray::from(v.clone()))),
@@ -72,9 +101,16 @@ fn to_record_batch(table: &Table) -> anyhow::Result<RecordBatch> {
         ]);
         fields.push(Field::new(&column.name, data_type, nullable).with_metadata(metadata));
         arrays.push(array);
+        lent.push(borrowed);
     }
     let schema = Arc::new(Schema::new(fields));
-    Ok(RecordBatch::try_new(schema, arrays)?)
+    match RecordBatch::try_new(schema, arrays) {
+        Ok(batch) => Ok((batch, lent)),
+        Err(e) => {
+            give_back(table, lent);
+            Err(e.into())
+        }
+    }
 }
 
 /// Reads a whole Parquet file written by any tool; units come back when the writer stored them.
@@ -175,7 +211,7 @@ mod tests {
         t.push(Column { name: "n".into(), unit: "".into(), description: "".into(), data: ColumnData::I64(vec![1, 2]) });
         t.push(Column::f64("odd", "m", "NaN and negative zero", vec![f64::NAN, -0.0]));
         t.metadata.insert("shakeflow.stage".into(), "x".into());
-        write_table(&path, &t).unwrap();
+        write_table(&path, &mut t).unwrap();
         let back = read_table(&path).unwrap();
         // The identity, NaN and the zero's sign included (Debug shows both; `==` would not): what
         // lets a run hand the written table itself to the next stage (pipeline::memo).
@@ -187,8 +223,10 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let mut t = Table::new();
         t.push(Column::f64("a", "m", "d", (0..1000).map(|i| (i as f64).sin()).collect()));
-        write_table(&dir.path().join("1.parquet"), &t).unwrap();
-        write_table(&dir.path().join("2.parquet"), &t).unwrap();
+        let before = format!("{t:?}");
+        write_table(&dir.path().join("1.parquet"), &mut t).unwrap();
+        write_table(&dir.path().join("2.parquet"), &mut t).unwrap();
+        assert_eq!(format!("{t:?}"), before, "the table lent its columns and got them back");
         let one = std::fs::read(dir.path().join("1.parquet")).unwrap();
         assert_eq!(one, std::fs::read(dir.path().join("2.parquet")).unwrap());
     }
