@@ -6,7 +6,7 @@ Eq. 22 with solve_ivp and terminal events at θ = 0 (impact, e of Eq. 24) and at
 (overturn); an impact whose rebound would rock the block less than 1e-7 rad ends in rest.
 
     rocking_scipy.py floor.csv --B 0.349 --H 1.082 --f 0.085 [--rtol 1e-10] [--method DOP853]
-    rocking_scipy.py --pulse-table --B 0.9101 --H 3.5627 --f 0 --ratios 1,2,4 > rocking_pulses.json
+    rocking_scipy.py --pulse-table --B 0.9101373 --H 3.5643866 --f 0 --ratios 1,2,4 > rocking_pulses.json
 
 floor.csv: columns time_s, ax_mps2 and optionally az_mps2 (by name), at a constant step. Prints JSON: theta on the input time
 base, the events, and the wall time of the simulation alone.
@@ -164,7 +164,8 @@ def main():
     block = Block(args.B, args.H, args.f)
     if args.pulse_table:
         table = {r: minimum_overturning(block, float(r)) for r in args.ratios.split(",")}
-        json.dump({"source": "tests/reference/rocking_scipy.py --pulse-table", "B": args.B, "H": args.H, "f": args.f,
+        # The whole command line, so that the file says how to make it again.
+        json.dump({"source": " ".join(["tests/reference/rocking_scipy.py", *sys.argv[1:]]), "B": args.B, "H": args.H, "f": args.f,
                    "alpha": block.alpha, "p": block.p, "pulse_dt_s": 1e-3,
                    "minimum_ap_over_g_tan_alpha": table}, sys.stdout, indent=1)
         print()
