@@ -78,6 +78,11 @@ fn demo_pipeline_recovers_the_archive_truth() {
             .iter()
             .map(|t| (format!("{}_top_ax_mps2", t["unit"].as_str().unwrap()), t["time_s"].as_f64().unwrap()))
             .collect();
+        // A toppling on a channel the stage dropped would otherwise never be looked for.
+        for (channel, _) in &expected {
+            assert!(channels.contains(channel), "{id}: no row for {channel}, where the archive has a toppling");
+        }
+        assert_eq!(channels.len(), 7, "{id}: one row per unit channel");
         for (i, channel) in channels.iter().enumerate() {
             match expected.iter().find(|(c, _)| c == channel) {
                 Some((_, t)) => {
@@ -157,6 +162,7 @@ fn check_camera_projection(runs: &Path, archive: &Path, manifest: &Value) {
     assert!((check.f64_column("rms_error").unwrap()[0] - theta_rms).abs() < 1e-3 * theta_rms);
     let check = read_table(&runs.join("cpt_check_rolling/errors/data.parquet")).unwrap();
     let reported = check.f64_column("rms_error").unwrap();
+    assert_eq!(reported.len(), 3, "one row each for dx, dy and yaw");
     for (r, mine) in reported.iter().zip([dx, dy, dyaw]) {
         assert!((r - mine).abs() < 1e-3 * mine, "compare stage {r} vs {mine}");
     }

@@ -89,13 +89,19 @@ fn anchored_block_overturns_earlier_than_the_free_one() {
     // The study's finding that matters for design: anchoring can make overturning likelier
     // (it overturns well below the 3 × PGA the free block survives) — and not at 1.18 × PGA.
     assert!(critical < 3.0 && critical > 1.18, "critical scale {critical}");
-    // The anchorage law is the main uncertainty (see README): the scale for other yield rotations.
+    // Our anchorage law gives 2.05, not the study's 1.19 (README: "Why the anchored block differs"):
+    // pinned to ±0.02 so that any change of the rocking or anchorage model shows here.
+    assert!((critical - 2.05).abs() < 0.02, "critical scale {critical}, documented 2.05");
+    // The anchorage law is the main uncertainty (see README): the scale for other yield rotations,
+    // 2.03–2.42 × PGA as documented, always below the free block's 3 × PGA.
     for yield_rotation in [1e-4, 5e-3, 2e-2] {
         let options = anchored(yield_rotation);
         let first = (0..=400)
             .map(|i| 1.0 + 0.005 * f64::from(i))
             .find(|&s| run(&block, dt, &acc, s, &options).overturn.is_some());
         println!("  θy = {yield_rotation}: first overturn at {first:?} × PGA");
+        let first = first.expect("overturns below 3 × PGA");
+        assert!((2.0..2.45).contains(&first), "θy = {yield_rotation}: first overturn at {first} × PGA");
     }
 }
 
@@ -129,6 +135,9 @@ fn adaptive_integration_matches_rk4_at_the_study_step_on_real_records() {
         );
         assert!(adaptive.events.len() > 3, "{name}: the block should rock");
         assert!(worst < 1e-4, "{name}: max |Δθ| = {worst} rad");
+        // Events at the same times: within 4e-7 s on four records; Chi-Chi's 220 events drift
+        // apart by 3.2e-3 s (RK4's own error at 1e-4 s there, README).
+        assert!(worst_time < 5e-3, "{name}: event times differ by up to {worst_time} s");
         overturned += usize::from(adaptive.overturn.is_some());
     }
     assert!((1..5).contains(&overturned), "a mix of overturning and surviving runs: {overturned}");

@@ -41,6 +41,8 @@ fn stored_floor_records_come_from_the_demo_building() {
         let path = reference(name);
         if std::env::var_os("SHAKEFLOW_WRITE_REFERENCE").is_some() {
             std::fs::write(&path, floor.to_csv()).unwrap();
+            // Comparing the file with what was just written into it would prove nothing.
+            panic!("{name} rewritten; run again without SHAKEFLOW_WRITE_REFERENCE to check it");
         }
         let stored = Floor::read_csv(&path);
         assert_eq!(stored.ax.len(), floor.ax.len(), "{name}");
@@ -62,7 +64,10 @@ fn differences(ours: &Response, peer: &Value, dt: f64, until_s: f64) -> (f64, f6
         .map(|d| d.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect())
         .collect();
     let (mut position, mut angle) = (0.0f64, 0.0f64);
-    for (j, &k) in samples.iter().enumerate().filter(|(_, &k)| k as f64 * dt < until_s) {
+    let compared: Vec<(usize, &usize)> = samples.iter().enumerate().filter(|(_, &k)| k as f64 * dt < until_s).collect();
+    // No sample compared would report perfect agreement.
+    assert!(compared.len() >= 10, "only {} peer samples before {until_s} s", compared.len());
+    for (j, &k) in compared {
         position = position.max((ours.x_m[k] - x[j]).abs()).max((ours.y_m[k] - y[j]).abs());
         angle = angle.max((ours.yaw_rad[k] - yaw[j]).abs());
         for (delta, peer_delta) in ours.delta_rad.iter().zip(&deltas) {

@@ -15,7 +15,6 @@
 //!   records; budget in `sdof_identification`.
 
 use shakeflow::signal::welch::{csd, identify_peak, transfer_function, welch, Detrend, WelchOptions, Window};
-use std::time::Instant;
 
 const FS: f64 = 200.0;
 const FN: f64 = 3.1;
@@ -293,27 +292,4 @@ fn constant_input_does_not_panic() {
     assert!(identify_peak(&tf, (0.0, 100.0), 0.5).is_none());
     let (_, p) = welch(&z, FS, &opts).unwrap();
     assert!(p.iter().all(|&v| v == 0.0));
-}
-
-#[test]
-fn timing_120s_pair_matlab_defaults() {
-    let n = (120.0 * FS) as usize;
-    let x = Gauss::new(21).vec(n);
-    let y = sdof_abs_accel(&x, FS, FN, ZETA);
-    let opts = WelchOptions::matlab_default(n);
-    let t0 = Instant::now();
-    let reps = 10;
-    let mut sink = 0.0;
-    for _ in 0..reps {
-        let tf = transfer_function(&x, &y, FS, &opts).unwrap();
-        sink += tf.coherence[10];
-    }
-    let dt = t0.elapsed().as_secs_f64() / reps as f64;
-    println!(
-        "transfer_function on a 120 s, 200 Hz pair (n = {n}, L = {}, nfft = {}): {:.3} ms per call (profile: {}) [{sink:.3}]",
-        opts.segment_len,
-        opts.nfft(),
-        dt * 1e3,
-        if cfg!(debug_assertions) { "test/dev, crate opt-level 0, deps opt-level 2" } else { "release" }
-    );
 }

@@ -96,5 +96,7 @@ fn demo_archive_toppling_and_no_false_alarms() {
         &rows,
     );
     assert_eq!(n_channels, tests.len() * 7, "expected 7 units per test");
+    // An archive without topplings would pass as "no false alarms" and check no detection.
+    assert!(n_topples >= 3, "the demo archive has three topplings, found {n_topples} in its manifest");
     assert!(failures.is_empty(), "{} archive failures:\n{}", failures.len(), failures.join("\n"));
 }

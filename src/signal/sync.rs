@@ -357,7 +357,6 @@ mod tests {
     use super::super::resample_bandlimited::resample_to_rate;
     use super::super::test_support::*;
     use super::*;
-    use std::time::Instant;
 
     const FS_REF: f64 = 200.0;
     const FS_TGT: f64 = 256.0;
@@ -468,7 +467,10 @@ mod tests {
                  mean reported uncertainty {sig_mean:.3e} s; std/reported = {ratio:.2}",
                 noise * 100.0
             );
-            assert!(ratio > 1.0 / 3.0 && ratio < 3.0, "uncertainty miscalibrated: ratio {ratio}");
+            // 20 realisations estimate the spread to ±16 % (one sigma): (0.5, 2) is about ±3 sigma
+            // around 1 and still catches a reported uncertainty off by a factor 2 (measured: 1.10
+            // at 5 % noise, 0.74 at 30 %).
+            assert!(ratio > 0.5 && ratio < 2.0, "uncertainty miscalibrated: ratio {ratio}");
         }
     }
 
@@ -554,20 +556,16 @@ mod tests {
     }
 
     #[test]
-    fn timing_two_120s_records_at_200hz() {
+    fn lag_of_two_noisy_120s_records_at_200hz_within_1ms() {
         let rec = read_at2("RSN2110_DENALI_FAIGO360.AT2"); // 234 s at 200 Hz
         let seg = &rec.acc[4000..4000 + 24000]; // 120 s
         let lag = 1.2345;
         let r = fourier_resample_delayed(seg, 200.0, 200.0, 0.0, 2 * seg.len());
         let mut t = fourier_resample_delayed(seg, 200.0, 200.0, lag, 2 * seg.len());
         add_noise(&mut t, 0.05 * rms(&r), &mut Rng::new(9));
-        let t0 = Instant::now();
         let est = estimate_lag(&r, &t, 200.0, Some(10.0)).unwrap();
-        let el = t0.elapsed();
         println!(
-            "timing: estimate_lag on 2 x 120 s @ 200 Hz (24000 samples each): {:.1} ms \
-             (lag error {:+.2e} s, sigma {:.1e} s, rho {:.4})",
-            el.as_secs_f64() * 1e3,
+            "estimate_lag on 2 x 120 s @ 200 Hz (24000 samples each): lag error {:+.2e} s, sigma {:.1e} s, rho {:.4}",
             est.lag_s - lag,
             est.uncertainty_s,
             est.correlation
