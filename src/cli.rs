@@ -14,7 +14,7 @@ use crate::pipeline::progress::Reporter;
 use crate::pipeline::sink::OutputSink;
 use crate::pipeline::spec::{PipelineFile, RecordFormat, SourceSpec};
 use crate::pipeline::{hash, sources};
-use crate::stages::{self, InputKind, InputPart, StageContext, StageInput};
+use crate::stages::{self, InputKind, InputPart, StageContext, StageInfo, StageInput};
 
 #[derive(Parser)]
 #[command(
@@ -65,16 +65,21 @@ enum Command {
     },
     /// Run one stage type alone on files, without a pipeline.
     ///
-    /// Example: shakeflow stage load --input RSN6.AT2 --output out/ ; then
-    /// shakeflow stage baseline --input out/records --output out2/ --set order=2
+    /// Examples:
+    ///
+    ///   shakeflow stage load --input RSN6.AT2 --output out/
+    ///   shakeflow stage baseline --input out/records --output out2/ --set order=2
+    ///
     /// For `load`, --set keys are source options (unit, dt, header_lines, time_column, columns, ...).
+    #[command(verbatim_doc_comment)]
     Stage {
         /// Stage type (see `shakeflow stages`).
         name: String,
         /// Input files (record files for `load`; Parquet files or dataset folders otherwise).
         #[arg(long = "input", short = 'i', required = true, num_args = 1..)]
         inputs: Vec<PathBuf>,
-        /// Output folder (replaced when the stage succeeds).
+        /// Output folder, replaced when the stage succeeds: new, empty, or an earlier output of
+        /// this stage type (anything else is refused).
         #[arg(long, short = 'o')]
         output: PathBuf,
         /// Parameter as key=value, value in YAML syntax (repeatable).
@@ -93,7 +98,7 @@ enum Command {
         #[arg(long, default_value_t = 5)]
         rows: usize,
     },
-    /// Print a (small) Parquet table, e.g. a study summary.
+    /// Print a (small) Parquet table, e.g. a study summary: a file, or an output folder of one part.
     Show {
         table: PathBuf,
         /// Rows to print at most.
@@ -368,8 +373,12 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
         input_hashes
             .insert(format!("params.{name} ({})", params[&name].as_str().unwrap_or_default()), hash::hash_file(&path)?);
     }
+    refuse_to_replace_foreign_folder(output, inputs, info)?;
     let parent = output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     std::fs::create_dir_all(parent).with_context(|| format!("cannot create `{}`", parent.display()))?;
+    if let Some(name) = output.file_name() {
+        crate::io::atomic::remove_abandoned(parent, &format!(".{}.tmp-", name.to_string_lossy()));
+    }
     let staging = crate::io::atomic::temp_sibling(output);
     let reporter = Reporter::new(false);
     let records: usize = stage_inputs.iter().map(|i| i.parts().len()).sum();
@@ -394,6 +403,34 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
     }
     result?;
     eprintln!("{name}: {records} record(s) → {}", output.display());
+    Ok(())
+}
+
+/// `stage --output` replaces the folder whole: only a folder that is new, empty or holds nothing
+/// but this stage type's own outputs may be replaced, and never one holding an input.
+fn refuse_to_replace_foreign_folder(output: &Path, inputs: &[PathBuf], info: &StageInfo) -> anyhow::Result<()> {
+    let refuse = |why: String| -> anyhow::Result<()> {
+        Err(crate::error::UserError::new(why)
+            .in_file(output)
+            .hint("`--output` is replaced as a whole when the stage succeeds: give a new or empty folder")
+            .into())
+    };
+    if output.exists() && !output.is_dir() {
+        return refuse("the output is a file, not a folder".into());
+    }
+    let absolute = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+    let out = absolute(output);
+    if let Some(input) = inputs.iter().find(|i| absolute(i).starts_with(&out)) {
+        return refuse(format!("the input `{}` is inside the output folder", input.display()));
+    }
+    let Ok(entries) = std::fs::read_dir(output) else { return Ok(()) };
+    let ours = |name: &str| name == crate::pipeline::sink::MCAP_DIR || info.outputs.iter().any(|o| o.name == name);
+    for entry in entries {
+        let name = entry?.file_name().to_string_lossy().into_owned();
+        if !ours(&name) {
+            return refuse(format!("the output folder holds `{name}`, which is not an output of `{}`", info.name));
+        }
+    }
     Ok(())
 }
 
