@@ -238,29 +238,62 @@ fn input_hashes_for(
 }
 
 fn stage_inputs(
+    plan: &Plan,
     stage: &PlannedStage,
     sources: &BTreeMap<String, ResolvedSource>,
     produced: &BTreeMap<String, Produced>,
 ) -> anyhow::Result<Vec<StageInput>> {
-    stage
+    let mut inputs: Vec<StageInput> = stage
         .inputs
         .iter()
         .map(|input| match input {
-            InputRef::Source(name) => {
-                let mut input = sources[name].input.clone();
-                if let StageInput::Source { files, .. } = &mut input {
-                    files.retain(|f| stage.selects(&f.partition));
-                }
-                Ok(input)
-            }
+            InputRef::Source(name) => Ok(sources[name].input.clone()),
             InputRef::Stage { stage: upstream, output } => {
                 let upstream = &produced[upstream];
-                let mut parts = dataset_parts_known(&upstream.dir.join(output), &input.label(), &upstream.written)?;
-                parts.retain(|p| stage.selects(&p.partition));
+                let parts = dataset_parts_known(&upstream.dir.join(output), &input.label(), &upstream.written)?;
                 Ok(StageInput::Dataset { name: input.label(), parts })
             }
         })
-        .collect()
+        .collect::<anyhow::Result<_>>()?;
+    check_select(plan, stage, &inputs)?;
+    for input in &mut inputs {
+        match input {
+            StageInput::Source { files, .. } => files.retain(|f| stage.selects(&f.partition)),
+            StageInput::Dataset { parts, .. } => parts.retain(|p| stage.selects(&p.partition)),
+        }
+    }
+    Ok(inputs)
+}
+
+/// A `select:` key or value that no record of the stage's inputs has is a typo, not a wish for
+/// an empty selection.
+fn check_select(plan: &Plan, stage: &PlannedStage, inputs: &[StageInput]) -> Result<(), UserError> {
+    let partitions: Vec<&(String, String)> = inputs.iter().flat_map(|i| i.parts()).flat_map(|p| &p.partition).collect();
+    for (key, values) in &stage.select {
+        let refuse = |message: String, wanted: &str, known: &BTreeSet<&str>, what: &str| {
+            let suggestion = crate::error::did_you_mean(wanted, known.iter().copied())
+                .map(|s| format!("did you mean `{s}`? "))
+                .unwrap_or_default();
+            let known: Vec<&str> = known.iter().copied().collect();
+            UserError::new(message)
+                .in_file(&plan.file.path)
+                .at(super::locate::key_position(&plan.file.text, &["stages", &stage.name, "select", key]))
+                .hint(format!("{suggestion}{what}: {}", known.join(", ")))
+        };
+        let seen: BTreeSet<&str> = partitions.iter().filter(|(k, _)| k == key).map(|(_, v)| v.as_str()).collect();
+        if seen.is_empty() {
+            let keys: BTreeSet<&str> = partitions.iter().map(|(k, _)| k.as_str()).collect();
+            let message =
+                format!("stage `{}` selects by `{key}`, but no record of its inputs has that key", stage.name);
+            return Err(refuse(message, key, &keys, "the inputs' partition keys"));
+        }
+        if let Some(value) = values.iter().find(|v| !seen.contains(v.as_str())) {
+            let message =
+                format!("stage `{}` selects {key} = `{value}`, but no record of its inputs has it", stage.name);
+            return Err(refuse(message, value, &seen, &format!("values of `{key}`")));
+        }
+    }
+    Ok(())
 }
 
 /// The parts of a dataset directory: each `data.parquet` with the partition its path encodes.
@@ -349,6 +382,9 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
     let lock = LockFile::read(&lock_file)?;
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;
+    // An interrupted run (Ctrl-C) leaves its staging folder: the next run clears it.
+    crate::io::atomic::remove_abandoned(&output_dir, ".staging-");
+    crate::io::atomic::remove_abandoned(&output_dir, &format!(".{LOCK_FILE}.tmp-"));
     let staging = output_dir.join(format!(".staging-{}", std::process::id()));
     std::fs::create_dir(&staging).map_err(|e| {
         output_dir_error(
@@ -524,7 +560,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
         let why = if env.forced.contains(&stage.name) { "forced".to_string() } else { assessment.reasons.join("; ") };
         let started = Instant::now();
         let dir = env.staging.join(&stage.name);
-        let inputs = stage_inputs(stage, env.sources, &snapshot)?;
+        let inputs = stage_inputs(env.plan, stage, env.sources, &snapshot)?;
         let records: usize = inputs.iter().map(|i| i.parts().len()).sum();
         let bar = env.reporter.stage_bar(&stage.name, records as u64);
         env.reporter.line(&format!("{:<18} running ({why})", stage.name));
