@@ -303,3 +303,82 @@ fn video_without_ffmpeg() {
     }
     assert!(!root.join("out/track").exists(), "nothing written:\n{message}");
 }
+
+#[test]
+fn select_by_a_misspelt_key() {
+    fails_cleanly(
+        |root| {
+            edit(root, "pipeline.yaml", |t| {
+                t.replace("    inputs: [load]\n", "    inputs: [load]\n    select:\n      motoin: [FB-1]\n")
+            })
+        },
+        &["pipeline.yaml:21:7", "selects by `motoin`", "did you mean `motion`"],
+    );
+}
+
+#[test]
+fn select_of_a_misspelt_value() {
+    fails_cleanly(
+        |root| {
+            edit(root, "pipeline.yaml", |t| {
+                t.replace("    inputs: [load]\n", "    inputs: [load]\n    select:\n      motion: [FB1]\n")
+            })
+        },
+        &["pipeline.yaml:21:7", "selects motion = `FB1`", "did you mean `FB-1`"],
+    );
+}
+
+#[test]
+fn a_key_given_twice() {
+    fails_cleanly(
+        |root| edit(root, "pipeline.yaml", |t| t.replace("      order: 3\n", "      order: 3\n      order: 2\n")),
+        &["pipeline.yaml:", "duplicate entry with key \"order\"", "keep one"],
+    );
+}
+
+#[test]
+fn a_gap_in_time_is_blamed_on_its_own_line() {
+    // 20 rows missing near the end of 400: the gap lengthens the mean step until every step
+    // differs from it, yet the error must point at the gap (line 352 follows line 331).
+    fails_cleanly(
+        |root| {
+            edit(root, "archive/FB-1/daq.csv", |t| {
+                let lines: Vec<&str> = t.lines().collect();
+                let kept: Vec<&str> = lines[..331].iter().chain(&lines[351..]).copied().collect();
+                kept.join("\n") + "\n"
+            })
+        },
+        &["archive/FB-1/daq.csv:332:1", "not uniformly sampled", "typical (median) step is 0.005000 s"],
+    );
+}
+
+#[test]
+fn stage_output_never_replaces_a_folder_of_other_files() {
+    let project = small_project();
+    let root = project.path();
+    std::fs::create_dir(root.join("mine")).unwrap();
+    std::fs::copy(root.join("archive/FB-1/daq.csv"), root.join("mine/daq.csv")).unwrap();
+    std::fs::write(root.join("mine/notes.txt"), "keep me").unwrap();
+    let before = snapshot(&root.join("mine"));
+    let load = |input: &str, output: &str| {
+        let set = ["--set", "header_lines=2", "--set", "time_column=Time", "--set", "unit=g"];
+        let mut args = vec!["stage", "load", "--input", input, "--output", output];
+        args.extend(set);
+        shakeflow(&args, root)
+    };
+    for (input, message) in [
+        ("mine/daq.csv", "the input `mine/daq.csv` is inside the output folder"),
+        ("archive/FB-1/daq.csv", "which is not an output of `load`"),
+    ] {
+        let out = load(input, "mine");
+        assert!(!out.status.success() && stderr(&out).contains(message), "{}", stderr(&out));
+        assert!(stderr(&out).contains("give a new or empty folder"), "{}", stderr(&out));
+        assert_eq!(snapshot(&root.join("mine")), before, "the folder was touched");
+    }
+    // A new folder is written, and then replaced by the same stage's next run.
+    for _ in 0..2 {
+        let out = load("mine/daq.csv", "fresh");
+        assert!(out.status.success(), "{}", stderr(&out));
+        assert!(root.join("fresh/records/data.parquet").is_file());
+    }
+}

@@ -228,15 +228,19 @@ fn resolve_inputs(
                     .hint("name a source declared under `inputs:`"));
             }
             let outputs = stages::find(&upstream.stage_type).map(|s| s.info().outputs).unwrap_or(&[]);
-            let output = match output {
+            let found = match output {
                 None => outputs.first().map(|o| o.name),
                 Some(wanted) => outputs.iter().map(|o| o.name).find(|o| *o == wanted),
             };
-            let Some(output) = output else {
+            let Some(output) = found else {
                 let names: Vec<&str> = outputs.iter().map(|o| o.name).collect();
+                let wanted = output.unwrap_or_default();
+                let suggestion = did_you_mean(wanted, names.iter().copied())
+                    .map(|s| format!("did you mean `{s}`? "))
+                    .unwrap_or_default();
                 return Err(file
-                    .error_at_value(&key_path, name, format!("stage `{head}` has no output `{}`", output.unwrap_or("")))
-                    .hint(format!("outputs of `{head}`: {}", names.join(", "))));
+                    .error_at_value(&key_path, name, format!("stage `{head}` has no output `{wanted}`"))
+                    .hint(format!("{suggestion}outputs of `{head}`: {}", names.join(", "))));
             };
             InputRef::Stage { stage: head.to_string(), output }
         } else {

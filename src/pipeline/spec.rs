@@ -214,12 +214,20 @@ impl PipelineFile {
     }
 
     pub fn parse(path: &Path, text: String) -> Result<Self, UserError> {
-        let spec: PipelineSpec = serde_yaml::from_str(&text).map_err(|e| {
+        let refuse = |e: serde_yaml::Error, hint: &str| {
             let position = e.location().map(|l| (l.line(), l.column()));
             let message = e.to_string();
             // serde_yaml appends " at line L column C"; the position is already in the prefix.
             let message = message.split(" at line ").next().unwrap_or(&message).to_string();
-            UserError::new(message).in_file(path).at(position).hint(
+            UserError::new(message).in_file(path).at(position).hint(hint)
+        };
+        // Typed maps keep the last of two equal keys without a word: a generic parse refuses them.
+        serde_yaml::from_str::<serde_yaml::Value>(&text).map_err(|e| {
+            refuse(e, "a key given twice in one mapping: the second would silently replace the first; keep one")
+        })?;
+        let spec: PipelineSpec = serde_yaml::from_str(&text).map_err(|e| {
+            refuse(
+                e,
                 "see `schemas/pipeline.schema.json` for the format, or `shakeflow stages` for stage types and parameters",
             )
         })?;
