@@ -140,16 +140,26 @@ impl Table {
 /// The name of the time column every time-series table starts with.
 pub const TIME_COLUMN: &str = "time_s";
 
-/// The mean step when every step is within a small tolerance of it; else the index of the first bad step.
+/// The mean step when every step is within a small tolerance of it; else the index of the first
+/// step that differs from the record's typical (median) step.
 pub fn uniform_step(time: &[f64]) -> Result<f64, usize> {
     let n = time.len();
     let dt = (time[n - 1] - time[0]) / (n - 1) as f64;
     // Text files round time to a few decimals: allow that rounding, not a real jitter.
-    let tolerance = 1e-3 * dt + 2e-6;
-    match time.windows(2).position(|w| !(dt > 0.0 && ((w[1] - w[0]) - dt).abs() <= tolerance)) {
-        None => Ok(dt),
-        Some(i) => Err(i),
-    }
+    let within = |step: f64, of: f64| of > 0.0 && (step - of).abs() <= 1e-3 * of + 2e-6;
+    let first_off = |of: f64| time.windows(2).position(|w| !within(w[1] - w[0], of));
+    let Some(off_mean) = first_off(dt) else { return Ok(dt) };
+    // A gap lengthens the mean step until every step differs from it: blame the step that
+    // differs from the typical one instead.
+    let typical = typical_step(time);
+    Err(first_off(typical).unwrap_or(off_mean))
+}
+
+/// The median of the steps between consecutive times.
+pub fn typical_step(time: &[f64]) -> f64 {
+    let mut steps: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).collect();
+    steps.sort_by(f64::total_cmp);
+    steps[steps.len() / 2]
 }
 
 #[cfg(test)]
@@ -163,6 +173,10 @@ mod tests {
         let mut jittered = rounded.clone();
         jittered[500] += 0.001;
         assert_eq!(uniform_step(&jittered), Err(499));
+        // A gap of 20 samples in 10 000 is blamed where it is, not on the first step (every step
+        // differs from the mean step the gap lengthened).
+        let gapped: Vec<f64> = (0..10_000).filter(|i| !(8000..8020).contains(i)).map(|i| i as f64 * 0.005).collect();
+        assert_eq!(uniform_step(&gapped), Err(7999));
     }
 
     #[test]

@@ -165,9 +165,9 @@ fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<T
                     NonUniformPolicy::Error => {
                         let step = time[bad + 1] - time[bad];
                         return Err(err(format!(
-                            "time is not uniformly sampled: the step after t = {} s is {step:.6} s, but the record's mean step is {:.6} s",
+                            "time is not uniformly sampled: the step after t = {} s is {step:.6} s, but the record's typical (median) step is {:.6} s",
                             time[bad],
-                            (time[n - 1] - time[0]) / (n - 1) as f64
+                            crate::table::typical_step(time)
                         ))
                         .at(first_line.map(|l| (l + bad + 1, 1)))
                         .hint("fix the file, or set `non_uniform: resample` on the source to resample linearly onto the median step"));
@@ -289,9 +289,7 @@ fn missing_column(path: &std::path::Path, name: &str, channels: &[&records::RawC
 }
 
 fn median_step(time: &[f64]) -> Option<f64> {
-    let mut steps: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).collect();
-    steps.sort_by(f64::total_cmp);
-    let median = steps[steps.len() / 2];
+    let median = crate::table::typical_step(time);
     (median > 0.0 && time.windows(2).all(|w| w[1] > w[0])).then_some(median)
 }
 
