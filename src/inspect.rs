@@ -95,6 +95,27 @@ fn describe_parquet(path: &Path, preview_rows: usize) -> anyhow::Result<String> 
 /// A whole (small) Parquet table as aligned text, for summaries printed at the end of a run.
 /// Prints a small table; `columns` (when not empty) picks and orders the columns shown.
 pub fn show(path: &Path, max_rows: usize, columns: &[String]) -> anyhow::Result<String> {
+    // A stage's output is a folder of partitions: one part is shown as it is.
+    if path.is_dir() {
+        let parts: Vec<String> = crate::pipeline::hash::list_files(path)?
+            .into_iter()
+            .filter(|f| f.ends_with(crate::pipeline::sink::DATA_FILE))
+            .collect();
+        return match parts.as_slice() {
+            [one] => show(&path.join(one), max_rows, columns),
+            [] => anyhow::bail!("`{}` holds no {} file", path.display(), crate::pipeline::sink::DATA_FILE),
+            many => {
+                let listed: Vec<String> =
+                    many.iter().take(5).map(|p| format!("  {}", path.join(p).display())).collect();
+                anyhow::bail!(
+                    "`{}` holds {} parts; show one of them, e.g.\n{}\n(or `shakeflow inspect` the folder for all of them)",
+                    path.display(),
+                    many.len(),
+                    listed.join("\n")
+                )
+            }
+        };
+    }
     let file = File::open(path).map_err(|e| anyhow::anyhow!("cannot open `{}`: {e}", path.display()))?;
     let mut frame = ParquetReader::new(file)
         .finish()
