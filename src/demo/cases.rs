@@ -93,11 +93,6 @@ const PLANS: [Plan; 5] = [
     },
 ];
 
-/// The test and floor each case stands on, to take from the archive's floor motions.
-pub fn floors_needed() -> Vec<(&'static str, u8)> {
-    PLANS.iter().map(|p| (p.test, p.floor)).collect()
-}
-
 /// Files of the cases, relative to the archive.
 pub fn file_names() -> Vec<String> {
     let mut out = Vec::new();

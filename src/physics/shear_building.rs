@@ -106,10 +106,6 @@ impl ShearBuilding {
         &self.mass
     }
 
-    pub fn stiffness_matrix(&self) -> &[Vec<f64>] {
-        &self.stiffness
-    }
-
     pub fn damping_matrix(&self) -> &[Vec<f64>] {
         &self.damping
     }

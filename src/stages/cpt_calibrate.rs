@@ -24,7 +24,7 @@ static INFO: StageInfo = StageInfo {
     inputs: InputKind::Files(&[RecordFormat::ControlPoints]),
     outputs: &[
         OutputInfo { name: "calibration", description: "one row: p11…p34 (P scaled so ‖p31..p33‖ = 1), k1/k2 when fitted, intrinsics, camera centre, objective_px (Eq. 2), rms_px", kind: OutputKind::Table },
-        OutputInfo { name: "residuals", description: "per control point: u_res_px, v_res_px, dist_px, outlier", kind: OutputKind::Table },
+        OutputInfo { name: "residuals", description: "per control point: u_res_px, v_res_px, dist_px, loo_dist_px (its distance when fitted without it), outlier", kind: OutputKind::Table },
         OutputInfo { name: "figures", description: "calibration.png: control points with magnified residuals, and residual per point", kind: OutputKind::Files },
     ],
     params: &[

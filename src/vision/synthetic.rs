@@ -91,11 +91,6 @@ impl Layer {
     pub fn background(shift: [f64; 2]) -> Layer {
         Layer { texture: 0, rect: None, shift }
     }
-
-    /// The shift actually rendered (multiples of 1/8 px).
-    pub fn rendered_shift(&self) -> [f64; 2] {
-        self.shift.map(quantise)
-    }
 }
 
 pub fn quantise(v: f64) -> f64 {
