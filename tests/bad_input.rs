@@ -382,3 +382,15 @@ fn stage_output_never_replaces_a_folder_of_other_files() {
         assert!(root.join("fresh/records/data.parquet").is_file());
     }
 }
+
+#[test]
+fn a_bad_set_value_is_named() {
+    let project = small_project();
+    let out = shakeflow(
+        &["stage", "load", "--input", "archive/FB-1/daq.csv", "--output", "o", "--set", "header_lines=two"],
+        project.path(),
+    );
+    let message = stderr(&out);
+    assert!(!out.status.success() && message.contains("--set header_lines=\"two\": invalid type"), "{message}");
+    assert!(!project.path().join("o").exists(), "nothing written");
+}

@@ -3,7 +3,6 @@
 
 use std::collections::BTreeMap;
 
-use anyhow::Context;
 use rayon::prelude::*;
 use serde_json::json;
 
@@ -311,8 +310,20 @@ pub fn ad_hoc_source(
     for (k, v) in overrides {
         value[k] = v.clone();
     }
-    serde_json::from_value(value)
-        .context("the --set values do not form a valid source (see `inputs:` in schemas/pipeline.schema.json)")
+    serde_json::from_value(value.clone()).map_err(|e| {
+        // serde names the type it expected, not the key: the key is the one whose removal helps.
+        let culprit = overrides.keys().find(|key| {
+            let mut without = value.clone();
+            without.as_object_mut().map(|o| o.remove(key.as_str()));
+            serde_json::from_value::<SourceSpec>(without).is_ok()
+        });
+        let what = match culprit {
+            Some(key) => format!("--set {key}={}: {e}", overrides[key]),
+            None => e.to_string(),
+        };
+        anyhow::anyhow!("{what}")
+            .context("the --set values do not form a valid source (see `inputs:` in schemas/pipeline.schema.json)")
+    })
 }
 
 /// What a delimited file's column names say about it: a time column (`time_s`, `time`, `t`) and
