@@ -54,9 +54,14 @@ fn changed_input_file_is_reported_and_recomputed() {
 fn tampered_output_is_detected() {
     let project = small_project();
     assert!(shakeflow(&["run", "pipeline.yaml"], project.path()).status.success());
-    std::fs::remove_file(project.path().join("out/load/records/motion=FB-1/data.parquet")).unwrap();
+    let part = project.path().join("out/load/records/motion=FB-1/data.parquet");
+    let bytes = std::fs::read(&part).unwrap();
+    std::fs::write(&part, &bytes[..bytes.len() - 1]).unwrap();
     let text = stdout(&shakeflow(&["status", "pipeline.yaml"], project.path()));
     assert!(text.contains("load               stale: output `records` was modified on disk"), "{text}");
+    std::fs::remove_file(&part).unwrap();
+    let text = stdout(&shakeflow(&["status", "pipeline.yaml"], project.path()));
+    assert!(text.contains("load               stale: output `records` lost files: 1 of its 2 are left"), "{text}");
 }
 
 #[test]

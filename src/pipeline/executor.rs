@@ -175,8 +175,13 @@ fn assess(
         let dir = output_dir.join(&out.path);
         if !dir.is_dir() {
             reasons.push(format!("output `{name}` missing ({})", dir.display()));
-        } else if super::sink::output_hash(&output_dir.join(&stage.name), name, &KnownHashes::new())?.0 != out.hash {
-            reasons.push(format!("output `{name}` was modified on disk"));
+        } else {
+            let (hash, files) = super::sink::output_hash(&output_dir.join(&stage.name), name, &KnownHashes::new())?;
+            if files < out.files {
+                reasons.push(format!("output `{name}` lost files: {files} of its {} are left", out.files));
+            } else if hash != out.hash {
+                reasons.push(format!("output `{name}` was modified on disk"));
+            }
         }
     }
     Ok(Assessment { key, reasons })
