@@ -394,3 +394,11 @@ fn a_bad_set_value_is_named() {
     assert!(!out.status.success() && message.contains("--set header_lines=\"two\": invalid type"), "{message}");
     assert!(!project.path().join("o").exists(), "nothing written");
 }
+
+#[test]
+fn a_header_count_past_the_column_names() {
+    fails_cleanly(
+        |root| edit(root, "pipeline.yaml", |t| t.replace("header_lines: 2", "header_lines: 3")),
+        &["archive/FB-1/daq.csv", "the row read as its header holds numbers", "lower it"],
+    );
+}

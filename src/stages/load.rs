@@ -282,6 +282,13 @@ fn missing_column(path: &std::path::Path, name: &str, channels: &[&records::RawC
     let available: Vec<&str> = channels.iter().map(|c| c.name.as_str()).collect();
     let suggestion =
         did_you_mean(name, available.iter().copied()).map(|s| format!("did you mean `{s}`? ")).unwrap_or_default();
+    // Names that are numbers: the row read as the header was a data row.
+    if !available.is_empty() && available.iter().all(|n| n.trim().parse::<f64>().is_ok()) {
+        return UserError::new(format!(
+            "the file has no column `{name}`: the row read as its header holds numbers, so `header_lines` (the lines before the column names) is too large: lower it"
+        ))
+        .in_file(path);
+    }
     UserError::new(format!("the file has no column `{name}`"))
         .in_file(path)
         .hint(format!("{suggestion}its columns are: {}", available.join(", ")))
