@@ -304,28 +304,20 @@ fn video_without_ffmpeg() {
     assert!(!root.join("out/track").exists(), "nothing written:\n{message}");
 }
 
+/// The baseline stage of the small project given a `select:` that matches no record.
+fn fails_with_select(selection: &str, expected: &[&str]) {
+    let select = format!("    inputs: [load]\n    select:\n      {selection}\n");
+    fails_cleanly(|root| edit(root, "pipeline.yaml", |t| t.replace("    inputs: [load]\n", &select)), expected);
+}
+
 #[test]
 fn select_by_a_misspelt_key() {
-    fails_cleanly(
-        |root| {
-            edit(root, "pipeline.yaml", |t| {
-                t.replace("    inputs: [load]\n", "    inputs: [load]\n    select:\n      motoin: [FB-1]\n")
-            })
-        },
-        &["pipeline.yaml:21:7", "selects by `motoin`", "did you mean `motion`"],
-    );
+    fails_with_select("motoin: [FB-1]", &["pipeline.yaml:21:7", "selects by `motoin`", "did you mean `motion`"]);
 }
 
 #[test]
 fn select_of_a_misspelt_value() {
-    fails_cleanly(
-        |root| {
-            edit(root, "pipeline.yaml", |t| {
-                t.replace("    inputs: [load]\n", "    inputs: [load]\n    select:\n      motion: [FB1]\n")
-            })
-        },
-        &["pipeline.yaml:21:7", "selects motion = `FB1`", "did you mean `FB-1`"],
-    );
+    fails_with_select("motion: [FB1]", &["pipeline.yaml:21:7", "selects motion = `FB1`", "did you mean `FB-1`"]);
 }
 
 #[test]
