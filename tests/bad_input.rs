@@ -394,3 +394,44 @@ fn a_header_count_past_the_column_names() {
         &["archive/FB-1/daq.csv", "the row read as its header holds numbers", "lower it"],
     );
 }
+
+/// Reference (floors) and target (a second DAQ) datasets for `stage synchronize`, motions FB-1
+/// and FB-2, the target's FB-2 without a reference record.
+fn synchronize_inputs(root: &Path) {
+    use shakeflow::table::{Column, Table};
+    let series = |name: &str, phase: f64| {
+        let mut t = Table::new();
+        t.push(Column::f64("time_s", "s", "time", (0..400).map(|k| k as f64 * 0.005).collect()));
+        t.push(Column::f64(name, "m/s^2", "a", (0..400).map(|k| (k as f64 * 0.05 + phase).sin()).collect()));
+        t
+    };
+    for (dir, name) in
+        [("floors/motion=FB-1/floor=5", "ax_mps2"), ("daq2/motion=FB-1", "sync"), ("daq2/motion=FB-2", "sync")]
+    {
+        std::fs::create_dir_all(root.join(dir)).unwrap();
+        shakeflow::io::parquet::write_table(&root.join(dir).join("data.parquet"), &mut series(name, 0.3)).unwrap();
+    }
+}
+
+#[test]
+fn a_record_the_reference_lacks_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    synchronize_inputs(dir.path());
+    let sync = |extra: &[&str]| {
+        let mut args = vec!["stage", "synchronize", "--input", "floors", "--input", "daq2", "--output", "out"];
+        args.extend(["--set", "target_channel=sync", "--set", "mcap=false", "--set", "max_lag_s=0.5"]);
+        args.extend(extra);
+        shakeflow(&args, dir.path())
+    };
+    let out = sync(&[]);
+    let message = stderr(&out);
+    assert!(!out.status.success(), "{message}");
+    assert!(
+        message.contains("no record for `motion=FB-2` at all")
+            && message.contains("is its file missing? (the reference's `motion` values: FB-1)"),
+        "{message}"
+    );
+    let out = sync(&["--set", "reference_select=floor5"]);
+    assert!(stderr(&out).contains("`reference_select` must look like key=value, not `floor5`"), "{}", stderr(&out));
+    assert!(!dir.path().join("out").exists(), "nothing written");
+}

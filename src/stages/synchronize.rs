@@ -9,12 +9,13 @@
 //! (prefixed by their partition, e.g. `floor4_ax_mps2`) and the aligned target channels over the
 //! time both cover.
 
+use std::path::Path;
 use std::sync::Arc;
 
 use rayon::prelude::*;
 
 use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
+use crate::pipeline::params::{ParamError, ParamKind, ParamSpec, Params, ParamsExt};
 use crate::signal::resample_bandlimited::Resampler;
 use crate::signal::sync::estimate_lag;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -46,6 +47,19 @@ impl Stage for Synchronize {
         &INFO
     }
 
+    /// `reference_select` is checked with the pipeline, so `validate` points at its line.
+    fn check(&self, params: &Params, _base_dir: &Path) -> Result<(), ParamError> {
+        let select = params.str_of("reference_select");
+        if select.is_empty() || select.split_once('=').is_some_and(|(k, v)| !k.is_empty() && !v.is_empty()) {
+            return Ok(());
+        }
+        Err(ParamError {
+            key: Some("reference_select".into()),
+            message: format!("`reference_select` must look like key=value, not `{select}`"),
+            hint: "name a partition of the reference records, e.g. `floor=5`".into(),
+        })
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let [reference, target] = ctx.inputs else {
             anyhow::bail!("`synchronize` reads exactly two inputs: [reference, target] (e.g. [baseline_floors, baseline_equipment])");
@@ -73,11 +87,20 @@ impl Stage for Synchronize {
                 .filter(|r| select.is_none_or(|(k, v)| partition_value(r, k) == Some(v)))
                 .collect();
             let [clock] = clock.as_slice() else {
-                anyhow::bail!(
-                    "{} reference records match `{join}={key}`{}; exactly one must be the clock reference (set `reference_select`)",
+                let matched = format!(
+                    "{} reference records match `{join}={key}`{}",
                     clock.len(),
                     select.map(|(k, v)| format!(" and `{k}={v}`")).unwrap_or_default()
                 );
+                if group.is_empty() {
+                    // The target has a record the reference lacks: most often a file missing from
+                    // the archive, not a wrong selection.
+                    anyhow::bail!(
+                        "{matched}: the reference input has no record for `{join}={key}` at all, though the target has one; is its file missing? (the reference's `{join}` values: {})",
+                        values_of(reference.parts(), join).join(", ")
+                    );
+                }
+                anyhow::bail!("{matched}; exactly one must be the clock reference (set `reference_select`)");
             };
             let references: Vec<(String, Arc<Table>)> = group
                 .iter()
@@ -97,6 +120,12 @@ impl Stage for Synchronize {
 
 fn partition_value<'a>(part: &'a InputPart, key: &str) -> Option<&'a str> {
     part.partition.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str())
+}
+
+/// The distinct values of `key` among the parts, sorted.
+fn values_of<'a>(parts: &'a [InputPart], key: &str) -> Vec<&'a str> {
+    let values: std::collections::BTreeSet<&str> = parts.iter().filter_map(|p| partition_value(p, key)).collect();
+    values.into_iter().collect()
 }
 
 /// Column prefix for a reference record: its partition minus the join key (`floor=4` → `floor4`).
