@@ -189,6 +189,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
                                 .hint(e.hint.unwrap_or_default())
                         })?;
                     println!("source {name:<16} {} file(s)", files.len());
+                    check_first_record(&plan, name, source, files.first())?;
                 }
             }
             for stage in plan.stages.values() {
@@ -404,6 +405,48 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
     result?;
     eprintln!("{name}: {records} record(s) → {}", output.display());
     Ok(())
+}
+
+/// `validate` reads a record source's first file as `load` would, so a misspelt column, a wrong
+/// `header_lines` or unit shows now rather than in the middle of a run.
+fn check_first_record(
+    plan: &Plan,
+    name: &str,
+    source: &SourceSpec,
+    first: Option<&sources::MatchedFile>,
+) -> Result<(), crate::error::UserError> {
+    use RecordFormat::*;
+    let Some(file) = first else { return Ok(()) };
+    if !matches!(source.format, At2 | RenadicV1 | SimcenterJson | Csv | Tsv | Delimited) {
+        return Ok(());
+    }
+    let part = InputPart {
+        partition: file.partition.clone(),
+        path: file.path.clone(),
+        label: file_label(&file.path),
+        hash: String::new(),
+    };
+    stages::load::load_record(source, &part).map(|_| ()).map_err(|mut e| {
+        let position = e.message.split('`').nth(1).and_then(|column| {
+            let output = source.columns.iter().find(|(_, c)| c.file_column() == column).map(|(out, _)| out.as_str());
+            match output {
+                Some(out) => crate::pipeline::locate::key_position(&plan.file.text, &["inputs", name, "columns", out]),
+                None if source.time_column.as_deref() == Some(column) => {
+                    crate::pipeline::locate::key_position(&plan.file.text, &["inputs", name, "time_column"])
+                }
+                None => None,
+            }
+        });
+        e.message = format!("source `{name}`, read as `load` would: {}", e.message);
+        if let Some((line, column)) = position {
+            e.hint = Some(format!(
+                "{} (the column is named at {}:{line}:{column})",
+                e.hint.clone().unwrap_or_default(),
+                plan.file.path.display()
+            ));
+        }
+        e
+    })
 }
 
 /// `stage --output` replaces the folder whole: only a folder that is new, empty or holds nothing

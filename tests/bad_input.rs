@@ -435,3 +435,17 @@ fn a_record_the_reference_lacks_is_named() {
     assert!(stderr(&out).contains("`reference_select` must look like key=value, not `floor5`"), "{}", stderr(&out));
     assert!(!dir.path().join("out").exists(), "nothing written");
 }
+
+#[test]
+fn validate_reads_a_source_file_and_names_a_misspelt_column() {
+    let project = small_project();
+    edit(project.path(), "pipeline.yaml", |t| t.replace("ay_mps2: NS", "ay_mps2: NSS"));
+    let out = shakeflow(&["validate", "pipeline.yaml"], project.path());
+    let message = stderr(&out);
+    assert!(!out.status.success(), "{message}");
+    for needle in
+        ["daq.csv", "source `daq`, read as `load` would", "no column `NSS`", "did you mean `NS`", "pipeline.yaml:12:7"]
+    {
+        assert!(message.contains(needle), "message lacks `{needle}`:\n{message}");
+    }
+}
