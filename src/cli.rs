@@ -56,7 +56,7 @@ enum Command {
     },
     /// Show which stages are stale and why (changed params, inputs, stage version, missing outputs).
     Status { pipeline: PathBuf },
-    /// Check a pipeline file without running it: keys, stage types, parameters, inputs, cycles, source files.
+    /// Check a pipeline file without running it: keys, stage types, parameters, inputs, cycles, source files (the first of each read as `load` would).
     Validate {
         pipeline: PathBuf,
         /// Do not check that the record sources match files (e.g. before generating an archive).
