@@ -298,6 +298,8 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
             .hint(format!("known stage types: {}", stages::names().join(", ")))
     })?;
     let info = stage.info();
+    // Before any input is read: a refusal costs nothing.
+    refuse_to_replace_foreign_folder(output, inputs, info)?;
     let assignments: Vec<(String, serde_json::Value)> =
         set.iter().map(|s| params::parse_set(s)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
     let (params, stage_inputs) = match info.inputs {
@@ -374,12 +376,9 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
         input_hashes
             .insert(format!("params.{name} ({})", params[&name].as_str().unwrap_or_default()), hash::hash_file(&path)?);
     }
-    refuse_to_replace_foreign_folder(output, inputs, info)?;
     let parent = output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     std::fs::create_dir_all(parent).with_context(|| format!("cannot create `{}`", parent.display()))?;
-    if let Some(name) = output.file_name() {
-        crate::io::atomic::remove_abandoned(parent, &format!(".{}.tmp-", name.to_string_lossy()));
-    }
+    crate::io::atomic::remove_abandoned_temps(output);
     let staging = crate::io::atomic::temp_sibling(output);
     let reporter = Reporter::new(false);
     let records: usize = stage_inputs.iter().map(|i| i.parts().len()).sum();

@@ -14,6 +14,13 @@ pub fn temp_sibling(path: &Path) -> PathBuf {
     path.with_file_name(format!(".{name}.tmp-{}-{n}", std::process::id()))
 }
 
+/// Removes the [`temp_sibling`]s of `path` that an interrupted process left behind.
+pub fn remove_abandoned_temps(path: &Path) {
+    let (Some(dir), Some(name)) = (path.parent(), path.file_name()) else { return };
+    let dir = if dir.as_os_str().is_empty() { Path::new(".") } else { dir };
+    remove_abandoned(dir, &format!(".{}.tmp-", name.to_string_lossy()));
+}
+
 /// Removes what an interrupted run left in `dir`: entries named `<prefix><pid>…` (a staging
 /// folder, a temporary file) whose process no longer exists. A live process's are left alone.
 pub fn remove_abandoned(dir: &Path, prefix: &str) {

@@ -388,9 +388,9 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;
     // An interrupted run (Ctrl-C) leaves its staging folder: the next run clears it.
-    crate::io::atomic::remove_abandoned(&output_dir, ".staging-");
-    crate::io::atomic::remove_abandoned(&output_dir, &format!(".{LOCK_FILE}.tmp-"));
-    let staging = output_dir.join(format!(".staging-{}", std::process::id()));
+    crate::io::atomic::remove_abandoned(&output_dir, STAGING_PREFIX);
+    crate::io::atomic::remove_abandoned_temps(&lock_file);
+    let staging = output_dir.join(format!("{STAGING_PREFIX}{}", std::process::id()));
     std::fs::create_dir(&staging).map_err(|e| {
         output_dir_error(
             format!("the output directory `{}` is not writable: {e}", output_dir.display()),
@@ -409,6 +409,9 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
     let _ = std::fs::remove_dir_all(&staging);
     committed
 }
+
+/// A run's staging folder is this prefix and the run's process id.
+const STAGING_PREFIX: &str = ".staging-";
 
 type StagesResult = (Vec<StageReport>, LockFile, Vec<String>);
 
