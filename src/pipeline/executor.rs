@@ -276,9 +276,7 @@ fn check_select(plan: &Plan, stage: &PlannedStage, inputs: &[StageInput]) -> Res
     let partitions: Vec<&(String, String)> = inputs.iter().flat_map(|i| i.parts()).flat_map(|p| &p.partition).collect();
     for (key, values) in &stage.select {
         let refuse = |message: String, wanted: &str, known: &BTreeSet<&str>, what: &str| {
-            let suggestion = crate::error::did_you_mean(wanted, known.iter().copied())
-                .map(|s| format!("did you mean `{s}`? "))
-                .unwrap_or_default();
+            let suggestion = crate::error::did_you_mean_hint(wanted, known.iter().copied());
             let known: Vec<&str> = known.iter().copied().collect();
             UserError::new(message)
                 .in_file(&plan.file.path)

@@ -70,9 +70,7 @@ pub fn normalize<'v>(
     for (key, value) in given {
         let Some(spec) = specs.iter().find(|s| s.name == key) else {
             let allowed: Vec<&str> = specs.iter().map(|s| s.name).collect();
-            let suggestion = crate::error::did_you_mean(key, allowed.iter().copied())
-                .map(|s| format!("did you mean `{s}`? "))
-                .unwrap_or_default();
+            let suggestion = crate::error::did_you_mean_hint(key, allowed.iter().copied());
             return Err(ParamError {
                 key: Some(key.to_string()),
                 message: format!("unknown parameter `{key}` for stage type `{stage_type}`"),

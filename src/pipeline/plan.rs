@@ -8,7 +8,7 @@ use indexmap::IndexMap;
 
 use super::params::{self, Params};
 use super::spec::{ColumnSpec, PipelineFile, SourceSpec};
-use crate::error::{did_you_mean, UserError};
+use crate::error::{did_you_mean_hint, UserError};
 use crate::stages::{self, InputKind, Stage};
 
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
@@ -57,9 +57,7 @@ impl Plan {
         let mut planned = IndexMap::new();
         for (name, spec) in &file.spec.stages {
             let stage = stages::find(&spec.stage_type).ok_or_else(|| {
-                let suggestion = did_you_mean(&spec.stage_type, stages::names())
-                    .map(|s| format!("did you mean `{s}`? "))
-                    .unwrap_or_default();
+                let suggestion = did_you_mean_hint(&spec.stage_type, stages::names());
                 file.error_at(&["stages", name, "type"], format!("unknown stage type `{}`", spec.stage_type)).hint(
                     format!("{suggestion}known stage types: {} (see `shakeflow stages`)", stages::names().join(", ")),
                 )
@@ -235,9 +233,7 @@ fn resolve_inputs(
             let Some(output) = found else {
                 let names: Vec<&str> = outputs.iter().map(|o| o.name).collect();
                 let wanted = output.unwrap_or_default();
-                let suggestion = did_you_mean(wanted, names.iter().copied())
-                    .map(|s| format!("did you mean `{s}`? "))
-                    .unwrap_or_default();
+                let suggestion = did_you_mean_hint(wanted, names.iter().copied());
                 return Err(file
                     .error_at_value(&key_path, name, format!("stage `{head}` has no output `{wanted}`"))
                     .hint(format!("{suggestion}outputs of `{head}`: {}", names.join(", "))));
@@ -246,9 +242,7 @@ fn resolve_inputs(
         } else {
             let candidates: Vec<&str> =
                 file.spec.inputs.keys().chain(file.spec.stages.keys()).map(String::as_str).collect();
-            let suggestion = did_you_mean(name, candidates.iter().copied())
-                .map(|s| format!("did you mean `{s}`? "))
-                .unwrap_or_default();
+            let suggestion = did_you_mean_hint(name, candidates.iter().copied());
             return Err(file
                 .error_at_value(
                     &key_path,

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use serde_json::json;
 
 use super::{InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
-use crate::error::{did_you_mean, UserError};
+use crate::error::{did_you_mean_hint, UserError};
 use crate::io::records::{self, DelimitedOptions, RawRecord};
 use crate::pipeline::spec::{ColumnSpec, GapPolicy, NonUniformPolicy, RecordFormat, SourceSpec};
 use crate::signal::resample;
@@ -280,8 +280,7 @@ fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<T
 
 fn missing_column(path: &std::path::Path, name: &str, channels: &[&records::RawChannel]) -> UserError {
     let available: Vec<&str> = channels.iter().map(|c| c.name.as_str()).collect();
-    let suggestion =
-        did_you_mean(name, available.iter().copied()).map(|s| format!("did you mean `{s}`? ")).unwrap_or_default();
+    let suggestion = did_you_mean_hint(name, available.iter().copied());
     // Names that are numbers: the row read as the header was a data row.
     if !available.is_empty() && available.iter().all(|n| n.trim().parse::<f64>().is_ok()) {
         return UserError::new(format!(
