@@ -1,4 +1,4 @@
-//! Artifacts opened by tools we did not write: pyarrow, DuckDB, the `mcap` reader, jsonschema.
+//! Artifacts opened by tools we did not write: pyarrow, DuckDB, the `mcap` reader with Google's protobuf, jsonschema.
 
 mod common;
 use common::*;

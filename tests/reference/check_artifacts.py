@@ -1,12 +1,15 @@
-"""Independent readers on shakeflow artifacts: pyarrow, DuckDB and the `mcap` package.
+"""Independent readers on shakeflow artifacts: pyarrow, DuckDB, and the `mcap` package with
+Google's protobuf runtime (`mcap-protobuf-support`, the decoding Foxglove does with protobufjs).
 
 Usage: check_artifacts.py OUTPUT_DIR STAGE
 Checks that every Parquet part of OUTPUT_DIR/STAGE/records carries units and descriptions per
 column and provenance per file, that pyarrow.dataset and DuckDB scan the folder as one
 Hive-partitioned dataset, and that each MCAP twin (OUTPUT_DIR/STAGE/mcap/records/...) holds the
-same samples as its Parquet part.
+same samples as its Parquet part: every float column at the first, middle and last sample, bit for
+bit, with its unit and description in the channel metadata.
 """
 import json
+import math
 import pathlib
 import sys
 
@@ -14,6 +17,7 @@ import duckdb
 import pyarrow.dataset as ds
 import pyarrow.parquet as pq
 from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
 
 
 def main(out_dir, stage):
@@ -37,18 +41,22 @@ def main(out_dir, stage):
         mcap_path = root.parent / "mcap" / "records" / part.relative_to(root).with_name("data.mcap")
         assert mcap_path.exists(), mcap_path
         with open(mcap_path, "rb") as f:
-            reader = make_reader(f)
+            reader = make_reader(f, decoder_factories=[DecoderFactory()])
             summary = reader.get_summary()
             schemas = {s.encoding for s in summary.schemas.values()}
-            assert schemas == {"jsonschema"}, schemas
-            messages = [(ch.topic, json.loads(msg.data), msg.log_time) for _, ch, msg in reader.iter_messages()]
+            assert schemas == {"protobuf"}, schemas
+            messages = [(ch.topic, ch.metadata, decoded, msg.log_time) for _, ch, msg, decoded in reader.iter_decoded_messages()]
         assert len(messages) == table.num_rows, (len(messages), table.num_rows)
-        column = [c for c in table.column_names if c != "time_s"][0]
-        values = table.column(column).to_pylist()
+        floats = [field for field in table.schema if field.type == "double"]
+        assert len(floats) > 1, floats
         times = table.column("time_s").to_pylist()
-        for i in (0, len(values) // 2, len(values) - 1):
-            topic, fields, log_time = messages[i]
-            assert fields[column] == values[i], (fields[column], values[i])
+        for i in (0, table.num_rows // 2, table.num_rows - 1):
+            topic, channel_metadata, decoded, log_time = messages[i]
+            for field in floats:
+                value, twin = table.column(field.name)[i].as_py(), getattr(decoded, field.name)
+                assert twin == value or (math.isnan(twin) and math.isnan(value)), (field.name, i, twin, value)
+                assert channel_metadata[f"unit.{field.name}"] == field.metadata[b"unit"].decode()
+                assert channel_metadata[f"description.{field.name}"] == field.metadata[b"description"].decode()
             assert abs(log_time - round(times[i] * 1e9)) <= 1
         assert topic.startswith(f"/{stage}/records"), topic
 
