@@ -573,25 +573,7 @@ fn running_median(x: &[f64], win: usize, step: usize) -> Vec<f64> {
         }
         keys(&x[lo..new_lo], &mut leaving);
         keys(&x[hi..new_hi], &mut entering);
-        merged.clear();
-        merged.resize(sorted.len() + entering.len() - 1, 0);
-        let (mut gone, mut added, mut filled) = (0, 0, 0);
-        for &k in &sorted {
-            if leaving[gone] == k {
-                gone += 1;
-                continue;
-            }
-            while entering[added] < k {
-                merged[filled] = entering[added];
-                (filled, added) = (filled + 1, added + 1);
-            }
-            merged[filled] = k;
-            filled += 1;
-        }
-        debug_assert_eq!(gone + 1, leaving.len(), "every sample leaving the window was in it");
-        let rest = &entering[added..entering.len() - 1];
-        merged[filled..filled + rest.len()].copy_from_slice(rest);
-        merged.truncate(filled + rest.len());
+        slide(&sorted, &leaving, &entering, &mut merged);
         std::mem::swap(&mut sorted, &mut merged);
         (lo, hi) = (new_lo, new_hi);
         if let Some(&m) = sorted.get(sorted.len() / 2) {
@@ -620,6 +602,32 @@ fn running_median(x: &[f64], win: usize, step: usize) -> Vec<f64> {
         };
     }
     out
+}
+
+/// `sorted` without the keys of `leaving` and with those of `entering`, into `merged`, in one
+/// pass. `leaving` (a sub-multiset of `sorted`) and `entering` are sorted and end in `u64::MAX`,
+/// which no finite value's key is, so neither runs out before `sorted` does.
+fn slide(sorted: &[u64], leaving: &[u64], entering: &[u64], merged: &mut Vec<u64>) {
+    merged.clear();
+    let (mut leaving, mut entering) = (leaving.iter().copied(), entering.iter().copied());
+    let next = |keys: &mut std::iter::Copied<std::slice::Iter<'_, u64>>| keys.next().unwrap_or(u64::MAX);
+    let (mut gone, mut added) = (next(&mut leaving), next(&mut entering));
+    for &k in sorted {
+        if k == gone {
+            gone = next(&mut leaving);
+            continue;
+        }
+        while added < k {
+            merged.push(added);
+            added = next(&mut entering);
+        }
+        merged.push(k);
+    }
+    debug_assert_eq!(gone, u64::MAX, "every sample leaving the window was in it");
+    while added != u64::MAX {
+        merged.push(added);
+        added = next(&mut entering);
+    }
 }
 
 /// An integer whose order is `f64::total_cmp`'s: flip every bit of negatives, the sign bit of
