@@ -138,6 +138,30 @@ fn fast_len(n: usize) -> usize {
     }
 }
 
+/// The length-`n` DFTs of two real sequences (zero-padded), from one complex transform of
+/// `x + i·y`: X[k] = (Z[k] + conj Z[n−k]) / 2, Y[k] = (Z[k] − conj Z[n−k]) / 2i.
+fn two_real_ffts(
+    x: &[f64],
+    y: &[f64],
+    n: usize,
+    fft: &dyn rustfft::Fft<f64>,
+) -> (Vec<Complex<f64>>, Vec<Complex<f64>>) {
+    let mut z = vec![Complex::new(0.0, 0.0); n];
+    for (d, &v) in z.iter_mut().zip(x) {
+        d.re = v;
+    }
+    for (d, &v) in z.iter_mut().zip(y) {
+        d.im = v;
+    }
+    fft.process(&mut z);
+    (0..n)
+        .map(|k| {
+            let (a, b) = (z[k], z[(n - k) % n].conj());
+            ((a + b) * 0.5, (a - b) * Complex::new(0.0, -0.5))
+        })
+        .unzip()
+}
+
 /// Signed angular frequency (rad/sample) of FFT bin k of length n; the Nyquist bin is
 /// taken as +π (real-signal cosine convention, consistent with taking real parts).
 fn omega(k: usize, n: usize) -> f64 {
@@ -206,17 +230,8 @@ pub fn estimate_lag_with(
     let mut planner = FftPlanner::<f64>::new();
     let fwd = planner.plan_fft_forward(n);
     let inv = planner.plan_fft_inverse(n);
-    let to_c = |x: &[f64]| -> Vec<Complex<f64>> {
-        let mut b = vec![Complex::new(0.0, 0.0); n];
-        for (d, &v) in b.iter_mut().zip(x) {
-            d.re = v;
-        }
-        b
-    };
-    let mut rf = to_c(&r);
-    let mut gf = to_c(&g);
-    fwd.process(&mut rf);
-    fwd.process(&mut gf);
+    // Both records in one complex transform (reference real, target imaginary), then apart.
+    let (rf, gf) = two_real_ffts(&r, &g, n, fwd.as_ref());
     let cspec: Vec<Complex<f64>> = gf.iter().zip(&rf).map(|(a, b)| a * b.conj()).collect();
     let mut cbuf = cspec.clone();
     inv.process(&mut cbuf);
@@ -298,18 +313,23 @@ pub fn estimate_lag_with(
     let (_, _, c2) = corr_eval(half_spec, n, tau);
 
     // --- shifted reference r_s[j] = r(j − τ) and its derivative w[j] = r'(j − τ) ---
-    let mut rs = vec![Complex::new(0.0, 0.0); n];
-    let mut rd = vec![Complex::new(0.0, 0.0); n];
+    // r_s and r_s' are real: one inverse transform of RS + i·RD gives r_s in its real part and
+    // r_s' in its imaginary part (a real signal's spectrum times i is the spectrum of i·signal).
+    let mut rs_rd = vec![Complex::new(0.0, 0.0); n];
     let mut gd = vec![Complex::new(0.0, 0.0); n];
     for k in 0..n {
         let om = omega(k, n);
-        let z = rf[k] * Complex::from_polar(1.0, -om * tau);
-        rs[k] = z;
-        rd[k] = z * Complex::new(0.0, om);
+        let mut z = rf[k] * Complex::from_polar(1.0, -om * tau);
+        let mut zd = z * Complex::new(0.0, om);
+        if 2 * k == n {
+            // The Nyquist bin of a real signal is real; the shift made it complex. Its real part
+            // is what a real inverse transform keeps, and the packing needs both spectra Hermitian.
+            (z.im, zd.im) = (0.0, 0.0);
+        }
+        rs_rd[k] = z + Complex::new(0.0, 1.0) * zd;
         gd[k] = gf[k] * Complex::new(0.0, om);
     }
-    inv.process(&mut rs);
-    inv.process(&mut rd);
+    inv.process(&mut rs_rd);
     inv.process(&mut gd);
     let j0 = ((tau - 1e-9).ceil().max(0.0)) as usize;
     let j1f = ((nr - 1) as f64 + tau + 1e-9).floor().min((ng - 1) as f64);
@@ -319,7 +339,7 @@ pub fn estimate_lag_with(
     let j1 = j1f as usize;
     let nov = j1 - j0 + 1;
     let scale = 1.0 / n as f64;
-    let rsv: Vec<f64> = rs[j0..=j1].iter().map(|z| z.re * scale).collect();
+    let rsv: Vec<f64> = rs_rd[j0..=j1].iter().map(|z| z.re * scale).collect();
     let gv = &g[j0..=j1];
     let sgr: f64 = gv.iter().zip(&rsv).map(|(a, b)| a * b).sum();
     let sgg: f64 = gv.iter().map(|a| a * a).sum();
@@ -333,17 +353,10 @@ pub fn estimate_lag_with(
     let a = sgr / srr;
     // w = derivative of the signal estimate (g + a·r_s)/(2a): averaging the two channels
     // halves the noise in the weights, so the noise×noise part of Var(c') is counted once.
-    let wv: Vec<f64> = (j0..=j1).map(|j| (gd[j].re / a + rd[j].re) * 0.5 * scale).collect();
+    let wv: Vec<f64> = (j0..=j1).map(|j| (gd[j].re / a + rs_rd[j].im) * 0.5 * scale).collect();
     let l = fast_len(2 * nov - 1);
-    let mut eb = vec![Complex::new(0.0, 0.0); l];
-    let mut wb = vec![Complex::new(0.0, 0.0); l];
-    for i in 0..nov {
-        eb[i].re = gv[i] - a * rsv[i];
-        wb[i].re = wv[i];
-    }
-    let fwd_l = planner.plan_fft_forward(l);
-    fwd_l.process(&mut eb);
-    fwd_l.process(&mut wb);
+    let ev: Vec<f64> = gv.iter().zip(&rsv).map(|(g, r)| g - a * r).collect();
+    let (eb, wb) = two_real_ffts(&ev, &wv, l, planner.plan_fft_forward(l).as_ref());
     let s: f64 = eb.iter().zip(&wb).map(|(e, w)| e.norm_sqr() * w.norm_sqr()).sum();
     let var_c1 = (s / (l as f64 * nov as f64)).max(0.0);
     let curv = sgn * c2;
