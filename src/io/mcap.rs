@@ -103,18 +103,18 @@ fn identifier(name: &str) -> String {
 /// (the original is then in the channel's `column.<field>` metadata), distinct.
 fn field_names(table: &Table) -> Vec<String> {
     let mut taken = BTreeSet::new();
-    float_columns(table)
-        .map(|column| {
-            let base = identifier(&column.name);
-            let mut field = base.clone();
-            let mut n = 2;
-            while !taken.insert(field.clone()) {
-                field = format!("{base}_{n}");
-                n += 1;
-            }
-            field
-        })
-        .collect()
+    float_columns(table).map(|column| distinct(identifier(&column.name), &mut taken)).collect()
+}
+
+/// `base`, or `base_2`, `base_3`, … if `taken` already has it; then taken too.
+fn distinct(base: String, taken: &mut BTreeSet<String>) -> String {
+    let mut name = base.clone();
+    let mut n = 2;
+    while !taken.insert(name.clone()) {
+        name = format!("{base}_{n}");
+        n += 1;
+    }
+    name
 }
 
 /// Fully qualified message name per topic, from its path (`/synchronize/records/motion=FB-4` →
@@ -126,13 +126,7 @@ fn message_names(topics: &[Topic<'_>]) -> Vec<String> {
         .map(|topic| {
             let segments: Vec<String> = topic.name.split('/').filter(|s| !s.is_empty()).map(identifier).collect();
             let base = format!("shakeflow.{}", if segments.is_empty() { "series".into() } else { segments.join(".") });
-            let mut name = base.clone();
-            let mut n = 2;
-            while !taken.insert(name.clone()) {
-                name = format!("{base}_{n}");
-                n += 1;
-            }
-            name
+            distinct(base, &mut taken)
         })
         .collect()
 }
