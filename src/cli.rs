@@ -414,9 +414,8 @@ fn check_first_record(
     source: &SourceSpec,
     first: Option<&sources::MatchedFile>,
 ) -> Result<(), crate::error::UserError> {
-    use RecordFormat::*;
     let Some(file) = first else { return Ok(()) };
-    if !matches!(source.format, At2 | RenadicV1 | SimcenterJson | Csv | Tsv | Delimited) {
+    if !source.format.is_record() {
         return Ok(());
     }
     let part = InputPart {
