@@ -49,13 +49,9 @@ impl Stage for Synchronize {
 
     /// `reference_select` is checked with the pipeline, so `validate` points at its line.
     fn check(&self, params: &Params, _base_dir: &Path) -> Result<(), ParamError> {
-        let select = params.str_of("reference_select");
-        if select.is_empty() || select.split_once('=').is_some_and(|(k, v)| !k.is_empty() && !v.is_empty()) {
-            return Ok(());
-        }
-        Err(ParamError {
+        reference_select(params).map(|_| ()).map_err(|message| ParamError {
             key: Some("reference_select".into()),
-            message: format!("`reference_select` must look like key=value, not `{select}`"),
+            message,
             hint: "name a partition of the reference records, e.g. `floor=5`".into(),
         })
     }
@@ -65,16 +61,7 @@ impl Stage for Synchronize {
             anyhow::bail!("`synchronize` reads exactly two inputs: [reference, target] (e.g. [baseline_floors, baseline_equipment])");
         };
         let join = ctx.params.str_of("join");
-        let select = ctx.params.str_of("reference_select");
-        let select = if select.is_empty() {
-            None
-        } else {
-            Some(
-                select
-                    .split_once('=')
-                    .ok_or_else(|| anyhow::anyhow!("`reference_select` must look like key=value, not `{select}`"))?,
-            )
-        };
+        let select = reference_select(ctx.params).map_err(anyhow::Error::msg)?;
         let known_lag = ctx.params.get("known_lag_s").and_then(|v| v.as_f64());
         ctx.sink.set_total(target.parts().len());
         target.parts().par_iter().try_for_each(|part| {
@@ -115,6 +102,18 @@ impl Stage for Synchronize {
             ctx.sink.write("lags", &part.partition, lag)?;
             ctx.sink.write("records", &part.partition, aligned)
         })
+    }
+}
+
+/// `reference_select` as (key, value); `None` when it is empty (a single reference record).
+fn reference_select(params: &Params) -> Result<Option<(&str, &str)>, String> {
+    let select = params.str_of("reference_select");
+    if select.is_empty() {
+        return Ok(None);
+    }
+    match select.split_once('=') {
+        Some((key, value)) if !key.is_empty() && !value.is_empty() => Ok(Some((key, value))),
+        _ => Err(format!("`reference_select` must look like key=value, not `{select}`")),
     }
 }
 
