@@ -556,12 +556,10 @@ fn running_median(x: &[f64], win: usize, step: usize) -> Vec<f64> {
     // sorted first, a few each), instead of a selection over the whole window.
     let mut sorted: Vec<u64> = Vec::with_capacity(win + 1);
     let (mut merged, mut leaving, mut entering) = (Vec::with_capacity(win + 1), Vec::new(), Vec::new());
-    // Sorted keys closed by u64::MAX, which no finite value has: the merge needs no bounds checks.
     let keys = |range: &[f64], into: &mut Vec<u64>| {
         into.clear();
         into.extend(range.iter().filter(|v| v.is_finite()).map(|&v| order_key(v)));
         into.sort_unstable();
-        into.push(u64::MAX);
     };
     let (mut lo, mut hi) = (0, 0);
     let mut c = 0;
@@ -605,8 +603,8 @@ fn running_median(x: &[f64], win: usize, step: usize) -> Vec<f64> {
 }
 
 /// `sorted` without the keys of `leaving` and with those of `entering`, into `merged`, in one
-/// pass. `leaving` (a sub-multiset of `sorted`) and `entering` are sorted and end in `u64::MAX`,
-/// which no finite value's key is, so neither runs out before `sorted` does.
+/// pass. `leaving` (a sub-multiset of `sorted`) and `entering` are sorted; an exhausted one
+/// reads as `u64::MAX`, which no finite value's key is.
 fn slide(sorted: &[u64], leaving: &[u64], entering: &[u64], merged: &mut Vec<u64>) {
     merged.clear();
     let (mut leaving, mut entering) = (leaving.iter().copied(), entering.iter().copied());
