@@ -15,6 +15,7 @@ use std::path::Path;
 use anyhow::{bail, Context};
 
 use crate::io::atomic;
+use crate::pipeline::hash::HashingWriter;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct Topic<'a> {
@@ -22,7 +23,12 @@ pub struct Topic<'a> {
     pub table: &'a Table,
 }
 
-pub fn write_timeseries(path: &Path, topics: &[Topic<'_>], metadata: &BTreeMap<String, String>) -> anyhow::Result<()> {
+/// Writes the twin and returns the content hash of its bytes (as [`hash::hash_file`] would give).
+pub fn write_timeseries(
+    path: &Path,
+    topics: &[Topic<'_>],
+    metadata: &BTreeMap<String, String>,
+) -> anyhow::Result<String> {
     // Messages of all channels interleaved in time order: players stream files front to back.
     let mut order: Vec<(u64, usize, usize)> = Vec::new();
     for (t, topic) in topics.iter().enumerate() {
@@ -36,14 +42,19 @@ pub fn write_timeseries(path: &Path, topics: &[Topic<'_>], metadata: &BTreeMap<S
     order.sort_unstable();
 
     let schemas = message_names(topics);
+    let mut content_hash = String::new();
     atomic::write_file(path, |w| {
         let mut writer = mcap::WriteOptions::new()
             // Uncompressed chunks: sensor doubles gain ~15 % from zstd, which cost more CPU than
             // the rest of the write; the Parquet table is the compact copy.
             .compression(None)
+            // Each chunk is assembled in memory and written once, front to back: the file is
+            // hashed on the way out instead of read back, and the buffered file is not flushed
+            // by a seek back to each chunk's header.
+            .disable_seeking(true)
             .profile("")
             .library(concat!("shakeflow ", env!("CARGO_PKG_VERSION")))
-            .create(w)?;
+            .create(mcap::write::NoSeek::new(HashingWriter::new(w)))?;
         let mut channels = Vec::with_capacity(topics.len());
         for (topic, full_name) in topics.iter().zip(&schemas) {
             let fields = field_names(topic.table);
@@ -75,9 +86,11 @@ pub fn write_timeseries(path: &Path, topics: &[Topic<'_>], metadata: &BTreeMap<S
         }
         writer.write_metadata(&mcap::records::Metadata { name: "shakeflow".into(), metadata: metadata.clone() })?;
         writer.finish()?;
+        content_hash = writer.into_inner().get_ref().finalize();
         Ok(())
     })
-    .with_context(|| format!("writing MCAP `{}`", path.display()))
+    .with_context(|| format!("writing MCAP `{}`", path.display()))?;
+    Ok(content_hash)
 }
 
 fn to_nanos(seconds: f64) -> anyhow::Result<u64> {
@@ -239,7 +252,8 @@ mod tests {
         t.push(Column::f64("time_s", "s", "time", vec![0.0, 0.01, 0.02]));
         t.push(Column::f64("ax_mps2", "m/s^2", "accel", vec![1.0, f64::NAN, 3.0]));
         let meta = BTreeMap::from([("shakeflow.stage".to_string(), "demo".to_string())]);
-        write_timeseries(&path, &[Topic { name: "/a/motion=FB-4".into(), table: &t }], &meta).unwrap();
+        let written = write_timeseries(&path, &[Topic { name: "/a/motion=FB-4".into(), table: &t }], &meta).unwrap();
+        assert_eq!(written, crate::pipeline::hash::hash_file(&path).unwrap());
         let s = summarize(&path).unwrap();
         assert_eq!(s.message_count, 3);
         assert_eq!(s.channels[0].0, "/a/motion=FB-4");

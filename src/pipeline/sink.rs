@@ -132,7 +132,9 @@ impl OutputSink {
             };
             let topics: Vec<mcap::Topic<'_>> =
                 split.iter().map(|(name, part)| mcap::Topic { name: name.clone(), table: part }).collect();
-            mcap::write_timeseries(&mcap_dir.join(MCAP_FILE), &topics, &table.metadata)?;
+            let mcap_path = mcap_dir.join(MCAP_FILE);
+            let mcap_hash = mcap::write_timeseries(&mcap_path, &topics, &table.metadata)?;
+            self.hashes.lock().expect("no panics while holding the lock").insert(mcap_path, mcap_hash);
         }
         if let Some((memo, readers)) = &self.memo {
             memo.keep(&path, table, *readers);
@@ -157,7 +159,7 @@ impl OutputSink {
         Ok(())
     }
 
-    /// The hashes of the files written (MCAP twins, which are written with seeks, are not among them).
+    /// The hashes of the files written.
     pub fn into_hashes(self) -> KnownHashes {
         self.hashes.into_inner().expect("no panics while holding the lock")
     }
@@ -206,6 +208,6 @@ pub fn output_hash(stage_dir: &Path, output: &str, known: &KnownHashes) -> anyho
     if !mcap_dir.is_dir() {
         return Ok((parquet_hash, parquet_files));
     }
-    let (mcap_hash, mcap_files) = hash::hash_dir(&mcap_dir)?;
+    let (mcap_hash, mcap_files) = hash::hash_dir_known(&mcap_dir, known)?;
     Ok((hash::hash_bytes(format!("{parquet_hash}\n{mcap_hash}").as_bytes()), parquet_files + mcap_files))
 }
