@@ -11,19 +11,6 @@ pub mod welch;
 #[cfg(test)]
 pub(crate) mod test_support;
 
-use std::sync::{Arc, Mutex, OnceLock};
-
-use rustfft::{Fft, FftDirection, FftPlanner};
-
-/// The FFT of length `n`, planned once per process: planning computes the twiddle factors
-/// (a sine and cosine each), which cost as much as the transforms when every record planned its
-/// own. The plan for a length is the same whoever asks first, so results do not depend on order.
-pub(crate) fn fft_plan(n: usize, direction: FftDirection) -> Arc<dyn Fft<f64>> {
-    static PLANNER: OnceLock<Mutex<FftPlanner<f64>>> = OnceLock::new();
-    let planner = PLANNER.get_or_init(|| Mutex::new(FftPlanner::new()));
-    planner.lock().unwrap_or_else(std::sync::PoisonError::into_inner).plan_fft(n, direction)
-}
-
 /// Σ a[i]·b[i] in sixteen partial sums, so multiply-adds overlap and vectorise (an in-order sum
 /// cannot be vectorised). With AVX the partial sums are four registers of four lanes, written
 /// out with intrinsics: the compiler's own vectorisation of the lanes loop used 2-lane registers

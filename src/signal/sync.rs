@@ -64,8 +64,7 @@
 
 use super::resample_bandlimited::sample_grid;
 use rustfft::num_complex::Complex;
-use rustfft::FftDirection;
-use super::fft_plan;
+use rustfft::FftPlanner;
 use std::f64::consts::PI;
 
 /// Result of [`estimate_lag`].
@@ -228,8 +227,9 @@ pub fn estimate_lag_with(
 
     // --- FFT cross-correlation, zero-padded (no wrap-around) ---
     let n = fast_len(nr + ng - 1);
-    let fwd = fft_plan(n, FftDirection::Forward);
-    let inv = fft_plan(n, FftDirection::Inverse);
+    let mut planner = FftPlanner::<f64>::new();
+    let fwd = planner.plan_fft_forward(n);
+    let inv = planner.plan_fft_inverse(n);
     // Both records in one complex transform (reference real, target imaginary), then apart.
     let (rf, gf) = two_real_ffts(&r, &g, n, fwd.as_ref());
     let cspec: Vec<Complex<f64>> = gf.iter().zip(&rf).map(|(a, b)| a * b.conj()).collect();
@@ -356,7 +356,7 @@ pub fn estimate_lag_with(
     let wv: Vec<f64> = (j0..=j1).map(|j| (gd[j].re / a + rs_rd[j].im) * 0.5 * scale).collect();
     let l = fast_len(2 * nov - 1);
     let ev: Vec<f64> = gv.iter().zip(&rsv).map(|(g, r)| g - a * r).collect();
-    let (eb, wb) = two_real_ffts(&ev, &wv, l, fft_plan(l, FftDirection::Forward).as_ref());
+    let (eb, wb) = two_real_ffts(&ev, &wv, l, planner.plan_fft_forward(l).as_ref());
     let s: f64 = eb.iter().zip(&wb).map(|(e, w)| e.norm_sqr() * w.norm_sqr()).sum();
     let var_c1 = (s / (l as f64 * nov as f64)).max(0.0);
     let curv = sgn * c2;

@@ -26,7 +26,7 @@
 //! real FFT would).
 
 use rustfft::num_complex::Complex64;
-use rustfft::{Fft, FftDirection};
+use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
 
 /// Window applied to each segment.
@@ -223,7 +223,7 @@ impl Engine {
         if !(energy > 0.0) {
             return Err("window has zero energy".to_string());
         }
-        let fft = super::fft_plan(nfft, FftDirection::Forward);
+        let fft = FftPlanner::<f64>::new().plan_fft_forward(nfft);
         let scratch = vec![Complex64::new(0.0, 0.0); fft.get_inplace_scratch_len()];
         Ok(Engine {
             nperseg,
