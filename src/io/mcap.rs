@@ -23,7 +23,8 @@ pub struct Topic<'a> {
     pub table: &'a Table,
 }
 
-/// Writes the twin and returns the content hash of its bytes (as [`hash::hash_file`] would give).
+/// Writes the twin and returns the content hash of its bytes (as
+/// [`hash_file`](crate::pipeline::hash::hash_file) would give).
 pub fn write_timeseries(
     path: &Path,
     topics: &[Topic<'_>],
