@@ -140,11 +140,34 @@ impl Table {
 /// The name of the time column every time-series table starts with.
 pub const TIME_COLUMN: &str = "time_s";
 
-/// The mean step when every step is within a small tolerance of it; else the index of the first
-/// step that differs from the record's typical (median) step.
-pub fn uniform_step(time: &[f64]) -> Result<f64, usize> {
+/// The sample rate of a uniformly sampled time column (at least two times): its nominal rate
+/// when it has one ([`nominal_rate`]), else the mean rate.
+pub fn sample_rate(time: &[f64]) -> f64 {
     let n = time.len();
-    let dt = (time[n - 1] - time[0]) / (n - 1) as f64;
+    nominal_rate(time).unwrap_or((n - 1) as f64 / (time[n - 1] - time[0]))
+}
+
+/// The mean rate rounded to 1 mHz, when that rate's grid `t0 + k/rate` holds every time of the
+/// column to within a thousandth of a sample. Text files round their times (to the microsecond,
+/// typically), so a 256 Hz DAQ reads as 255.9999987 Hz: the rate it was set to is what an
+/// engineer expects in the metadata, and it keeps a 256 → 200 Hz resampling periodic (25
+/// filters instead of one per sample). A clock that truly runs off its nominal rate drifts by
+/// more than a thousandth of a sample over a record and keeps its measured rate.
+pub fn nominal_rate(time: &[f64]) -> Option<f64> {
+    let n = time.len();
+    let mean = (n - 1) as f64 / (time[n - 1] - time[0]);
+    let rate = (mean * 1e3).round() / 1e3;
+    if !(rate.is_finite() && rate > 0.0) {
+        return None;
+    }
+    let tolerance = 1e-3 / rate;
+    time.iter().enumerate().all(|(k, &t)| (t - (time[0] + k as f64 / rate)).abs() <= tolerance).then_some(rate)
+}
+
+/// The step of [`sample_rate`] when every step is within a small tolerance of it; else the index
+/// of the first step that differs from the record's typical (median) step.
+pub fn uniform_step(time: &[f64]) -> Result<f64, usize> {
+    let dt = 1.0 / sample_rate(time);
     // Text files round time to a few decimals: allow that rounding, not a real jitter.
     let within = |step: f64, of: f64| of > 0.0 && (step - of).abs() <= 1e-3 * of + 2e-6;
     let first_off = |of: f64| time.windows(2).position(|w| !within(w[1] - w[0], of));
@@ -177,6 +200,25 @@ mod tests {
         // differs from the mean step the gap lengthened).
         let gapped: Vec<f64> = (0..10_000).filter(|i| !(8000..8020).contains(i)).map(|i| i as f64 * 0.005).collect();
         assert_eq!(uniform_step(&gapped), Err(7999));
+    }
+
+    #[test]
+    fn rounded_times_give_the_nominal_rate_and_a_drifting_clock_its_own() {
+        // A 256 Hz DAQ's times printed to the microsecond (the demo archive's DAQ2) read as
+        // 255.9999987 Hz from the mean step; a 200 Hz one's as 199.99999999999997 Hz.
+        let printed = |rate: f64, n: usize| -> Vec<f64> {
+            (0..n).map(|k| format!("{:.6}", k as f64 / rate).parse().unwrap()).collect()
+        };
+        let daq2 = printed(256.0, 12_288);
+        assert_ne!((daq2.len() - 1) as f64 / daq2[daq2.len() - 1], 256.0);
+        assert_eq!(sample_rate(&daq2), 256.0);
+        assert_eq!(uniform_step(&daq2), Ok(1.0 / 256.0));
+        assert_eq!(sample_rate(&printed(200.0, 24_000)), 200.0);
+        assert_eq!(sample_rate(&printed(199.98, 24_000)), 199.98);
+        // 10 ppm slow over 120 s is 0.3 samples of drift: measured, not rounded away.
+        let drifting = printed(256.0 * (1.0 - 1e-5), 30_725);
+        assert_eq!(nominal_rate(&drifting), None);
+        assert!((sample_rate(&drifting) / 256.0 - (1.0 - 1e-5)).abs() < 1e-8);
     }
 
     #[test]

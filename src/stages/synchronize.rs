@@ -137,7 +137,7 @@ fn sample_rate(table: &Table) -> Result<(f64, f64), String> {
     if time.len() < 2 {
         return Err("fewer than 2 samples".into());
     }
-    Ok((time[0], (time.len() - 1) as f64 / (time[time.len() - 1] - time[0])))
+    Ok((time[0], crate::table::sample_rate(time)))
 }
 
 /// The pure part: aligned record and its one-row lag table.

@@ -94,7 +94,7 @@ fn analyse(table: &Table, pairs: &[(String, String)], params: &Params) -> Result
     if n < 16 {
         return Err(format!("{n} samples are too few for a transfer function"));
     }
-    let fs = (n - 1) as f64 / (time[n - 1] - time[0]);
+    let fs = crate::table::sample_rate(time);
     let opts = options(params, n, fs)?;
     let band = (params.f64_of("band_min_hz"), params.f64_of("band_max_hz"));
     let column = |name: &str| {
