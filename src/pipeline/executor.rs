@@ -5,7 +5,7 @@
 //! moved into place, together with the new lockfile, after every stage succeeded. A failed run
 //! leaves the previous artifacts and the lockfile exactly as they were.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -80,6 +80,8 @@ fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, User
         })
         .collect();
     let mut resolved = BTreeMap::new();
+    // Sources may share files (one DAQ export split into floors): each file is read once.
+    let mut hashed: HashMap<PathBuf, String> = HashMap::new();
     for name in used {
         let spec = &plan.file.spec.inputs[name];
         let folders = spec.format == RecordFormat::Frames;
@@ -99,12 +101,15 @@ fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, User
         } else {
             files
         };
-        let paths: Vec<PathBuf> = files.iter().map(|f| f.path.clone()).collect();
-        let hashes: Vec<String> = paths
+        let unhashed: Vec<&Path> =
+            files.iter().map(|f| f.path.as_path()).filter(|p| !hashed.contains_key(*p)).collect();
+        let new_hashes: Vec<String> = unhashed
             .par_iter()
             .map(|p| hash::hash_path(p))
             .collect::<anyhow::Result<_>>()
             .map_err(|e| UserError::new(format!("source `{name}`: {e:#}")))?;
+        hashed.extend(unhashed.into_iter().map(Path::to_path_buf).zip(new_hashes));
+        let hashes: Vec<String> = files.iter().map(|f| hashed[&f.path].clone()).collect();
         let mut summary = serde_json::to_string(spec).expect("specs serialise");
         let parts: Vec<InputPart> = files
             .into_iter()
