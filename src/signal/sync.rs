@@ -162,6 +162,14 @@ fn two_real_ffts(
         .unzip()
 }
 
+/// The unscaled inverse transform (like rustfft's inverse plan) with a forward plan:
+/// conj(F(conj(x))).
+fn inverse_unscaled(forward: &dyn rustfft::Fft<f64>, buffer: &mut [Complex<f64>]) {
+    buffer.iter_mut().for_each(|z| z.im = -z.im);
+    forward.process(buffer);
+    buffer.iter_mut().for_each(|z| z.im = -z.im);
+}
+
 /// Signed angular frequency (rad/sample) of FFT bin k of length n; the Nyquist bin is
 /// taken as +π (real-signal cosine convention, consistent with taking real parts).
 fn omega(k: usize, n: usize) -> f64 {
@@ -227,14 +235,15 @@ pub fn estimate_lag_with(
 
     // --- FFT cross-correlation, zero-padded (no wrap-around) ---
     let n = fast_len(nr + ng - 1);
-    let mut planner = FftPlanner::<f64>::new();
-    let fwd = planner.plan_fft_forward(n);
-    let inv = planner.plan_fft_inverse(n);
+    // One forward plan serves every transform here (inverses by conjugation, the uncertainty's
+    // transforms at this length too): planning computes a twiddle sine per bin, and three plans
+    // cost more than the transforms themselves.
+    let fwd = FftPlanner::<f64>::new().plan_fft_forward(n);
     // Both records in one complex transform (reference real, target imaginary), then apart.
     let (rf, gf) = two_real_ffts(&r, &g, n, fwd.as_ref());
     let cspec: Vec<Complex<f64>> = gf.iter().zip(&rf).map(|(a, b)| a * b.conj()).collect();
     let mut cbuf = cspec.clone();
-    inv.process(&mut cbuf);
+    inverse_unscaled(fwd.as_ref(), &mut cbuf);
     let c_at = |m: isize| -> f64 {
         let idx = if m >= 0 { m as usize } else { (n as isize + m) as usize };
         cbuf[idx].re / n as f64
@@ -317,9 +326,16 @@ pub fn estimate_lag_with(
     // r_s' in its imaginary part (a real signal's spectrum times i is the spectrum of i·signal).
     let mut rs_rd = vec![Complex::new(0.0, 0.0); n];
     let mut gd = vec![Complex::new(0.0, 0.0); n];
+    // e^{−iω_k τ} by a rotation per bin, re-synced every 512 bins and where ω_k turns negative.
+    let step = Complex::from_polar(1.0, -2.0 * PI * tau / n as f64);
+    let mut rot = Complex::new(1.0, 0.0);
     for k in 0..n {
         let om = omega(k, n);
-        let mut z = rf[k] * Complex::from_polar(1.0, -om * tau);
+        if k % 512 == 0 || k == n / 2 + 1 {
+            rot = Complex::from_polar(1.0, -om * tau);
+        }
+        let mut z = rf[k] * rot;
+        rot *= step;
         let mut zd = z * Complex::new(0.0, om);
         if 2 * k == n {
             // The Nyquist bin of a real signal is real; the shift made it complex. Its real part
@@ -329,8 +345,8 @@ pub fn estimate_lag_with(
         rs_rd[k] = z + Complex::new(0.0, 1.0) * zd;
         gd[k] = gf[k] * Complex::new(0.0, om);
     }
-    inv.process(&mut rs_rd);
-    inv.process(&mut gd);
+    inverse_unscaled(fwd.as_ref(), &mut rs_rd);
+    inverse_unscaled(fwd.as_ref(), &mut gd);
     let j0 = ((tau - 1e-9).ceil().max(0.0)) as usize;
     let j1f = ((nr - 1) as f64 + tau + 1e-9).floor().min((ng - 1) as f64);
     if j1f < j0 as f64 + 1.0 {
@@ -354,9 +370,11 @@ pub fn estimate_lag_with(
     // w = derivative of the signal estimate (g + a·r_s)/(2a): averaging the two channels
     // halves the noise in the weights, so the noise×noise part of Var(c') is counted once.
     let wv: Vec<f64> = (j0..=j1).map(|j| (gd[j].re / a + rs_rd[j].im) * 0.5 * scale).collect();
-    let l = fast_len(2 * nov - 1);
+    // Any length ≥ 2·nov − 1 gives the same sum (no wrap-around); n is one, and planned.
+    let l = n;
+    debug_assert!(l >= 2 * nov - 1);
     let ev: Vec<f64> = gv.iter().zip(&rsv).map(|(g, r)| g - a * r).collect();
-    let (eb, wb) = two_real_ffts(&ev, &wv, l, planner.plan_fft_forward(l).as_ref());
+    let (eb, wb) = two_real_ffts(&ev, &wv, l, fwd.as_ref());
     let s: f64 = eb.iter().zip(&wb).map(|(e, w)| e.norm_sqr() * w.norm_sqr()).sum();
     let var_c1 = (s / (l as f64 * nov as f64)).max(0.0);
     let curv = sgn * c2;
