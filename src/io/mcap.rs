@@ -73,9 +73,10 @@ pub fn write_timeseries(
         let columns: Vec<Vec<&[f64]>> =
             topics.iter().map(|t| float_columns(t.table).filter_map(Column::as_f64).collect()).collect();
         let mut sequence = vec![0u32; topics.len()];
-        let mut message = Vec::new();
+        // A message's layout (field tags, value offsets) is fixed per topic: only values change.
+        let mut messages: Vec<SampleMessage> = columns.iter().map(|c| SampleMessage::new(c.len())).collect();
         for (nanos, t, row) in order {
-            encode_sample(&columns[t], row, &mut message);
+            let message = messages[t].encode(&columns[t], row);
             let header = mcap::records::MessageHeader {
                 channel_id: channels[t],
                 sequence: sequence[t],
@@ -83,7 +84,7 @@ pub fn write_timeseries(
                 publish_time: nanos,
             };
             sequence[t] += 1;
-            writer.write_to_known_channel(&header, &message)?;
+            writer.write_to_known_channel(&header, message)?;
         }
         writer.write_metadata(&mcap::records::Metadata { name: "shakeflow".into(), metadata: metadata.clone() })?;
         writer.finish()?;
@@ -192,13 +193,31 @@ fn file_descriptor_set(full_name: &str, fields: &[String]) -> Vec<u8> {
     set
 }
 
-/// One sample: field i + 1 = column i's value as a `double` (wire type 1), every field written
-/// (a gap is NaN, as in the Parquet table).
-fn encode_sample(columns: &[&[f64]], row: usize, out: &mut Vec<u8>) {
-    out.clear();
-    for (i, values) in columns.iter().enumerate() {
-        put_varint(((i as u64) + 1) << 3 | 1, out);
-        out.extend_from_slice(&values[row].to_le_bytes());
+/// One sample as a protobuf message: field i + 1 = column i's value as a `double` (wire type 1),
+/// every field written (a gap is NaN, as in the Parquet table). The tags never change, so they
+/// are written once and each sample only overwrites the values.
+struct SampleMessage {
+    bytes: Vec<u8>,
+    /// Where each column's 8 value bytes start.
+    offsets: Vec<usize>,
+}
+
+impl SampleMessage {
+    fn new(fields: usize) -> SampleMessage {
+        let (mut bytes, mut offsets) = (Vec::new(), Vec::with_capacity(fields));
+        for i in 0..fields {
+            put_varint(((i as u64) + 1) << 3 | 1, &mut bytes);
+            offsets.push(bytes.len());
+            bytes.extend_from_slice(&[0; 8]);
+        }
+        SampleMessage { bytes, offsets }
+    }
+
+    fn encode(&mut self, columns: &[&[f64]], row: usize) -> &[u8] {
+        for (values, &at) in columns.iter().zip(&self.offsets) {
+            self.bytes[at..at + 8].copy_from_slice(&values[row].to_le_bytes());
+        }
+        &self.bytes
     }
 }
 
@@ -282,8 +301,8 @@ mod tests {
         // two from field 16 (129 = 0x81 0x01).
         let columns: Vec<Vec<f64>> = (0..17).map(|i| vec![i as f64 + 0.5]).collect();
         let slices: Vec<&[f64]> = columns.iter().map(Vec::as_slice).collect();
-        let mut out = Vec::new();
-        encode_sample(&slices, 0, &mut out);
+        let mut message = SampleMessage::new(slices.len());
+        let out = message.encode(&slices, 0).to_vec();
         assert_eq!(out.len(), 15 * 9 + 2 * 10);
         assert_eq!(out[0], 0x09);
         assert_eq!(&out[1..9], &0.5f64.to_le_bytes());
