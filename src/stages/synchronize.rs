@@ -214,15 +214,12 @@ fn align(
             }
         }
     }
-    for (c, v) in target_columns {
+    for (c, mut v) in target_columns {
         let description =
             format!("{} (on the reference clock: resampled to {fs} Hz, shifted by the lag)", c.description);
-        out.push(Column {
-            name: c.name.clone(),
-            unit: c.unit.clone(),
-            description,
-            data: ColumnData::F64(v[range.clone()].to_vec()),
-        });
+        v.truncate(range.end);
+        v.drain(..range.start);
+        out.push(Column { name: c.name.clone(), unit: c.unit.clone(), description, data: ColumnData::F64(v) });
     }
     out.metadata = target.metadata.clone();
     out.metadata.insert(
