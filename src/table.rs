@@ -153,7 +153,7 @@ pub fn sample_rate(time: &[f64]) -> f64 {
 /// engineer expects in the metadata, and it keeps a 256 → 200 Hz resampling periodic (25
 /// filters instead of one per sample). A clock that truly runs off its nominal rate drifts by
 /// more than a thousandth of a sample over a record and keeps its measured rate.
-pub fn nominal_rate(time: &[f64]) -> Option<f64> {
+fn nominal_rate(time: &[f64]) -> Option<f64> {
     let n = time.len();
     let mean = (n - 1) as f64 / (time[n - 1] - time[0]);
     let rate = (mean * 1e3).round() / 1e3;

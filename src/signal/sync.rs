@@ -371,12 +371,11 @@ pub fn estimate_lag_with(
     // halves the noise in the weights, so the noise×noise part of Var(c') is counted once.
     let wv: Vec<f64> = (j0..=j1).map(|j| (gd[j].re / a + rs_rd[j].im) * 0.5 * scale).collect();
     // Any length ≥ 2·nov − 1 gives the same sum (no wrap-around); n is one, and planned.
-    let l = n;
-    debug_assert!(l >= 2 * nov - 1);
+    debug_assert!(n >= 2 * nov - 1);
     let ev: Vec<f64> = gv.iter().zip(&rsv).map(|(g, r)| g - a * r).collect();
-    let (eb, wb) = two_real_ffts(&ev, &wv, l, fwd.as_ref());
+    let (eb, wb) = two_real_ffts(&ev, &wv, n, fwd.as_ref());
     let s: f64 = eb.iter().zip(&wb).map(|(e, w)| e.norm_sqr() * w.norm_sqr()).sum();
-    let var_c1 = (s / (l as f64 * nov as f64)).max(0.0);
+    let var_c1 = (s / (n as f64 * nov as f64)).max(0.0);
     let curv = sgn * c2;
     let uncertainty_s = if curv < 0.0 { var_c1.sqrt() / curv.abs() / fs } else { f64::INFINITY };
 
