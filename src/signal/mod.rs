@@ -3,6 +3,7 @@
 pub mod baseline;
 pub mod resample;
 pub mod resample_bandlimited;
+mod running_median;
 pub mod sync;
 pub mod synthetic_motion;
 pub mod toppling;

@@ -48,6 +48,8 @@
 //! Time samples must be nondecreasing; non-finite times are treated as missing samples.
 //! Sample rates of 100-1000 Hz are handled (all windows are in seconds).
 
+use super::running_median::running_median;
+
 /// Options of [`detect_toppling`]. All times in seconds.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DetectOptions {
@@ -546,103 +548,6 @@ fn sta_lta(d: &[f64], dt: f64, o: &DetectOptions) -> Vec<f64> {
     r
 }
 
-/// Running median over `win` samples, evaluated every `step` samples and interpolated linearly.
-fn running_median(x: &[f64], win: usize, step: usize) -> Vec<f64> {
-    let n = x.len();
-    let h = win / 2;
-    let mut knots: Vec<(usize, f64)> = Vec::new();
-    // The finite values of x[lo..hi] as sortable integer keys, kept sorted as the window slides:
-    // per knot one merge pass drops the samples that left and adds those that entered (both
-    // sorted first, a few each), instead of a selection over the whole window.
-    let mut sorted: Vec<u64> = Vec::with_capacity(win + 1);
-    let (mut merged, mut leaving, mut entering) = (Vec::with_capacity(win + 1), Vec::new(), Vec::new());
-    let keys = |range: &[f64], into: &mut Vec<u64>| {
-        into.clear();
-        into.extend(range.iter().filter(|v| v.is_finite()).map(|&v| order_key(v)));
-        into.sort_unstable();
-    };
-    let (mut lo, mut hi) = (0, 0);
-    let mut c = 0;
-    while c < n {
-        let (new_lo, new_hi) = (c.saturating_sub(h), (c + h + 1).min(n));
-        if new_lo >= hi {
-            sorted.clear();
-            (lo, hi) = (new_lo, new_lo);
-        }
-        keys(&x[lo..new_lo], &mut leaving);
-        keys(&x[hi..new_hi], &mut entering);
-        slide(&sorted, &leaving, &entering, &mut merged);
-        std::mem::swap(&mut sorted, &mut merged);
-        (lo, hi) = (new_lo, new_hi);
-        if let Some(&m) = sorted.get(sorted.len() / 2) {
-            knots.push((c, from_order_key(m)));
-        }
-        if c == n - 1 {
-            break;
-        }
-        c = (c + step).min(n - 1);
-    }
-    let mut out = vec![f64::NAN; n];
-    if knots.is_empty() {
-        return out;
-    }
-    let mut k = 0;
-    for (i, o) in out.iter_mut().enumerate() {
-        while k + 1 < knots.len() && knots[k + 1].0 <= i {
-            k += 1;
-        }
-        let (i0, m0) = knots[k];
-        *o = if i <= i0 || k + 1 == knots.len() {
-            m0
-        } else {
-            let (i1, m1) = knots[k + 1];
-            m0 + (m1 - m0) * (i - i0) as f64 / (i1 - i0) as f64
-        };
-    }
-    out
-}
-
-/// `sorted` without the keys of `leaving` and with those of `entering`, into `merged`, in one
-/// pass. `leaving` (a sub-multiset of `sorted`) and `entering` are sorted; an exhausted one
-/// reads as `u64::MAX`, which no finite value's key is.
-fn slide(sorted: &[u64], leaving: &[u64], entering: &[u64], merged: &mut Vec<u64>) {
-    merged.clear();
-    let (mut leaving, mut entering) = (leaving.iter().copied(), entering.iter().copied());
-    let next = |keys: &mut std::iter::Copied<std::slice::Iter<'_, u64>>| keys.next().unwrap_or(u64::MAX);
-    let (mut gone, mut added) = (next(&mut leaving), next(&mut entering));
-    for &k in sorted {
-        if k == gone {
-            gone = next(&mut leaving);
-            continue;
-        }
-        while added < k {
-            merged.push(added);
-            added = next(&mut entering);
-        }
-        merged.push(k);
-    }
-    debug_assert_eq!(gone, u64::MAX, "every sample leaving the window was in it");
-    while added != u64::MAX {
-        merged.push(added);
-        added = next(&mut entering);
-    }
-}
-
-/// An integer whose order is `f64::total_cmp`'s: flip every bit of negatives, the sign bit of
-/// the rest.
-fn order_key(v: f64) -> u64 {
-    let bits = v.to_bits();
-    if bits >> 63 == 1 {
-        !bits
-    } else {
-        bits | 1 << 63
-    }
-}
-
-fn from_order_key(key: u64) -> f64 {
-    f64::from_bits(if key >> 63 == 1 { key & !(1 << 63) } else { !key })
-}
-
 fn median(v: &mut [f64]) -> Option<f64> {
     if v.is_empty() {
         return None;
@@ -714,49 +619,6 @@ mod tests {
         fn normal(&mut self) -> f64 {
             let (u, v) = (self.uniform().max(1e-300), self.uniform());
             (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
-        }
-    }
-
-    #[test]
-    fn order_keys_sort_like_total_cmp_and_round_trip() {
-        let values =
-            [f64::NEG_INFINITY, -1e300, -1.5, -f64::MIN_POSITIVE / 4.0, -0.0, 0.0, 5e-324, 1.0, 2.5e10, f64::INFINITY];
-        for (i, a) in values.iter().enumerate() {
-            assert_eq!(from_order_key(order_key(*a)).to_bits(), a.to_bits());
-            for b in &values[i + 1..] {
-                assert!(order_key(*a) < order_key(*b), "{a} < {b}");
-            }
-        }
-    }
-
-    #[test]
-    fn running_median_is_the_median_of_each_window() {
-        // The sliding sorted window against a selection over each window's finite values, with
-        // gaps, repeated values, signed zeros, windows longer than the record and steps longer
-        // than the window.
-        let mut r = Rng(7);
-        let x: Vec<f64> = (0..700)
-            .map(|i| match i % 37 {
-                0 | 1 => f64::NAN,
-                5 => 0.0,
-                6 => -0.0,
-                _ => (r.normal() * 4.0).round() / 4.0,
-            })
-            .collect();
-        for (win, step) in [(201, 10), (3, 1), (50, 7), (9, 30), (2000, 13)] {
-            let knot_at = |c: usize| {
-                let mut window: Vec<f64> = x[c.saturating_sub(win / 2)..(c + win / 2 + 1).min(x.len())]
-                    .iter()
-                    .copied()
-                    .filter(|v| v.is_finite())
-                    .collect();
-                median(&mut window)
-            };
-            let got = running_median(&x, win, step);
-            // Knots of windows without a finite value are interpolated over, not compared.
-            for c in (0..x.len()).step_by(step).filter(|&c| knot_at(c).is_some()) {
-                assert_eq!(got[c].to_bits(), knot_at(c).unwrap().to_bits(), "window {win}, step {step}, knot {c}");
-            }
         }
     }
 
