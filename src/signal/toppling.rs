@@ -140,6 +140,34 @@ pub struct TopplingEvent {
     pub explanation: String,
 }
 
+/// A record's time column prepared once for all of its channels: gaps filled, median step.
+pub struct TimeBase<'a> {
+    time_s: &'a [f64],
+    filled: Vec<f64>,
+    dt: f64,
+}
+
+impl<'a> TimeBase<'a> {
+    /// Err: why no channel on this time column can be analysed.
+    pub fn new(time_s: &'a [f64]) -> Result<TimeBase<'a>, String> {
+        let filled = fill_time(time_s).ok_or("time is not nondecreasing or has fewer than two finite values")?;
+        let dt = median_step(&filled).ok_or("no positive time step")?;
+        Ok(TimeBase { time_s, filled, dt })
+    }
+}
+
+fn not_analysed(why: String) -> TopplingEvent {
+    TopplingEvent {
+        toppled: false,
+        impact_time_s: None,
+        peak_mps2: 0.0,
+        confidence: 0.0,
+        pre_rms_mps2: 0.0,
+        post_rms_mps2: 0.0,
+        explanation: format!("not analysed: {why}"),
+    }
+}
+
 /// Detects a toppling impact in an equipment-top horizontal acceleration record (m/s²).
 ///
 /// `floor_vertical_mps2`, if given, must be sampled at `time_s` (same length); it is only used
@@ -150,34 +178,36 @@ pub fn detect_toppling(
     floor_vertical_mps2: Option<&[f64]>,
     opts: &DetectOptions,
 ) -> TopplingEvent {
-    let invalid = |why: String| TopplingEvent {
-        toppled: false,
-        impact_time_s: None,
-        peak_mps2: 0.0,
-        confidence: 0.0,
-        pre_rms_mps2: 0.0,
-        post_rms_mps2: 0.0,
-        explanation: format!("not analysed: {why}"),
-    };
     if time_s.len() != top_ax_mps2.len() {
-        return invalid(format!("time has {} samples, acceleration {}", time_s.len(), top_ax_mps2.len()));
+        return not_analysed(format!("time has {} samples, acceleration {}", time_s.len(), top_ax_mps2.len()));
     }
-    let Some(t) = fill_time(time_s) else {
-        return invalid("time is not nondecreasing or has fewer than two finite values".into());
-    };
+    match TimeBase::new(time_s) {
+        Ok(base) => detect_toppling_on(&base, top_ax_mps2, floor_vertical_mps2, opts),
+        Err(why) => not_analysed(why),
+    }
+}
+
+/// [`detect_toppling`] on a time column shared by several channels of one record, prepared once.
+pub fn detect_toppling_on(
+    base: &TimeBase<'_>,
+    top_ax_mps2: &[f64],
+    floor_vertical_mps2: Option<&[f64]>,
+    opts: &DetectOptions,
+) -> TopplingEvent {
+    let (time_s, t, dt) = (base.time_s, &base.filled, base.dt);
+    if time_s.len() != top_ax_mps2.len() {
+        return not_analysed(format!("time has {} samples, acceleration {}", time_s.len(), top_ax_mps2.len()));
+    }
     let x: Vec<f64> = top_ax_mps2
         .iter()
         .zip(time_s)
         .map(|(&v, &ts)| if v.is_finite() && ts.is_finite() { v } else { f64::NAN })
         .collect();
     let n = x.len();
-    let Some(dt) = median_step(&t) else {
-        return invalid("no positive time step".into());
-    };
-    let record = Record { t: &t, x: &x, dt };
+    let record = Record { t, x: &x, dt };
     let n_valid = x.iter().filter(|v| v.is_finite()).count();
     if (n_valid as f64) * dt < 1.0 || n_valid < 16 {
-        return invalid(format!("only {n_valid} valid samples"));
+        return not_analysed(format!("only {n_valid} valid samples"));
     }
 
     // Detrended copy for the record's peak and RMS.
@@ -249,7 +279,7 @@ pub fn detect_toppling(
     merged.sort_by(|a, b| b.peak_amp.total_cmp(&a.peak_amp));
     merged.truncate(opts.max_candidates);
 
-    let t_end = last_valid_time(&t, &x);
+    let t_end = last_valid_time(t, &x);
     let evals: Vec<Evaluation> =
         merged.iter().map(|c| evaluate(&record, floor_vertical_mps2, c, t_end, opts)).collect();
 

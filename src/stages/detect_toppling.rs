@@ -6,7 +6,7 @@ use rayon::prelude::*;
 
 use super::{split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
-use crate::signal::toppling::{detect_toppling, DetectOptions};
+use crate::signal::toppling::{detect_toppling, detect_toppling_on, DetectOptions, TimeBase};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct DetectToppling;
@@ -58,9 +58,26 @@ fn detect(table: &Table, channels: &[(String, Option<String>)], opts: &DetectOpt
     let finite = |v: f64| v.is_finite().then_some(v);
     let (mut names, mut toppled, mut times, mut peaks, mut confidence, mut pre, mut post, mut why) =
         (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
-    for (top, vertical) in channels {
-        let vertical = vertical.as_deref().map(column).transpose()?;
-        let event = detect_toppling(time, column(top)?, vertical, opts);
+    // The time column is prepared once for all channels, which then run in parallel, so the
+    // stage's last record is shared by both cores instead of finishing on one.
+    let base = TimeBase::new(time);
+    // Columns are looked up in order first, so a missing one is always the first one named.
+    let inputs = channels
+        .iter()
+        .map(|(top, vertical)| {
+            let vertical = vertical.as_deref().map(column).transpose()?;
+            Ok((column(top)?, vertical))
+        })
+        .collect::<Result<Vec<_>, String>>()?;
+    let detected: Vec<_> = inputs
+        .par_iter()
+        .map(|&(top_ax, vertical)| match &base {
+            Ok(base) => detect_toppling_on(base, top_ax, vertical, opts),
+            // Not analysable: the event that says why.
+            Err(_) => detect_toppling(time, top_ax, vertical, opts),
+        })
+        .collect();
+    for ((top, _), event) in channels.iter().zip(detected) {
         names.push(top.clone());
         toppled.push(event.toppled);
         times.push(event.impact_time_s);
