@@ -68,15 +68,21 @@ fn median_knots(x: &[f64], h: usize, step: usize) -> Vec<(usize, f64)> {
     }
 }
 
-/// The median of a short window's finite values (element `count / 2` in `total_cmp` order).
+/// The median of a short window's finite values.
 fn select_median(window: &[f64], scratch: &mut Vec<f64>) -> Option<f64> {
     scratch.clear();
     scratch.extend(window.iter().copied().filter(|v| v.is_finite()));
-    if scratch.is_empty() {
+    median(scratch)
+}
+
+/// Element `len / 2` of `v` in `total_cmp` order (reorders `v`); None if `v` is empty.
+pub(super) fn median(v: &mut [f64]) -> Option<f64> {
+    if v.is_empty() {
         return None;
     }
-    let m = scratch.len() / 2;
-    Some(*scratch.select_nth_unstable_by(m, f64::total_cmp).1)
+    let m = v.len() / 2;
+    let (_, x, _) = v.select_nth_unstable_by(m, f64::total_cmp);
+    Some(*x)
 }
 
 /// "No element": a list's head sentinel (nothing below it) and the end of a list.
@@ -92,8 +98,8 @@ struct Block {
     slot: Vec<u32>,
     prev: Vec<u32>,
     next: Vec<u32>,
+    /// The smallest linked slot (`TAIL`: none). The largest is never asked for.
     first: u32,
-    last: u32,
 }
 
 impl Block {
@@ -104,7 +110,6 @@ impl Block {
             prev: Vec::with_capacity(len),
             next: Vec::with_capacity(len),
             first: TAIL,
-            last: HEAD,
         }
     }
 
@@ -126,7 +131,7 @@ impl Block {
         self.prev.extend((0..m).map(|s| if s == 0 { HEAD } else { s - 1 }));
         self.next.clear();
         self.next.extend((1..=m).map(|s| if s == m { TAIL } else { s }));
-        (self.first, self.last) = if m == 0 { (TAIL, HEAD) } else { (0, m - 1) };
+        self.first = if m == 0 { TAIL } else { 0 };
     }
 
     fn set_next(&mut self, of: u32, to: u32) {
@@ -138,9 +143,7 @@ impl Block {
     }
 
     fn set_prev(&mut self, of: u32, to: u32) {
-        if of == TAIL {
-            self.last = to;
-        } else {
+        if of != TAIL {
             self.prev[of as usize] = to;
         }
     }

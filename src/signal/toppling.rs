@@ -48,7 +48,7 @@
 //! Time samples must be nondecreasing; non-finite times are treated as missing samples.
 //! Sample rates of 100-1000 Hz are handled (all windows are in seconds).
 
-use super::running_median::running_median;
+use super::running_median::{median, running_median};
 
 /// Options of [`detect_toppling`]. All times in seconds.
 #[derive(Clone, Debug, PartialEq)]
@@ -156,6 +156,11 @@ impl<'a> TimeBase<'a> {
     }
 }
 
+fn length_mismatch(time_s: &[f64], top_ax_mps2: &[f64]) -> Option<TopplingEvent> {
+    (time_s.len() != top_ax_mps2.len())
+        .then(|| not_analysed(format!("time has {} samples, acceleration {}", time_s.len(), top_ax_mps2.len())))
+}
+
 fn not_analysed(why: String) -> TopplingEvent {
     TopplingEvent {
         toppled: false,
@@ -178,8 +183,9 @@ pub fn detect_toppling(
     floor_vertical_mps2: Option<&[f64]>,
     opts: &DetectOptions,
 ) -> TopplingEvent {
-    if time_s.len() != top_ax_mps2.len() {
-        return not_analysed(format!("time has {} samples, acceleration {}", time_s.len(), top_ax_mps2.len()));
+    // Lengths before the time column: a record wrong in both reports its lengths.
+    if let Some(mismatch) = length_mismatch(time_s, top_ax_mps2) {
+        return mismatch;
     }
     match TimeBase::new(time_s) {
         Ok(base) => detect_toppling_on(&base, top_ax_mps2, floor_vertical_mps2, opts),
@@ -195,8 +201,8 @@ pub fn detect_toppling_on(
     opts: &DetectOptions,
 ) -> TopplingEvent {
     let (time_s, t, dt) = (base.time_s, &base.filled, base.dt);
-    if time_s.len() != top_ax_mps2.len() {
-        return not_analysed(format!("time has {} samples, acceleration {}", time_s.len(), top_ax_mps2.len()));
+    if let Some(mismatch) = length_mismatch(time_s, top_ax_mps2) {
+        return mismatch;
     }
     let x: Vec<f64> = top_ax_mps2
         .iter()
@@ -576,15 +582,6 @@ fn sta_lta(d: &[f64], dt: f64, o: &DetectOptions) -> Vec<f64> {
         r[i] = (sta / (lta + eps)).sqrt();
     }
     r
-}
-
-fn median(v: &mut [f64]) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    let m = v.len() / 2;
-    let (_, x, _) = v.select_nth_unstable_by(m, f64::total_cmp);
-    Some(*x)
 }
 
 fn values_in(t: &[f64], x: &[f64], a: f64, b: f64) -> Vec<f64> {
