@@ -4,6 +4,13 @@
 # that built shakeflow before rebuilds in seconds. Override with CARGO_TARGET_DIR=... .
 CARGO_TARGET_DIR ?= $(HOME)/.cache/shakeflow-target
 export CARGO_TARGET_DIR
+# .cargo/config.toml builds for x86-64-v3. On an x86-64 CPU without it (or where the loader cannot
+# tell), build for baseline x86-64 instead: the same artifacts, a little slower.
+ifeq ($(shell uname -m),x86_64)
+ifneq ($(shell /lib64/ld-linux-x86-64.so.2 --help 2>/dev/null | grep -c 'x86-64-v3 .supported'),1)
+export CARGO_TARGET_X86_64_UNKNOWN_LINUX_GNU_RUSTFLAGS := -C target-cpu=x86-64
+endif
+endif
 CARGO ?= cargo
 PYTHON ?= python3
 # Python is only an independent reference (numpy, scipy, pyarrow, mcap, duckdb) for tests and benchmarks.
