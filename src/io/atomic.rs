@@ -63,7 +63,11 @@ where
     write_then_rename(path, true, fill)
 }
 
-const WRITE_BUFFER_BYTES: usize = 1 << 20;
+/// Small records (page headers, MCAP message indexes, footers) are gathered into 64 KiB writes;
+/// a larger write (a Parquet column chunk, an MCAP chunk, each assembled in memory by its
+/// writer) skips the buffer and goes to the file without a copy. A 1 MiB buffer copied those
+/// too: 1.7 % more instructions on the demo study, for 227 write calls instead of 1 514.
+const WRITE_BUFFER_BYTES: usize = 1 << 16;
 
 fn write_then_rename<F>(path: &Path, durable: bool, fill: F) -> anyhow::Result<()>
 where
@@ -72,8 +76,6 @@ where
     let tmp = temp_sibling(path);
     let result = (|| {
         let file = File::create(&tmp).map_err(|e| anyhow::anyhow!("cannot create `{}`: {e}", tmp.display()))?;
-        // MCAP writers emit a record at a time (a sample is ~170 bytes): with std's 8 KiB buffer
-        // a 3 MB twin took 400 write calls.
         let mut writer = BufWriter::with_capacity(WRITE_BUFFER_BYTES, file);
         fill(&mut writer)?;
         writer.flush()?;
