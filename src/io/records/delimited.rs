@@ -143,13 +143,21 @@ pub fn read_delimited(path: &Path, opts: &DelimitedOptions) -> Result<RawRecord,
     let mut columns: Vec<Vec<f64>> = (0..ncols).map(|_| Vec::with_capacity(rows_estimate)).collect();
     let ctx = Context { path, body, names: &names, names_line, splitter, opts, first_data_number };
     let mut row = Vec::with_capacity(ncols);
-    for (number, line) in lines {
+    // Rows are read straight from the body: the plain-row parser finds each line's end as it
+    // goes, so the common row costs no separate search for its newline.
+    let (bytes, mut start, mut number) = (body.as_bytes(), offset_in(body, first_data), first_data_number);
+    while start < bytes.len() {
         if let Splitter::Char(c) = splitter {
-            if plain_row(line.as_bytes(), c as u8, &mut row) && row.len() == ncols {
-                columns.iter_mut().zip(&row).for_each(|(column, &v)| column.push(v));
-                continue;
+            if let Some(used) = plain_row(&bytes[start..], c as u8, &mut row) {
+                if row.len() == ncols {
+                    columns.iter_mut().zip(&row).for_each(|(column, &v)| column.push(v));
+                    (start, number) = (start + used, number + 1);
+                    continue;
+                }
             }
         }
+        let end = body[start..].find('\n').map_or(body.len(), |i| start + i);
+        let line = body[start..end].strip_suffix('\r').unwrap_or(&body[start..end]);
         let mut count = 0;
         for cell in splitter.cells(line) {
             if let Some(column) = columns.get_mut(count) {
@@ -160,6 +168,7 @@ pub fn read_delimited(path: &Path, opts: &DelimitedOptions) -> Result<RawRecord,
         if count != ncols {
             return Err(ctx.ragged(number, count));
         }
+        (start, number) = (end + 1, number + 1);
     }
 
     let rows = columns[0].len();
@@ -179,22 +188,28 @@ pub fn read_delimited(path: &Path, opts: &DelimitedOptions) -> Result<RawRecord,
     Ok(RawRecord { format: "delimited", dt: None, time: None, channels, header })
 }
 
-/// The common row of plain numbers (no spaces, quotes or gaps), parsed straight from its bytes
-/// into `row`. False sends the line to the general reader, which also words any error.
-fn plain_row(line: &[u8], delimiter: u8, row: &mut Vec<f64>) -> bool {
+/// The common row of plain numbers (no spaces, quotes or gaps) at the start of `text`, parsed
+/// straight from its bytes into `row`; returns the bytes it spans with its line end (`\n`,
+/// `\r\n` or the end of `text`). None sends the line to the general reader, which also words
+/// any error.
+fn plain_row(text: &[u8], delimiter: u8, row: &mut Vec<f64>) -> Option<usize> {
     row.clear();
-    let mut rest = line;
+    let mut at = 0;
     loop {
-        let parsed = short_decimal(rest).map(Ok).unwrap_or_else(|| fast_float2::parse_partial::<f64, _>(rest));
-        let Ok((v, used)) = parsed else { return false };
+        let rest = &text[at..];
+        let (v, used) =
+            short_decimal(rest).map(Ok).unwrap_or_else(|| fast_float2::parse_partial::<f64, _>(rest)).ok()?;
         if !v.is_finite() {
-            return false;
+            return None;
         }
         row.push(v);
-        match rest.get(used) {
-            None => return true,
-            Some(&b) if b == delimiter => rest = &rest[used + 1..],
-            Some(_) => return false,
+        at += used;
+        match text.get(at) {
+            None => return Some(at),
+            Some(b'\n') => return Some(at + 1),
+            Some(b'\r') if text.get(at + 1) == Some(&b'\n') => return Some(at + 2),
+            Some(&b) if b == delimiter => at += 1,
+            Some(_) => return None,
         }
     }
 }
