@@ -537,8 +537,8 @@ fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Resu
         accel.metadata.extend(provenance.clone());
         camera.metadata.extend(provenance.clone());
         let png = stages::diagnose::figure(d).map_err(anyhow::Error::msg)?;
-        crate::io::parquet::write_table(&target.join("accel.parquet"), &mut accel)?;
-        crate::io::parquet::write_table(&target.join("camera.parquet"), &mut camera)?;
+        crate::io::parquet::write_table(&target.join("accel.parquet"), &accel)?;
+        crate::io::parquet::write_table(&target.join("camera.parquet"), &camera)?;
         crate::io::mcap::write_timeseries(
             &target.join("diagnosis.mcap"),
             &[

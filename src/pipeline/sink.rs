@@ -112,7 +112,7 @@ impl OutputSink {
         table.metadata.insert("shakeflow.output".into(), output.into());
         table.metadata.insert("shakeflow.partition".into(), relative.clone());
         let path = dir.join(DATA_FILE);
-        let hash = parquet::write_table(&path, &mut table)?;
+        let hash = parquet::write_table(&path, &table)?;
         self.hashes.lock().expect("no panics while holding the lock").insert(path.clone(), hash);
         if info.kind == OutputKind::TimeSeries && self.mcap {
             let topic = if relative.is_empty() {
