@@ -14,7 +14,6 @@ the script's / shakeflow's (above 1: shakeflow is faster or leaner).
 import argparse
 import os
 import pathlib
-import shutil
 import statistics
 import subprocess
 import sys
@@ -70,35 +69,39 @@ def measure(cmd):
 
 
 def run_sides(commands, repeat):
-    """Times each side's (command, output folder) `repeat` times. The order rotates every round,
-    so no side always runs right after the same other one, and each run's output is deleted
-    before the next run starts: every run begins from the same file-system state."""
+    """Times each side's command `repeat` times; `commands[side](output)` is the command that
+    writes into the folder `output`. The order rotates every round, so no side always runs right
+    after the same other one. Every run writes into a fresh folder and nothing is deleted until
+    all runs are done: on ext4 without a journal (this VM's disk) a file created within seconds
+    of a deletion makes the kernel step over each recently freed inode, so deleting the last
+    run's output just before the next charged each side for the harness's own cleanup, in
+    proportion to the files it creates (the demo pipeline ~350, the script ~60)."""
     results = {side: [] for side in commands}
     sides = list(commands)
-    for round_ in range(repeat):
-        for side in sides[round_ % len(sides):] + sides[:round_ % len(sides)]:
-            command, output = commands[side]
-            results[side].append(measure(command))
-            shutil.rmtree(output, ignore_errors=True)
+    with tempfile.TemporaryDirectory() as runs:
+        for round_ in range(repeat):
+            for side in sides[round_ % len(sides):] + sides[:round_ % len(sides)]:
+                output = pathlib.Path(runs) / f"side{sides.index(side)}-run{round_}"
+                results[side].append(measure(commands[side](output)))
     return results
 
 
 def time_pipelines(args, pipelines, scripts, script_source):
     """Times each shakeflow pipeline text of `pipelines` ({side: text}) and the Python script
-    run with each argument list of `scripts` ({side: [arguments]}) with `run_sides`, each writing
-    into its own folder of a temporary directory."""
+    run with each argument list of `scripts` ({side: [arguments]}) with `run_sides`."""
     with tempfile.TemporaryDirectory() as tmp:
         tmp = pathlib.Path(tmp)
         commands = {}
         for i, (side, text) in enumerate(pipelines.items()):
-            pipeline, output = tmp / f"pipeline{i}.yaml", tmp / f"out{i}"
-            pipeline.write_text(text.replace("output_dir: ../runs/demo", f"output_dir: {output}"))
-            commands[side] = ([args.shakeflow, "run", "--quiet", str(pipeline)], output)
+            def pipeline_run(output, i=i, text=text):
+                pipeline = tmp / f"pipeline{i}-{output.name}.yaml"
+                pipeline.write_text(text.replace("output_dir: ../runs/demo", f"output_dir: {output}"))
+                return [args.shakeflow, "run", "--quiet", str(pipeline)]
+            commands[side] = pipeline_run
         script = tmp / "py_side.py"
         script.write_text(script_source)
-        for i, (side, arguments) in enumerate(scripts.items()):
-            output = tmp / f"py_out{i}"
-            commands[side] = ([sys.executable, str(script), str(args.archive), str(output), *arguments], output)
+        for side, arguments in scripts.items():
+            commands[side] = lambda output, arguments=arguments: [sys.executable, str(script), str(args.archive), str(output), *arguments]
         return run_sides(commands, args.repeat)
 
 
