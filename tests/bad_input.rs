@@ -409,7 +409,7 @@ fn synchronize_inputs(root: &Path) {
         [("floors/motion=FB-1/floor=5", "ax_mps2"), ("daq2/motion=FB-1", "sync"), ("daq2/motion=FB-2", "sync")]
     {
         std::fs::create_dir_all(root.join(dir)).unwrap();
-        shakeflow::io::parquet::write_table(&root.join(dir).join("data.parquet"), &mut series(name, 0.3)).unwrap();
+        shakeflow::io::parquet::write_table(&root.join(dir).join("data.parquet"), &series(name, 0.3)).unwrap();
     }
 }
 

@@ -109,7 +109,7 @@ fn non_uniform_time_through_the_stage_command() {
     table.push(Column::f64("time_s", "s", "time", time));
     table.push(Column::f64("ax_mps2", "m/s^2", "x", vec![0.5; 100]));
     table.push(Column::f64("ay_mps2", "m/s^2", "y", vec![0.0; 100]));
-    shakeflow::io::parquet::write_table(&dir.path().join("floor.parquet"), &mut table).unwrap();
+    shakeflow::io::parquet::write_table(&dir.path().join("floor.parquet"), &table).unwrap();
     let out = shakeflow(
         &["stage", "simulate_rolling", "--input", "floor.parquet", "--output", "out", "--set", "preset=MC2"],
         dir.path(),
