@@ -1,6 +1,7 @@
 //! Tables as Parquet: units and descriptions as Arrow field metadata, provenance as file metadata.
 
 use std::collections::{BTreeMap, HashMap};
+use std::io::Write;
 use std::ops::Range;
 use std::path::Path;
 use std::sync::Arc;
@@ -9,12 +10,13 @@ use anyhow::{anyhow, Context};
 use arrow::array::{Array, ArrayRef, BooleanArray, Float64Array, Int64Array, RecordBatch, StringArray};
 use arrow::datatypes::{DataType, Field, Schema};
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use parquet::arrow::arrow_writer::{compute_leaves, ArrowColumnWriter, ArrowRowGroupWriterFactory};
 use parquet::arrow::{add_encoded_arrow_schema_to_metadata, ArrowSchemaConverter};
 use parquet::basic::{Compression, Encoding, ZstdLevel};
 use parquet::data_type::{BoolType, ByteArray, ByteArrayType, DoubleType, Int64Type};
 use parquet::file::metadata::KeyValue;
 use parquet::file::properties::{EnabledStatistics, WriterProperties};
-use parquet::file::writer::{SerializedColumnWriter, SerializedFileWriter};
+use parquet::file::writer::{SerializedColumnWriter, SerializedFileWriter, SerializedRowGroupWriter};
 use parquet::schema::types::ColumnPath;
 
 use crate::io::atomic;
@@ -26,34 +28,41 @@ const ARROW_SCHEMA_KEY: &str = "ARROW:schema";
 
 /// Writes `table` to `path` (atomically); returns the content hash of the file written.
 ///
-/// The columns go straight to parquet's column writers rather than through an Arrow batch and
-/// `ArrowWriter`: that one gathers every value through an index list and buffers the row group
-/// before copying it out (2.3 % of the demo study's instructions). The bytes are the same (a
-/// test compares them): the same properties, the same Arrow schema embedded (units,
-/// descriptions), the same row groups.
+/// Columns without nulls go straight to parquet's column writers rather than through an Arrow
+/// batch and `ArrowWriter`: that one gathers every value through an index list and buffers the
+/// row group before copying it out (2.3 % of the demo study's instructions). The bytes are the
+/// same (a test compares them): the same properties, the same Arrow schema embedded (units,
+/// descriptions), the same row groups, nullable columns through Arrow's own column writer.
 pub fn write_table(path: &Path, table: &Table) -> anyhow::Result<String> {
     let schema = arrow_schema(table);
     let mut props = writer_properties(table, &schema)?;
     let descriptor = ArrowSchemaConverter::new().with_coerce_types(props.coerce_types()).convert(&schema)?;
     add_encoded_arrow_schema_to_metadata(&schema, &mut props);
     let rows_per_group = props.max_row_group_row_count().unwrap_or(usize::MAX).max(1);
+    let has_nullable = table.columns.iter().any(|c| matches!(c.data, ColumnData::OptF64(_) | ColumnData::OptStr(_)));
+    let schema = Arc::new(schema);
     let mut hash = String::new();
     atomic::write_file(path, |w| {
         let mut writer =
             SerializedFileWriter::new(HashingWriter::new(w), descriptor.root_schema_ptr(), Arc::new(props))?;
+        let arrow_columns = has_nullable.then(|| ArrowRowGroupWriterFactory::new(&writer, schema.clone()));
         // Row groups of at most `rows_per_group` rows, as ArrowWriter cuts them; an empty table
         // is a schema without row groups.
-        let mut start = 0;
+        let (mut start, mut index) = (0, 0);
         while start < table.num_rows() {
             let rows = start..table.num_rows().min(start.saturating_add(rows_per_group));
+            let mut arrow_writers: Vec<Option<ArrowColumnWriter>> = match &arrow_columns {
+                Some(factory) => factory.create_column_writers(index)?.into_iter().map(Some).collect(),
+                None => Vec::new(),
+            };
             let mut group = writer.next_row_group()?;
-            for column in &table.columns {
-                let mut out = group.next_column()?.ok_or_else(|| anyhow!("no Parquet column for `{}`", column.name))?;
-                write_column(&mut out, &column.data, rows.clone())?;
-                out.close()?;
+            for (i, column) in table.columns.iter().enumerate() {
+                let arrow_writer = arrow_writers.get_mut(i).and_then(Option::take);
+                write_column(&mut group, arrow_writer, schema.field(i), &column.data, rows.clone())
+                    .with_context(|| format!("column `{}`", column.name))?;
             }
             group.close()?;
-            start = rows.end;
+            (start, index) = (rows.end, index + 1);
         }
         hash = writer.into_inner()?.finalize();
         Ok(())
@@ -84,34 +93,51 @@ fn writer_properties(table: &Table, schema: &Schema) -> anyhow::Result<WriterPro
     Ok(props.build())
 }
 
-/// Rows `rows` of one column.
-fn write_column(
-    out: &mut SerializedColumnWriter<'_>,
+/// Rows `rows` of one column, as the next column chunk of `group`. Nullable columns go through
+/// `arrow_writer` (an Arrow column writer for this column), as ArrowWriter writes them: it keeps
+/// definition levels that are all 1 or all 0 in a compact form, which moves where its pages end.
+fn write_column<W: Write + Send>(
+    group: &mut SerializedRowGroupWriter<'_, W>,
+    arrow_writer: Option<ArrowColumnWriter>,
+    field: &Field,
     data: &ColumnData,
     rows: Range<usize>,
-) -> parquet::errors::Result<usize> {
-    /// The present values of an optional column and its definition levels (1 present, 0 null).
-    fn present<T, U>(values: &[Option<T>], convert: impl Fn(&T) -> U) -> (Vec<U>, Vec<i16>) {
-        let levels = values.iter().map(|v| i16::from(v.is_some())).collect();
-        (values.iter().flatten().map(convert).collect(), levels)
-    }
+) -> anyhow::Result<()> {
     match data {
-        ColumnData::F64(v) => out.typed::<DoubleType>().write_batch(&v[rows], None, None),
-        ColumnData::OptF64(v) => {
-            let (values, levels) = present(&v[rows], |x| *x);
-            out.typed::<DoubleType>().write_batch(&values, Some(&levels), None)
-        }
-        ColumnData::I64(v) => out.typed::<Int64Type>().write_batch(&v[rows], None, None),
-        ColumnData::Bool(v) => out.typed::<BoolType>().write_batch(&v[rows], None, None),
+        ColumnData::F64(v) => required(group, |out| out.typed::<DoubleType>().write_batch(&v[rows], None, None)),
+        ColumnData::I64(v) => required(group, |out| out.typed::<Int64Type>().write_batch(&v[rows], None, None)),
+        ColumnData::Bool(v) => required(group, |out| out.typed::<BoolType>().write_batch(&v[rows], None, None)),
         ColumnData::Str(v) => {
             let values: Vec<ByteArray> = v[rows].iter().map(|s| ByteArray::from(s.as_str())).collect();
-            out.typed::<ByteArrayType>().write_batch(&values, None, None)
+            required(group, |out| out.typed::<ByteArrayType>().write_batch(&values, None, None))
         }
-        ColumnData::OptStr(v) => {
-            let (values, levels) = present(&v[rows], |s| ByteArray::from(s.as_str()));
-            out.typed::<ByteArrayType>().write_batch(&values, Some(&levels), None)
-        }
+        ColumnData::OptF64(v) => nullable(group, arrow_writer, field, Arc::new(Float64Array::from(v[rows].to_vec()))),
+        ColumnData::OptStr(v) => nullable(group, arrow_writer, field, Arc::new(StringArray::from(v[rows].to_vec()))),
     }
+}
+
+fn required<W: Write + Send>(
+    group: &mut SerializedRowGroupWriter<'_, W>,
+    write: impl FnOnce(&mut SerializedColumnWriter<'_>) -> parquet::errors::Result<usize>,
+) -> anyhow::Result<()> {
+    let mut out = group.next_column()?.ok_or_else(|| anyhow!("the Parquet schema has fewer columns than the table"))?;
+    write(&mut out)?;
+    out.close()?;
+    Ok(())
+}
+
+fn nullable<W: Write + Send>(
+    group: &mut SerializedRowGroupWriter<'_, W>,
+    writer: Option<ArrowColumnWriter>,
+    field: &Field,
+    array: ArrayRef,
+) -> anyhow::Result<()> {
+    let mut writer = writer.ok_or_else(|| anyhow!("no Arrow column writer for the nullable column"))?;
+    for leaf in compute_leaves(field, &array)? {
+        writer.write(&leaf)?;
+    }
+    writer.close()?.append_to_row_group(group)?;
+    Ok(())
 }
 
 /// The table's Arrow schema: each column's type and nullability, its unit and description as
@@ -291,8 +317,17 @@ mod tests {
         let mut long = Table::new();
         long.push(Column::f64("time_s", "s", "time", (0..rows).map(|i| i as f64 / 256.0).collect()));
         long.push(column("gap", ColumnData::OptF64((0..rows).map(|i| (i % 1000 != 0).then_some(1.5)).collect())));
+        // Nullable columns with no null, or nothing but nulls, over several pages: ArrowWriter
+        // cuts their pages elsewhere than the plain column writer would.
+        let rows = 45_000;
+        let mut uniform = Table::new();
+        uniform.push(column("full", ColumnData::OptF64((0..rows).map(|i| Some(i as f64)).collect())));
+        uniform.push(column("none", ColumnData::OptF64(vec![None; rows])));
+        let text = |i: usize| Some(format!("a label long enough to fill pages sooner, number {i}"));
+        uniform.push(column("labels", ColumnData::OptStr((0..rows).map(text).collect())));
+        uniform.push(column("no_labels", ColumnData::OptStr(vec![None; rows])));
         let dir = tempfile::tempdir().unwrap();
-        for (name, table) in [("mixed", &mixed), ("empty", &empty), ("long", &long)] {
+        for (name, table) in [("mixed", &mixed), ("empty", &empty), ("long", &long), ("uniform", &uniform)] {
             let path = dir.path().join(format!("{name}.parquet"));
             write_table(&path, table).unwrap();
             assert!(std::fs::read(&path).unwrap() == arrow_writer_bytes(table), "{name}: the bytes differ");
