@@ -83,7 +83,10 @@ pub fn resolve(
         if !(path.is_file() || folders && path.is_dir()) {
             continue;
         }
-        let relative = path.strip_prefix(base_dir).unwrap_or(&path).to_string_lossy().replace('\\', "/");
+        // The template is matched against what it was joined to: the path below `base_dir` for a
+        // relative template, the whole path for an absolute one (also when it lies below it).
+        let root = if Path::new(&glob_pattern).is_absolute() { Path::new("") } else { base_dir };
+        let relative = path.strip_prefix(root).unwrap_or(&path).to_string_lossy().replace('\\', "/");
         let mut partition = if has_keys {
             match match_pieces(&relative, &pieces) {
                 Some(p) => p,
@@ -123,6 +126,18 @@ mod tests {
         let files = resolve(dir.path(), "{motion}/DAQ1_floors.csv", &constant, false).unwrap();
         let partitions: Vec<_> = files.iter().map(|f| crate::stages::partition_path(&f.partition)).collect();
         assert_eq!(partitions, ["motion=BI-1/floor=5", "motion=FB-4/floor=5"]);
+    }
+
+    #[test]
+    fn an_absolute_template_below_the_pipeline_folder_matches() {
+        // The pipeline's folder is `dir`, the archive `dir/arch`, named by its absolute path.
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(dir.path().join("arch/FB-4")).unwrap();
+        std::fs::write(dir.path().join("arch/FB-4/DAQ2_equipment.csv"), "x").unwrap();
+        let pattern = format!("{}/arch/{{motion}}/DAQ2_equipment.csv", dir.path().display());
+        let files = resolve(dir.path(), &pattern, &BTreeMap::new(), false).unwrap();
+        assert_eq!(files.len(), 1);
+        assert_eq!(crate::stages::partition_path(&files[0].partition), "motion=FB-4");
     }
 
     #[test]
