@@ -1,7 +1,6 @@
 //! Robustness on the demo data (not made here), modified: spike without drop, truncated
 //! records, NaN gaps, offset/drift, other sample rates.
-#[path = "toppling_common/mod.rs"]
-mod common;
+use crate::toppling_common as common;
 
 use common::*;
 use shakeflow::signal::toppling::{detect_toppling, DetectOptions, TopplingEvent};

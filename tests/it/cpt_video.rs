@@ -3,7 +3,7 @@
 //! exactly the tracks of the PNG folder, and times must come from the container's presentation
 //! timestamps — here with a 0.12 s gap after frame 9 that a frame index / fps clock would miss.
 
-mod common;
+use crate::common;
 
 use shakeflow::io::parquet::read_table;
 use shakeflow::table::ColumnData;

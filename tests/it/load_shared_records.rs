@@ -1,7 +1,7 @@
 //! The load stage on every real record in ../shared: NPTS, DT and PGA as SOURCES.md states them
 //! (PGA there is max|a| computed from the file, in g, to 4 decimals).
 
-mod common;
+use crate::common;
 
 use serde_json::json;
 use shakeflow::pipeline::spec::SourceSpec;

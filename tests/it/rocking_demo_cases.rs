@@ -3,8 +3,7 @@
 //! the same equations): same overturn verdict, side and time within 0.01 s, and θ within 1e-3 rad
 //! up to the overturn, outside the samples the reference itself marks as solver-sensitive; the
 //! predicted top accelerometer within the cases' sensor noise.
-#[path = "toppling_common/mod.rs"]
-mod common;
+use crate::toppling_common as common;
 
 use common::*;
 use shakeflow::physics::rocking::{simulate, Block, Excitation, Options, Shape};

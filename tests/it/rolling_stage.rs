@@ -2,7 +2,7 @@
 //! (one test per case) stops with a message naming the file and what to do, a non-zero exit and
 //! nothing written; an equipment file is part of the cache key; artifacts are bit-identical.
 
-mod common;
+use crate::common;
 use common::*;
 use std::path::Path;
 

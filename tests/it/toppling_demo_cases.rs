@@ -1,7 +1,6 @@
 //! Demo cases (../shared/cases/demo): toppling found within 0.05 s of `overturn_time_s`,
 //! no toppling where `overturned: false`.
-#[path = "toppling_common/mod.rs"]
-mod common;
+use crate::toppling_common as common;
 
 use common::*;
 use shakeflow::signal::toppling::{detect_toppling, DetectOptions};

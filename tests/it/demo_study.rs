@@ -8,7 +8,7 @@
 //! within 1.5 mm RMS, yaw within 5 mrad RMS: the calibration from 14 points with 0.5 px noise
 //! alone accounts for about 0.5 mrad and 0.5 mm, tracking at ~0.03 px for 0.2 mm.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 

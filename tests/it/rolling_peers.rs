@@ -21,9 +21,8 @@
 //!   python rolling_mujoco.py --floor rolling_floor_rinaldi.csv --units PS1,PB2,MC2,UI3 --every 5 --out rolling_mujoco_rinaldi.json
 //! and the floor records with `SHAKEFLOW_WRITE_REFERENCE=1 cargo test --test rolling_peers stored_floor`.
 
-mod common;
-#[path = "rolling_common/mod.rs"]
-mod rolling;
+use crate::common;
+use crate::rolling_common as rolling;
 
 use common::{reference_script, run_python};
 use rolling::*;

@@ -1,7 +1,7 @@
 //! Bad input, one test per case: non-zero exit, one clear message naming the file (and line),
 //! no partial artifact, previous artifacts and the lockfile exactly as they were.
 
-mod common;
+use crate::common;
 use common::*;
 use std::path::Path;
 

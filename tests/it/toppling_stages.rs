@@ -2,7 +2,7 @@
 //! its own equipment file (the contract columns and the case's baseline verdict), in a pipeline
 //! whose equipment file is edited (only that stage reruns), and with bad input (clear errors,
 //! nothing written).
-mod common;
+use crate::common;
 use common::*;
 use shakeflow::table::ColumnData;
 use std::path::Path;

@@ -1,6 +1,6 @@
 //! Artifacts opened by tools we did not write: pyarrow, DuckDB, the `mcap` reader with Google's protobuf, jsonschema.
 
-mod common;
+use crate::common;
 use common::*;
 use std::path::Path;
 

@@ -3,7 +3,7 @@
 //! the expected one, the window starts within 0.5 s of the true onset, and where a physics is
 //! found the fit improves at least threefold. Also the `diagnose` stage in a pipeline, and bad
 //! case folders.
-mod common;
+use crate::common;
 use common::*;
 use std::path::Path;
 

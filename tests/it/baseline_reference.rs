@@ -1,7 +1,7 @@
 //! The baseline stage against numpy.polyfit on the real RENADIC record (uncorrected, 124.6 s).
 //! Reference values: tests/reference/baseline_llolleo.json, made by baseline_numpy.py beside it.
 
-mod common;
+use crate::common;
 
 use serde_json::Value;
 use shakeflow::pipeline::spec::SourceSpec;

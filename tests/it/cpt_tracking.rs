@@ -8,7 +8,7 @@
 //!
 //! Frames are 160 × 120 px so the 1000-frame sequence stays quick in debug builds.
 
-mod common;
+use crate::common;
 
 use shakeflow::vision::synthetic::{quantise, Layer, Look, SpeckleScene};
 use shakeflow::vision::track::{NamedPoint, SequenceTracker, Status, TemplatePolicy, TrackOptions};

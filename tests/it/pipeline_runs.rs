@@ -1,6 +1,6 @@
 //! The engine as a user meets it: run, cache, status, force, determinism, single-stage runs.
 
-mod common;
+use crate::common;
 use common::*;
 
 #[test]

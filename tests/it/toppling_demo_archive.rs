@@ -1,8 +1,7 @@
 //! Synthetic demo archive (shakeflow demo-archive): every (test, unit) channel of
 //! DAQ2_equipment.csv; toppled exactly where manifest.json says (within 0.05 s after converting
 //! DAQ1 -> DAQ2 time), no toppling anywhere else.
-#[path = "toppling_common/mod.rs"]
-mod common;
+use crate::toppling_common as common;
 
 use common::*;
 use shakeflow::signal::toppling::{detect_toppling, DetectOptions};

@@ -1,0 +1,31 @@
+//! Every integration test in one binary: one link instead of one per file (a fresh clone
+//! linked 24 test binaries). Each file is a module named for what it checks.
+
+mod common;
+mod rolling_common;
+mod toppling_common;
+
+mod bad_input;
+mod baseline_reference;
+mod cpt_calibration;
+mod cpt_tracking;
+mod cpt_video;
+mod demo_archive;
+mod demo_study;
+mod diagnose_cases;
+mod fragility_scipy;
+mod interop;
+mod load_shared_records;
+mod pipeline_runs;
+mod rocking_demo_cases;
+mod rocking_published;
+mod rocking_pulses;
+mod rolling_findings;
+mod rolling_peers;
+mod rolling_stage;
+mod sdof_identification;
+mod toppling_demo_archive;
+mod toppling_demo_cases;
+mod toppling_robustness;
+mod toppling_stages;
+mod welch_scipy;
