@@ -165,7 +165,11 @@ pub fn main() -> anyhow::Result<ExitCode> {
         }
         Command::Status { pipeline } => {
             let plan = Plan::new(PipelineFile::read(&pipeline)?)?;
-            let lines = executor::status(&plan)?;
+            let mut notes = Vec::new();
+            let lines = executor::status(&plan, &mut notes)?;
+            for note in &notes {
+                println!("note: {note}");
+            }
             let stale = lines.iter().filter(|l| !l.reasons.is_empty()).count();
             for line in &lines {
                 if line.reasons.is_empty() {
@@ -179,6 +183,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
         }
         Command::Validate { pipeline, skip_inputs } => {
             let plan = Plan::new(PipelineFile::read(&pipeline)?)?;
+            let mut input_files: Vec<PathBuf> = plan.stages.values().flat_map(|s| s.files.values().cloned()).collect();
             if !skip_inputs {
                 for (name, source) in &plan.file.spec.inputs {
                     let folders = source.format == RecordFormat::Frames;
@@ -189,9 +194,19 @@ pub fn main() -> anyhow::Result<ExitCode> {
                                 .hint(e.hint.unwrap_or_default())
                         })?;
                     println!("source {name:<16} {} file(s)", files.len());
+                    input_files.extend(files.iter().map(|f| f.path.clone()));
                     check_first_record(&plan, name, source, files.first())?;
                 }
             }
+            crate::pipeline::ownership::check_output_dir(&plan.file, &input_files)?;
+            let output_dir = plan.file.output_dir();
+            let lock = crate::pipeline::lock::LockFile::read(&output_dir.join(crate::pipeline::lock::LOCK_FILE))?;
+            crate::pipeline::ownership::check_stage_folders(
+                &plan.file,
+                &output_dir,
+                plan.stages.keys().map(String::as_str),
+                &lock,
+            )?;
             for stage in plan.stages.values() {
                 let inputs: Vec<String> = stage.inputs.iter().map(|i| i.label()).collect();
                 println!("stage  {:<16} {:<10} ← {}", stage.name, stage.stage.info().name, inputs.join(", "));
@@ -376,30 +391,48 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
         input_hashes
             .insert(format!("params.{name} ({})", params[&name].as_str().unwrap_or_default()), hash::hash_file(&path)?);
     }
-    let parent = output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    std::fs::create_dir_all(parent).with_context(|| format!("cannot create `{}`", parent.display()))?;
-    crate::io::atomic::remove_abandoned_temps(output);
-    let staging = crate::io::atomic::temp_sibling(output);
-    let reporter = Reporter::new(false);
+    // A stage that fails leaves no trace: an output folder it had to create goes again.
+    let created = !output.exists();
+    std::fs::create_dir_all(output).with_context(|| format!("cannot create `{}`", output.display()))?;
     let records: usize = stage_inputs.iter().map(|i| i.parts().len()).sum();
-    let sink = OutputSink::new(&staging, name, info, &params, &input_hashes, reporter.stage_bar(name, records as u64));
-    let ctx = StageContext {
-        stage_name: name,
-        params: &params,
-        inputs: &stage_inputs,
-        sink: &sink,
-        base_dir: Path::new("."),
-        memo: None,
-    };
-    let result = stage.run(&ctx).and_then(|()| {
-        for o in info.outputs {
-            std::fs::create_dir_all(staging.join(o.name))?;
+    let result = (|| -> anyhow::Result<()> {
+        let lease = crate::pipeline::lease::Lease::acquire(output)?;
+        crate::pipeline::txn::recover(&lease)?;
+        // Again under the lease: what another run committed meanwhile counts too.
+        refuse_to_replace_foreign_folder(output, inputs, info)?;
+        let transaction = crate::pipeline::txn::Transaction::begin(&lease)?;
+        let root = transaction.new_path("");
+        let reporter = Reporter::new(false);
+        let sink = OutputSink::new(&root, name, info, &params, &input_hashes, reporter.stage_bar(name, records as u64));
+        let ctx = StageContext {
+            stage_name: name,
+            params: &params,
+            inputs: &stage_inputs,
+            sink: &sink,
+            base_dir: Path::new("."),
+            memo: None,
+        };
+        let staged = stage.run(&ctx).and_then(|()| {
+            for o in info.outputs {
+                std::fs::create_dir_all(root.join(o.name))?;
+            }
+            crate::pipeline::ownership::write_marker(&root, name, info.name)
+        });
+        if let Err(e) = staged {
+            transaction.abort();
+            return Err(e);
         }
-        crate::io::atomic::replace_dir(&staging, output)
-            .with_context(|| format!("moving results into `{}`", output.display()))
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_dir_all(&staging);
+        // The folder is replaced whole: every entry of ours, new ones in, old ones without a new version out.
+        let ours = stage_entries(info);
+        let install: Vec<String> = ours.iter().filter(|e| root.join(e).exists()).cloned().collect();
+        let remove: Vec<String> = ours.into_iter().filter(|e| !install.contains(e)).collect();
+        transaction
+            .commit(&install, &remove, None)
+            .with_context(|| format!("moving results into `{}`", output.display()))?;
+        Ok(())
+    })();
+    if result.is_err() && created {
+        let _ = std::fs::remove_dir(output);
     }
     result?;
     eprintln!("{name}: {records} record(s) → {}", output.display());
@@ -447,30 +480,56 @@ fn check_first_record(
     })
 }
 
-/// `stage --output` replaces the folder whole: only a folder that is new, empty or holds nothing
-/// but this stage type's own outputs may be replaced, and never one holding an input.
+/// What `shakeflow stage` writes in its output folder: the outputs, their MCAP twins, its marker.
+fn stage_entries(info: &StageInfo) -> Vec<String> {
+    let mut entries: Vec<String> = info.outputs.iter().map(|o| o.name.to_string()).collect();
+    entries.push(crate::pipeline::sink::MCAP_DIR.into());
+    entries.push(crate::pipeline::ownership::STAGE_MARKER.into());
+    entries
+}
+
+/// `stage --output` replaces the folder whole: only a folder that is new, empty or an earlier
+/// output of this stage type (its marker says so) may be replaced, and never one holding an input.
 fn refuse_to_replace_foreign_folder(output: &Path, inputs: &[PathBuf], info: &StageInfo) -> anyhow::Result<()> {
     let refuse = |why: String| -> anyhow::Result<()> {
         Err(crate::error::UserError::new(why)
             .in_file(output)
-            .hint("`--output` is replaced as a whole when the stage succeeds: give a new or empty folder")
+            .hint("`--output` is replaced as a whole when the stage succeeds: give a new or empty folder, or one an earlier `shakeflow stage` of the same type wrote")
             .into())
     };
     if output.exists() && !output.is_dir() {
         return refuse("the output is a file, not a folder".into());
     }
-    let absolute = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
-    let out = absolute(output);
-    if let Some(input) = inputs.iter().find(|i| absolute(i).starts_with(&out)) {
+    let out = crate::pipeline::ownership::resolved(output);
+    if let Some(input) = inputs.iter().find(|i| crate::pipeline::ownership::resolved(i).starts_with(&out)) {
         return refuse(format!("the input `{}` is inside the output folder", input.display()));
     }
     let Ok(entries) = std::fs::read_dir(output) else { return Ok(()) };
-    let ours = |name: &str| name == crate::pipeline::sink::MCAP_DIR || info.outputs.iter().any(|o| o.name == name);
-    for entry in entries {
-        let name = entry?.file_name().to_string_lossy().into_owned();
-        if !ours(&name) {
-            return refuse(format!("the output folder holds `{name}`, which is not an output of `{}`", info.name));
+    let names: Vec<String> =
+        entries.map(|e| e.map(|e| e.file_name().to_string_lossy().into_owned())).collect::<Result<_, _>>()?;
+    let names: Vec<&String> = names.iter().filter(|n| *n != crate::pipeline::lease::STATE_DIR).collect();
+    if names.is_empty() {
+        return Ok(());
+    }
+    match crate::pipeline::ownership::read_marker(output) {
+        Some(marker) if marker.stage_type == info.name => {}
+        Some(marker) => {
+            return refuse(format!(
+                "the output folder holds an earlier output of stage type `{}`, not `{}`",
+                marker.stage_type, info.name
+            ))
         }
+        None => {
+            return refuse(format!(
+                "the output folder holds `{}` and was not written by `shakeflow stage` (no `{}` marker)",
+                names[0],
+                crate::pipeline::ownership::STAGE_MARKER
+            ))
+        }
+    }
+    let ours = stage_entries(info);
+    if let Some(foreign) = names.iter().find(|n| !ours.contains(n)) {
+        return refuse(format!("the output folder holds `{foreign}`, which is not an output of `{}`", info.name));
     }
     Ok(())
 }

@@ -1,9 +1,9 @@
 //! Running a plan: decide per stage whether it is cached, run what is not (in parallel where
 //! the DAG allows), and commit all results at once.
 //!
-//! A run is all-or-nothing: new outputs are staged under `<output_dir>/.staging-<pid>/` and only
-//! moved into place, together with the new lockfile, after every stage succeeded. A failed run
-//! leaves the previous artifacts and the lockfile exactly as they were.
+//! A run is all-or-nothing: it holds the output folder's lease (`lease.rs`), writes new outputs
+//! into a transaction and commits them with the new lockfile in one step (`txn.rs`) after every
+//! stage succeeded. A failed run leaves the previous artifacts and the lockfile as they were.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
@@ -15,13 +15,16 @@ use rayon::prelude::*;
 use serde_json::json;
 
 use super::hash::{self, KnownHashes};
+use super::lease::Lease;
 use super::lock::{LockFile, OutputLock, StageLock, LOCK_FILE};
 use super::memo::{TableMemo, DEFAULT_BUDGET_BYTES};
+use super::ownership;
 use super::plan::{InputRef, Plan, PlannedStage};
 use super::progress::Reporter;
 use super::sink::OutputSink;
 use super::sources;
 use super::spec::RecordFormat;
+use super::txn::{self, Recovery, Transaction};
 use crate::error::UserError;
 use crate::stages::{InputPart, StageContext, StageInput};
 
@@ -323,7 +326,7 @@ fn dataset_parts_known(dir: &Path, label: &str, known: &KnownHashes) -> anyhow::
             let partition = relative
                 .split('/')
                 .filter_map(|segment| segment.split_once('='))
-                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .map(|(k, v)| (super::paths::decode_component(k), super::paths::decode_component(v)))
                 .collect();
             InputPart { partition, path, label: format!("{label}/{relative}"), hash }
         })
@@ -336,9 +339,26 @@ pub struct StatusLine {
     pub reasons: Vec<String>,
 }
 
-/// What `run` would do, and why, without running anything.
-pub fn status(plan: &Plan) -> Result<Vec<StatusLine>, UserError> {
+/// What `run` would do, and why, without running anything; `notes` are what the user should
+/// know besides (a run in progress, an interrupted commit completed).
+pub fn status(plan: &Plan, notes: &mut Vec<String>) -> Result<Vec<StatusLine>, UserError> {
     let output_dir = plan.file.output_dir();
+    if output_dir.join(super::lease::STATE_DIR).is_dir() {
+        // An interrupted commit is completed first, so the answer is about what is on disk now;
+        // while a run holds the folder, the committed state is reported as it stands.
+        match Lease::acquire(&output_dir) {
+            Ok(lease) => {
+                let recovery = txn::recover(&lease).map_err(|e| UserError::new(format!("{e:#}")))?;
+                if recovery.completed > 0 {
+                    notes.push(format!("completed {} commit(s) of an interrupted run", recovery.completed));
+                }
+                if recovery.discarded > 0 {
+                    notes.push(format!("removed {} unfinished attempt(s) of an interrupted run", recovery.discarded));
+                }
+            }
+            Err(busy) => notes.push(format!("{}; reporting the last committed state", busy.message)),
+        }
+    }
     let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;
@@ -374,47 +394,52 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
     }
     let forced: BTreeSet<String> = options.force.iter().flat_map(|n| plan.with_dependents(n)).collect();
     let output_dir = plan.file.output_dir();
-    let lock_file = output_dir.join(LOCK_FILE);
-    let output_dir_error = |problem: String, hint: &str| {
-        UserError::new(problem)
-            .in_file(&plan.file.path)
-            .at(super::locate::key_position(&plan.file.text, &["output_dir"]))
-            .hint(hint)
-    };
-    std::fs::create_dir_all(&output_dir).map_err(|e| {
-        output_dir_error(
-            format!("cannot create the output directory `{}`: {e}", output_dir.display()),
-            "choose a writable `output_dir` (relative to the pipeline file)",
-        )
-    })?;
-    let lock = LockFile::read(&lock_file)?;
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;
-    // An interrupted run (Ctrl-C) leaves its staging folder: the next run clears it.
-    crate::io::atomic::remove_abandoned(&output_dir, STAGING_PREFIX);
-    crate::io::atomic::remove_abandoned_temps(&lock_file);
-    let staging = output_dir.join(format!("{STAGING_PREFIX}{}", std::process::id()));
-    std::fs::create_dir(&staging).map_err(|e| {
-        output_dir_error(
-            format!("the output directory `{}` is not writable: {e}", output_dir.display()),
-            "fix its permissions or choose another `output_dir`",
-        )
+    ownership::check_output_dir(&plan.file, &input_paths(plan, &sources))?;
+    std::fs::create_dir_all(&output_dir).map_err(|e| {
+        plan.file
+            .error_at(&["output_dir"], format!("cannot create the output directory `{}`: {e}", output_dir.display()))
+            .hint("choose a writable `output_dir` (relative to the pipeline file)")
     })?;
-    let result = run_stages(plan, &forced, &lock, &sources, &files, &output_dir, &staging, reporter);
-    let committed = result.and_then(|(reports, new_lock, rerun)| {
-        for name in &rerun {
-            crate::io::atomic::replace_dir(&staging.join(name), &output_dir.join(name))
-                .with_context(|| format!("moving the new outputs of `{name}` into place"))?;
+    let lease = Lease::acquire(&output_dir)?;
+    if let Some(holder) = &lease.took_over {
+        reporter.line(&format!(
+            "took over the lease of an earlier run that is gone (pid {} on `{}`, started {})",
+            holder.pid,
+            holder.host,
+            super::lease::format_utc(holder.started)
+        ));
+    }
+    let recovery = txn::recover(&lease)?;
+    if recovery != Recovery::default() {
+        reporter.line(&format!(
+            "an interrupted run: {} commit(s) completed, {} unfinished attempt(s) removed",
+            recovery.completed, recovery.discarded
+        ));
+    }
+    let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
+    ownership::check_stage_folders(&plan.file, &output_dir, plan.stages.keys().map(String::as_str), &lock)?;
+    let transaction = Transaction::begin(&lease)?;
+    let result = run_stages(plan, &forced, &lock, &sources, &files, &output_dir, &transaction, reporter);
+    match result {
+        Ok((reports, new_lock, rerun)) => {
+            transaction.commit(&rerun, &[], Some(&new_lock))?;
+            Ok(reports)
         }
-        new_lock.write(&lock_file)?;
-        Ok(reports)
-    });
-    let _ = std::fs::remove_dir_all(&staging);
-    committed
+        Err(e) => {
+            transaction.abort();
+            Err(e)
+        }
+    }
 }
 
-/// A run's staging folder is this prefix and the run's process id.
-const STAGING_PREFIX: &str = ".staging-";
+/// Every file a run reads: record files and files named by parameters.
+fn input_paths(plan: &Plan, sources: &BTreeMap<String, ResolvedSource>) -> Vec<PathBuf> {
+    let records = sources.values().flat_map(|s| s.input.parts().iter().map(|p| p.path.clone()));
+    let params = plan.stages.values().flat_map(|s| s.files.values().cloned());
+    records.chain(params).collect()
+}
 
 type StagesResult = (Vec<StageReport>, LockFile, Vec<String>);
 
@@ -426,7 +451,7 @@ struct RunEnv<'a> {
     sources: &'a BTreeMap<String, ResolvedSource>,
     files: &'a BTreeMap<String, BTreeMap<String, String>>,
     output_dir: &'a Path,
-    staging: &'a Path,
+    transaction: &'a Transaction,
     reporter: &'a Reporter,
     produced: Mutex<BTreeMap<String, Produced>>,
     entries: Mutex<BTreeMap<String, StageLock>>,
@@ -462,7 +487,7 @@ fn run_stages(
     sources: &BTreeMap<String, ResolvedSource>,
     files: &BTreeMap<String, BTreeMap<String, String>>,
     output_dir: &Path,
-    staging: &Path,
+    transaction: &Transaction,
     reporter: &Reporter,
 ) -> anyhow::Result<StagesResult> {
     let mut dependents: BTreeMap<&str, Vec<&PlannedStage>> = BTreeMap::new();
@@ -486,7 +511,7 @@ fn run_stages(
         sources,
         files,
         output_dir,
-        staging,
+        transaction,
         reporter,
         produced: Mutex::new(BTreeMap::new()),
         entries: Mutex::new(BTreeMap::new()),
@@ -555,7 +580,7 @@ fn release_read_tables(env: &RunEnv<'_>, stage: &PlannedStage) {
     }
 }
 
-/// Checks one stage against the lockfile and runs it into the staging directory if it is stale.
+/// Checks one stage against the lockfile and runs it into the run's transaction if it is stale.
 fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
     let snapshot = env.produced.lock().expect("no poisoned lock").clone();
     let hashes = input_hashes_for(stage, env.sources, &snapshot, env.files).expect("upstream stages finished");
@@ -570,7 +595,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
     } else {
         let why = if env.forced.contains(&stage.name) { "forced".to_string() } else { assessment.reasons.join("; ") };
         let started = Instant::now();
-        let dir = env.staging.join(&stage.name);
+        let dir = env.transaction.new_path(&stage.name);
         let inputs = stage_inputs(env.plan, stage, env.sources, &snapshot)?;
         let records: usize = inputs.iter().map(|i| i.parts().len()).sum();
         let bar = env.reporter.stage_bar(&stage.name, records as u64);
@@ -592,6 +617,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
             format!("stage `{}` (type `{}`) failed; nothing was changed on disk", stage.name, info.name)
         })?;
         bar.finish_and_clear();
+        ownership::write_marker(&dir, &stage.name, info.name)?;
         let written = sink.into_hashes();
         let mut outputs = BTreeMap::new();
         for output in info.outputs {

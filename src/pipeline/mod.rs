@@ -1,13 +1,18 @@
 //! The pipeline engine: spec → plan (DAG) → cached, parallel, all-or-nothing execution.
 
 pub mod executor;
+pub mod failpoint;
 pub mod hash;
+pub mod lease;
 pub mod locate;
 pub mod lock;
 pub mod memo;
+pub mod ownership;
 pub mod params;
+pub mod paths;
 pub mod plan;
 pub mod progress;
 pub mod sink;
 pub mod sources;
 pub mod spec;
+pub mod txn;

@@ -56,6 +56,18 @@ impl Plan {
         }
         let mut planned = IndexMap::new();
         for (name, spec) in &file.spec.stages {
+            if let Some(problem) = super::paths::component_problem(name) {
+                return Err(file
+                    .error_at(&["stages", name], format!("stage name `{name}` cannot name a folder: {problem}"))
+                    .hint(
+                        "each stage writes the folder `<output_dir>/<stage name>`: use letters, digits, `_`, `-`, `.`",
+                    ));
+            }
+            if name == super::lock::LOCK_FILE {
+                return Err(file
+                    .error_at(&["stages", name], format!("stage name `{name}` is the lockfile's name"))
+                    .hint("choose another stage name"));
+            }
             let stage = stages::find(&spec.stage_type).ok_or_else(|| {
                 let suggestion = did_you_mean_hint(&spec.stage_type, stages::names());
                 file.error_at(&["stages", name, "type"], format!("unknown stage type `{}`", spec.stage_type)).hint(
@@ -127,6 +139,19 @@ pub fn param_files(
 }
 
 fn check_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<(), UserError> {
+    // Constant partitions become folders `key=value` of every dataset made from this source.
+    for (key, value) in &source.partition {
+        if !key.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_') || key.is_empty() {
+            return Err(file
+                .error_at(&["inputs", name, "partition", key], format!("`{key}` is not a valid partition key"))
+                .hint("partition keys are letters, digits and `_`, as `{key}`s in paths are"));
+        }
+        if let Some(problem) = super::paths::component_problem(value) {
+            return Err(file
+                .error_at(&["inputs", name, "partition", key], format!("partition value `{value}` cannot name a folder: {problem}"))
+                .hint("partition values become folders (`key=value`) of every output: use a plain name such as `4` or `roof`"));
+        }
+    }
     let known = || format!("known units: {}", crate::units::known_units().join(", "));
     if let Some(unit) = &source.unit {
         if crate::units::conversion(unit).is_none() {

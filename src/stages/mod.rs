@@ -83,8 +83,15 @@ pub struct StageInfo {
 /// Partition keys of a record (`motion=FB-4/floor=5`), in order.
 pub type Partition = Vec<(String, String)>;
 
+/// The dataset folder of a record: `key=value` segments, each value percent-encoded where it is
+/// not a plain name (`090 (CUE)` → `090%20%28CUE%29`), so no value can leave its folder.
 pub fn partition_path(partition: &Partition) -> String {
-    partition.iter().map(|(k, v)| format!("{k}={v}")).collect::<Vec<_>>().join("/")
+    use crate::pipeline::paths::encode_component;
+    partition
+        .iter()
+        .map(|(k, v)| format!("{}={}", encode_component(k), encode_component(v)))
+        .collect::<Vec<_>>()
+        .join("/")
 }
 
 /// One file a stage reads: a raw record file or one part of an upstream dataset.

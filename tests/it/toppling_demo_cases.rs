@@ -6,7 +6,6 @@ use common::*;
 use shakeflow::signal::toppling::{detect_toppling, DetectOptions};
 
 pub struct DemoCase {
-    pub id: String,
     pub t: Vec<f64>,
     pub ax: Vec<f64>,
     pub az_floor: Vec<f64>,
@@ -32,7 +31,6 @@ pub fn load_demo(id: &str) -> DemoCase {
     let ft = floor.col("time_s");
     assert_eq!(ft.len(), t.len(), "{id}: floor.csv and observed_accel.csv lengths differ");
     DemoCase {
-        id: id.into(),
         ax: acc.col("top_ax_mps2").to_vec(),
         az_floor: floor.col("az_mps2").to_vec(),
         t,

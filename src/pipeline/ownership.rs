@@ -1,0 +1,163 @@
+//! What shakeflow may replace: only what it wrote, and never where a user's files live.
+//!
+//! Every stage folder shakeflow writes holds a marker, `<stage>/.shakeflow-stage`, naming the
+//! stage and its type. Before anything runs, a folder where a stage's outputs would go must be
+//! absent or carry that stage's marker (or, written by a shakeflow from before markers, be the
+//! lockfile's); and `output_dir` itself must not be a file system root, the home folder, or a
+//! folder holding the pipeline file or its inputs.
+
+use std::path::{Component, Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::lock::LockFile;
+use super::spec::PipelineFile;
+use crate::error::UserError;
+
+pub const STAGE_MARKER: &str = ".shakeflow-stage";
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StageMarker {
+    pub stage: String,
+    #[serde(rename = "type")]
+    pub stage_type: String,
+}
+
+/// Marks `dir` as the output folder of `stage` (of type `stage_type`). Deterministic bytes.
+pub fn write_marker(dir: &Path, stage: &str, stage_type: &str) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let marker = StageMarker { stage: stage.into(), stage_type: stage_type.into() };
+    let body = serde_json::to_vec_pretty(&marker)?;
+    crate::io::atomic::write_file(&dir.join(STAGE_MARKER), |w| Ok(std::io::Write::write_all(w, &body)?))
+}
+
+pub fn read_marker(dir: &Path) -> Option<StageMarker> {
+    serde_json::from_slice(&std::fs::read(dir.join(STAGE_MARKER)).ok()?).ok()
+}
+
+/// `path` with its longest existing ancestor resolved (symlinks, `..`) and the rest appended:
+/// where it is or would be, for comparing folders that may not exist yet.
+pub fn resolved(path: &Path) -> PathBuf {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let normal = super::spec::lexically_normal(&absolute);
+    let mut existing = normal.as_path();
+    let mut rest = Vec::new();
+    loop {
+        if let Ok(real) = existing.canonicalize() {
+            let mut out = real;
+            out.extend(rest.iter().rev());
+            return out;
+        }
+        match (existing.parent(), existing.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name.to_os_string());
+                existing = parent;
+            }
+            _ => return normal,
+        }
+    }
+}
+
+/// The folder part of a source path before its first wildcard or `{key}`: where its files lie.
+fn literal_prefix(base: &Path, pattern: &str) -> PathBuf {
+    let mut prefix = PathBuf::new();
+    for component in Path::new(pattern).components() {
+        let text = component.as_os_str().to_string_lossy();
+        if text.contains(['*', '?', '[', '{']) {
+            return base.join(prefix);
+        }
+        prefix.push(component);
+    }
+    // A plain file path: its folder holds it.
+    base.join(prefix.parent().unwrap_or(Path::new("")))
+}
+
+/// Refuses an `output_dir` that shakeflow must never write into: a file system root, the home
+/// folder, or a folder holding the pipeline file, a record source or a file a parameter names
+/// (`files`, resolved; source patterns are checked by their literal folder too, so this holds
+/// before the sources are resolved).
+pub fn check_output_dir(file: &PipelineFile, files: &[PathBuf]) -> Result<(), UserError> {
+    let output_dir = resolved(&file.output_dir());
+    let refuse = |why: String| {
+        file.error_at(&["output_dir"], format!("`output_dir: {}` {why}", file.spec.output_dir)).hint(
+            "shakeflow replaces stage folders in `output_dir` and may one day clean it: give it a folder of its own, \
+             e.g. `output_dir: ../runs/<study>` (relative to the pipeline file)",
+        )
+    };
+    let is_root = !output_dir.components().any(|c| matches!(c, Component::Normal(_)));
+    if is_root {
+        return Err(refuse(format!("is `{}`, the root of a file system", output_dir.display())));
+    }
+    if let Some(home) = std::env::var_os("HOME").filter(|h| !h.is_empty()) {
+        if resolved(Path::new(&home)) == output_dir {
+            return Err(refuse(format!("is the home folder `{}`", output_dir.display())));
+        }
+    }
+    let pipeline = resolved(&file.path);
+    if pipeline.starts_with(&output_dir) {
+        return Err(refuse(format!("holds the pipeline file itself (`{}`)", file.path.display())));
+    }
+    let base = file.base_dir();
+    for (name, source) in &file.spec.inputs {
+        let folder = resolved(&literal_prefix(&base, &source.path));
+        if folder.starts_with(&output_dir) {
+            return Err(refuse(format!("holds the files of source `{name}` (`{}`)", source.path)));
+        }
+    }
+    if let Some(input) = files.iter().find(|f| resolved(f).starts_with(&output_dir)) {
+        return Err(refuse(format!("holds the input `{}`", input.display())));
+    }
+    Ok(())
+}
+
+/// Refuses, before anything runs, a stage whose folder in `output_dir` exists but is not that
+/// stage's: a user's folder that happens to share its name is never replaced.
+pub fn check_stage_folders<'a>(
+    file: &PipelineFile,
+    output_dir: &Path,
+    stages: impl IntoIterator<Item = &'a str>,
+    lock: &LockFile,
+) -> Result<(), UserError> {
+    for stage in stages {
+        let dir = output_dir.join(stage);
+        let Ok(meta) = std::fs::symlink_metadata(&dir) else { continue };
+        let problem = if !meta.is_dir() {
+            Some(if meta.file_type().is_symlink() { "is a symbolic link" } else { "is a file" }.to_string())
+        } else {
+            match read_marker(&dir) {
+                Some(marker) if marker.stage == stage => None,
+                Some(marker) => Some(format!("holds the outputs of stage `{}`, not `{stage}`", marker.stage)),
+                // Written by a shakeflow from before markers: the lockfile knows it.
+                None if lock.stages.contains_key(stage) => None,
+                None => Some(format!("was not written by shakeflow (it has no `{STAGE_MARKER}` marker)")),
+            }
+        };
+        if let Some(problem) = problem {
+            return Err(file
+                .error_at(&["stages", stage], format!("stage `{stage}` would replace `{}`, which {problem}", dir.display()))
+                .hint("shakeflow replaces only folders it wrote: rename the stage or choose another `output_dir`; nothing was changed"));
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn literal_prefixes_stop_at_the_first_pattern() {
+        let base = Path::new("/p");
+        assert_eq!(literal_prefix(base, "archive/{motion}/daq.csv"), Path::new("/p/archive"));
+        assert_eq!(literal_prefix(base, "gm/*.AT2"), Path::new("/p/gm"));
+        assert_eq!(literal_prefix(base, "data/one.csv"), Path::new("/p/data"));
+        assert_eq!(literal_prefix(base, "one.csv"), Path::new("/p"));
+    }
+
+    #[test]
+    fn resolved_paths_follow_existing_folders_and_keep_the_rest() {
+        let dir = tempfile::tempdir().unwrap();
+        let real = dir.path().canonicalize().unwrap();
+        assert_eq!(resolved(&dir.path().join("a/../b/c")), real.join("b/c"));
+    }
+}

@@ -1,0 +1,305 @@
+//! The commit: a run's new outputs and lockfile replace the old ones all at once, or not at all.
+//!
+//! A transaction is a folder `<root>/.shakeflow/txn-<token>/` of the lease holder:
+//!
+//! 1. stages write their outputs under `new/<entry>/`;
+//! 2. the new lockfile is written to `shakeflow.lock` in the transaction, forced to disk;
+//! 3. the journal (entries to install and to remove, whether a lockfile comes) is written to
+//!    `journal.tmp`, forced to disk, and renamed to `journal`. **That rename is the commit
+//!    point**: before it, the transaction never happened; after it, it has;
+//! 4. roll forward, each step idempotent: each entry `<root>/<e>` moves to `old/<e>`, then
+//!    `new/<e>` to `<root>/<e>`; the lockfile moves to `<root>/shakeflow.lock`;
+//! 5. the journal is removed, then the transaction folder with the old outputs in it.
+//!
+//! Whoever next takes the lease [`recover`]s first: a transaction with a journal is rolled forward
+//! (steps 4–5), one without is removed whole. Every move is a rename inside `root`, so nothing is
+//! copied and a crash at any instant leaves either the old state or a journal that completes
+//! the new one (`tests/it/crash_safety.rs` kills a run at every step and checks).
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context};
+use serde::{Deserialize, Serialize};
+
+use super::failpoint;
+use super::lease::{Lease, STATE_DIR};
+use super::lock::{LockFile, LOCK_FILE};
+
+const TXN_PREFIX: &str = "txn-";
+const JOURNAL: &str = "journal";
+const JOURNAL_FORMAT: u32 = 1;
+
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Journal {
+    version: u32,
+    /// Entries of `root` (relative paths, possibly nested) replaced by (or created from) `new/<entry>`.
+    install: Vec<String>,
+    /// Entries of `root` removed (moved into the transaction, deleted with it).
+    remove: Vec<String>,
+    /// Whether the transaction's `shakeflow.lock` replaces the root's.
+    lockfile: bool,
+}
+
+/// An open transaction of the lease holder on its root.
+pub struct Transaction {
+    root: PathBuf,
+    dir: PathBuf,
+}
+
+impl Transaction {
+    /// Opens a transaction in `lease`'s folder (the lease proves no other run writes there).
+    pub fn begin(lease: &Lease) -> anyhow::Result<Transaction> {
+        let root = lease.root().to_path_buf();
+        let token = format!("{TXN_PREFIX}{}-{}", std::process::id(), unique());
+        let dir = root.join(STATE_DIR).join(token);
+        fs::create_dir_all(dir.join("new")).with_context(|| format!("cannot create `{}`", dir.display()))?;
+        Ok(Transaction { root, dir })
+    }
+
+    /// Where the new version of `root/<entry>` is written.
+    pub fn new_path(&self, entry: &str) -> PathBuf {
+        self.dir.join("new").join(entry)
+    }
+
+    /// Makes the new entries, removals and lockfile the root's, all at once (see the module doc).
+    /// An error before the commit point leaves the root exactly as it was.
+    pub fn commit(self, install: &[String], remove: &[String], lock: Option<&LockFile>) -> anyhow::Result<()> {
+        let prepared = (|| -> anyhow::Result<()> {
+            if let Some(lock) = lock {
+                failpoint::hit("commit.write_lockfile")?;
+                lock.write(&self.dir.join(LOCK_FILE)).context("writing the new lockfile")?;
+                failpoint::hit("commit.lockfile_written")?;
+            }
+            let journal = Journal {
+                version: JOURNAL_FORMAT,
+                install: install.to_vec(),
+                remove: remove.to_vec(),
+                lockfile: lock.is_some(),
+            };
+            let tmp = self.dir.join("journal.tmp");
+            crate::io::atomic::write_new_durable(&tmp, &serde_json::to_vec_pretty(&journal)?)
+                .context("writing the commit journal")?;
+            failpoint::hit("commit.journal_written")?;
+            Ok(())
+        })();
+        if let Err(e) = prepared {
+            let _ = fs::remove_dir_all(&self.dir);
+            let full = e.chain().any(|c| {
+                c.downcast_ref::<std::io::Error>().and_then(std::io::Error::raw_os_error) == Some(libc::ENOSPC)
+            });
+            let advice = if full { "; free space on that disk and rerun" } else { "" };
+            return Err(e.context(format!(
+                "nothing was changed: the previous results and lockfile in `{}` are as they were{advice}",
+                self.root.display()
+            )));
+        }
+        fs::rename(self.dir.join("journal.tmp"), self.dir.join(JOURNAL))
+            .and_then(|()| sync_dir(&self.dir))
+            .with_context(|| format!("committing `{}`", self.dir.display()))?;
+        failpoint::hit("commit.committed")?;
+        roll_forward(&self.root, &self.dir)
+    }
+
+    /// Forgets the transaction: the root stays as it was.
+    pub fn abort(self) {
+        let _ = fs::remove_dir_all(&self.dir);
+    }
+}
+
+fn unique() -> u128 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos())
+}
+
+fn exists(path: &Path) -> bool {
+    fs::symlink_metadata(path).is_ok()
+}
+
+/// Steps 4–5 of the protocol; safe to repeat after a crash at any point of them.
+fn roll_forward(root: &Path, dir: &Path) -> anyhow::Result<()> {
+    let text = fs::read(dir.join(JOURNAL)).with_context(|| format!("reading `{}`", dir.join(JOURNAL).display()))?;
+    let journal: Journal = serde_json::from_slice(&text)
+        .with_context(|| format!("the commit journal `{}` is damaged", dir.join(JOURNAL).display()))?;
+    if journal.version != JOURNAL_FORMAT {
+        bail!("the commit journal `{}` has format {}", dir.join(JOURNAL).display(), journal.version);
+    }
+    let old = dir.join("old");
+    fs::create_dir_all(&old)?;
+    let move_aside = |entry: &str| -> anyhow::Result<()> {
+        let target = root.join(entry);
+        if exists(&target) {
+            let aside = old.join(entry);
+            if exists(&aside) {
+                bail!(
+                    "cannot finish an earlier commit: both `{}` and `{}` exist; move `{}` away and rerun",
+                    target.display(),
+                    aside.display(),
+                    target.display()
+                );
+            }
+            if let Some(parent) = aside.parent() {
+                fs::create_dir_all(parent)?;
+            }
+            fs::rename(&target, &aside).with_context(|| format!("moving `{}` out of the way", target.display()))?;
+        }
+        failpoint::hit(&format!("commit.moved_aside.{entry}"))?;
+        Ok(())
+    };
+    for entry in &journal.install {
+        let new = dir.join("new").join(entry);
+        if !exists(&new) {
+            continue; // installed before a crash
+        }
+        move_aside(entry)?;
+        if let Some(parent) = root.join(entry).parent() {
+            fs::create_dir_all(parent)?;
+        }
+        fs::rename(&new, root.join(entry))
+            .with_context(|| format!("moving the new `{entry}` into `{}`", root.display()))?;
+        failpoint::hit(&format!("commit.moved_in.{entry}"))?;
+    }
+    for entry in &journal.remove {
+        move_aside(entry)?;
+    }
+    let new_lock = dir.join(LOCK_FILE);
+    if journal.lockfile && exists(&new_lock) {
+        fs::rename(&new_lock, root.join(LOCK_FILE)).context("installing the new lockfile")?;
+        failpoint::hit("commit.lockfile_installed")?;
+    }
+    sync_dir(root)?;
+    fs::remove_file(dir.join(JOURNAL))?;
+    failpoint::hit("commit.journal_removed")?;
+    fs::remove_dir_all(dir).with_context(|| format!("removing `{}`", dir.display()))?;
+    Ok(())
+}
+
+/// Forces a folder's entries (renames into or out of it) to disk.
+fn sync_dir(dir: &Path) -> std::io::Result<()> {
+    fs::File::open(dir)?.sync_all()
+}
+
+/// What [`recover`] did.
+#[derive(Debug, Default, PartialEq)]
+pub struct Recovery {
+    /// Commits an interrupted run had made and that are now complete.
+    pub completed: usize,
+    /// Unfinished transactions (or older shakeflow's staging folders) removed.
+    pub discarded: usize,
+}
+
+/// Completes or removes what interrupted runs left in the lease's folder: transactions (see the
+/// module doc) and the staging folders and temporary files of older shakeflow versions
+/// (`.staging-<pid>`, `.<name>.tmp-<pid>-<n>`). Only the lease holder may call it, so nothing in
+/// use is touched.
+pub fn recover(lease: &Lease) -> anyhow::Result<Recovery> {
+    let root = lease.root();
+    let mut recovery = Recovery::default();
+    let state = root.join(STATE_DIR);
+    let mut txns: Vec<PathBuf> = match fs::read_dir(&state) {
+        Ok(entries) => entries
+            .flatten()
+            .filter(|e| e.file_name().to_string_lossy().starts_with(TXN_PREFIX))
+            .map(|e| e.path())
+            .collect(),
+        Err(_) => Vec::new(),
+    };
+    txns.sort();
+    for dir in txns {
+        if dir.join(JOURNAL).is_file() {
+            roll_forward(root, &dir)?;
+            recovery.completed += 1;
+        } else {
+            fs::remove_dir_all(&dir).with_context(|| format!("removing `{}`", dir.display()))?;
+            recovery.discarded += 1;
+        }
+    }
+    if let Ok(entries) = fs::read_dir(root) {
+        for entry in entries.flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            if is_legacy_leftover(&name) {
+                let path = entry.path();
+                let _ = if path.is_dir() { fs::remove_dir_all(&path) } else { fs::remove_file(&path) };
+                recovery.discarded += 1;
+            }
+        }
+    }
+    Ok(recovery)
+}
+
+/// `.staging-<digits>` or `.<name>.tmp-<digits>-<digits>`: what shakeflow before the journal left
+/// when interrupted.
+fn is_legacy_leftover(name: &str) -> bool {
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    if let Some(pid) = name.strip_prefix(".staging-") {
+        return digits(pid);
+    }
+    let Some(rest) = name.strip_prefix('.') else { return false };
+    let Some((_, tail)) = rest.rsplit_once(".tmp-") else { return false };
+    tail.split_once('-').is_some_and(|(pid, n)| digits(pid) && digits(n))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tree(dir: &Path) -> Vec<String> {
+        let mut files = super::super::hash::list_files(dir).unwrap();
+        files.retain(|f| !f.starts_with(".shakeflow/lease"));
+        files
+    }
+
+    #[test]
+    fn a_commit_replaces_installs_and_removes_at_once() {
+        let root = tempfile::tempdir().unwrap();
+        for (entry, file) in [("a", "old"), ("gone", "x"), ("keep", "k")] {
+            fs::create_dir_all(root.path().join(entry)).unwrap();
+            fs::write(root.path().join(entry).join(file), file).unwrap();
+        }
+        let lease = Lease::acquire(root.path()).unwrap();
+        let txn = Transaction::begin(&lease).unwrap();
+        for entry in ["a", "b"] {
+            fs::create_dir_all(txn.new_path(entry)).unwrap();
+            fs::write(txn.new_path(entry).join("new"), entry).unwrap();
+        }
+        let lock = LockFile { version: 1, stages: Default::default() };
+        txn.commit(&["a".into(), "b".into()], &["gone".into()], Some(&lock)).unwrap();
+        assert_eq!(tree(root.path()), ["a/new", "b/new", "keep/k", "shakeflow.lock"]);
+    }
+
+    #[test]
+    fn an_unjournaled_transaction_is_discarded_and_a_journaled_one_completed() {
+        let root = tempfile::tempdir().unwrap();
+        fs::create_dir_all(root.path().join("a")).unwrap();
+        fs::write(root.path().join("a/old"), "1").unwrap();
+        let lease = Lease::acquire(root.path()).unwrap();
+        // Not committed: discarded.
+        let txn = Transaction::begin(&lease).unwrap();
+        fs::create_dir_all(txn.new_path("a")).unwrap();
+        fs::write(txn.new_path("a").join("new"), "2").unwrap();
+        std::mem::forget(txn);
+        // Committed, then "crashed" right after the commit point: completed.
+        let txn = Transaction::begin(&lease).unwrap();
+        fs::create_dir_all(txn.new_path("c")).unwrap();
+        fs::write(txn.new_path("c").join("new"), "3").unwrap();
+        let journal = Journal { version: 1, install: vec!["c".into()], remove: vec![], lockfile: false };
+        fs::write(txn.dir.join(JOURNAL), serde_json::to_vec(&journal).unwrap()).unwrap();
+        std::mem::forget(txn);
+        fs::write(root.path().join(".staging-4242"), "legacy").unwrap();
+        fs::write(root.path().join(".load.tmp-17-3"), "legacy").unwrap();
+        fs::write(root.path().join(".notes.txt"), "the user's").unwrap();
+        let recovery = recover(&lease).unwrap();
+        assert_eq!(recovery, Recovery { completed: 1, discarded: 3 });
+        assert_eq!(tree(root.path()), [".notes.txt", "a/old", "c/new"]);
+    }
+
+    #[test]
+    fn legacy_leftovers_are_recognised_by_their_exact_shape() {
+        assert!(is_legacy_leftover(".staging-123"));
+        assert!(is_legacy_leftover(".baseline.tmp-99-0"));
+        assert!(is_legacy_leftover(".shakeflow.lock.tmp-99-12"));
+        for user in [".staging-", ".staging-12a", "load.tmp-1-2", ".x.tmp-1", ".x.tmp-a-1", ".bashrc"] {
+            assert!(!is_legacy_leftover(user), "{user}");
+        }
+    }
+}
