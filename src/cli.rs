@@ -491,10 +491,22 @@ fn stage_entries(info: &StageInfo) -> Vec<String> {
 /// `stage --output` replaces the folder whole: only a folder that is new, empty or an earlier
 /// output of this stage type (its marker says so) may be replaced, and never one holding an input.
 fn refuse_to_replace_foreign_folder(output: &Path, inputs: &[PathBuf], info: &StageInfo) -> anyhow::Result<()> {
+    refuse_foreign_output(output, inputs, info.name, Some(&stage_entries(info)))
+}
+
+/// The check behind `stage --output` and `diagnose --out`: `output` may be replaced when it is new,
+/// empty, or carries the marker of an earlier `command` and (when `ours` lists them) holds only
+/// those entries.
+fn refuse_foreign_output(
+    output: &Path,
+    inputs: &[PathBuf],
+    command: &str,
+    ours: Option<&[String]>,
+) -> anyhow::Result<()> {
     let refuse = |why: String| -> anyhow::Result<()> {
         Err(crate::error::UserError::new(why)
             .in_file(output)
-            .hint("`--output` is replaced as a whole when the stage succeeds: give a new or empty folder, or one an earlier `shakeflow stage` of the same type wrote")
+            .hint("the output folder is replaced as a whole when the command succeeds: give a new or empty folder, or one an earlier run of the same command wrote")
             .into())
     };
     if output.exists() && !output.is_dir() {
@@ -512,24 +524,23 @@ fn refuse_to_replace_foreign_folder(output: &Path, inputs: &[PathBuf], info: &St
         return Ok(());
     }
     match crate::pipeline::ownership::read_marker(output) {
-        Some(marker) if marker.stage_type == info.name => {}
+        Some(marker) if marker.stage_type == command => {}
         Some(marker) => {
             return refuse(format!(
-                "the output folder holds an earlier output of stage type `{}`, not `{}`",
-                marker.stage_type, info.name
+                "the output folder holds an earlier output of stage type `{}`, not `{command}`",
+                marker.stage_type
             ))
         }
         None => {
             return refuse(format!(
-                "the output folder holds `{}` and was not written by `shakeflow stage` (no `{}` marker)",
+                "the output folder holds `{}` and was not written by shakeflow (no `{}` marker)",
                 names[0],
                 crate::pipeline::ownership::STAGE_MARKER
             ))
         }
     }
-    let ours = stage_entries(info);
-    if let Some(foreign) = names.iter().find(|n| !ours.contains(n)) {
-        return refuse(format!("the output folder holds `{foreign}`, which is not an output of `{}`", info.name));
+    if let Some(foreign) = ours.and_then(|ours| names.iter().find(|n| !ours.contains(n))) {
+        return refuse(format!("the output folder holds `{foreign}`, which is not an output of `{command}`"));
     }
     Ok(())
 }
@@ -553,6 +564,9 @@ fn file_label(path: &Path) -> String {
     path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
 }
 
+/// The marker type of a `shakeflow diagnose` output folder.
+const DIAGNOSE: &str = "diagnose";
+
 /// `shakeflow diagnose`: every case is diagnosed first; files are written only when all succeeded.
 fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Result<()> {
     use rayon::prelude::*;
@@ -562,6 +576,9 @@ fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Resu
     let params = params::normalize(info.params, info.name, assignments.iter().map(|(k, v)| (k.as_str(), v.clone())))
         .map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;
     let settings = stages::diagnose::settings(&params);
+    // Written into a transaction and committed at once: `--out` is replaced whole, and only
+    // when it is new, empty or an earlier diagnosis (its marker). Refused before any work.
+    refuse_foreign_output(out, cases, DIAGNOSE, None)?;
     let started = std::time::Instant::now();
     let results: Vec<(PathBuf, crate::diagnose::Diagnosis, String)> = cases
         .par_iter()
@@ -580,40 +597,74 @@ fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Resu
             Ok((dir.clone(), d, hash::hash_dir(dir)?.0))
         })
         .collect::<anyhow::Result<_>>()?;
-    for (dir, d, input_hash) in &results {
-        let target = if results.len() == 1 { out.to_path_buf() } else { out.join(&d.case) };
-        std::fs::create_dir_all(&target).with_context(|| format!("cannot create `{}`", target.display()))?;
-        let provenance = BTreeMap::from([
-            ("shakeflow.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
-            ("shakeflow.command".to_string(), "diagnose".to_string()),
-            ("shakeflow.case".to_string(), d.case.clone()),
-            ("shakeflow.input_hash".to_string(), input_hash.clone()),
-            ("shakeflow.params".to_string(), serde_json::to_string(&params)?),
-            ("shakeflow.verdict".to_string(), d.verdict.to_string()),
-        ]);
-        let mut accel = stages::diagnose::accel_table(d);
-        let mut camera = stages::diagnose::camera_table(d);
-        accel.metadata.extend(provenance.clone());
-        camera.metadata.extend(provenance.clone());
-        let png = stages::diagnose::figure(d).map_err(anyhow::Error::msg)?;
-        crate::io::parquet::write_table(&target.join("accel.parquet"), &accel)?;
-        crate::io::parquet::write_table(&target.join("camera.parquet"), &camera)?;
-        crate::io::mcap::write_timeseries(
-            &target.join("diagnosis.mcap"),
-            &[
-                crate::io::mcap::Topic { name: format!("/{}/accel", d.case), table: &accel },
-                crate::io::mcap::Topic { name: format!("/{}/camera", d.case), table: &camera },
-            ],
-            &provenance,
-        )?;
-        crate::io::atomic::write_file(&target.join("diagnosis.png"), |w| Ok(std::io::Write::write_all(w, &png)?))?;
-        // The contract file last: its presence means the folder is complete.
-        let json = stages::diagnose::json_bytes(d);
-        crate::io::atomic::write_file(&target.join("diagnosis.json"), |w| {
-            Ok(std::io::Write::write_all(w, json.as_bytes())?)
-        })?;
-        eprintln!("{} → {}", dir.display(), target.join("diagnosis.json").display());
+    let created = !out.exists();
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create `{}`", out.display()))?;
+    let result = (|| -> anyhow::Result<()> {
+        let lease = crate::pipeline::lease::Lease::acquire(out)?;
+        crate::pipeline::txn::recover(&lease)?;
+        refuse_foreign_output(out, cases, DIAGNOSE, None)?;
+        let transaction = crate::pipeline::txn::Transaction::begin(&lease)?;
+        let root = transaction.new_path("");
+        let written = (|| -> anyhow::Result<()> {
+            for (dir, d, input_hash) in &results {
+                let target = if results.len() == 1 { root.clone() } else { root.join(&d.case) };
+                std::fs::create_dir_all(&target).with_context(|| format!("cannot create `{}`", target.display()))?;
+                let provenance = BTreeMap::from([
+                    ("shakeflow.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+                    ("shakeflow.command".to_string(), "diagnose".to_string()),
+                    ("shakeflow.case".to_string(), d.case.clone()),
+                    ("shakeflow.input_hash".to_string(), input_hash.clone()),
+                    ("shakeflow.params".to_string(), serde_json::to_string(&params)?),
+                    ("shakeflow.verdict".to_string(), d.verdict.to_string()),
+                ]);
+                let mut accel = stages::diagnose::accel_table(d);
+                let mut camera = stages::diagnose::camera_table(d);
+                accel.metadata.extend(provenance.clone());
+                camera.metadata.extend(provenance.clone());
+                let png = stages::diagnose::figure(d).map_err(anyhow::Error::msg)?;
+                crate::io::parquet::write_table(&target.join("accel.parquet"), &accel)?;
+                crate::io::parquet::write_table(&target.join("camera.parquet"), &camera)?;
+                crate::io::mcap::write_timeseries(
+                    &target.join("diagnosis.mcap"),
+                    &[
+                        crate::io::mcap::Topic { name: format!("/{}/accel", d.case), table: &accel },
+                        crate::io::mcap::Topic { name: format!("/{}/camera", d.case), table: &camera },
+                    ],
+                    &provenance,
+                )?;
+                crate::io::atomic::write_file(&target.join("diagnosis.png"), |w| {
+                    Ok(std::io::Write::write_all(w, &png)?)
+                })?;
+                // The contract file last: its presence means the folder is complete.
+                let json = stages::diagnose::json_bytes(d);
+                crate::io::atomic::write_file(&target.join("diagnosis.json"), |w| {
+                    Ok(std::io::Write::write_all(w, json.as_bytes())?)
+                })?;
+                let shown = if results.len() == 1 { out.to_path_buf() } else { out.join(&d.case) };
+                eprintln!("{} → {}", dir.display(), shown.join("diagnosis.json").display());
+            }
+            crate::pipeline::ownership::write_marker(&root, DIAGNOSE, DIAGNOSE)
+        })();
+        if let Err(e) = written {
+            transaction.abort();
+            return Err(e);
+        }
+        let entries = |dir: &Path| -> Vec<String> {
+            std::fs::read_dir(dir)
+                .map(|e| e.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect())
+                .unwrap_or_default()
+        };
+        let install = entries(&root);
+        let remove: Vec<String> = entries(out)
+            .into_iter()
+            .filter(|e| e != crate::pipeline::lease::STATE_DIR && !install.contains(e))
+            .collect();
+        transaction.commit(&install, &remove, None)
+    })();
+    if result.is_err() && created {
+        let _ = std::fs::remove_dir(out);
     }
+    result?;
     eprintln!("{} case(s) in {:.1} s", results.len(), started.elapsed().as_secs_f64());
     Ok(())
 }

@@ -360,7 +360,7 @@ fn stage_output_never_replaces_a_folder_of_other_files() {
     };
     for (input, message) in [
         ("mine/daq.csv", "the input `mine/daq.csv` is inside the output folder"),
-        ("archive/FB-1/daq.csv", "was not written by `shakeflow stage`"),
+        ("archive/FB-1/daq.csv", "was not written by shakeflow"),
     ] {
         let out = load(input, "mine");
         assert!(!out.status.success() && stderr(&out).contains(message), "{}", stderr(&out));

@@ -200,3 +200,16 @@ fn stage_output_over_another_stage_types_output_is_refused() {
     let again = shakeflow(&["stage", "baseline", "-i", "loaded/records", "-o", "based", "--set", "order=2"], root);
     assert!(again.status.success(), "{}", stderr(&again));
 }
+
+#[test]
+fn diagnose_out_never_replaces_a_folder_it_did_not_write() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    write(root, "report/thesis.tex", "years of work");
+    let case = shared_dir().join("cases/demo/demo_01");
+    let out = shakeflow(&["diagnose", case.to_str().unwrap(), "--out", "report"], root);
+    let message = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{message}");
+    assert!(message.contains("was not written by"), "{message}");
+    assert_eq!(std::fs::read_to_string(root.join("report/thesis.tex")).unwrap(), "years of work");
+}
