@@ -54,8 +54,21 @@ enum Command {
         #[arg(long, short = 'q')]
         quiet: bool,
     },
-    /// Show which stages are stale and why (changed params, inputs, stage version, missing outputs).
+    /// Show which stages are stale and why (changed params, inputs, stage version, missing outputs),
+    /// and stage folders the pipeline no longer has.
     Status { pipeline: PathBuf },
+    /// Remove the stage folders of stages the pipeline no longer has (only folders shakeflow wrote).
+    ///
+    /// Example: after deleting the stage `old_baseline` from pipelines/demo.yaml,
+    ///   shakeflow gc pipelines/demo.yaml --dry-run   lists runs/demo/old_baseline and its size
+    ///   shakeflow gc pipelines/demo.yaml             removes it (one commit, like a run)
+    #[command(verbatim_doc_comment)]
+    Gc {
+        pipeline: PathBuf,
+        /// List what would be removed, remove nothing.
+        #[arg(long)]
+        dry_run: bool,
+    },
     /// Check a pipeline file without running it: keys, stage types, parameters, inputs, cycles, source files (the first of each read as `load` would).
     Validate {
         pipeline: PathBuf,
@@ -179,6 +192,17 @@ pub fn main() -> anyhow::Result<ExitCode> {
                 }
             }
             println!("{stale} of {} stage(s) stale; lockfile {}", lines.len(), executor::lock_path(&plan).display());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Gc { pipeline, dry_run } => {
+            let plan = Plan::new(PipelineFile::read(&pipeline)?)?;
+            let removed = executor::gc(&plan, dry_run)?;
+            let verb = if dry_run { "would remove" } else { "removed" };
+            for (stage, bytes) in &removed {
+                println!("{verb} {} ({:.1} MB)", plan.file.output_dir().join(stage).display(), *bytes as f64 / 1e6);
+            }
+            let total: u64 = removed.iter().map(|(_, b)| b).sum();
+            println!("{} orphaned stage folder(s), {:.1} MB {verb}", removed.len(), total as f64 / 1e6);
             Ok(ExitCode::SUCCESS)
         }
         Command::Validate { pipeline, skip_inputs } => {

@@ -360,6 +360,14 @@ pub fn status(plan: &Plan, notes: &mut Vec<String>) -> Result<Vec<StatusLine>, U
         }
     }
     let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
+    ownership::check_pipeline(&plan.file, &lock)?;
+    let stages: Vec<&str> = plan.stages.keys().map(String::as_str).collect();
+    for orphan in ownership::orphaned_stage_folders(&output_dir, &stages) {
+        notes.push(format!(
+            "`{}` holds the outputs of stage `{orphan}`, which the pipeline no longer has (`shakeflow gc` removes it)",
+            output_dir.join(&orphan).display()
+        ));
+    }
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;
     let mut produced: BTreeMap<String, Produced> = BTreeMap::new();
@@ -419,6 +427,7 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
         ));
     }
     let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
+    ownership::check_pipeline(&plan.file, &lock)?;
     ownership::check_stage_folders(&plan.file, &output_dir, plan.stages.keys().map(String::as_str), &lock)?;
     let transaction = Transaction::begin(&lease)?;
     let result = run_stages(plan, &forced, &lock, &sources, &files, &output_dir, &transaction, reporter);
@@ -432,6 +441,28 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
             Err(e)
         }
     }
+}
+
+/// `shakeflow gc`: removes (in one commit, under the lease) the stage folders shakeflow wrote for
+/// stages the pipeline no longer has; returns each with its size in bytes. Nothing else is
+/// touched: a folder without shakeflow's marker is never an orphan.
+pub fn gc(plan: &Plan, dry_run: bool) -> anyhow::Result<Vec<(String, u64)>> {
+    let output_dir = plan.file.output_dir();
+    if !output_dir.is_dir() {
+        return Ok(Vec::new());
+    }
+    let lease = Lease::acquire(&output_dir)?;
+    txn::recover(&lease)?;
+    let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
+    ownership::check_pipeline(&plan.file, &lock)?;
+    let stages: Vec<&str> = plan.stages.keys().map(String::as_str).collect();
+    let orphans = ownership::orphaned_stage_folders(&output_dir, &stages);
+    let sized: Vec<(String, u64)> =
+        orphans.iter().map(|o| (o.clone(), hash::tree_bytes(&output_dir.join(o)))).collect();
+    if !dry_run && !orphans.is_empty() {
+        Transaction::begin(&lease)?.commit(&[], &orphans, None)?;
+    }
+    Ok(sized)
 }
 
 /// Every file a run reads: record files and files named by parameters.
@@ -538,6 +569,7 @@ fn run_stages(
         ordered.iter().filter(|r| matches!(r.outcome, Outcome::Ran { .. })).map(|r| r.name.clone()).collect();
     let new_lock = LockFile {
         version: lock.version.max(1),
+        pipeline: Some(ownership::pipeline_label(&plan.file)),
         stages: entries.into_inner().map_err(|_| anyhow!("a stage panicked"))?,
     };
     Ok((ordered, new_lock, rerun))

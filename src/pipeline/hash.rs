@@ -38,6 +38,16 @@ pub fn list_files(dir: &Path) -> anyhow::Result<Vec<String>> {
     Ok(files)
 }
 
+/// Bytes of the files below `dir` (for reports; unreadable entries count nothing).
+pub fn tree_bytes(dir: &Path) -> u64 {
+    list_files(dir)
+        .unwrap_or_default()
+        .iter()
+        .filter_map(|f| std::fs::metadata(dir.join(f)).ok())
+        .map(|m| m.len())
+        .sum()
+}
+
 /// Content hashes of files this run has just written, by path, computed from the bytes as they
 /// were written: the cache then need not read them back.
 pub type KnownHashes = HashMap<PathBuf, String>;

@@ -15,6 +15,10 @@ const LOCK_FORMAT: u32 = 1;
 #[serde(deny_unknown_fields)]
 pub struct LockFile {
     pub version: u32,
+    /// The pipeline file that owns the output folder, relative to it (`../pipelines/demo.yaml`):
+    /// a second pipeline writing into the same folder is refused.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pipeline: Option<String>,
     pub stages: BTreeMap<String, StageLock>,
 }
 
@@ -48,7 +52,7 @@ impl LockFile {
         let text = match std::fs::read_to_string(path) {
             Ok(text) => text,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-                return Ok(LockFile { version: LOCK_FORMAT, stages: BTreeMap::new() })
+                return Ok(LockFile { version: LOCK_FORMAT, pipeline: None, stages: BTreeMap::new() })
             }
             Err(e) => return Err(UserError::new(format!("cannot read the lockfile: {e}")).in_file(path)),
         };

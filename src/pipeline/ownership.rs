@@ -141,6 +141,57 @@ pub fn check_stage_folders<'a>(
     Ok(())
 }
 
+/// How the lockfile names the pipeline that owns its folder: the pipeline file's path relative
+/// to the output folder, both resolved (`../pipelines/demo.yaml`); the same on every machine.
+pub fn pipeline_label(file: &PipelineFile) -> String {
+    let from = resolved(&file.output_dir());
+    let to = resolved(&file.path);
+    let common = from.components().zip(to.components()).take_while(|(a, b)| a == b).count();
+    let ups = from.components().count() - common;
+    let mut parts: Vec<String> = vec!["..".to_string(); ups];
+    parts.extend(to.components().skip(common).map(|c| c.as_os_str().to_string_lossy().into_owned()));
+    parts.join("/")
+}
+
+/// Refuses a pipeline writing into an output folder whose lockfile belongs to another pipeline:
+/// the two would replace each other's stages without a word.
+pub fn check_pipeline(file: &PipelineFile, lock: &LockFile) -> Result<(), UserError> {
+    let ours = pipeline_label(file);
+    match &lock.pipeline {
+        Some(owner) if *owner != ours => Err(file
+            .error_at(
+                &["output_dir"],
+                format!(
+                    "`output_dir: {}` holds the results of another pipeline, `{owner}` (relative to that folder; its lockfile says so)",
+                    file.spec.output_dir
+                ),
+            )
+            .hint(format!(
+                "two pipelines writing one folder would replace each other's stages: give this one its own `output_dir`. \
+                 If you moved or renamed the pipeline file, delete `{}` to hand the folder over (every stage then reruns)",
+                file.output_dir().join(super::lock::LOCK_FILE).display()
+            ))),
+        _ => Ok(()),
+    }
+}
+
+/// Stage folders of `output_dir` that shakeflow wrote (they carry a marker) for a stage the
+/// pipeline no longer has, sorted.
+pub fn orphaned_stage_folders(output_dir: &Path, stages: &[&str]) -> Vec<String> {
+    let Ok(entries) = std::fs::read_dir(output_dir) else { return Vec::new() };
+    let mut orphans: Vec<String> = entries
+        .flatten()
+        .filter(|e| e.file_type().is_ok_and(|t| t.is_dir()))
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let marker = read_marker(&e.path())?;
+            (marker.stage == name && !stages.contains(&name.as_str())).then_some(name)
+        })
+        .collect();
+    orphans.sort();
+    orphans
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

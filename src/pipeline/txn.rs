@@ -262,7 +262,7 @@ mod tests {
             fs::create_dir_all(txn.new_path(entry)).unwrap();
             fs::write(txn.new_path(entry).join("new"), entry).unwrap();
         }
-        let lock = LockFile { version: 1, stages: Default::default() };
+        let lock = LockFile { version: 1, pipeline: None, stages: Default::default() };
         txn.commit(&["a".into(), "b".into()], &["gone".into()], Some(&lock)).unwrap();
         assert_eq!(tree(root.path()), ["a/new", "b/new", "keep/k", "shakeflow.lock"]);
     }

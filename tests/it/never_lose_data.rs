@@ -213,3 +213,57 @@ fn diagnose_out_never_replaces_a_folder_it_did_not_write() {
     assert!(message.contains("was not written by"), "{message}");
     assert_eq!(std::fs::read_to_string(root.join("report/thesis.tex")).unwrap(), "years of work");
 }
+
+#[test]
+fn gc_removes_only_the_folders_of_stages_the_pipeline_dropped() {
+    let project = small_project();
+    let root = project.path();
+    let out = shakeflow(&["run", "pipeline.yaml"], root);
+    assert!(out.status.success(), "{}", stderr(&out));
+    write(root, "out/NOTES.txt", "mine");
+    write(root, "out/plots/fig.png", "mine too");
+    // The stage `baseline` leaves the pipeline: its folder is an orphan, the user's are not.
+    let without = PIPELINE[..PIPELINE.find("  baseline:").unwrap()].to_string();
+    write(root, "pipeline.yaml", &without);
+    let status = shakeflow(&["status", "pipeline.yaml"], root);
+    assert!(
+        stdout(&status).contains("holds the outputs of stage `baseline`, which the pipeline no longer has"),
+        "{}",
+        stdout(&status)
+    );
+    let dry = shakeflow(&["gc", "pipeline.yaml", "--dry-run"], root);
+    assert!(stdout(&dry).contains("would remove out/baseline"), "{}", stdout(&dry));
+    assert!(root.join("out/baseline").is_dir());
+    let gc = shakeflow(&["gc", "pipeline.yaml"], root);
+    assert!(gc.status.success(), "{}", stderr(&gc));
+    assert!(stdout(&gc).contains("1 orphaned stage folder(s)"), "{}", stdout(&gc));
+    assert!(!root.join("out/baseline").exists());
+    assert!(
+        root.join("out/NOTES.txt").is_file()
+            && root.join("out/plots/fig.png").is_file()
+            && root.join("out/load").is_dir()
+    );
+    let again = shakeflow(&["run", "pipeline.yaml"], root);
+    assert!(stderr(&again).contains("0 ran, 1 cached"), "{}", stderr(&again));
+}
+
+#[test]
+fn a_second_pipeline_writing_into_anothers_output_dir_is_refused() {
+    let project = small_project();
+    let root = project.path();
+    let out = shakeflow(&["run", "pipeline.yaml"], root);
+    assert!(out.status.success(), "{}", stderr(&out));
+    write(root, "other.yaml", PIPELINE);
+    let before = snapshot(&root.join("out"));
+    for command in ["run", "status"] {
+        let refused = shakeflow(&[command, "other.yaml"], root);
+        let message = stderr(&refused);
+        assert_eq!(refused.status.code(), Some(1), "{message}");
+        assert!(
+            message.contains("other.yaml:2:")
+                && message.contains("holds the results of another pipeline, `../pipeline.yaml`"),
+            "{message}"
+        );
+    }
+    assert_eq!(before, snapshot(&root.join("out")));
+}
