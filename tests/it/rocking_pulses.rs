@@ -5,7 +5,7 @@
 //! Checked against the scipy peer (tests/reference/rocking_scipy.py --pulse-table →
 //! rocking_pulses.json, same pulse sampled at 1 ms, same search): within 2e-3 (the two bisection
 //! tolerances). Zhang & Makris's trend: the minimum rises from about 1 for long pulses and grows
-//! with ω_p/p; the table is printed for the README.
+//! with ω_p/p; the table is printed for docs/models/toppling.md.
 use shakeflow::physics::rocking::{simulate, Block, Excitation, Options, Shape};
 
 const PULSE_DT: f64 = 1e-3;

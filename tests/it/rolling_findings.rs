@@ -7,7 +7,7 @@
 //! 3. the response is sensitive to the initial yaw and caster angles and to μ_s and μ_k —
 //!    beyond the numerical noise of the integration.
 //!
-//! `make rolling-findings` runs this with the tables printed (the numbers in README.md).
+//! `make rolling-findings` runs this with the tables printed (the numbers in docs/models/rolling.md).
 
 use std::collections::BTreeMap;
 
