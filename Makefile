@@ -28,7 +28,7 @@ help:
 	@echo "make prove   fresh concealed-effect cases (prove/generate_cases.py) scored against shakeflow diagnose"
 	@echo "             [SEED=n] [PER_EFFECT=5] [PROVE_JOBS=2]; make prove-check re-checks the generator's physics"
 	@echo "make schema  regenerate schemas/pipeline.schema.json from the stage registry"
-	@echo "make rolling-findings  the study's rolling findings on the demo archive, as tables (README.md)"
+	@echo "make rolling-findings  the study's rolling findings on the demo archive, as tables (docs/models/rolling.md)"
 
 release:
 	$(CARGO) build --release --locked
