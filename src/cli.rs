@@ -7,13 +7,14 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use clap::{Parser, Subcommand};
 
+use crate::io::hash;
 use crate::pipeline::executor::{self, Outcome, RunOptions};
 use crate::pipeline::params;
 use crate::pipeline::plan::Plan;
 use crate::pipeline::progress::Reporter;
 use crate::pipeline::sink::OutputSink;
+use crate::pipeline::sources;
 use crate::pipeline::spec::{PipelineFile, RecordFormat, SourceSpec};
-use crate::pipeline::{hash, sources};
 use crate::stages::{self, InputKind, InputPart, StageContext, StageInfo, StageInput};
 
 #[derive(Parser)]

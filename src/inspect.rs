@@ -11,8 +11,8 @@ use polars::prelude::*;
 use polars_io::parquet::read::ParquetReader;
 use polars_io::SerReader;
 
+use crate::io::hash;
 use crate::io::{mcap, parquet};
-use crate::pipeline::hash;
 use crate::table::ColumnData;
 
 pub fn describe(path: &Path, preview_rows: usize) -> anyhow::Result<String> {
@@ -97,7 +97,7 @@ fn describe_parquet(path: &Path, preview_rows: usize) -> anyhow::Result<String> 
 pub fn show(path: &Path, max_rows: usize, columns: &[String]) -> anyhow::Result<String> {
     // A stage's output is a folder of partitions: one part is shown as it is.
     if path.is_dir() {
-        let parts: Vec<String> = crate::pipeline::hash::list_files(path)?
+        let parts: Vec<String> = crate::io::hash::list_files(path)?
             .into_iter()
             .filter(|f| f.ends_with(crate::pipeline::sink::DATA_FILE))
             .collect();

@@ -15,7 +15,7 @@ use std::path::Path;
 use anyhow::{bail, Context};
 
 use crate::io::atomic;
-use crate::pipeline::hash::HashingWriter;
+use crate::io::hash::HashingWriter;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct Topic<'a> {
@@ -24,7 +24,7 @@ pub struct Topic<'a> {
 }
 
 /// Writes the twin and returns the content hash of its bytes (as
-/// [`hash_file`](crate::pipeline::hash::hash_file) would give).
+/// [`hash_file`](crate::io::hash::hash_file) would give).
 pub fn write_timeseries(
     path: &Path,
     topics: &[Topic<'_>],
@@ -273,7 +273,7 @@ mod tests {
         t.push(Column::f64("ax_mps2", "m/s^2", "accel", vec![1.0, f64::NAN, 3.0]));
         let meta = BTreeMap::from([("shakeflow.stage".to_string(), "demo".to_string())]);
         let written = write_timeseries(&path, &[Topic { name: "/a/motion=FB-4".into(), table: &t }], &meta).unwrap();
-        assert_eq!(written, crate::pipeline::hash::hash_file(&path).unwrap());
+        assert_eq!(written, crate::io::hash::hash_file(&path).unwrap());
         let s = summarize(&path).unwrap();
         assert_eq!(s.message_count, 3);
         assert_eq!(s.channels[0].0, "/a/motion=FB-4");

@@ -5,6 +5,7 @@ pub mod case;
 pub mod control_points;
 pub mod equipment;
 pub mod frames;
+pub mod hash;
 pub mod mcap;
 pub mod parquet;
 pub mod records;

@@ -20,7 +20,7 @@ use parquet::file::writer::{SerializedColumnWriter, SerializedFileWriter, Serial
 use parquet::schema::types::ColumnPath;
 
 use crate::io::atomic;
-use crate::pipeline::hash::HashingWriter;
+use crate::io::hash::HashingWriter;
 use crate::table::{Column, ColumnData, Table};
 
 /// The Arrow schema embedded beside a table's own metadata (as ArrowWriter does); not part of it.

@@ -14,7 +14,6 @@ use anyhow::{anyhow, Context};
 use rayon::prelude::*;
 use serde_json::json;
 
-use super::hash::{self, KnownHashes};
 use super::lease::Lease;
 use super::lock::{LockFile, OutputLock, StageLock, LOCK_FILE};
 use super::memo::{TableMemo, DEFAULT_BUDGET_BYTES};
@@ -26,6 +25,7 @@ use super::sources;
 use super::spec::RecordFormat;
 use super::txn::{self, Recovery, Transaction};
 use crate::error::UserError;
+use crate::io::hash::{self, KnownHashes};
 use crate::stages::{InputPart, StageContext, StageInput};
 
 #[derive(Debug, Clone, Default)]

@@ -2,7 +2,6 @@
 
 pub mod executor;
 pub mod failpoint;
-pub mod hash;
 pub mod lease;
 pub mod locate;
 pub mod lock;

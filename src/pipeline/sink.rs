@@ -8,8 +8,8 @@ use std::sync::{Arc, Mutex};
 
 use anyhow::{anyhow, bail};
 
+use crate::io::hash::{self, KnownHashes};
 use crate::io::{mcap, parquet};
-use crate::pipeline::hash::{self, KnownHashes};
 use crate::pipeline::memo::TableMemo;
 use crate::stages::{partition_path, OutputInfo, OutputKind, Partition, StageInfo};
 use crate::table::Table;

@@ -244,7 +244,7 @@ mod tests {
     use super::*;
 
     fn tree(dir: &Path) -> Vec<String> {
-        let mut files = super::super::hash::list_files(dir).unwrap();
+        let mut files = crate::io::hash::list_files(dir).unwrap();
         files.retain(|f| !f.starts_with(".shakeflow/lease"));
         files
     }

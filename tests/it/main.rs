@@ -26,6 +26,7 @@ mod rolling_findings;
 mod rolling_peers;
 mod rolling_stage;
 mod sdof_identification;
+mod tidy;
 mod toppling_demo_archive;
 mod toppling_demo_cases;
 mod toppling_robustness;
