@@ -171,7 +171,7 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
             return Err(err(format!(
                 "the time column `{name}` overflows in unit conversion: its sample {} ({}) times {factor} is not a finite number of seconds",
                 i + 1,
-                channel.values[i]
+                short(channel.values[i])
             ))
             .at(channel.first_data_line.map(|l| (l + i, 1)))
             .hint("the value is damaged, or `time_unit` is wrong"));
@@ -290,7 +290,7 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
                 "column `{}` overflows in unit conversion: sample {} ({} {unit_name}) times {factor} is not a finite number of {}",
                 channel.name,
                 i + 1,
-                channel.values[i],
+                short(channel.values[i]),
                 conversion.si_unit
             ))
             .at(channel.first_data_line.filter(|_| explicit_time.is_some() || spec.format != RecordFormat::At2).map(|l| (l + i, 1)))
@@ -358,6 +358,15 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
 
 /// More samples than this many times a record's own would come from a damaged time column.
 const MAX_RESAMPLING_GROWTH: usize = 100;
+
+/// A number as a message shows it: 1e308, not 309 digits.
+fn short(v: f64) -> String {
+    if v != 0.0 && !(1e-4..1e15).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        v.to_string()
+    }
+}
 
 /// The first value that was finite in the file and is not after unit conversion.
 fn overflowed(raw: &[f64], converted: &[f64]) -> Option<usize> {
