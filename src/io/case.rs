@@ -52,6 +52,22 @@ fn sensor_number(sensors: Option<&serde_yaml::Value>, sensor: &str, key: &str) -
     sensors?.get(sensor)?.get(key)?.as_f64()
 }
 
+/// [`read_case`], then the folder hashed again: a case whose files changed since the run hashed
+/// them when it was planned (`expected_hash`; empty: unchecked) is refused, so the diagnosis
+/// holds what its provenance names.
+pub fn read_case_unchanged(dir: &Path, expected_hash: &str) -> Result<Case, UserError> {
+    let case = read_case(dir)?;
+    if expected_hash.is_empty() {
+        return Ok(case);
+    }
+    let now = crate::io::hash::hash_dir(dir).map_err(|e| UserError::new(format!("{e:#}")).in_file(dir))?.0;
+    if now != expected_hash {
+        return Err(UserError::new(format!("`{}` changed while this run was reading it", dir.display()))
+            .hint("another program is writing into the case folder; rerun when it is no longer being written"));
+    }
+    Ok(case)
+}
+
 pub fn read_case(dir: &Path) -> Result<Case, UserError> {
     if !dir.is_dir() {
         return Err(UserError::new(format!("`{}` is not a folder", dir.display())).hint(LAYOUT_HINT));

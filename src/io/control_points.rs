@@ -5,6 +5,7 @@
 use std::path::Path;
 
 use crate::error::UserError;
+use crate::io::records::{decode, printable, read_bytes, unchanged, ParseError};
 use crate::vision::calibrate::ControlPoint;
 
 pub const COLUMNS: [&str; 5] = ["X_mm", "Y_mm", "Z_mm", "u_px", "v_px"];
@@ -16,14 +17,28 @@ pub struct NamedControlPoint {
     pub line: usize,
 }
 
-pub fn read_control_points(path: &Path) -> Result<Vec<NamedControlPoint>, UserError> {
-    let text = std::fs::read_to_string(path).map_err(|e| {
-        UserError::new(format!("cannot read the control points: {e}")).in_file(path).hint("check the path")
-    })?;
+/// Reads the control points of `path` from one read of its bytes, which must hash to
+/// `expected_hash` (the hash the run took when it was planned; empty: unchecked).
+pub fn read_control_points(path: &Path, expected_hash: &str) -> Result<Vec<NamedControlPoint>, UserError> {
+    let as_user_error = |e: ParseError| {
+        UserError::new(e.message).in_file(path).at(e.line.map(|l| (l, e.column.unwrap_or(1)))).hint(e.hint)
+    };
+    let bytes = read_bytes(path).map_err(as_user_error)?;
+    unchanged(path, expected_hash, &bytes).map_err(as_user_error)?;
+    let text = decode(path, &bytes).map_err(as_user_error)?;
+    parse(path, &text).map_err(|mut e| {
+        // Messages quote the file's cells and names.
+        e.message = printable(&e.message).into_owned();
+        e
+    })
+}
+
+/// The control points in the text of a control-point file; `path` only names it in errors.
+pub fn parse(path: &Path, text: &str) -> Result<Vec<NamedControlPoint>, UserError> {
     let mut lines = text
         .lines()
         .enumerate()
-        .map(|(i, l)| (i + 1, l.trim_start_matches('\u{feff}').trim_end_matches('\r')))
+        .map(|(i, l)| (i + 1, l.trim_end_matches('\r')))
         .filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
     let expected = format!("a header row naming {} (and optionally `point`)", COLUMNS.join(", "));
     let Some((header_line, header)) = lines.next() else {
@@ -92,13 +107,13 @@ mod tests {
         let path = dir.path().join("cp.csv");
         std::fs::write(&path, "# surveyed\npoint,X_mm,Y_mm,Z_mm,u_px,v_px\nA,0,0,0,10.5,20\nB,100,0,0,110,21\n")
             .unwrap();
-        let points = read_control_points(&path).unwrap();
+        let points = read_control_points(&path, "").unwrap();
         assert_eq!(points.len(), 2);
         assert_eq!((points[1].name.as_str(), points[1].point.world[0], points[1].line), ("B", 100.0, 4));
         std::fs::write(&path, "X_mm,Y_mm,Z_mm,u_px,v_px\n0,0,0,1,2\n1,2,x3,4,5\n").unwrap();
-        let err = read_control_points(&path).unwrap_err();
+        let err = read_control_points(&path, "").unwrap_err();
         assert_eq!((err.line, err.column), (Some(3), Some(5)), "{err}");
         std::fs::write(&path, "X_mm,Y_mm,u_px,v_px\n").unwrap();
-        assert!(read_control_points(&path).unwrap_err().message.contains("no `Z_mm` column"));
+        assert!(read_control_points(&path, "").unwrap_err().message.contains("no `Z_mm` column"));
     }
 }

@@ -8,6 +8,8 @@ use std::path::Path;
 use serde::Deserialize;
 
 use crate::error::UserError;
+use crate::io::records::{decode, read_bytes};
+use crate::pipeline::spec::yaml_refusal;
 
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -34,14 +36,27 @@ pub struct RockingEquipment {
 }
 
 pub fn read_rocking_equipment(path: &Path) -> Result<RockingEquipment, UserError> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| UserError::new(format!("cannot read the equipment file: {e}")).in_file(path))?;
-    serde_yaml::from_str(&text).map_err(|e| {
+    let bytes = read_bytes(path)
+        .map_err(|e| UserError::new(format!("cannot read the equipment file: {}", e.message)).in_file(path))?;
+    let text = decode(path, &bytes).map_err(|e| {
+        UserError::new(format!("not an equipment file: {}", e.message))
+            .in_file(path)
+            .at(e.line.map(|l| (l, 1)))
+            .hint(e.hint)
+    })?;
+    parse_rocking_equipment(path, &text)
+}
+
+/// The equipment described by the text of an equipment file; `path` only names it in errors.
+pub fn parse_rocking_equipment(path: &Path, text: &str) -> Result<RockingEquipment, UserError> {
+    serde_yaml::from_str(text).map_err(|e| {
         let position = e.location().map(|l| (l.line(), l.column()));
-        UserError::new(format!("not a valid equipment file: {e}")).in_file(path).at(position).hint(
+        let (message, hint) = yaml_refusal(
+            &e,
             "keys: shape (rectangular|trapezoidal), B_m, H_m, f, mass_kg, B1_m, B2_m, g_mps2 \
              (plus the descriptive name, description, e_formula, derived, sensors, conventions)",
-        )
+        );
+        UserError::new(format!("not a valid equipment file: {message}")).in_file(path).at(position).hint(hint)
     })
 }
 

@@ -205,20 +205,33 @@ pub struct PipelineFile {
 
 impl PipelineFile {
     pub fn read(path: &Path) -> Result<Self, UserError> {
-        let text = std::fs::read_to_string(path).map_err(|e| {
+        let bytes = std::fs::read(path).map_err(|e| {
             UserError::new(format!("cannot read the pipeline file: {e}"))
                 .in_file(path)
                 .hint("give the path of a pipeline YAML file, e.g. `pipelines/demo.yaml`")
+        })?;
+        if let Some(not_text) = crate::io::records::not_text(&bytes) {
+            return Err(not_a_pipeline(path, not_text));
+        }
+        let text = String::from_utf8(bytes).map_err(|e| {
+            let valid = &e.as_bytes()[..e.utf8_error().valid_up_to()];
+            let line = valid.iter().filter(|&&b| b == b'\n').count() + 1;
+            let column = valid.iter().rev().take_while(|&&b| b != b'\n').filter(|&&b| b & 0xc0 != 0x80).count() + 1;
+            UserError::new(format!("the pipeline file is not UTF-8 text: byte {} is not valid UTF-8", valid.len() + 1))
+                .in_file(path)
+                .at(Some((line, column)))
+                .hint("save the file as UTF-8 (a Latin-1 or Windows-1252 editor setting, or a binary file?)")
         })?;
         Self::parse(path, text)
     }
 
     pub fn parse(path: &Path, text: String) -> Result<Self, UserError> {
+        if let Some(not_text) = crate::io::records::not_text(text.as_bytes()) {
+            return Err(not_a_pipeline(path, not_text));
+        }
         let refuse = |e: serde_yaml::Error, hint: &str| {
             let position = e.location().map(|l| (l.line(), l.column()));
-            let message = e.to_string();
-            // serde_yaml appends " at line L column C"; the position is already in the prefix.
-            let message = message.split(" at line ").next().unwrap_or(&message).to_string();
+            let (message, hint) = yaml_refusal(&e, hint);
             UserError::new(message).in_file(path).at(position).hint(hint)
         };
         // Typed maps keep the last of two equal keys without a word: a generic parse refuses them.
@@ -261,6 +274,39 @@ impl PipelineFile {
     }
 }
 
+fn not_a_pipeline(path: &Path, not_text: crate::io::records::NotText) -> UserError {
+    UserError::new(format!("not a pipeline file: {}", not_text.message))
+        .in_file(path)
+        .at(not_text.line.map(|l| (l, 1)))
+        .hint(format!("{}; a pipeline is a YAML text file", not_text.hint))
+}
+
+/// The message and hint for a YAML file serde_yaml refused: the limits it guards are named for
+/// what they are (an alias bomb, nesting too deep), other refusals take `hint`. Messages quote
+/// the file: its control characters are escaped.
+pub fn yaml_refusal(e: &serde_yaml::Error, hint: &str) -> (String, String) {
+    let message = e.to_string();
+    // serde_yaml appends " at line L column C"; the position is already in the prefix.
+    let message = message.split(" at line ").next().unwrap_or(&message);
+    let (message, hint) = if message.contains("repetition limit exceeded") {
+        (
+            "the YAML expands aliases (`*name`) into too many values (an alias bomb, \"billion laughs\"): refused"
+                .to_string(),
+            "anchors (`&name`) and aliases (`*name`) that repeat each other multiply: write the values out, or alias \
+             only small values"
+                .to_string(),
+        )
+    } else if message.contains("recursion limit exceeded") {
+        (
+            "the YAML nests lists or mappings too deeply (more than 128 levels): refused".to_string(),
+            "a pipeline is a few levels deep; look for runaway `[` or `{` or indentation".to_string(),
+        )
+    } else {
+        (message.to_string(), hint.to_string())
+    };
+    (crate::io::records::printable(&message).into_owned(), hint)
+}
+
 /// `a/b/../c` → `a/c` without touching the disk (the folder may not exist yet); for paths users read.
 pub fn lexically_normal(path: &Path) -> PathBuf {
     use std::path::Component;
@@ -298,6 +344,48 @@ mod tests {
         assert_eq!(err.line, Some(6), "{err}");
         assert!(err.message.contains("unknown field `parms`"), "{err}");
         assert!(err.message.contains("expected one of"), "{err}");
+    }
+
+    /// Used to say "repetition limit exceeded" with the hint for duplicate keys.
+    #[test]
+    fn an_alias_bomb_is_named_for_what_it_is() {
+        let mut text = String::from(
+            "version: 1\noutput_dir: out\nstages: {}\nbomb:\n  a0: &a0 [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n",
+        );
+        for k in 1..10 {
+            let prev = format!("*a{}", k - 1);
+            text.push_str(&format!("  a{k}: &a{k} [{}]\n", vec![prev.as_str(); 9].join(", ")));
+        }
+        let err = PipelineFile::parse(Path::new("p.yaml"), text).unwrap_err();
+        assert!(err.message.contains("alias bomb"), "{err}");
+        assert!(!err.to_string().contains("key given twice"), "{err}");
+    }
+
+    #[test]
+    fn binary_and_utf16_pipelines_are_named_as_such() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("p.yaml");
+        let text = "version: 1\noutput_dir: out\nstages: {}\n";
+        let utf16: Vec<u8> = text.encode_utf16().flat_map(u16::to_le_bytes).collect();
+        for bytes in [[&[0xfe, 0xff][..], &utf16].concat(), utf16.clone(), b"\x1f\x8b\x08\x00\x1b[2J".to_vec()] {
+            std::fs::write(&path, &bytes).unwrap();
+            let err = PipelineFile::read(&path).unwrap_err().to_string();
+            assert!(err.contains("not a pipeline file: binary or UTF-16 file"), "{err}");
+            assert!(!err.chars().any(|c| c.is_control() && c != '\n'), "{err:?}");
+        }
+        std::fs::write(&path, b"version: 1\noutput_dir: caf\xe9\nstages: {}\n").unwrap();
+        let err = PipelineFile::read(&path).unwrap_err();
+        assert_eq!((err.line, err.column), (Some(2), Some(16)), "{err}");
+        assert!(err.message.contains("not UTF-8 text"), "{err}");
+    }
+
+    /// serde_yaml quotes the offending text: its control characters reach no terminal.
+    #[test]
+    fn yaml_messages_escape_control_characters() {
+        let text = "version: 1\noutput_dir: out\nstages: {}\n\"\\e[2Jkey\": 1\n";
+        let err = PipelineFile::parse(Path::new("p.yaml"), text.into()).unwrap_err();
+        assert!(err.message.contains("\\u{1b}[2Jkey"), "{err}");
+        assert!(!err.to_string().contains('\u{1b}'), "{err:?}");
     }
 
     #[test]

@@ -5,6 +5,7 @@ use rayon::prelude::*;
 use serde_json::json;
 
 use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use crate::io::records::printable;
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::signal::baseline::PolynomialBasis;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -61,8 +62,8 @@ impl Stage for Baseline {
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
             let table = ctx.read_table(part)?;
-            let mut corrected =
-                correct(&table, order, &wanted).map_err(|e| anyhow::anyhow!("{}: {e}", part.path.display()))?;
+            let mut corrected = correct(&table, order, &wanted)
+                .map_err(|e| anyhow::anyhow!("{}: {}", part.path.display(), printable(&e)))?;
             corrected.metadata.extend(super::record_provenance(part));
             ctx.sink.write("records", &part.partition, corrected)
         })
@@ -82,15 +83,19 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
             None => return Err(format!("no column `{name}`; columns: {}", table.column_names().join(", "))),
         }
     }
+    if let Some(i) = time.iter().position(|t| !t.is_finite()) {
+        return Err(format!("`{TIME_COLUMN}` has a non-finite value at sample {}", i + 1));
+    }
     let basis = PolynomialBasis::new(time, order);
     let mut out = Table { columns: Vec::new(), metadata: table.metadata.clone() };
+    let mut columns = Vec::with_capacity(table.columns.len());
     let mut fits = serde_json::Map::new();
     for column in &table.columns {
         let selected = column.name != TIME_COLUMN
             && matches!(column.data, ColumnData::F64(_))
             && (wanted.is_empty() || wanted.contains(&column.name));
         if !selected {
-            out.push(column.clone());
+            columns.push(column.clone());
             continue;
         }
         let values = column.as_f64().expect("selected columns are float");
@@ -102,6 +107,13 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
             ));
         }
         let (corrected, fit) = basis.remove(values);
+        if corrected.iter().chain(&fit.coefficients).any(|v| !v.is_finite()) {
+            let peak = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            return Err(format!(
+                "column `{}`: the order-{order} baseline fit is not finite: its values reach {peak:e} {}, beyond what a least-squares fit can square and sum",
+                column.name, column.unit
+            ));
+        }
         let rms_removed =
             (values.iter().zip(&corrected).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / values.len() as f64).sqrt();
         fits.insert(
@@ -115,16 +127,50 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
                 "unit": column.unit,
             }),
         );
-        out.push(Column {
+        columns.push(Column {
             name: column.name.clone(),
             unit: column.unit.clone(),
             description: format!("{} (order-{order} polynomial baseline removed)", column.description),
             data: ColumnData::F64(corrected),
         });
     }
+    out.extend(columns);
     out.metadata.insert(
         "shakeflow.baseline".into(),
         json!({"order": order, "basis": "polyfit_coefficients: numpy.polyfit order (highest power first, t in s)", "fits": fits}).to_string(),
     );
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn table(values: Vec<f64>) -> Table {
+        let mut t = Table::new();
+        t.push(Column::f64(TIME_COLUMN, "s", "", (0..values.len()).map(|k| k as f64 * 0.01).collect()));
+        t.push(Column::f64("ax_mps2", "m/s^2", "", values));
+        t
+    }
+
+    /// 1e308 m/s² overflows the fit's sums of squares: it used to give a table of NaN.
+    #[test]
+    fn values_too_large_to_fit_are_an_error_not_nan() {
+        let mut values: Vec<f64> = (0..200).map(|k| (k as f64 * 0.3).sin()).collect();
+        values[17] = 1e308;
+        let e = correct(&table(values), 3, &[]).unwrap_err();
+        assert!(e.contains("column `ax_mps2`: the order-3 baseline fit is not finite"), "{e}");
+        assert!(e.contains("1e308 m/s^2"), "{e}");
+        let fine = correct(&table((0..200).map(|k| (k as f64 * 0.3).sin() * 1e150).collect()), 3, &[]).unwrap();
+        assert!(fine.f64_column("ax_mps2").unwrap().iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn a_non_finite_time_is_an_error() {
+        let mut t = table(vec![0.0; 10]);
+        if let ColumnData::F64(time) = &mut t.columns[0].data {
+            time[4] = f64::INFINITY;
+        }
+        assert!(correct(&t, 1, &[]).unwrap_err().contains("`time_s` has a non-finite value at sample 5"));
+    }
 }

@@ -50,7 +50,7 @@ impl Stage for CptCalibrate {
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
-            let points = read_control_points(&part.path)?;
+            let points = read_control_points(&part.path, &part.hash)?;
             let controls: Vec<_> = points.iter().map(|p| p.point).collect();
             let result = calibrate(&controls, model, outlier_sigma).map_err(|e| {
                 let hint = match e {

@@ -8,7 +8,7 @@ use serde_json::{json, Value};
 
 use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::diagnose::{diagnose, Diagnosis, Settings};
-use crate::io::case::read_case;
+use crate::io::case::read_case_unchanged;
 use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
 use crate::pipeline::spec::RecordFormat;
 use crate::table::{Column, Table, TIME_COLUMN};
@@ -54,7 +54,7 @@ impl Stage for Diagnose {
         let mut rows: Vec<(String, Diagnosis)> = parts
             .par_iter()
             .map(|part| {
-                let case = read_case(&part.path)?;
+                let case = read_case_unchanged(&part.path, &part.hash)?;
                 let d = diagnose(&case, &settings).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
                 let mut accel = accel_table(&d);
                 let mut camera = camera_table(&d);

@@ -1,7 +1,7 @@
 //! `load`: record files (delimited text, PEER AT2, RENADIC V1, SimCenter JSON) → uniform SI
 //! time-series tables, one per file, partitioned as the source's path template says.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 
 use rayon::prelude::*;
 use serde_json::json;
@@ -53,7 +53,8 @@ impl Stage for Load {
             files.entry((job.2.path.as_path(), ParseKey::of(job.0))).or_default().push(*job);
         }
         files.into_par_iter().try_for_each(|((path, _), jobs)| {
-            let raw = parse(jobs[0].0, path).map_err(anyhow::Error::new)?;
+            debug_assert!(jobs.iter().all(|job| job.2.path == path));
+            let raw = parse(jobs[0].0, jobs[0].2).map_err(anyhow::Error::new)?;
             jobs.into_par_iter().try_for_each(|(spec, source, part)| {
                 let mut table = load_parsed(spec, part, &raw).map_err(anyhow::Error::new)?;
                 table.metadata.insert("shakeflow.source".into(), source.to_string());
@@ -87,14 +88,28 @@ impl<'a> ParseKey<'a> {
     }
 }
 
-fn parse(spec: &SourceSpec, path: &std::path::Path) -> Result<RawRecord, UserError> {
-    let as_user_error = |e: records::ParseError| UserError {
-        file: Some(e.path.clone()),
+/// A reader's refusal as the error a user sees.
+fn user_error(e: records::ParseError) -> UserError {
+    UserError {
+        file: Some(e.path),
         line: e.line,
         column: e.column,
-        message: e.message.clone(),
-        hint: (!e.hint.is_empty()).then(|| e.hint.clone()),
-    };
+        message: e.message,
+        hint: (!e.hint.is_empty()).then_some(e.hint),
+    }
+}
+
+/// Parses the file of `part` from one read of its bytes, which must be the bytes the run hashed
+/// when it was planned (`part.hash`): the artifact then holds what its `shakeflow.input_hash` names.
+fn parse(spec: &SourceSpec, part: &InputPart) -> Result<RawRecord, UserError> {
+    let path = part.path.as_path();
+    if !spec.format.is_record() {
+        return Err(UserError::new(format!("`load` does not read `{}` sources", spec.format.name()))
+            .in_file(path)
+            .hint("a `frames` source feeds `cpt_track`, a `control_points` source `cpt_calibrate`, a `case` source `diagnose`"));
+    }
+    let bytes = records::read_bytes(path).map_err(user_error)?;
+    records::unchanged(path, &part.hash, &bytes).map_err(user_error)?;
     let delimited = |delimiter: Option<u8>| DelimitedOptions {
         delimiter,
         header_lines: spec.header_lines,
@@ -107,28 +122,33 @@ fn parse(spec: &SourceSpec, path: &std::path::Path) -> Result<RawRecord, UserErr
         Some(d) => d.bytes().next(),
     };
     match spec.format {
-        RecordFormat::At2 => records::read_at2(path),
-        RecordFormat::RenadicV1 => records::read_renadic_v1(path),
-        RecordFormat::SimcenterJson => records::read_simcenter_json(path),
-        RecordFormat::Csv => records::read_delimited(path, &delimited(delimiter.or(Some(b',')))),
-        RecordFormat::Tsv => records::read_delimited(path, &delimited(delimiter.or(Some(b'\t')))),
-        RecordFormat::Delimited => records::read_delimited(path, &delimited(delimiter)),
-        RecordFormat::Frames | RecordFormat::ControlPoints | RecordFormat::Case => {
-            return Err(UserError::new(format!("`load` does not read `{}` sources", spec.format.name()))
-                .in_file(path)
-                .hint("a `frames` source feeds `cpt_track`, a `control_points` source `cpt_calibrate`, a `case` source `diagnose`"))
-        }
+        RecordFormat::At2 => records::parse_at2(path, &bytes),
+        RecordFormat::RenadicV1 => records::parse_renadic_v1(path, &bytes),
+        RecordFormat::SimcenterJson => records::parse_simcenter_json(path, &bytes),
+        RecordFormat::Csv => records::parse_delimited(path, &bytes, &delimited(delimiter.or(Some(b',')))),
+        RecordFormat::Tsv => records::parse_delimited(path, &bytes, &delimited(delimiter.or(Some(b'\t')))),
+        RecordFormat::Delimited => records::parse_delimited(path, &bytes, &delimited(delimiter)),
+        RecordFormat::Frames | RecordFormat::ControlPoints | RecordFormat::Case => unreachable!("refused above"),
     }
-    .map_err(as_user_error)
+    .map_err(user_error)
 }
 
 /// Reads one file as the source spec says; every refusal names the file and, where it can, the line.
 pub fn load_record(spec: &SourceSpec, part: &InputPart) -> Result<Table, UserError> {
-    load_parsed(spec, part, &parse(spec, part.path.as_path())?)
+    load_parsed(spec, part, &parse(spec, part)?)
 }
 
 /// [`load_record`] of a file already parsed as `spec` says.
 fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Table, UserError> {
+    // Messages quote the file's column names: their control characters are escaped.
+    table_of(spec, part, raw).map_err(|mut e| {
+        e.message = records::printable(&e.message).into_owned();
+        e.hint = e.hint.map(|h| records::printable(&h).into_owned());
+        e
+    })
+}
+
+fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Table, UserError> {
     let path = part.path.as_path();
     let err = |message: String| UserError::new(message).in_file(path);
 
@@ -141,8 +161,21 @@ fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<T
                 .hint("set `time_column` to one of the file's columns, or drop it and give `dt`")
         })?;
         let channel = all[index];
+        if let Some(other) = all.iter().skip(index + 1).find(|c| &c.name == name) {
+            return Err(repeated_column(path, spec, raw, channel, other)
+                .hint("`time_column` cannot tell them apart: rename one in the file"));
+        }
         let factor = spec.time_unit.as_deref().and_then(units::conversion).map_or(1.0, |c| c.factor);
-        let time = channel.values.iter().map(|v| v * factor).collect();
+        let time: Vec<f64> = channel.values.iter().map(|v| v * factor).collect();
+        if let Some(i) = overflowed(&channel.values, &time) {
+            return Err(err(format!(
+                "the time column `{name}` overflows in unit conversion: its sample {} ({}) times {factor} is not a finite number of seconds",
+                i + 1,
+                short(channel.values[i])
+            ))
+            .at(channel.first_data_line.map(|l| (l + i, 1)))
+            .hint("the value is damaged, or `time_unit` is wrong"));
+        }
         let others = all.iter().enumerate().filter(|&(i, _)| i != index).map(|(_, c)| *c).collect();
         (Some((time, channel.first_data_line)), others)
     } else {
@@ -186,6 +219,13 @@ fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<T
             (0.0, dt, None)
         }
     };
+    // The step and the rate in the metadata are finite, and so is every time of the output.
+    if !(dt > 0.0 && (1.0 / dt).is_finite() && (t0 + (n - 1) as f64 * dt).is_finite()) {
+        return Err(err(format!(
+            "the sample interval {dt} s over {n} samples from t = {t0} s does not give finite, increasing times"
+        ))
+        .hint("the time column, DT or `dt` is damaged or in the wrong unit"));
+    }
 
     let selected: Vec<(String, &records::RawChannel, Option<&ColumnSpec>)> = if spec.columns.is_empty() {
         channels.iter().map(|c| (c.name.clone(), *c, None)).collect()
@@ -202,13 +242,28 @@ fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<T
             .collect::<Result<_, UserError>>()?
     };
 
+    distinct_names(path, spec, raw, &selected)?;
+
     let n_out = match &resampled_from {
-        Some(time) => ((time[n - 1] - t0) / dt).floor() as usize + 1,
+        Some(time) => {
+            // The median step of a damaged time column (a stray huge time, steps of 1e-300 s)
+            // could ask for more samples than memory holds: a resampled record keeps to a
+            // sane multiple of the samples it was made from.
+            let span = ((time[n - 1] - t0) / dt).floor();
+            if !(span.is_finite() && span < (MAX_RESAMPLING_GROWTH * n) as f64) {
+                return Err(err(format!(
+                    "resampling onto the median step ({dt} s) would turn {n} samples spanning {} s into {span:e}: more than {MAX_RESAMPLING_GROWTH} times as many",
+                    time[n - 1] - t0
+                ))
+                .hint("the time column has a damaged value or a gap far longer than the record; repair it"));
+            }
+            span as usize + 1
+        }
         None => n,
     };
     let mut table = Table::new();
     let time: Vec<f64> = (0..n_out).map(|k| t0 + k as f64 * dt).collect();
-    table.push(Column::f64(TIME_COLUMN, "s", "time from the start of the record", time));
+    let mut columns = vec![Column::f64(TIME_COLUMN, "s", "time from the start of the record", time)];
     let mut conversions = serde_json::Map::new();
     let mut gaps = serde_json::Map::new();
     for (out_name, channel, column_spec) in selected {
@@ -230,6 +285,17 @@ fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<T
         })?;
         let factor = conversion.factor * spec.scale * detail.and_then(|d| d.scale).unwrap_or(1.0);
         let mut values: Vec<f64> = channel.values.iter().map(|v| v * factor).collect();
+        if let Some(i) = overflowed(&channel.values, &values) {
+            return Err(err(format!(
+                "column `{}` overflows in unit conversion: sample {} ({} {unit_name}) times {factor} is not a finite number of {}",
+                channel.name,
+                i + 1,
+                short(channel.values[i]),
+                conversion.si_unit
+            ))
+            .at(channel.first_data_line.filter(|_| explicit_time.is_some() || spec.format != RecordFormat::At2).map(|l| (l + i, 1)))
+            .hint("the value is damaged, or the unit or `scale` is wrong; it is not a missing value, so `gaps: interpolate` does not fill it"));
+        }
         let missing = values.iter().filter(|v| !v.is_finite()).count();
         if missing > 0 {
             match spec.gaps {
@@ -252,13 +318,25 @@ fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<T
         if let Some(time) = &resampled_from {
             values = resample::resample_linear(time, &values, t0, dt, n_out);
         }
+        // Gap filling has nothing to start from in a column of gaps only: it stays NaN, never
+        // to be written. (Filling and resampling interpolate convexly: finite values stay finite.)
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            let cause = if missing == channel.values.len() {
+                "every value is missing: `gaps: interpolate` has nothing to interpolate from"
+            } else {
+                "gap filling or resampling left it undefined"
+            };
+            return Err(err(format!("column `{}`: output sample {} is not finite: {cause}", channel.name, i + 1))
+                .hint("check the column in the file, or leave it out with `columns:`"));
+        }
         let description = detail.and_then(|d| d.description.clone()).unwrap_or_else(|| {
             format!("`{}` of {}", channel.name, path.file_name().map(|f| f.to_string_lossy()).unwrap_or_default())
         });
         conversions
             .insert(out_name.clone(), json!({"file_column": channel.name, "file_unit": unit_name, "factor": factor}));
-        table.push(Column::f64(&out_name, conversion.si_unit, &description, values));
+        columns.push(Column::f64(&out_name, conversion.si_unit, &description, values));
     }
+    table.extend(columns);
     metadata.insert(
         "shakeflow.load".to_string(),
         json!({
@@ -276,6 +354,98 @@ fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<T
     );
     table.metadata = metadata;
     Ok(table)
+}
+
+/// More samples than this many times a record's own would come from a damaged time column.
+const MAX_RESAMPLING_GROWTH: usize = 100;
+
+/// A number as a message shows it: 1e308, not 309 digits.
+fn short(v: f64) -> String {
+    if v != 0.0 && !(1e-4..1e15).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        v.to_string()
+    }
+}
+
+/// The first value that was finite in the file and is not after unit conversion.
+fn overflowed(raw: &[f64], converted: &[f64]) -> Option<usize> {
+    raw.iter().zip(converted).position(|(r, c)| r.is_finite() && !c.is_finite())
+}
+
+/// Refuses output columns that would share a name: two channels of the file with one name, a
+/// channel named like the time column `load` adds, or a `columns:` entry naming a file column
+/// the file has twice (which of the two would be read?).
+fn distinct_names(
+    path: &std::path::Path,
+    spec: &SourceSpec,
+    raw: &RawRecord,
+    selected: &[(String, &records::RawChannel, Option<&ColumnSpec>)],
+) -> Result<(), UserError> {
+    let mut seen: HashMap<&str, &records::RawChannel> = HashMap::with_capacity(selected.len());
+    for (out, channel, column_spec) in selected {
+        if out == TIME_COLUMN {
+            let what = if column_spec.is_some() {
+                format!("the output column `{TIME_COLUMN}` under `columns:`")
+            } else {
+                format!("the file's column `{}`", channel.name)
+            };
+            return Err(UserError::new(format!(
+                "{what} would collide with the time column `{TIME_COLUMN}` that `load` writes"
+            ))
+            .in_file(path)
+            .at(name_line(spec, raw, channel).map(|l| (l, 1)))
+            .hint(format!(
+                "if it holds the time, set `time_column: {}` on the source; else give it another name with `columns:`",
+                channel.name
+            )));
+        }
+        if let Some(first) = seen.insert(out.as_str(), channel) {
+            return Err(repeated_column(path, spec, raw, first, channel).hint(
+                "pick the channels with `columns:` (output name: file column), leaving out the repeated name, or rename one in the file",
+            ));
+        }
+    }
+    // A selected file column given twice in the file: `columns:` would silently take the first.
+    let mut by_name: HashMap<&str, &records::RawChannel> = HashMap::with_capacity(raw.channels.len());
+    for channel in &raw.channels {
+        if let Some(first) = by_name.insert(channel.name.as_str(), channel) {
+            if selected.iter().any(|(_, c, s)| s.is_some() && c.name == channel.name) {
+                return Err(repeated_column(path, spec, raw, first, channel)
+                    .hint("`columns:` cannot tell them apart: rename one in the file"));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// "the file has two columns named `x`", at the line naming them where the format has one.
+fn repeated_column(
+    path: &std::path::Path,
+    spec: &SourceSpec,
+    raw: &RawRecord,
+    first: &records::RawChannel,
+    second: &records::RawChannel,
+) -> UserError {
+    let index = |c: &records::RawChannel| raw.channels.iter().position(|o| std::ptr::eq(o, c)).map_or(0, |i| i + 1);
+    UserError::new(format!(
+        "the file has two columns named `{}` (columns {} and {} of {})",
+        second.name,
+        index(first),
+        index(second),
+        raw.channels.len()
+    ))
+    .in_file(path)
+    .at(name_line(spec, raw, second).map(|l| (l, 1)))
+}
+
+/// The line that names `channel`: a delimited file's column-name row, an AT2 file's event line.
+fn name_line(spec: &SourceSpec, raw: &RawRecord, channel: &records::RawChannel) -> Option<usize> {
+    match raw.format {
+        "delimited" if spec.column_names => channel.first_data_line.map(|l| l - 1),
+        "at2" => Some(2),
+        _ => None,
+    }
 }
 
 fn missing_column(path: &std::path::Path, name: &str, channels: &[&records::RawChannel]) -> UserError {

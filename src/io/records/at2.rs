@@ -2,8 +2,8 @@
 //! values, any number per line.
 
 use super::{
-    char_column, empty_file_error, load, numbered_lines, offset_in, parse_finite, quote, ParseError, RawChannel,
-    RawRecord,
+    char_column, decode, empty_file_error, numbered_lines, offset_in, parse_finite, quote, read_bytes, ParseError,
+    RawChannel, RawRecord,
 };
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -13,7 +13,12 @@ const HEADER_FORMS: &str =
     "expected 'NPTS=   8773, DT=   .0050 SEC' (NGA) or '4096    0.0100    NPTS, DT' (older PEER)";
 
 pub fn read_at2(path: &Path) -> Result<RawRecord, ParseError> {
-    let text = load(path)?;
+    parse_at2(path, &read_bytes(path)?)
+}
+
+/// [`read_at2`] of a file's bytes; `path` only names the file in errors.
+pub fn parse_at2(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
+    let text = decode(path, bytes)?;
     if text.trim().is_empty() {
         return Err(empty_file_error(path, "a PEER AT2 record (4 header lines, then values)"));
     }
@@ -52,7 +57,25 @@ pub fn read_at2(path: &Path) -> Result<RawRecord, ParseError> {
         header.insert("filter".to_string(), filter);
     }
 
-    let mut values = Vec::with_capacity(npts);
+    // Each value takes a character and a separator: a count the data has no room for is a
+    // damaged header, refused before anything is allocated for it. (Without data, the file
+    // holds only its header: said below.)
+    let data = text.match_indices('\n').nth(HEADER_LINES - 1).map_or("", |(i, _)| &text[i + 1..]);
+    let (data_bytes, room) = (data.len(), data.len() / 2 + 1);
+    if npts > room && !data.trim().is_empty() {
+        let column = keyed_value(&head[3].to_ascii_uppercase(), "NPTS")
+            .map_or_else(|| head[3].len() - head[3].trim_start().len(), |(a, _)| a);
+        return Err(ParseError::new(
+            path,
+            Some(HEADER_LINES),
+            Some(char_column(head[3], column)),
+            format!(
+                "NPTS = {npts} (line {HEADER_LINES}) cannot be right: the {data_bytes} bytes after the header hold at most {room} values"
+            ),
+            "the NPTS on line 4 is damaged, or the file was cut short; get a fresh copy of the record",
+        ));
+    }
+    let mut values = Vec::with_capacity(npts.min(room));
     let mut first_data_line = None;
     let mut last_data_line = HEADER_LINES;
     for (number, line) in lines {

@@ -4,7 +4,9 @@
 //! Built for files of tens of MB: the file is read once and cells are parsed
 //! straight from `&str` slices, with no per-cell allocation.
 
-use super::{char_column, empty_file_error, load, numbered_lines, offset_in, ParseError, RawChannel, RawRecord};
+use super::{
+    char_column, decode, empty_file_error, numbered_lines, offset_in, read_bytes, ParseError, RawChannel, RawRecord,
+};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -75,7 +77,13 @@ fn clean(cell: &str) -> &str {
 }
 
 pub fn read_delimited(path: &Path, opts: &DelimitedOptions) -> Result<RawRecord, ParseError> {
-    let text = load(path)?;
+    parse_delimited(path, &read_bytes(path)?, opts)
+}
+
+/// [`read_delimited`] of a file's bytes; `path` only names the file in errors (and, without a
+/// delimiter in `opts`, its extension picks tab for `.tsv`/`.tab`).
+pub fn parse_delimited(path: &Path, bytes: &[u8], opts: &DelimitedOptions) -> Result<RawRecord, ParseError> {
+    let text = decode(path, bytes)?;
     if text.trim().is_empty() {
         return Err(empty_file_error(path, "rows of numbers, optionally under a column-name row"));
     }
@@ -139,7 +147,9 @@ pub fn read_delimited(path: &Path, opts: &DelimitedOptions) -> Result<RawRecord,
 
     let ncols = names.len();
     // Rough row count from the first data row, to allocate once.
-    let rows_estimate = body.len() / (first_data.len() + 1).max(8) + 1;
+    // A row takes at least a byte per cell: no more rows fit in the body than that allows,
+    // which bounds what a wide column-name row over a short first row could reserve.
+    let rows_estimate = (body.len() / (first_data.len() + 1).max(8)).min(body.len() / ncols) + 1;
     let mut columns: Vec<Vec<f64>> = (0..ncols).map(|_| Vec::with_capacity(rows_estimate)).collect();
     let ctx = Context { path, body, names: &names, names_line, splitter, opts, first_data_number };
     let mut row = Vec::with_capacity(ncols);

@@ -13,11 +13,12 @@ mod simcenter;
 #[cfg(test)]
 mod tests;
 
-pub use at2::read_at2;
-pub use delimited::{read_delimited, DelimitedOptions};
-pub use renadic::read_renadic_v1;
-pub use simcenter::read_simcenter_json;
+pub use at2::{parse_at2, read_at2};
+pub use delimited::{parse_delimited, read_delimited, DelimitedOptions};
+pub use renadic::{parse_renadic_v1, read_renadic_v1};
+pub use simcenter::{parse_simcenter_json, read_simcenter_json};
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::fmt;
 use std::io::Read;
@@ -69,8 +70,35 @@ impl ParseError {
         message: impl Into<String>,
         hint: impl Into<String>,
     ) -> Self {
-        ParseError { path: path.to_path_buf(), line, column, message: message.into(), hint: hint.into() }
+        // Messages quote the file (cells, lines, names): its control characters are escaped.
+        let (message, hint) = (message.into(), hint.into());
+        let (message, hint) = (printable(&message).into_owned(), printable(&hint).into_owned());
+        ParseError { path: path.to_path_buf(), line, column, message, hint }
     }
+}
+
+/// `text` with the characters a terminal would act on instead of showing escaped: control
+/// characters (`\r`, ESC, NUL, ...) and the invisible direction and zero-width marks, so a
+/// message quoting a file can neither rewrite the terminal nor disguise what it quotes.
+pub fn printable(text: &str) -> Cow<'_, str> {
+    let hidden = |c: char| {
+        c.is_control()
+            || matches!(c, '\u{200b}'..='\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2060}'..='\u{2069}' | '\u{feff}')
+    };
+    if !text.contains(hidden) {
+        return Cow::Borrowed(text);
+    }
+    let mut out = String::with_capacity(text.len() + 8);
+    for c in text.chars() {
+        match c {
+            '\t' => out.push_str("\\t"),
+            '\r' => out.push_str("\\r"),
+            '\n' => out.push_str("\\n"),
+            c if hidden(c) => out.push_str(&format!("\\u{{{:x}}}", u32::from(c))),
+            c => out.push(c),
+        }
+    }
+    Cow::Owned(out)
 }
 
 impl fmt::Display for ParseError {
@@ -123,26 +151,77 @@ pub fn sniff_format(path: &Path) -> Option<&'static str> {
     }
 }
 
-/// Read the whole file once. Invalid UTF-8 (e.g. a Latin-1 station name) is
-/// replaced rather than rejected: only the numbers matter, and a mangled
-/// number still fails with a precise message.
-fn load(path: &Path) -> Result<String, ParseError> {
-    let bytes = std::fs::read(path).map_err(|e| {
+/// The bytes of a file, read once: readers parse these very bytes, so a run can hash what it
+/// parses ([`unchanged`]).
+pub fn read_bytes(path: &Path) -> Result<Vec<u8>, ParseError> {
+    std::fs::read(path).map_err(|e| {
         let hint = match e.kind() {
             std::io::ErrorKind::NotFound => "check the path and the current directory",
             std::io::ErrorKind::PermissionDenied => "check the file's permissions",
             _ => "check that the path is a readable file",
         };
         ParseError::new(path, None, None, format!("cannot read the file: {e}"), hint)
-    })?;
-    let mut text = match String::from_utf8(bytes) {
-        Ok(s) => s,
-        Err(e) => String::from_utf8_lossy(e.as_bytes()).into_owned(),
-    };
-    if text.starts_with('\u{feff}') {
-        text.drain(..'\u{feff}'.len_utf8());
+    })
+}
+
+/// Refuses `bytes` when `expected_hash` (the blake3 hex taken when the run was planned; empty:
+/// unknown) is not their hash: the file was replaced or still being written while the run read
+/// it, and the artifact would hold other bytes than its provenance names.
+pub fn unchanged(path: &Path, expected_hash: &str, bytes: &[u8]) -> Result<(), ParseError> {
+    if expected_hash.is_empty() || crate::io::hash::hash_bytes(bytes) == expected_hash {
+        return Ok(());
     }
-    Ok(text)
+    Err(ParseError::new(
+        path,
+        None,
+        None,
+        format!(
+            "`{}` changed while this run was reading it: its content is no longer what the run hashed when it started",
+            path.display()
+        ),
+        "another program is writing or replacing it (an export or a copy still in progress?); rerun when it is no longer being written",
+    ))
+}
+
+/// The text of a record file. Invalid UTF-8 (e.g. a Latin-1 station name) is replaced rather
+/// than rejected: only the numbers matter, and a mangled number still fails with a precise
+/// message. A UTF-16 file or one holding NUL bytes (binary, compressed, UTF-16 without a
+/// byte-order mark) is refused as such, before any message could quote its bytes.
+pub fn decode<'a>(path: &Path, bytes: &'a [u8]) -> Result<Cow<'a, str>, ParseError> {
+    if let Some(problem) = not_text(bytes) {
+        return Err(ParseError::new(path, problem.line, None, problem.message, problem.hint));
+    }
+    let bytes = bytes.strip_prefix("\u{feff}".as_bytes()).unwrap_or(bytes);
+    Ok(String::from_utf8_lossy(bytes))
+}
+
+/// Why bytes are not a text file: a binary file, or UTF-16 text.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NotText {
+    pub line: Option<usize>,
+    pub message: String,
+    pub hint: &'static str,
+}
+
+/// Whether `bytes` are a binary or UTF-16 file rather than (UTF-8 or ASCII) text: a UTF-16
+/// byte-order mark, or a NUL byte (never in text; in every UTF-16 file of ASCII text).
+pub fn not_text(bytes: &[u8]) -> Option<NotText> {
+    const HINT: &str = "this is a binary or UTF-16 file, not plain text: check that it is the right file \
+                        (not a compressed or binary export); save UTF-16 text as UTF-8";
+    if bytes.starts_with(&[0xff, 0xfe]) || bytes.starts_with(&[0xfe, 0xff]) {
+        return Some(NotText {
+            line: None,
+            message: "binary or UTF-16 file: it starts with a UTF-16 byte-order mark".to_string(),
+            hint: HINT,
+        });
+    }
+    let at = bytes.iter().position(|&b| b == 0)?;
+    let line = bytes[..at].iter().filter(|&&b| b == b'\n').count() + 1;
+    Some(NotText {
+        line: Some(line),
+        message: format!("binary or UTF-16 file: it holds a NUL byte (byte {}, line {line})", at + 1),
+        hint: HINT,
+    })
 }
 
 fn empty_file_error(path: &Path, what: &str) -> ParseError {

@@ -7,7 +7,8 @@
 //! are cut by fixed width, never split on whitespace.
 
 use super::{
-    char_column, empty_file_error, load, numbered_lines, parse_finite, quote, ParseError, RawChannel, RawRecord,
+    char_column, decode, empty_file_error, numbered_lines, offset_in, parse_finite, quote, read_bytes, ParseError,
+    RawChannel, RawRecord,
 };
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -41,7 +42,12 @@ impl Channel {
 }
 
 pub fn read_renadic_v1(path: &Path) -> Result<RawRecord, ParseError> {
-    let text = load(path)?;
+    parse_renadic_v1(path, &read_bytes(path)?)
+}
+
+/// [`read_renadic_v1`] of a file's bytes; `path` only names the file in errors.
+pub fn parse_renadic_v1(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
+    let text = decode(path, bytes)?;
     if text.trim().is_empty() {
         return Err(empty_file_error(path, "a RENADIC Vol.1 file (27 header lines per channel, then data)"));
     }
@@ -160,14 +166,30 @@ fn read_channel(
     check_fixed_numbers(path, floats, FLOAT_WIDTH, index, "real", |s| parse_finite(s).is_some())?;
 
     *pos = start + header_len;
+    // A point is two fields, the second at least one character of the last: a count the rest
+    // of the file has no room for is a damaged header, refused before anything is allocated.
+    // (Without data, the channel holds only its header: said when its points are counted.)
+    let rest = lines.get(*pos).map_or(0, |&(_, line)| text_len(lines) - offset_in(lines[0].1, line));
+    let room = rest / (FIELD + 1) + 1;
+    if npts > room && rest > 0 {
+        return Err(ParseError::new(
+            path,
+            Some(npts_line),
+            None,
+            format!(
+                "channel {index} ({name}): NO. OF POINTS = {npts} cannot be right: the {rest} bytes after its header hold at most {room} points"
+            ),
+            "the point count in the header is damaged, or the file was cut short; get a fresh copy",
+        ));
+    }
     let mut channel = Channel {
         name,
         unit,
         npts,
         npts_line,
-        time: Vec::with_capacity(npts),
-        accel: Vec::with_capacity(npts),
-        data_lines: Vec::with_capacity(npts.div_ceil(PAIRS_PER_LINE)),
+        time: Vec::with_capacity(npts.min(room)),
+        accel: Vec::with_capacity(npts.min(room)),
+        data_lines: Vec::with_capacity(npts.min(room).div_ceil(PAIRS_PER_LINE)),
     };
     let mut trailer_line = None;
     while *pos < lines.len() && channel.time.len() < npts {
@@ -202,6 +224,14 @@ fn read_channel(
         return Err(count_mismatch(path, &channel, index, trailer_line, lines));
     }
     Ok(channel)
+}
+
+/// Bytes from the start of the first line to the end of the last.
+fn text_len(lines: &[(usize, &str)]) -> usize {
+    match (lines.first(), lines.last()) {
+        (Some(first), Some(last)) => offset_in(first.1, last.1) + last.1.len(),
+        _ => 0,
+    }
 }
 
 /// First header line containing `key`, with the text after it.

@@ -2,7 +2,7 @@
 //! `{"dT": 0.005, "data_x": [...], "data_y": [...], "PGA_x": ..., "name": ...}`,
 //! values in g by convention.
 
-use super::{char_column, empty_file_error, load, ParseError, RawChannel, RawRecord};
+use super::{char_column, decode, empty_file_error, read_bytes, ParseError, RawChannel, RawRecord};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -28,7 +28,12 @@ struct Event {
 }
 
 pub fn read_simcenter_json(path: &Path) -> Result<RawRecord, ParseError> {
-    let text = load(path)?;
+    parse_simcenter_json(path, &read_bytes(path)?)
+}
+
+/// [`read_simcenter_json`] of a file's bytes; `path` only names the file in errors.
+pub fn parse_simcenter_json(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
+    let text = decode(path, bytes)?;
     if text.trim().is_empty() {
         return Err(empty_file_error(path, LAYOUT));
     }
@@ -93,6 +98,24 @@ pub fn read_simcenter_json(path: &Path) -> Result<RawRecord, ParseError> {
             None,
             "no \"data_x\", \"data_y\" or \"data_z\" array in the JSON object",
             format!("{LAYOUT}; {}", keys_present(&text)),
+        ));
+    }
+    if let Some(other) = channels.iter().find(|c| c.values.len() != channels[0].values.len()) {
+        let first = &channels[0];
+        let key = format!("\"data_{}\"", other.name);
+        let line = text.find(&key).map(|at| text[..at].matches('\n').count() + 1);
+        return Err(ParseError::new(
+            path,
+            line,
+            None,
+            format!(
+                "\"data_{}\" has {} samples but \"data_{}\" has {}",
+                other.name,
+                other.values.len(),
+                first.name,
+                first.values.len()
+            ),
+            "the components of one record share one time base; the file is damaged or was edited: get a fresh copy",
         ));
     }
     Ok(RawRecord { format: "simcenter_json", dt: Some(dt), time: None, channels, header })

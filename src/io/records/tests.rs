@@ -592,3 +592,109 @@ fn large_csv_reads_every_row_exactly() {
         }
     }
 }
+
+// ---------------------------------------------------------------- hostile input
+
+/// A damaged NPTS is refused at its line and column before anything is allocated for it: the
+/// count 99999999999 used to abort the process ("memory allocation of 799999999992 bytes
+/// failed"), 2^64 − 1 to panic ("capacity overflow").
+#[test]
+fn at2_npts_beyond_the_file_size_is_refused_before_allocating() {
+    let tmp = Scratch::new();
+    for npts in ["99999999999", "18446744073709551615"] {
+        let text = data_text("Rinaldi228.AT2").replacen("NPTS=   1991", &format!("NPTS=   {npts}"), 1);
+        let e = read_at2(&tmp.write("huge.AT2", text)).unwrap_err();
+        assert_eq!((e.line, e.column), (Some(4), Some(9)), "{e}");
+        assert!(e.message.contains(&format!("NPTS = {npts} (line 4) cannot be right")), "{e}");
+        // The older header form.
+        let text = data_text("NIS090.AT2").replacen("4096    0.0100", &format!("{npts}    0.0100"), 1);
+        let e = read_at2(&tmp.write("huge_old.AT2", text)).unwrap_err();
+        assert_eq!((e.line, e.column), (Some(4), Some(1)), "{e}");
+        assert!(e.message.contains("cannot be right"), "{e}");
+    }
+}
+
+#[test]
+fn renadic_point_count_beyond_the_file_size_is_refused_before_allocating() {
+    let tmp = Scratch::new();
+    for npts in ["99999999999", "18446744073709551615"] {
+        let text =
+            data_text("llolleo1002271.v1").replacen("NO. OF POINTS =  24923", &format!("NO. OF POINTS = {npts}"), 1);
+        let e = read_renadic_v1(&tmp.write("huge.v1", text)).unwrap_err();
+        assert_eq!(e.line, Some(11), "{e}");
+        assert!(e.message.contains(&format!("NO. OF POINTS = {npts} cannot be right")), "{e}");
+    }
+}
+
+/// Used to panic in `Table::push` ("column `y` has 3 rows but the table has 4") once loaded.
+#[test]
+fn simcenter_components_of_different_lengths_are_refused() {
+    let tmp = Scratch::new();
+    let text = "{\n  \"dT\": 0.01,\n  \"data_x\": [0.1, 0.2, 0.3, 0.4],\n  \"data_y\": [0.1, 0.2, 0.3]\n}\n";
+    let e = read_simcenter_json(&tmp.write("ragged.json", text)).unwrap_err();
+    assert_eq!(e.line, Some(4), "{e}");
+    assert!(e.message.contains("\"data_y\" has 3 samples but \"data_x\" has 4"), "{e}");
+}
+
+/// UTF-16 (with or without a byte-order mark) and binary files are named as such, and nothing
+/// in the message is a NUL or another control character copied from the file.
+#[test]
+fn binary_and_utf16_files_are_named_as_such() {
+    let tmp = Scratch::new();
+    let text = data_text("Rinaldi228.AT2");
+    let utf16: Vec<u8> = text.encode_utf16().flat_map(u16::to_le_bytes).collect();
+    let with_bom = [&[0xff, 0xfe][..], &utf16].concat();
+    let gzip_like = [0x1f, 0x8b, 0x08, 0x00, 0x1b, b'[', b'2', b'J', 0x07, b'\r', 0x00, 0xff];
+    for (name, bytes) in [("bom.AT2", &with_bom[..]), ("nobom.AT2", &utf16[..]), ("z.csv", &gzip_like[..])] {
+        let path = tmp.write(name, bytes);
+        let errors = [
+            read_at2(&path).unwrap_err(),
+            read_renadic_v1(&path).unwrap_err(),
+            read_simcenter_json(&path).unwrap_err(),
+            read_delimited(&path, &csv_opts()).unwrap_err(),
+        ];
+        for e in errors {
+            let shown = err_text(&e);
+            assert!(shown.contains("binary or UTF-16 file"), "{name}: {shown}");
+            assert!(!shown.chars().any(|c| c.is_control() && c != '\n'), "{name}: {shown:?}");
+        }
+    }
+}
+
+/// A cell holding terminal escapes (ESC, BEL, CR) is quoted with them escaped: an error
+/// message cannot clear the screen or overwrite its own first half.
+#[test]
+fn messages_escape_control_characters_from_the_file() {
+    let tmp = Scratch::new();
+    let path = tmp.write("esc.csv", "time,a\n0,1\n0.01,\u{1b}[2J\u{7}x\rfake\u{202e}\n");
+    let e = read_delimited(&path, &csv_opts()).unwrap_err();
+    let shown = err_text(&e);
+    assert!(shown.contains("\\u{1b}[2J\\u{7}x\\rfake\\u{202e}"), "{shown}");
+    assert!(!shown.chars().any(|c| (c.is_control() && c != '\n') || c == '\u{202e}'), "{shown:?}");
+    assert_eq!(printable("plain text, é"), "plain text, é");
+}
+
+/// A column-name row 200 000 cells wide over a long file of one-cell rows used to reserve
+/// rows × columns floats before reading the first row (terabytes: an abort); the reservation
+/// now follows from the file's size and the ragged row is refused.
+#[test]
+fn wide_name_row_over_short_rows_reserves_by_the_file_size() {
+    let tmp = Scratch::new();
+    let mut text = (0..200_000).map(|i| format!("c{i}")).collect::<Vec<_>>().join(",");
+    text.push('\n');
+    text.push_str(&"1\n".repeat(1 << 20));
+    let e = read_delimited(&tmp.write("wide.csv", text), &csv_opts()).unwrap_err();
+    assert!(e.message.contains("line 2 has 1 cell(s) but the column-name row (line 1) has 200000"), "{e}");
+}
+
+/// `unchanged` passes the bytes whose hash the run took and refuses others.
+#[test]
+fn bytes_other_than_the_planned_ones_are_refused() {
+    let path = Path::new("rec.csv");
+    let planned = crate::io::hash::hash_bytes(b"time,a\n0,1\n");
+    assert!(unchanged(path, &planned, b"time,a\n0,1\n").is_ok());
+    assert!(unchanged(path, "", b"anything").is_ok());
+    let e = unchanged(path, &planned, b"time,a\n0,2\n").unwrap_err();
+    assert!(e.message.contains("`rec.csv` changed while this run was reading it"), "{e}");
+    assert!(e.hint.contains("rerun when it is no longer being written"), "{e}");
+}
