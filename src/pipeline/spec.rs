@@ -59,6 +59,18 @@ pub enum RecordFormat {
     RenadicV1,
     /// SimCenter event JSON (`dT`, `data_x`, `data_y`).
     SimcenterJson,
+    /// COSMOS Strong-Motion Data Format v1.20 (`.v0c`, `.V1c`, `.V2c`; CESMD), one or more channels.
+    Cosmos,
+    /// CSMIP/CGS (formerly CDMG) Vol.1 (`.V1`, `.RAW`) and Vol.2 (`.V2`), three channels.
+    Dmg,
+    /// USGS SMC (`.smc`), one component.
+    Smc,
+    /// NIED K-NET and KiK-net ASCII (`.EW`, `.NS`, `.UD`, `.EW2`, ...), one component.
+    Knet,
+    /// ESM (Engineering Strong-Motion database) ASCII, one component.
+    Esm,
+    /// GeoNet `.V1A` / `.V2A`, three components.
+    Geonet,
     /// A diagnosis case folder, named by its `equipment.yaml` (`cases/{case}/equipment.yaml`):
     /// equipment, floor record and observations, read whole by `diagnose`.
     Case,
@@ -70,13 +82,19 @@ pub enum RecordFormat {
 
 impl RecordFormat {
     /// Every format, in the order the schema lists them.
-    pub const ALL: [RecordFormat; 9] = [
+    pub const ALL: [RecordFormat; 15] = [
         RecordFormat::Delimited,
         RecordFormat::Csv,
         RecordFormat::Tsv,
         RecordFormat::At2,
         RecordFormat::RenadicV1,
         RecordFormat::SimcenterJson,
+        RecordFormat::Cosmos,
+        RecordFormat::Dmg,
+        RecordFormat::Smc,
+        RecordFormat::Knet,
+        RecordFormat::Esm,
+        RecordFormat::Geonet,
         RecordFormat::Frames,
         RecordFormat::ControlPoints,
         RecordFormat::Case,
@@ -91,6 +109,16 @@ impl RecordFormat {
     pub fn name(self) -> String {
         serde_json::to_value(self).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default()
     }
+}
+
+/// What a lone horizontal component is called when a source has no `columns` map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ComponentAs {
+    Ax,
+    Ay,
+    /// Every channel keeps the file's own name (`180`, `HNE`, `chan1`).
+    Label,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
@@ -153,6 +181,10 @@ pub struct SourceSpec {
     /// Factor applied to every channel after unit conversion (e.g. a sensor sensitivity).
     #[serde(default = "one")]
     pub scale: f64,
+    /// Accelerogram formats, without `columns`: the axis a record's lone horizontal component
+    /// becomes (`ax`, default), or `label` to name every channel as the file does.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub component_as: Option<ComponentAs>,
     #[serde(default)]
     pub gaps: GapPolicy,
     #[serde(default)]

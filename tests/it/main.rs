@@ -17,6 +17,7 @@ mod fragility_scipy;
 mod interop;
 mod load_shared_records;
 mod pipeline_runs;
+mod record_formats;
 mod rocking_demo_cases;
 mod rocking_published;
 mod rocking_pulses;

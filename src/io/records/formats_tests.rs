@@ -35,6 +35,9 @@ fn meta<'r>(raw: &'r RawRecord, key: &str) -> &'r str {
     raw.header.get(key).unwrap_or_else(|| panic!("no header key {key}: {:?}", raw.header.keys().collect::<Vec<_>>()))
 }
 
+/// A reader function.
+type Reader = fn(&Path) -> Result<RawRecord, ParseError>;
+
 /// A damaged copy of a shared record, written to a fresh temp file, read by `read`.
 fn damaged(name: &str, edit: impl Fn(&str) -> String, read: fn(&Path) -> Result<RawRecord, ParseError>) -> ParseError {
     static COUNTER: AtomicUsize = AtomicUsize::new(0);
@@ -297,7 +300,7 @@ fn every_format_is_known_by_its_content() {
 
 #[test]
 fn truncated_files_are_refused_with_their_line() {
-    let cases: [(&str, fn(&Path) -> Result<RawRecord, ParseError>, usize); 6] = [
+    let cases: [(&str, Reader, usize); 6] = [
         ("cosmos/NCMDH--n.00725272.HNE.--.V1c", read_cosmos, 1000),
         ("dmg/CE89146.V2", read_dmg, 1000),
         ("smc/0111a.smc", read_smc, 300),
