@@ -5,7 +5,7 @@
 //! real header each announced by a line with its count and Fortran format, comment lines, a
 //! data line with the count, units and format, the values, and optionally `End-of-data`.
 
-use super::fixed::{after, fortran_format, leading_count, Lines};
+use super::fixed::{after, fortran_format, is_blank, leading_count, Lines};
 use super::{empty_file_error, load, quote, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -24,7 +24,7 @@ pub fn read_cosmos(path: &Path) -> Result<RawRecord, ParseError> {
     let mut dt: Option<(f64, usize)> = None;
     let mut i = 0;
     while i < lines.count() {
-        if lines.get(i).is_some_and(|l| l.trim().is_empty()) {
+        if lines.get(i).is_some_and(is_blank) {
             i += 1;
             continue;
         }
@@ -130,7 +130,11 @@ fn read_channel(
         )
     })?;
     let (mut values, mut next) = lines.fixed(at, at + 1, npts, per_line, width, "data")?;
-    if lines.get(next).is_some_and(|l| l.trim_start().to_ascii_lowercase().starts_with("end-of-data")) {
+    // `End-of-data for ...`, or `/&` in files written like CSMIP's.
+    if lines.get(next).is_some_and(|l| {
+        let l = l.trim_start().to_ascii_lowercase();
+        l.starts_with("end-of-data") || l.starts_with("/&")
+    }) {
         next += 1;
     }
 

@@ -4,7 +4,7 @@
 //! `UNITS`, `STREAM`, `PGA_CM/S^2`, ...), then the values, one or more to a line. Every header
 //! key is kept (lower-cased); the AFAD-derived files' other date layouts are kept as written.
 
-use super::fixed::Lines;
+use super::fixed::{is_blank, Lines};
 use super::{empty_file_error, load, quote, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -88,7 +88,7 @@ pub fn read_esm(path: &Path) -> Result<RawRecord, ParseError> {
         ));
     }
     let (values, next) = lines.free(ndata_line, data_start, npts, "acceleration")?;
-    if let Some(k) = (next..lines.count()).find(|&k| lines.get(k).is_some_and(|l| !l.trim().is_empty())) {
+    if let Some(k) = (next..lines.count()).find(|&k| lines.get(k).is_some_and(|l| !is_blank(l))) {
         return Err(lines.error(
             k,
             None,

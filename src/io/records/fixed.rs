@@ -191,6 +191,11 @@ impl<'a> Lines<'a> {
     }
 }
 
+/// A line with nothing but blanks and control characters (old DOS files end in Ctrl-Z).
+pub(super) fn is_blank(line: &str) -> bool {
+    line.chars().all(|c| c.is_whitespace() || c.is_control())
+}
+
 /// A Fortran edit descriptor such as `(8f9.6)`, `(1E15.6)`, `(10I8)`, `Format= (5F15.6)`:
 /// values per line and field width.
 pub(super) fn fortran_format(text: &str) -> Option<(usize, usize)> {

@@ -411,3 +411,94 @@ fn garbage_in_a_fixed_width_block_is_located() {
     );
     assert_eq!(err.line, Some(14), "{err}");
 }
+
+/// A copy of a shared record edited by `edit`, read by `read`, which must succeed.
+fn edited(name: &str, edit: impl Fn(&str) -> String, read: Reader) -> RawRecord {
+    static COUNTER: AtomicUsize = AtomicUsize::new(0);
+    let text = std::fs::read_to_string(record(name)).unwrap();
+    let dir = std::env::temp_dir().join(format!(
+        "shakeflow-variants-{}-{}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(Path::new(name).file_name().unwrap());
+    std::fs::write(&path, edit(&text)).unwrap();
+    let result = read(&path);
+    std::fs::remove_dir_all(&dir).unwrap();
+    result.unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Layouts met in older files of the same formats (gmprocess's test data has them): a CSMIP
+/// block line without a Fortran format (fields that may touch), a COSMOS channel ended by `/&`,
+/// a DOS end-of-file (Ctrl-Z) after the last channel, and lower-case `g/10` units.
+#[test]
+fn older_layouts_of_the_same_formats() {
+    let original = read_dmg(&record("dmg/CE89146.V2")).unwrap();
+    let no_format = edited("dmg/CE89146.V2", |t| t.replace("in cm/sec2. (8f10.6)", "in cm/sec2.         "), read_dmg);
+    assert_eq!(no_format.channels, original.channels);
+    let ctrl_z = edited("dmg/CE89146.V1", |t| format!("{t}\u{1a}\r\n"), read_dmg);
+    assert_eq!(ctrl_z.channels, read_dmg(&record("dmg/CE89146.V1")).unwrap().channels);
+    let cosmos = edited(
+        "cosmos/NCMDH--n.00725272.HNE.--.V1c",
+        |t| t.replace("End-of-data for ChanHNE acceleration", "/&  ----------  End of data for channel  1  ----------"),
+        read_cosmos,
+    );
+    assert_eq!(cosmos.channels, read_cosmos(&record("cosmos/NCMDH--n.00725272.HNE.--.V1c")).unwrap().channels);
+    let tenth = edited(
+        "dmg/CE89146.V1",
+        |t| t.replace("in units of g .", "in units of g/10.").replace("are sec and g .", "are sec and g/10."),
+        read_dmg,
+    );
+    assert!(tenth.channels.iter().all(|c| c.unit == "g/10"));
+}
+
+/// Older CSMIP Vol.1 (digitised film): no data line, (time, accel) pairs after 13 + 7 + 7 header
+/// lines, times printed to 1 ms. Uniform within that resolution: the grid's step is the dt;
+/// otherwise the time column goes to `load` (its `non_uniform` policy).
+#[test]
+fn csmip_time_value_pairs() {
+    let block = |chan: &str, times: &[f64], values: &[f64]| {
+        let mut text = String::from("UNCORRECTED ACCELEROGRAM DATA              PROCESSED: 07/16/98, CDMG 13160\n");
+        for k in 1..13 {
+            text += &match k {
+                6 => format!("CHAN  {chan}\n"),
+                10 => format!("NO. OF POINTS = {:6}  RECORD LENGTH = 59.998 SEC\n", times.len()),
+                11 => "UNITS OF UNCOR ACCEL ARE SEC AND G/10.     MAX  =  -.055 G, AT  15.992 SEC.\n".to_string(),
+                _ => format!("TEXT LINE {k}\n"),
+            };
+        }
+        text += &"    0    0    0    0    0    0    0    0    0    0    0    0    0    0    0    0\n".repeat(7);
+        text += &"      .000      .000      .000      .000      .000      .000      .000      .000\n".repeat(7);
+        for pairs in times.iter().zip(values).collect::<Vec<_>>().chunks(5) {
+            text += &pairs.iter().map(|(t, v)| format!("{t:7.3}{v:7.3}")).collect::<String>();
+            text += "\n";
+        }
+        text + "/&  ----------  END OF DATA FOR CHANNEL  1  ----------\n"
+    };
+    let dir = std::env::temp_dir().join(format!("shakeflow-pairs-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("old.raw");
+    // 12 samples at 4.967 ms, printed to 1 ms: uniform within the print resolution.
+    let times: Vec<f64> = (0..12).map(|k| (k as f64 * 0.004967 * 1000.0).round() / 1000.0).collect();
+    // Exact 3-decimal values: (k - 5) / 1000 rounds as the printed decimal parses.
+    let values: Vec<f64> = (0..12).map(|k| (k as f64 - 5.0) / 1000.0).collect();
+    std::fs::write(&path, block("1:  90 DEG", &times, &values) + &block("2: UP", &times, &values)).unwrap();
+    let raw = read_dmg(&path).unwrap();
+    assert_eq!(raw.dt, Some((times[11] - times[0]) / 11.0));
+    assert_eq!(raw.time, None);
+    assert_eq!(channel(&raw, "chan1").values, values);
+    assert_eq!(channel(&raw, "chan1").unit, "g/10");
+    assert_eq!(meta(&raw, "channel.chan2.orientation"), "up");
+    // A jittered time column is kept whole, for `load` to refuse or resample.
+    let mut jittered = times.clone();
+    jittered[6] += 0.003;
+    std::fs::write(&path, block("1:  90 DEG", &jittered, &values) + &block("2: UP", &jittered, &values)).unwrap();
+    let raw = read_dmg(&path).unwrap();
+    assert_eq!((raw.dt, raw.time.as_deref()), (None, Some(&jittered[..])));
+    // Channels with their own jittered times cannot share one table.
+    std::fs::write(&path, block("1:  90 DEG", &jittered, &values) + &block("2: UP", &times, &values)).unwrap();
+    let err = read_dmg(&path).unwrap_err();
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert!(err.message.contains("time column differs from the first channel's"), "{err}");
+}

@@ -7,7 +7,7 @@
 //! R(26) is the sampling interval; a V2A follows each acceleration block with its velocity and
 //! displacement blocks, which the reader skips.
 
-use super::fixed::{after, compass_azimuth, Lines};
+use super::fixed::{after, compass_azimuth, is_blank, Lines};
 use super::{empty_file_error, load, quote, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -27,7 +27,7 @@ pub fn read_geonet(path: &Path) -> Result<RawRecord, ParseError> {
     let mut dt: Option<f64> = None;
     let mut i = 0;
     while i < lines.count() {
-        if lines.get(i).is_some_and(|l| l.trim().is_empty()) {
+        if lines.get(i).is_some_and(is_blank) {
             i += 1;
             continue;
         }

@@ -7,7 +7,7 @@
 //! DC offset (the header's `Max. Acc.` is measured after removing the mean): that is left to a
 //! baseline step. The number of values must be `Duration Time(s)` × `Sampling Freq(Hz)`.
 
-use super::fixed::Lines;
+use super::fixed::{is_blank, Lines};
 use super::{char_column, empty_file_error, load, quote, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -94,7 +94,7 @@ pub fn read_knet(path: &Path) -> Result<RawRecord, ParseError> {
     let npts = expected as usize;
     let (mut values, next) = lines.free(11, HEADER_LINES, npts, "count")?;
     if let Some((k, line)) =
-        (next..lines.count()).filter_map(|k| lines.get(k).map(|l| (k, l))).find(|(_, l)| !l.trim().is_empty())
+        (next..lines.count()).filter_map(|k| lines.get(k).map(|l| (k, l))).find(|(_, l)| !is_blank(l))
     {
         let token = line.split_ascii_whitespace().next().unwrap_or("");
         return Err(lines.error(

@@ -5,7 +5,7 @@
 //! in 10-character fields that touch (`1.5057E+0-2.2223E+0`), 8 to a line. R(2) is the
 //! sampling rate. Integer I(1) and real R(1) hold the file's "unknown" markers.
 
-use super::fixed::{after, Lines};
+use super::fixed::{after, is_blank, Lines};
 use super::{empty_file_error, load, quote, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -26,15 +26,17 @@ pub fn read_smc(path: &Path) -> Result<RawRecord, ParseError> {
     let level = match kind.split_whitespace().next() {
         Some("1") => "V1",
         Some("2") => "V2",
-        _ => return Err(lines.error(
-            0,
-            Some(1),
-            format!(
+        _ => {
+            return Err(lines.error(
+                0,
+                Some(1),
+                format!(
                 "expected an SMC record type ('1 UNCORRECTED ACCELEROGRAM' or '2 CORRECTED ACCELEROGRAM'), found {}",
                 quote(head[0])
             ),
-            "SMC velocity and displacement files, and files without a type, are not accelerograms",
-        )),
+                "SMC velocity and displacement files, and files without a type, are not accelerograms",
+            ))
+        }
     };
     if !kind.to_ascii_uppercase().contains("ACCELEROGRAM") {
         return Err(lines.error(
@@ -92,7 +94,7 @@ pub fn read_smc(path: &Path) -> Result<RawRecord, ParseError> {
         }
     }
     let (values, next) = lines.fixed(int_line(17), data_start, npts, 8, 10, "acceleration")?;
-    if let Some(k) = (next..lines.count()).find(|&k| lines.get(k).is_some_and(|l| !l.trim().is_empty())) {
+    if let Some(k) = (next..lines.count()).find(|&k| lines.get(k).is_some_and(|l| !is_blank(l))) {
         return Err(lines.error(
             k,
             None,
