@@ -60,6 +60,7 @@ bench: release $(PY_STAMP)
 	$(VENV_PY) bench/rolling.py --shakeflow $(BIN)
 	$(CARGO) build --release --locked --example cpt_match
 	$(VENV_PY) bench/cpt.py --shakeflow $(BIN) --matcher $(CARGO_TARGET_DIR)/release/examples/cpt_match
+	$(VENV_PY) bench/load_formats.py --shakeflow $(BIN)
 
 # The proof: a fresh set of concealed-effect cases (new seed unless SEED is given), diagnosed and scored.
 PROVE_DIR ?= runs/prove

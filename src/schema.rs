@@ -98,7 +98,8 @@ pub fn pipeline_schema() -> Value {
                     "columns": {"type": "object", "additionalProperties": {"$ref": "#/definitions/column"}, "description": "output column name → file column"},
                     "scale": {"type": "number", "default": 1.0, "description": "factor applied after unit conversion"},
                     "gaps": {"enum": ["error", "interpolate"], "default": "error", "description": "what to do with empty/NaN samples"},
-                    "non_uniform": {"enum": ["error", "resample"], "default": "error", "description": "what to do with a non-uniform time column"}
+                    "non_uniform": {"enum": ["error", "resample"], "default": "error", "description": "what to do with a non-uniform time column"},
+                    "component_as": {"enum": ["ax", "ay", "label"], "default": "ax", "description": "accelerogram formats without `columns`: the axis a record's lone horizontal component becomes, or `label` to keep the file's channel names (docs/formats.md)"}
                 }
             },
             "column": {
@@ -136,7 +137,10 @@ mod tests {
 
     #[test]
     fn source_properties_match_the_parser() {
-        let spec: SourceSpec = serde_json::from_value(json!({"format": "at2", "path": "x"})).unwrap();
+        // `component_as` is left out of the serialised spec when absent (source hashes stay as
+        // they were): give it, so every key shows.
+        let spec: SourceSpec =
+            serde_json::from_value(json!({"format": "at2", "path": "x", "component_as": "ax"})).unwrap();
         let parsed: Vec<String> = serde_json::to_value(spec).unwrap().as_object().unwrap().keys().cloned().collect();
         let schema = pipeline_schema();
         let documented: Vec<String> =

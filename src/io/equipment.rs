@@ -9,7 +9,7 @@ use serde::Deserialize;
 
 use crate::error::UserError;
 use crate::io::records::{decode, read_bytes};
-use crate::pipeline::spec::yaml_refusal;
+use crate::io::yaml::yaml_refusal;
 
 #[derive(Debug, Clone, Default, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]

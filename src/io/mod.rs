@@ -9,3 +9,4 @@ pub mod hash;
 pub mod mcap;
 pub mod parquet;
 pub mod records;
+pub mod yaml;

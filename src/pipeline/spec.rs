@@ -59,6 +59,18 @@ pub enum RecordFormat {
     RenadicV1,
     /// SimCenter event JSON (`dT`, `data_x`, `data_y`).
     SimcenterJson,
+    /// COSMOS Strong-Motion Data Format v1.20 (`.v0c`, `.V1c`, `.V2c`; CESMD), one or more channels.
+    Cosmos,
+    /// CSMIP/CGS (formerly CDMG) Vol.1 (`.V1`, `.RAW`) and Vol.2 (`.V2`), three channels.
+    Dmg,
+    /// USGS SMC (`.smc`), one component.
+    Smc,
+    /// NIED K-NET and KiK-net ASCII (`.EW`, `.NS`, `.UD`, `.EW2`, ...), one component.
+    Knet,
+    /// ESM (Engineering Strong-Motion database) ASCII, one component.
+    Esm,
+    /// GeoNet `.V1A` / `.V2A`, three components.
+    Geonet,
     /// A diagnosis case folder, named by its `equipment.yaml` (`cases/{case}/equipment.yaml`):
     /// equipment, floor record and observations, read whole by `diagnose`.
     Case,
@@ -70,13 +82,19 @@ pub enum RecordFormat {
 
 impl RecordFormat {
     /// Every format, in the order the schema lists them.
-    pub const ALL: [RecordFormat; 9] = [
+    pub const ALL: [RecordFormat; 15] = [
         RecordFormat::Delimited,
         RecordFormat::Csv,
         RecordFormat::Tsv,
         RecordFormat::At2,
         RecordFormat::RenadicV1,
         RecordFormat::SimcenterJson,
+        RecordFormat::Cosmos,
+        RecordFormat::Dmg,
+        RecordFormat::Smc,
+        RecordFormat::Knet,
+        RecordFormat::Esm,
+        RecordFormat::Geonet,
         RecordFormat::Frames,
         RecordFormat::ControlPoints,
         RecordFormat::Case,
@@ -91,6 +109,16 @@ impl RecordFormat {
     pub fn name(self) -> String {
         serde_json::to_value(self).ok().and_then(|v| v.as_str().map(String::from)).unwrap_or_default()
     }
+}
+
+/// What a lone horizontal component is called when a source has no `columns` map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ComponentAs {
+    Ax,
+    Ay,
+    /// Every channel keeps the file's own name (`180`, `HNE`, `chan1`).
+    Label,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
@@ -153,6 +181,10 @@ pub struct SourceSpec {
     /// Factor applied to every channel after unit conversion (e.g. a sensor sensitivity).
     #[serde(default = "one")]
     pub scale: f64,
+    /// Accelerogram formats, without `columns`: the axis a record's lone horizontal component
+    /// becomes (`ax`, default), or `label` to name every channel as the file does.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub component_as: Option<ComponentAs>,
     #[serde(default)]
     pub gaps: GapPolicy,
     #[serde(default)]
@@ -231,7 +263,7 @@ impl PipelineFile {
         }
         let refuse = |e: serde_yaml::Error, hint: &str| {
             let position = e.location().map(|l| (l.line(), l.column()));
-            let (message, hint) = yaml_refusal(&e, hint);
+            let (message, hint) = crate::io::yaml::yaml_refusal(&e, hint);
             UserError::new(message).in_file(path).at(position).hint(hint)
         };
         // Typed maps keep the last of two equal keys without a word: a generic parse refuses them.
@@ -279,32 +311,6 @@ fn not_a_pipeline(path: &Path, not_text: crate::io::records::NotText) -> UserErr
         .in_file(path)
         .at(not_text.line.map(|l| (l, 1)))
         .hint(format!("{}; a pipeline is a YAML text file", not_text.hint))
-}
-
-/// The message and hint for a YAML file serde_yaml refused: the limits it guards are named for
-/// what they are (an alias bomb, nesting too deep), other refusals take `hint`. Messages quote
-/// the file: its control characters are escaped.
-pub fn yaml_refusal(e: &serde_yaml::Error, hint: &str) -> (String, String) {
-    let message = e.to_string();
-    // serde_yaml appends " at line L column C"; the position is already in the prefix.
-    let message = message.split(" at line ").next().unwrap_or(&message);
-    let (message, hint) = if message.contains("repetition limit exceeded") {
-        (
-            "the YAML expands aliases (`*name`) into too many values (an alias bomb, \"billion laughs\"): refused"
-                .to_string(),
-            "anchors (`&name`) and aliases (`*name`) that repeat each other multiply: write the values out, or alias \
-             only small values"
-                .to_string(),
-        )
-    } else if message.contains("recursion limit exceeded") {
-        (
-            "the YAML nests lists or mappings too deeply (more than 128 levels): refused".to_string(),
-            "a pipeline is a few levels deep; look for runaway `[` or `{` or indentation".to_string(),
-        )
-    } else {
-        (message.to_string(), hint.to_string())
-    };
-    (crate::io::records::printable(&message).into_owned(), hint)
 }
 
 /// `a/b/../c` → `a/c` without touching the disk (the folder may not exist yet); for paths users read.

@@ -1,4 +1,5 @@
-//! `load`: record files (delimited text, PEER AT2, RENADIC V1, SimCenter JSON) → uniform SI
+//! `load`: record files (delimited text, PEER AT2, RENADIC V1, SimCenter JSON, COSMOS, CSMIP/DMG,
+//! USGS SMC, K-NET/KiK-net, ESM, GeoNet) → uniform SI
 //! time-series tables, one per file, partitioned as the source's path template says.
 
 use std::collections::{BTreeMap, HashMap};
@@ -9,7 +10,7 @@ use serde_json::json;
 use super::{InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
 use crate::error::{did_you_mean_hint, UserError};
 use crate::io::records::{self, DelimitedOptions, RawRecord};
-use crate::pipeline::spec::{ColumnSpec, GapPolicy, NonUniformPolicy, RecordFormat, SourceSpec};
+use crate::pipeline::spec::{ColumnSpec, ComponentAs, GapPolicy, NonUniformPolicy, RecordFormat, SourceSpec};
 use crate::signal::resample;
 use crate::table::{Column, Table, TIME_COLUMN};
 use crate::units;
@@ -125,6 +126,12 @@ fn parse(spec: &SourceSpec, part: &InputPart) -> Result<RawRecord, UserError> {
         RecordFormat::At2 => records::parse_at2(path, &bytes),
         RecordFormat::RenadicV1 => records::parse_renadic_v1(path, &bytes),
         RecordFormat::SimcenterJson => records::parse_simcenter_json(path, &bytes),
+        RecordFormat::Cosmos => records::parse_cosmos(path, &bytes),
+        RecordFormat::Dmg => records::parse_dmg(path, &bytes),
+        RecordFormat::Smc => records::parse_smc(path, &bytes),
+        RecordFormat::Knet => records::parse_knet(path, &bytes),
+        RecordFormat::Esm => records::parse_esm(path, &bytes),
+        RecordFormat::Geonet => records::parse_geonet(path, &bytes),
         RecordFormat::Csv => records::parse_delimited(path, &bytes, &delimited(delimiter.or(Some(b',')))),
         RecordFormat::Tsv => records::parse_delimited(path, &bytes, &delimited(delimiter.or(Some(b'\t')))),
         RecordFormat::Delimited => records::parse_delimited(path, &bytes, &delimited(delimiter)),
@@ -181,7 +188,28 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
     } else {
         (raw.time.clone().map(|t| (t, raw.channels.first().and_then(|c| c.first_data_line))), all)
     };
-    let n = channels.first().map_or(0, |c| c.values.len());
+    let selected: Vec<(String, &records::RawChannel, Option<&ColumnSpec>)> = if spec.columns.is_empty() {
+        let names = default_names(spec, raw, &channels).map_err(|e| {
+            err(e).hint("map the channels yourself with `columns:` (output name → the file's channel name)")
+        })?;
+        channels.iter().zip(names).map(|(c, name)| (name, *c, None)).collect()
+    } else {
+        spec.columns
+            .iter()
+            .map(|(out, cs)| {
+                let channel = channels
+                    .iter()
+                    .find(|c| c.name == cs.file_column())
+                    .ok_or_else(|| missing_column(path, cs.file_column(), &channels))?;
+                Ok((out.clone(), *channel, Some(cs)))
+            })
+            .collect::<Result<_, UserError>>()?
+    };
+    distinct_names(path, spec, raw, &selected)?;
+    // Channels of one file may differ in length (CSMIP Vol.1): the table takes the shortest.
+    let n = selected.iter().map(|s| s.1.values.len()).min().unwrap_or(0);
+    let cut: serde_json::Map<String, serde_json::Value> =
+        selected.iter().filter(|s| s.1.values.len() != n).map(|s| (s.0.clone(), json!(s.1.values.len()))).collect();
     if n < 2 {
         return Err(err(format!("the record has {n} sample(s); at least 2 are needed")));
     }
@@ -227,23 +255,6 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
         .hint("the time column, DT or `dt` is damaged or in the wrong unit"));
     }
 
-    let selected: Vec<(String, &records::RawChannel, Option<&ColumnSpec>)> = if spec.columns.is_empty() {
-        channels.iter().map(|c| (c.name.clone(), *c, None)).collect()
-    } else {
-        spec.columns
-            .iter()
-            .map(|(out, cs)| {
-                let channel = channels
-                    .iter()
-                    .find(|c| c.name == cs.file_column())
-                    .ok_or_else(|| missing_column(path, cs.file_column(), &channels))?;
-                Ok((out.clone(), *channel, Some(cs)))
-            })
-            .collect::<Result<_, UserError>>()?
-    };
-
-    distinct_names(path, spec, raw, &selected)?;
-
     let n_out = match &resampled_from {
         Some(time) => {
             // The median step of a damaged time column (a stray huge time, steps of 1e-300 s)
@@ -284,8 +295,8 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
                 .hint(format!("known units: {}", units::known_units().join(", ")))
         })?;
         let factor = conversion.factor * spec.scale * detail.and_then(|d| d.scale).unwrap_or(1.0);
-        let mut values: Vec<f64> = channel.values.iter().map(|v| v * factor).collect();
-        if let Some(i) = overflowed(&channel.values, &values) {
+        let mut values: Vec<f64> = channel.values[..n].iter().map(|v| v * factor).collect();
+        if let Some(i) = overflowed(&channel.values[..n], &values) {
             return Err(err(format!(
                 "column `{}` overflows in unit conversion: sample {} ({} {unit_name}) times {factor} is not a finite number of {}",
                 channel.name,
@@ -321,7 +332,7 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
         // Gap filling has nothing to start from in a column of gaps only: it stays NaN, never
         // to be written. (Filling and resampling interpolate convexly: finite values stay finite.)
         if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-            let cause = if missing == channel.values.len() {
+            let cause = if missing == n {
                 "every value is missing: `gaps: interpolate` has nothing to interpolate from"
             } else {
                 "gap filling or resampling left it undefined"
@@ -337,21 +348,22 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
         columns.push(Column::f64(&out_name, conversion.si_unit, &description, values));
     }
     table.extend(columns);
-    metadata.insert(
-        "shakeflow.load".to_string(),
-        json!({
-            "format": spec.format,
-            "dt_s": dt,
-            "sample_rate_hz": 1.0 / dt,
-            "npts": n_out,
-            "t0_s": t0,
-            "columns": conversions,
-            "gaps_filled": gaps,
-            "resampled_from_non_uniform": resampled_from.is_some(),
-            "header": raw.header,
-        })
-        .to_string(),
-    );
+    let mut summary = json!({
+        "format": spec.format,
+        "dt_s": dt,
+        "sample_rate_hz": 1.0 / dt,
+        "npts": n_out,
+        "t0_s": t0,
+        "columns": conversions,
+        "gaps_filled": gaps,
+        "resampled_from_non_uniform": resampled_from.is_some(),
+        "header": raw.header,
+    });
+    if !cut.is_empty() {
+        // The original lengths of the channels cut to the shortest; absent when none was.
+        summary["cut_to_shortest_channel"] = json!(cut);
+    }
+    metadata.insert("shakeflow.load".to_string(), summary.to_string());
     table.metadata = metadata;
     Ok(table)
 }
@@ -446,6 +458,37 @@ fn name_line(spec: &SourceSpec, raw: &RawRecord, channel: &records::RawChannel) 
         "at2" => Some(2),
         _ => None,
     }
+}
+
+/// Column names when a source has no `columns:` map. Accelerogram formats name their channels by
+/// quantity and axis (`ax_mps2`, `ay_mps2`, `az_mps2`; `records::roles` says which channel is
+/// which), so one source covers a suite of records whatever their files call the components;
+/// delimited and RENADIC files, and `component_as: label`, keep the file's names.
+fn default_names(spec: &SourceSpec, raw: &RawRecord, channels: &[&records::RawChannel]) -> Result<Vec<String>, String> {
+    use RecordFormat::*;
+    let by_axis = matches!(spec.format, At2 | SimcenterJson | Cosmos | Dmg | Smc | Knet | Esm | Geonet);
+    if !by_axis || spec.component_as == Some(ComponentAs::Label) {
+        return Ok(channels.iter().map(|c| c.name.clone()).collect());
+    }
+    let single = match spec.component_as {
+        Some(ComponentAs::Ay) => Some('y'),
+        _ => None,
+    };
+    let axes = records::roles::axes(raw, channels, single)?;
+    Ok(channels
+        .iter()
+        .zip(axes)
+        .map(|(c, axis)| {
+            let unit = spec.unit.as_deref().or((!c.unit.is_empty()).then_some(c.unit.as_str()));
+            match unit.and_then(units::conversion).map(|u| u.si_unit) {
+                Some("m/s^2") => format!("a{axis}_mps2"),
+                Some("m/s") => format!("v{axis}_mps"),
+                Some("m") => format!("d{axis}_m"),
+                // Not a motion (or an unknown unit, which the caller reports): the file's name.
+                _ => c.name.clone(),
+            }
+        })
+        .collect())
 }
 
 fn missing_column(path: &std::path::Path, name: &str, channels: &[&records::RawChannel]) -> UserError {

@@ -21,6 +21,7 @@ mod load_shared_records;
 mod mutation_harness;
 mod never_lose_data;
 mod pipeline_runs;
+mod record_formats;
 mod rocking_demo_cases;
 mod rocking_published;
 mod rocking_pulses;

@@ -7,16 +7,32 @@
 //! line and column where that makes sense, and a hint on the likely cause.
 
 mod at2;
+mod cosmos;
 mod delimited;
+mod dmg;
+mod esm;
+mod fixed;
+#[cfg(test)]
+mod formats_tests;
+mod geonet;
+mod knet;
 mod renadic;
+pub mod roles;
 mod simcenter;
+mod smc;
 #[cfg(test)]
 mod tests;
 
 pub use at2::{parse_at2, read_at2};
+pub use cosmos::{parse_cosmos, read_cosmos};
 pub use delimited::{parse_delimited, read_delimited, DelimitedOptions};
+pub use dmg::{parse_dmg, read_dmg};
+pub use esm::{parse_esm, read_esm};
+pub use geonet::{parse_geonet, read_geonet};
+pub use knet::{parse_knet, read_knet};
 pub use renadic::{parse_renadic_v1, read_renadic_v1};
 pub use simcenter::{parse_simcenter_json, read_simcenter_json};
+pub use smc::{parse_smc, read_smc};
 
 use std::borrow::Cow;
 use std::collections::BTreeMap;
@@ -132,6 +148,9 @@ pub fn sniff_format(path: &Path) -> Option<&'static str> {
     let head = head.strip_prefix('\u{feff}').unwrap_or(&head);
     let first: Vec<&str> = head.lines().take(4).collect();
     let upper = |i: usize| first.get(i).map(|l| l.to_ascii_uppercase()).unwrap_or_default();
+    if let Some(format) = sniff_strong_motion(head, &upper(0), &upper(1)) {
+        return Some(format);
+    }
     if upper(0).starts_with("UNCORRECTED ACCELEROGRAM") {
         return Some("renadic_v1");
     }
@@ -147,8 +166,42 @@ pub fn sniff_format(path: &Path) -> Option<&'static str> {
         "v1" => Some("renadic_v1"),
         "json" => Some("simcenter_json"),
         "csv" | "tsv" | "tab" | "txt" => Some("delimited"),
+        "v0c" | "v1c" | "v2c" => Some("cosmos"),
+        "smc" => Some("smc"),
+        "raw" => Some("dmg"),
+        "v1a" | "v2a" => Some("geonet"),
+        "ew" | "ns" | "ud" | "ew1" | "ns1" | "ud1" | "ew2" | "ns2" | "ud2" => Some("knet"),
         _ => None,
     }
+}
+
+/// The strong-motion formats by content (COSMOS, CSMIP/DMG, SMC, K-NET, ESM, GeoNet): their
+/// extensions overlap (`.V1`, `.V2`, `.asc`), their first lines do not.
+fn sniff_strong_motion(head: &str, line1: &str, line2: &str) -> Option<&'static str> {
+    let upper_head = head.to_ascii_uppercase();
+    if line1.contains("(FORMAT V") {
+        return Some("cosmos");
+    }
+    if line1.starts_with("ORIGIN TIME") && upper_head.contains("SCALE FACTOR") {
+        return Some("knet");
+    }
+    if line1.starts_with("EVENT_NAME:") && upper_head.contains("NDATA:") {
+        return Some("esm");
+    }
+    let kind = line1.trim_start_matches(|c: char| c.is_ascii_digit()).trim_start();
+    if line1.starts_with(|c: char| c.is_ascii_digit()) && kind.contains("ACCELEROGRAM") && line2.trim() == "*" {
+        return Some("smc");
+    }
+    if line1.contains("ACCELEROGRAM") && line2.starts_with("SITE ") {
+        return Some("geonet");
+    }
+    // CSMIP Vol.1 shares its first line with RENADIC's; RENADIC names itself.
+    let csmip = ["CSMIP", "CGS", "CDMG", "ACCELEROGRAM POINTS", "POINTS OF ACCEL"];
+    if line1.contains("ACCELEROGRAM") && !upper_head.contains("RENADIC") && csmip.iter().any(|m| upper_head.contains(m))
+    {
+        return Some("dmg");
+    }
+    None
 }
 
 /// The bytes of a file, read once: readers parse these very bytes, so a run can hash what it
