@@ -18,6 +18,7 @@ mod interop;
 mod load_shared_records;
 mod pipeline_runs;
 mod rocking_demo_cases;
+mod rocking_isolated;
 mod rocking_published;
 mod rocking_pulses;
 mod rolling_findings;
