@@ -24,6 +24,7 @@ mod rocking_pulses;
 mod rolling_findings;
 mod rolling_peers;
 mod rolling_stage;
+mod rolling_swivel;
 mod sdof_identification;
 mod toppling_demo_archive;
 mod toppling_demo_cases;
