@@ -8,6 +8,8 @@ mod toppling_common;
 mod bad_input;
 mod baseline_reference;
 mod cpt_calibration;
+mod cpt_occlusion;
+mod cpt_project_inputs;
 mod cpt_tracking;
 mod cpt_video;
 mod demo_archive;
