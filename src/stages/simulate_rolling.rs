@@ -58,7 +58,7 @@ static PARAMS: [ParamSpec; MODEL_KEYS + 15] = [
     model_key("trail_m", "m", "caster trail d (the study gives none; null: 0.3 × wheel diameter, at least 5 mm; 0 needs lateral_slip)", 10.0),
     model_key("swivel_arm_m", "m", "lever arm ρ of the swivel friction torque μ_δ N ρ (null: 0.02, a swivel bearing's radius; 1 reproduces the study's numbers literally)", 10.0),
     model_key("friction_eps", "m/s", "ε of the rolling friction's regularised sign tanh(v/ε) (null: 1e-4)", 1.0),
-    model_key("friction_eps_swivel", "rad/s", "ε_sw of the swivel friction's regularised sign tanh(δ̇/ε_sw) (null: 1e-4, from a convergence study: docs/models/rolling.md)", 10.0),
+    model_key("friction_eps_swivel", "rad/s", "ε_sw of the swivel friction's regularised sign tanh(δ̇/ε_sw) (null: 1e-3, from a convergence study: docs/models/rolling.md)", 10.0),
     ParamSpec {
         name: "preset",
         kind: ParamKind::Choice(rolling::PRESETS),

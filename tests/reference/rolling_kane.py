@@ -23,7 +23,7 @@ Loads (the formulation of shakeflow's 4WMC-NOTES.md, stated physically):
 Usage: rolling_kane.py --floor FLOOR.csv --units PS1,MC2 [--t-end S] [--rtol R] [--every K] --out OUT.json
 FLOOR.csv: time_s, ax_mps2, ay_mps2 (uniform). Units take the study's Table 4 (transcribed here
 independently of shakeflow's presets), with the caster trail d = max(0.3 x wheel diameter, 5 mm),
-swivel lever arm 0.02 m and friction regularisations 1e-4 m/s (rolling) and 1e-4 rad/s (swivel)
+swivel lever arm 0.02 m and friction regularisations 1e-4 m/s (rolling) and 1e-3 rad/s (swivel)
 that shakeflow uses by default.
 The floor is linear between samples and the integration restarts at every sample, as shakeflow
 does. OUT.json: per unit, the parameters and the state at every K-th sample.
@@ -56,7 +56,7 @@ def unit_spec(unit):
         "wheel_width_m": ew, "wheel_mass_kg": mw, "steer0_deg": steer, "mu_s_roll": msr, "mu_s_swivel": mss,
         "mu_k_roll": mkr, "mu_k_swivel": mks, "beta_spm": beta, "gamma_n": gamma, "p": 1.0,
         "trail_m": max(0.3 * dw, 0.005), "swivel_arm_m": 0.02, "friction_eps": 1e-4,
-        "friction_eps_swivel": 1e-4,
+        "friction_eps_swivel": 1e-3,
     }
 
 

@@ -50,7 +50,7 @@ pub const DEFAULT_SWIVEL_ARM_M: f64 = 0.02;
 pub const DEFAULT_FRICTION_EPS_MPS: f64 = 1e-4;
 /// Default regularisation rate ε_sw of the swivel's sign (rad/s), from the convergence study in
 /// docs/models/rolling.md.
-pub const DEFAULT_FRICTION_EPS_SWIVEL_RADPS: f64 = 1e-4;
+pub const DEFAULT_FRICTION_EPS_SWIVEL_RADPS: f64 = 1e-3;
 
 /// Geometry and masses of a cart.
 #[derive(Clone, Copy, Debug, PartialEq)]
