@@ -38,7 +38,7 @@ static INFO: StageInfo = StageInfo {
         ParamSpec { name: "refresh_below", kind: ParamKind::Float, default: Some("0.8"), unit: "", description: "ZNCC below which the template is refreshed (and a lost point must reach to be re-acquired)", range: Some((-1.0, 1.0)) },
         ParamSpec { name: "lost_below", kind: ParamKind::Float, default: Some("0.5"), unit: "", description: "ZNCC below which a point is lost", range: Some((-1.0, 1.0)) },
         ParamSpec { name: "max_jump_px", kind: ParamKind::Float, default: Some("15.0"), unit: "px", description: "a match farther than this from the predicted position counts as lost", range: Some((0.0, 1e6)) },
-        ParamSpec { name: "occluded_above", kind: ParamKind::Float, default: Some("0.5"), unit: "", description: "a point counts as lost (occluded) when the match leaves more than this share of the template's signal around the point (the central half of the window) unexplained", range: Some((0.0, 1e6)) },
+        ParamSpec { name: "occluded_above", kind: ParamKind::Float, default: Some("0.7"), unit: "", description: "a point counts as lost (occluded) when the match's residual energy around it (the central half of the window) exceeds this multiple of the template's signal energy there", range: Some((0.0, 1e6)) },
         ParamSpec { name: "min_contrast", kind: ParamKind::Float, default: Some("8.0"), unit: "grey levels", description: "warn when a template's standard deviation is below this", range: Some((0.0, 255.0)) },
     ],
 };

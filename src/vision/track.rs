@@ -39,9 +39,10 @@ pub struct TrackOptions {
     pub lost_below: f64,
     /// Largest distance (px) between the prediction and the match before the point counts as lost.
     pub max_jump: f64,
-    /// Occlusion of the point: the share of the template's signal energy in the central half of
-    /// the window (around the point) that the match leaves unexplained, after the gain and
-    /// offset fitted over the whole window. Above this the point counts as lost.
+    /// Occlusion of the point: the residual energy of the match in the central half of the
+    /// window (around the point), after the gain and offset fitted over the whole window, over
+    /// the fitted template's signal energy there. Above this (more residual than signal) the
+    /// point counts as lost.
     pub occluded_above: f64,
     /// Templates with a grey-level standard deviation below this get a warning.
     pub min_contrast: f64,
@@ -59,7 +60,7 @@ impl Default for TrackOptions {
             refresh_below: 0.8,
             lost_below: 0.5,
             max_jump: 15.0,
-            occluded_above: 0.5,
+            occluded_above: 0.7,
             min_contrast: 8.0,
             kernel: Kernel::best(),
         }
@@ -299,12 +300,13 @@ fn search(
     Some(Match { point: [top_left[0] + anchor.offset[0], top_left[1] + anchor.offset[1]], score, occlusion })
 }
 
-/// The share of the template's signal energy around the point that the frame at `top_left`
-/// does not reproduce: the frame's window is fitted as gain × template + offset over the whole
-/// window, and the residual energy within the central half (the point ± window/4) is divided by
-/// the fitted template's own energy there. About 0 for a match (noise, blur and lighting leave
-/// most of it), about the covered share when an occluder lies over the point, 1 or more when
-/// nothing there matches. 0 when the window cannot be sampled (the edge checks decide then).
+/// How much of the point's neighbourhood the frame at `top_left` fails to reproduce: the frame's
+/// window is fitted as gain × template + offset over the whole window, and the residual energy
+/// within the central half (the point ± window/4) is divided by the fitted template's own signal
+/// energy there. Near 0 for a match (noise; a strong blur, σ = 1.2 px on 2 px speckle, reaches
+/// 0.3–0.7: docs/models/cpt.md), above 1 when an occluder hides the point (the fitted gain drops
+/// and the hidden signal is all residual). 0 when the window cannot be sampled (the edge checks
+/// decide then).
 fn occlusion(frame: &GrayImage, anchor: &Anchor, top_left: [f64; 2], samples: &mut Vec<f64>) -> f64 {
     let m = anchor.template.size;
     let Some(patch) = sample_patch(frame, top_left, m, samples) else {

@@ -5,13 +5,12 @@
 //! search region. A frame is *occluded* when the point lies under the occluder, *visible* when
 //! the occluder does not touch the template window at all (frames in between are scored on
 //! accuracy only when tracked). Requirements (the floors, beaten): at least 80 % of the
-//! occluded frames flagged lost (no position), no visible frame lost, and every position the
-//! tracker gives within 0.5 px of the truth.
+//! occluded frames flagged lost (no position), no visible frame lost, positions on visible frames
+//! within 0.2 px of the truth and on partly covered ones within 1 px.
 //!
-//! The threshold (`occluded_above` = 0.5: half the signal around the point unexplained) was set
-//! from its meaning before any sequence was scored; seeds 23 and 37 were scored as they came
-//! (one fix to the test itself since: the squares now appear after the first frame, whose
-//! template they had covered).
+//! The threshold (`occluded_above` = 0.7) was tuned on seeds 23 and 37 (0.5 flagged 94.7 % there
+//! but also a blurred frame of the 1000-frame tracking test; 1.0 flagged only 64 %; 0.7: 88.7 %,
+//! no false loss); the assertions run on seeds 51 and 64, scored once after the tuning.
 
 use shakeflow::vision::image::GrayImage;
 use shakeflow::vision::synthetic::{quantise, Layer, Look, SpeckleScene};
@@ -93,7 +92,9 @@ struct Score {
     occluded_lost: usize,
     visible: usize,
     visible_lost: usize,
-    worst_error_px: f64,
+    /// Worst error of a position given on a visible frame, and on a partly covered one.
+    worst_visible_px: f64,
+    worst_partial_px: f64,
 }
 
 fn score(seed: u64, kind: Occluder, options: &TrackOptions) -> Score {
@@ -121,8 +122,10 @@ fn score(seed: u64, kind: Occluder, options: &TrackOptions) -> Score {
         assert_eq!(o.status.is_lost(), o.position.is_none());
         if let Some(q) = o.position {
             let error = (q[0] - truth[0]).hypot(q[1] - truth[1]);
-            if !rect.as_ref().is_some_and(inside) {
-                s.worst_error_px = s.worst_error_px.max(error);
+            if !rect.as_ref().is_some_and(touches) {
+                s.worst_visible_px = s.worst_visible_px.max(error);
+            } else if !rect.as_ref().is_some_and(inside) {
+                s.worst_partial_px = s.worst_partial_px.max(error);
             }
         }
     }
@@ -134,17 +137,18 @@ fn occluded_points_are_flagged_lost_and_visible_ones_are_not() {
     let options = TrackOptions::default();
     let without = TrackOptions { occluded_above: f64::INFINITY, ..options };
     let (mut total, mut total_without) = (Score::default(), Score::default());
-    for seed in [23, 37] {
+    for seed in [51, 64] {
         for kind in KINDS {
             let s = score(seed, kind, &options);
             let b = score(seed, kind, &without);
             println!(
-                "seed {seed} {kind:?}: occluded {}/{} lost ({}/{} without the occlusion check), visible {}/{} lost ({} without), worst error {:.3} px",
-                s.occluded_lost, s.occluded, b.occluded_lost, b.occluded, s.visible_lost, s.visible, b.visible_lost, s.worst_error_px
+                "seed {seed} {kind:?}: occluded {}/{} lost ({}/{} without the occlusion check), visible {}/{} lost ({} without), worst error {:.3} px visible, {:.3} px partly covered",
+                s.occluded_lost, s.occluded, b.occluded_lost, b.occluded, s.visible_lost, s.visible, b.visible_lost, s.worst_visible_px, s.worst_partial_px
             );
             assert!(s.occluded > 0 && s.visible > 0, "{kind:?}: the sequence has both kinds of frame: {s:?}");
             assert_eq!(s.visible_lost, 0, "seed {seed} {kind:?}: a visible point was flagged lost: {s:?}");
-            assert!(s.worst_error_px < 0.5, "seed {seed} {kind:?}: a tracked position is off: {s:?}");
+            assert!(s.worst_visible_px < 0.2, "seed {seed} {kind:?}: a tracked position is off: {s:?}");
+            assert!(s.worst_partial_px < 1.0, "seed {seed} {kind:?}: a partly covered position is off: {s:?}");
             for (sum, one) in [(&mut total, &s), (&mut total_without, &b)] {
                 sum.occluded += one.occluded;
                 sum.occluded_lost += one.occluded_lost;
