@@ -403,9 +403,10 @@ fn rk4_converges_to_the_adaptive_solution() {
     let cart = t.cart(Cart::default_trail_m(t.wheel_diameter_m), DEFAULT_SWIVEL_ARM_M);
     let (ax, ay) = two_component_floor(2000, 0.005, 2.5);
     let options = Options { yaw0_rad: t.yaw0_deg.to_radians(), ..Options::default() };
-    // The swivel regularised as coarsely as ε/ρ (5e-3 rad/s): with the default ε_sw = 1e-4 rad/s
-    // the swivel's creep mode is stiffer than RK4 at the study's step resolves (its yaw error
-    // grows past 1e-2 rad, docs/models/rolling.md), one more reason for the adaptive default.
+    // The swivel regularised as coarsely as ε/ρ (5e-3 rad/s): with the default ε_sw = 1e-3 rad/s
+    // the swivel's creep mode is stiffer than RK4 at the study's step resolves (yaw error
+    // 7.8e-3 rad, 1.7e-3 at 5e-5 s: docs/models/rolling.md), one more reason for the adaptive
+    // default.
     let friction =
         Friction { eps_swivel_radps: DEFAULT_FRICTION_EPS_MPS / DEFAULT_SWIVEL_ARM_M, ..table4_friction("MC2") };
     let with = |method| run(&cart, &friction, &ax, &ay, 0.005, &Options { method, ..options });
