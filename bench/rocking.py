@@ -71,7 +71,8 @@ def main():
     args = ap.parse_args()
     sf = args.shakeflow
     motions = pathlib.Path(args.motions)
-    block = rocking_scipy.Block(**BLOCK)
+    # Standard gravity, as simulate_toppling uses by default (the peer defaults to the study's 9.81).
+    block = rocking_scipy.Block(**BLOCK, g=9.80665)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = pathlib.Path(tmp)
         dt, acc = read_at2(motions / RECORDS[0])

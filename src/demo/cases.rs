@@ -158,7 +158,7 @@ fn make_case(plan: &Plan, ax: &[f64], az: &[f64]) -> Result<(Vec<(String, Vec<u8
         }
         Effect::Flexibility => (
             Options {
-                isolated_base: Some(IsolatedBase { period_s: 1.0 / 3.1, damping_ratio: 0.04 }),
+                isolated_base: Some(IsolatedBase { period_s: 1.0 / 3.1, damping_ratio: 0.04, mass_ratio: None }),
                 ..Options::default()
             },
             "  frequency_hz: 3.1\n  damping_ratio: 0.04\n".to_string(),

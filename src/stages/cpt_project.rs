@@ -58,9 +58,21 @@ impl Stage for CptProject {
         let mut calibrations: Vec<(&InputPart, Arc<Table>)> = Vec::new();
         for part in ctx.inputs.iter().flat_map(|i| i.parts()) {
             let table = ctx.read_table(part)?;
-            if table.column("p11").is_some() {
+            // A whole cpt_calibrate stage as input brings its `residuals` too (per control point:
+            // point, u_px, …): take each table by the output its metadata names, then by columns.
+            let made_by = |stage: &str, output: &str| {
+                table.metadata.get("shakeflow.stage_type").is_some_and(|t| t == stage)
+                    && table.metadata.get("shakeflow.output").is_some_and(|o| o == output)
+            };
+            let from_calibrate = table.metadata.get("shakeflow.stage_type").is_some_and(|t| t == "cpt_calibrate");
+            if made_by("cpt_calibrate", "calibration") || (!from_calibrate && table.column("p11").is_some()) {
                 calibrations.push((part, table));
-            } else if table.column("u_px").is_some() && table.column("point").is_some() {
+            } else if from_calibrate {
+                continue;
+            } else if table.column("u_px").is_some()
+                && table.column("point").is_some()
+                && table.column("time_s").is_some()
+            {
                 tracks.push((part, table));
             } else {
                 return Err(UserError::new(format!(

@@ -19,7 +19,7 @@ pub struct CptTrack;
 
 static INFO: StageInfo = StageInfo {
     name: "cpt_track",
-    version: 1,
+    version: 2,
     summary: "Track points through an image sequence (PNG/JPEG folder, or a video through ffmpeg): ZNCC or SSD template matching against a reference template, sub-pixel, lost points flagged, optional camera-shake correction.",
     inputs: InputKind::Files(&[RecordFormat::Frames]),
     outputs: &[
@@ -38,6 +38,7 @@ static INFO: StageInfo = StageInfo {
         ParamSpec { name: "refresh_below", kind: ParamKind::Float, default: Some("0.8"), unit: "", description: "ZNCC below which the template is refreshed (and a lost point must reach to be re-acquired)", range: Some((-1.0, 1.0)) },
         ParamSpec { name: "lost_below", kind: ParamKind::Float, default: Some("0.5"), unit: "", description: "ZNCC below which a point is lost", range: Some((-1.0, 1.0)) },
         ParamSpec { name: "max_jump_px", kind: ParamKind::Float, default: Some("15.0"), unit: "px", description: "a match farther than this from the predicted position counts as lost", range: Some((0.0, 1e6)) },
+        ParamSpec { name: "occluded_above", kind: ParamKind::Float, default: Some("0.7"), unit: "", description: "a point counts as lost (occluded) when the match's residual energy around it (the central half of the window) exceeds this multiple of the template's signal energy there", range: Some((0.0, 1e6)) },
         ParamSpec { name: "min_contrast", kind: ParamKind::Float, default: Some("8.0"), unit: "grey levels", description: "warn when a template's standard deviation is below this", range: Some((0.0, 255.0)) },
     ],
 };
@@ -91,6 +92,7 @@ fn options(params: &Params) -> TrackOptions {
         refresh_below: params.f64_of("refresh_below"),
         lost_below: params.f64_of("lost_below"),
         max_jump: params.f64_of("max_jump_px"),
+        occluded_above: params.f64_of("occluded_above"),
         min_contrast: params.f64_of("min_contrast"),
         kernel: Kernel::best(),
     }
@@ -288,7 +290,7 @@ impl Rows {
             name: "status".into(),
             unit: String::new(),
             description:
-                "ok | refreshed (template re-cut) | reacquired | lost_score | lost_jump | lost_edge | lost_reference"
+                "ok | refreshed (template re-cut) | reacquired | lost_score | lost_jump | lost_occluded | lost_edge | lost_reference"
                     .into(),
             data: ColumnData::Str(self.status),
         });

@@ -18,7 +18,7 @@ use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 pub struct SimulateRolling;
 
 /// The model's keys: what a preset or an equipment file may give (the first `MODEL_KEYS` specs).
-const MODEL_KEYS: usize = 18;
+const MODEL_KEYS: usize = 19;
 const MAX_LENGTH_M: f64 = 100.0;
 
 const fn model_key(name: &'static str, unit: &'static str, description: &'static str, max: f64) -> ParamSpec {
@@ -57,7 +57,8 @@ static PARAMS: [ParamSpec; MODEL_KEYS + 15] = [
     model_key("p", "", "velocity exponent of the viscous term (null: 1)", 10.0),
     model_key("trail_m", "m", "caster trail d (the study gives none; null: 0.3 × wheel diameter, at least 5 mm; 0 needs lateral_slip)", 10.0),
     model_key("swivel_arm_m", "m", "lever arm ρ of the swivel friction torque μ_δ N ρ (null: 0.02, a swivel bearing's radius; 1 reproduces the study's numbers literally)", 10.0),
-    model_key("friction_eps", "m/s", "ε of the regularised friction sign tanh(v/ε) (null: 1e-4)", 1.0),
+    model_key("friction_eps", "m/s", "ε of the rolling friction's regularised sign tanh(v/ε) (null: 1e-4)", 1.0),
+    model_key("friction_eps_swivel", "rad/s", "ε_sw of the swivel friction's regularised sign tanh(δ̇/ε_sw) (null: 1e-3, from a convergence study: docs/models/rolling.md)", 10.0),
     ParamSpec {
         name: "preset",
         kind: ParamKind::Choice(rolling::PRESETS),
@@ -71,7 +72,7 @@ static PARAMS: [ParamSpec; MODEL_KEYS + 15] = [
         kind: ParamKind::Path,
         default: Some("null"),
         unit: "",
-        description: "YAML file of model keys (length_m … friction_eps), over the preset; the stage's own values win",
+        description: "YAML file of model keys (length_m … friction_eps_swivel), over the preset; the stage's own values win",
         range: None,
     },
     ParamSpec {
@@ -182,7 +183,7 @@ static PARAMS: [ParamSpec; MODEL_KEYS + 15] = [
 
 static INFO: StageInfo = StageInfo {
     name: "simulate_rolling",
-    version: 1,
+    version: 2,
     summary: "Rolling, turning and pivot steering of equipment on four swivel casters under the two horizontal floor components (the study's 4WMC, made well posed).",
     inputs: InputKind::Datasets,
     outputs: &[
@@ -318,11 +319,12 @@ impl Setup {
             roll: stribeck(required("mu_s_roll")?, required("mu_k_roll")?),
             swivel: stribeck(required("mu_s_swivel")?, required("mu_k_swivel")?),
             eps_mps: number("friction_eps").unwrap_or(rolling::DEFAULT_FRICTION_EPS_MPS),
+            eps_swivel_radps: number("friction_eps_swivel").unwrap_or(rolling::DEFAULT_FRICTION_EPS_SWIVEL_RADPS),
             law,
         };
         friction.check().map_err(|m| {
             refuse(
-                "friction_eps",
+                if m.starts_with("friction_eps_swivel") { "friction_eps_swivel" } else { "friction_eps" },
                 format!("`simulate_rolling`: {m}"),
                 "friction values must be zero or positive, ε positive",
             )
@@ -380,6 +382,7 @@ impl Setup {
             ("trail_m", cart.trail_m),
             ("swivel_arm_m", cart.swivel_arm_m),
             ("friction_eps", friction.eps_mps),
+            ("friction_eps_swivel", friction.eps_swivel_radps),
         ] {
             resolved.insert(key.into(), json!(value));
         }

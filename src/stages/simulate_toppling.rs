@@ -28,7 +28,7 @@ macro_rules! rocking_params {
             ParamSpec { name: "B1_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "trapezoid: base (short side) B1", range: Some((1e-6, 1e3)) },
             ParamSpec { name: "B2_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "trapezoid: top B2", range: Some((1e-6, 1e3)) },
             ParamSpec { name: "mass_kg", kind: ParamKind::Float, default: Some("null"), unit: "kg", description: "mass (the rocking response does not depend on it; reported)", range: Some((1e-9, 1e9)) },
-            ParamSpec { name: "g_mps2", kind: ParamKind::Float, default: Some("null"), unit: "m/s^2", description: "gravity; null: the equipment file's g_mps2, else the study's 9.81", range: Some((0.1, 100.0)) },
+            ParamSpec { name: "g_mps2", kind: ParamKind::Float, default: Some("null"), unit: "m/s^2", description: "gravity; null: the equipment file's g_mps2, else standard gravity 9.80665", range: Some((0.1, 100.0)) },
             ParamSpec { name: "horizontal", kind: ParamKind::Str, default: Some("\"ax_mps2\""), unit: "", description: "input column: in-plane horizontal floor acceleration (m/s^2)", range: None },
             ParamSpec { name: "vertical", kind: ParamKind::Str, default: Some("null"), unit: "", description: "input column: vertical floor acceleration (m/s^2, up); null: none", range: None },
             ParamSpec { name: "restitution", kind: ParamKind::Float, default: Some("null"), unit: "", description: "coefficient of restitution; null: Eq. 24, e = 1 - (mRB/I0) sin(alpha)", range: Some((0.0, 1.0)) },
@@ -37,6 +37,7 @@ macro_rules! rocking_params {
             ParamSpec { name: "anchor_yield_rotation_rad", kind: ParamKind::Float, default: Some("0.001"), unit: "rad", description: "block rotation at which a slack anchor yields (sets the anchor stiffness)", range: Some((1e-7, 0.5)) },
             ParamSpec { name: "isolation_period_s", kind: ParamKind::Float, default: Some("null"), unit: "s", description: "linear isolated base under the block (period T_b); null: on the floor", range: Some((1e-3, 100.0)) },
             ParamSpec { name: "isolation_damping", kind: ParamKind::Float, default: Some("0.1"), unit: "", description: "damping ratio of the isolated base", range: Some((0.0, 0.99)) },
+            ParamSpec { name: "isolation_mass_ratio", kind: ParamKind::Float, default: Some("null"), unit: "", description: "isolated base: its mass over the block's, m_b/m; the base carries the block's reaction and impacts conserve the system's momentum (docs/models/toppling.md); null: the limit m_b >> m, a prescribed base motion", range: Some((1e-6, 1e9)) },
             ParamSpec { name: "sensor_height_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "height of the top accelerometer; null: the top of the block", range: Some((0.0, 1e3)) },
             ParamSpec { name: "method", kind: ParamKind::Choice(&["adaptive", "rk4"]), default: Some("\"adaptive\""), unit: "", description: "adaptive Dormand-Prince 5(4) with located events, or the study's fixed-step RK4", range: None },
             ParamSpec { name: "rtol", kind: ParamKind::Float, default: Some("1e-11"), unit: "", description: "relative tolerance of the adaptive integrator (absolute: 1e-2 rtol rad)", range: Some((1e-14, 1e-2)) },
@@ -50,7 +51,7 @@ pub(crate) use rocking_params;
 
 static INFO: StageInfo = StageInfo {
     name: "simulate_toppling",
-    version: 1,
+    version: 2,
     summary: "The study's 2D rigid-block toppling model on floor records: rest, uplift (Eq. 20/21), rocking (Eq. 22), impacts (Eq. 24), overturning; adaptive integration with located events.",
     inputs: InputKind::Datasets,
     outputs: &[
@@ -195,7 +196,7 @@ pub fn model_from_params(params: &Params, equipment_file: Option<&Path>) -> Resu
         None => return Err(missing("shape")),
     };
     let mass = pick("mass_kg", geometry.mass_kg).unwrap_or(1.0);
-    let g = number("g_mps2").or(geometry.g_mps2).unwrap_or(9.81);
+    let g = number("g_mps2").or(geometry.g_mps2).unwrap_or(crate::units::G0);
     let block = Block::new(shape, mass, g).map_err(|e| UserError::new(format!("invalid block: {e}")))?;
     let options = Options {
         restitution: number("restitution"),
@@ -204,8 +205,11 @@ pub fn model_from_params(params: &Params, equipment_file: Option<&Path>) -> Resu
             ductility: params.f64_of("anchor_ductility"),
             yield_rotation_rad: params.f64_of("anchor_yield_rotation_rad"),
         }),
-        isolated_base: number("isolation_period_s")
-            .map(|period_s| IsolatedBase { period_s, damping_ratio: params.f64_of("isolation_damping") }),
+        isolated_base: number("isolation_period_s").map(|period_s| IsolatedBase {
+            period_s,
+            damping_ratio: params.f64_of("isolation_damping"),
+            mass_ratio: number("isolation_mass_ratio"),
+        }),
         sensor_height_m: number("sensor_height_m"),
         rest_amplitude_rad: params.f64_of("rest_amplitude_rad"),
         method: match params.str_of("method") {

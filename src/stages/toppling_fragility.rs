@@ -16,7 +16,7 @@ pub struct TopplingFragility;
 
 static INFO: StageInfo = StageInfo {
     name: "toppling_fragility",
-    version: 1,
+    version: 2,
     summary: "Overturning fragility of one unit: floor records scaled over intensities, all runs simulated in parallel, lognormal curve (median, beta) by maximum likelihood.",
     inputs: InputKind::Datasets,
     outputs: &[

@@ -9,8 +9,10 @@
 //! The template is refreshed only when the score drops below `refresh_below` — and dropped
 //! again for the reference as soon as the reference matches well — because re-cutting it every
 //! frame (the study's update, `TemplatePolicy::EveryFrame`) lets per-frame errors accumulate.
-//! A point whose score falls below `lost_below`, or that jumps too far, is reported lost (no
-//! position) and searched for in a wider region until the reference matches again.
+//! A point whose score falls below `lost_below`, whose own neighbourhood the match does not
+//! explain (`occluded_above`: an occluder over the point while the rest of the window still
+//! matches), or that jumps too far, is reported lost (no position) and searched for in a wider
+//! region until the reference matches again.
 
 use super::image::{sample_patch, GrayImage};
 use super::matcher::{match_template, Kernel, Score, ScoreMap, Scratch, Template};
@@ -37,6 +39,11 @@ pub struct TrackOptions {
     pub lost_below: f64,
     /// Largest distance (px) between the prediction and the match before the point counts as lost.
     pub max_jump: f64,
+    /// Occlusion of the point: the residual energy of the match in the central half of the
+    /// window (around the point), after the gain and offset fitted over the whole window, over
+    /// the fitted template's signal energy there. Above this (more residual than signal) the
+    /// point counts as lost.
+    pub occluded_above: f64,
     /// Templates with a grey-level standard deviation below this get a warning.
     pub min_contrast: f64,
     pub kernel: Kernel,
@@ -53,6 +60,7 @@ impl Default for TrackOptions {
             refresh_below: 0.8,
             lost_below: 0.5,
             max_jump: 15.0,
+            occluded_above: 0.7,
             min_contrast: 8.0,
             kernel: Kernel::best(),
         }
@@ -70,6 +78,8 @@ pub enum Status {
     LostScore,
     /// The best match is farther from the prediction than `max_jump`.
     LostJump,
+    /// The window matches, but not around the point itself: something covers it.
+    LostOccluded,
     /// The search region or the template left the image.
     LostEdge,
     /// Camera-shake correction was asked for but no reference point was tracked in this frame.
@@ -84,13 +94,17 @@ impl Status {
             Status::Reacquired => "reacquired",
             Status::LostScore => "lost_score",
             Status::LostJump => "lost_jump",
+            Status::LostOccluded => "lost_occluded",
             Status::LostEdge => "lost_edge",
             Status::LostReference => "lost_reference",
         }
     }
 
     pub fn is_lost(self) -> bool {
-        matches!(self, Status::LostScore | Status::LostJump | Status::LostEdge | Status::LostReference)
+        matches!(
+            self,
+            Status::LostScore | Status::LostJump | Status::LostOccluded | Status::LostEdge | Status::LostReference
+        )
     }
 }
 
@@ -218,6 +232,10 @@ impl PointTracker {
             self.mark_lost();
             return lost(Status::LostScore, found.score);
         }
+        if found.occlusion > options.occluded_above {
+            self.mark_lost();
+            return lost(Status::LostOccluded, found.score);
+        }
         if self.lost && found.score < options.refresh_below {
             return lost(Status::LostScore, found.score);
         }
@@ -278,7 +296,51 @@ fn search(
     } else {
         (integer, map.zncc[best])
     };
-    Some(Match { point: [top_left[0] + anchor.offset[0], top_left[1] + anchor.offset[1]], score })
+    let occlusion = occlusion(frame, anchor, top_left, samples);
+    Some(Match { point: [top_left[0] + anchor.offset[0], top_left[1] + anchor.offset[1]], score, occlusion })
+}
+
+/// How much of the point's neighbourhood the frame at `top_left` fails to reproduce: the frame's
+/// window is fitted as gain × template + offset over the whole window, and the residual energy
+/// within the central half (the point ± window/4) is divided by the fitted template's own signal
+/// energy there. Near 0 for a match (noise; a strong blur, σ = 1.2 px on 2 px speckle, reaches
+/// 0.3–0.7: docs/models/cpt.md), above 1 when an occluder hides the point (the fitted gain drops
+/// and the hidden signal is all residual). 0 when the window cannot be sampled (the edge checks
+/// decide then).
+fn occlusion(frame: &GrayImage, anchor: &Anchor, top_left: [f64; 2], samples: &mut Vec<f64>) -> f64 {
+    let m = anchor.template.size;
+    let Some(patch) = sample_patch(frame, top_left, m, samples) else {
+        return 0.0;
+    };
+    let t = &anchor.centred;
+    let n = (m * m) as f64;
+    let mean = patch.values.iter().sum::<f64>() / n;
+    let (tv, tt) =
+        t.iter().zip(&patch.values).fold((0.0, 0.0), |(tv, tt), (tk, v)| (tv + tk * (v - mean), tt + tk * tk));
+    if tt == 0.0 {
+        return 0.0;
+    }
+    let gain = tv / tt;
+    if gain <= 0.0 {
+        return 1.0;
+    }
+    let reach = m as f64 / 4.0;
+    let near = |k: usize| {
+        let (x, y) = ((k % m) as f64, (k / m) as f64);
+        (x - anchor.offset[0]).abs() <= reach && (y - anchor.offset[1]).abs() <= reach
+    };
+    let central: Vec<usize> = (0..m * m).filter(|&k| near(k)).collect();
+    let c = central.len() as f64;
+    let t_mean = central.iter().map(|&k| t[k]).sum::<f64>() / c;
+    let (residual, signal) = central.iter().fold((0.0, 0.0), |(r, e), &k| {
+        let model = gain * t[k];
+        ((patch.values[k] - mean - model).powi(2) + r, e + (gain * (t[k] - t_mean)).powi(2))
+    });
+    if signal > 0.0 {
+        residual / signal
+    } else {
+        0.0
+    }
 }
 
 fn same_template(a: &Anchor, b: &Anchor) -> bool {
@@ -288,6 +350,8 @@ fn same_template(a: &Anchor, b: &Anchor) -> bool {
 struct Match {
     point: [f64; 2],
     score: f64,
+    /// `occlusion` at the match.
+    occlusion: f64,
 }
 
 /// Quadratic peak, then ECC iterations maximising the ZNCC of the template against the

@@ -13,15 +13,18 @@ Loads (the formulation of shakeflow's 4WMC-NOTES.md, stated physically):
 - the floor only translates: every body gets the inertial force -m * (ax, ay) at its centre;
 - rolling resistance at each wheel centre: -mu_roll(|v|) N tanh(v/eps) along F_i.x, v = the
   centre's speed along F_i.x; mu(v) = mu_s sech(beta v) + mu_k (1 - sech(beta v)) + gamma |v|^p;
-- swivel bearing: torque -mu_sw(rho|w|) N rho tanh(rho w/eps) about the vertical on the fork and
-  the opposite torque on the platform, w = the fork's yaw rate relative to the platform;
+- swivel bearing: torque -mu_sw(rho|w|) N rho tanh(w/eps_sw) about the vertical on the fork and
+  the opposite torque on the platform, w = the fork's yaw rate relative to the platform (eps_sw
+  in rad/s, the swivel's own regularisation; results stored before it existed used
+  tanh(rho w/eps), i.e. eps_sw = eps/rho, and state no friction_eps_swivel);
 - N = (m_w + m_p/4) g per wheel; caster pivots at the platform corners, order (+a,+b), (-a,+b),
   (-a,-b), (+a,-b).
 
 Usage: rolling_kane.py --floor FLOOR.csv --units PS1,MC2 [--t-end S] [--rtol R] [--every K] --out OUT.json
 FLOOR.csv: time_s, ax_mps2, ay_mps2 (uniform). Units take the study's Table 4 (transcribed here
 independently of shakeflow's presets), with the caster trail d = max(0.3 x wheel diameter, 5 mm),
-swivel lever arm 0.02 m and friction regularisation 1e-4 m/s that shakeflow uses by default.
+swivel lever arm 0.02 m and friction regularisations 1e-4 m/s (rolling) and 1e-3 rad/s (swivel)
+that shakeflow uses by default.
 The floor is linear between samples and the integration restarts at every sample, as shakeflow
 does. OUT.json: per unit, the parameters and the state at every K-th sample.
 """
@@ -53,6 +56,7 @@ def unit_spec(unit):
         "wheel_width_m": ew, "wheel_mass_kg": mw, "steer0_deg": steer, "mu_s_roll": msr, "mu_s_swivel": mss,
         "mu_k_roll": mkr, "mu_k_swivel": mks, "beta_spm": beta, "gamma_n": gamma, "p": 1.0,
         "trail_m": max(0.3 * dw, 0.005), "swivel_arm_m": 0.02, "friction_eps": 1e-4,
+        "friction_eps_swivel": 1e-3,
     }
 
 
@@ -65,7 +69,8 @@ def derive():
     ud = me.dynamicsymbols("ud1:5")
     up = me.dynamicsymbols("up1:5")
     a, b, r, d, rho, mp, mw, Ip, Is, Iz, Nw = sm.symbols("a b r d rho m_p m_w I_p I_s I_z N_w", positive=True)
-    mus_r, muk_r, mus_s, muk_s, beta, gam, p, eps = sm.symbols("mus_r muk_r mus_s muk_s beta gamma p eps")
+    mus_r, muk_r, mus_s, muk_s, beta, gam, p, eps, eps_sw = sm.symbols(
+        "mus_r muk_r mus_s muk_s beta gamma p eps eps_sw")
     ax, ay = sm.symbols("a_x a_y")
 
     N = me.ReferenceFrame("N")
@@ -99,7 +104,7 @@ def derive():
         bodies.append(me.RigidBody(f"wheel{i}", centre, W, mw, (me.inertia(F, Iz, Is, Iz), centre)))
         v = centre.vel(N).dot(F.x)
         roll = mu(mus_r, muk_r, sm.sqrt(v**2)) * Nw * sm.tanh(v / eps)
-        swivel = rho * mu(mus_s, muk_s, rho * sm.sqrt(ud[i] ** 2)) * Nw * sm.tanh(rho * ud[i] / eps)
+        swivel = rho * mu(mus_s, muk_s, rho * sm.sqrt(ud[i] ** 2)) * Nw * sm.tanh(ud[i] / eps_sw)
         loads += [(centre, floor_force(mw) - roll * F.x), (F, -swivel * N.z), (P, swivel * N.z)]
 
     q = [x, y, th, *dl, *ph]
@@ -109,7 +114,7 @@ def derive():
     kd = [qi.diff() - ui for qi, ui in zip(q, u)]
     kane = me.KanesMethod(N, q_ind=q, u_ind=u_ind, kd_eqs=kd, u_dependent=u_dep, velocity_constraints=constraints)
     kane.kanes_equations(bodies, loads)
-    params = [a, b, r, d, rho, mp, mw, Ip, Is, Iz, Nw, mus_r, muk_r, mus_s, muk_s, beta, gam, p, eps]
+    params = [a, b, r, d, rho, mp, mw, Ip, Is, Iz, Nw, mus_r, muk_r, mus_s, muk_s, beta, gam, p, eps, eps_sw]
     dep = sm.solve(constraints, u_dep, dict=True)[0]
     args = (q, u, params, ax, ay)
     mass = sm.lambdify(args, kane.mass_matrix, cse=True)
@@ -127,6 +132,7 @@ def parameters(spec):
         mp * (a * a + b * b) / 3, mw * r * r / 2, mw * (3 * r * r + width * width) / 12, (mw + mp / 4) * G,
         spec["mu_s_roll"], spec["mu_k_roll"], spec["mu_s_swivel"], spec["mu_k_swivel"],
         spec["beta_spm"], spec["gamma_n"], spec["p"], spec["friction_eps"],
+        spec.get("friction_eps_swivel", spec["friction_eps"] / spec["swivel_arm_m"]),
     ]
 
 

@@ -28,7 +28,7 @@ impl Effect for Flexibility {
 
     fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, String> {
         let options = Options {
-            isolated_base: Some(IsolatedBase { period_s: 1.0 / params[0], damping_ratio: params[1] }),
+            isolated_base: Some(IsolatedBase { period_s: 1.0 / params[0], damping_ratio: params[1], mass_ratio: None }),
             ..case.nominal_options()
         };
         Ok(case.simulate(&case.block, &options)?.1)

@@ -130,11 +130,22 @@ fn dot3(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-/// Friction with its regularised sign: coefficient × capacity × tanh(v/ε), signed like v.
-fn friction_force(law: &super::Stribeck, normal_n: f64, speed: f64, eps: f64) -> f64 {
+/// Friction with its regularised sign: coefficient(speed) × capacity × tanh(x), signed like x,
+/// where x is the motion over its regularisation scale (v/ε, or δ̇/ε_sw for the swivel).
+fn friction_force(law: &super::Stribeck, normal_n: f64, speed: f64, x: f64) -> f64 {
     // tanh|x| = −expm1(−2|x|)/(2 + expm1(−2|x|)): one call, exact near zero, odd by copysign.
-    let m = (-2.0 * speed.abs() / eps).exp_m1();
-    law.coefficient(speed) * normal_n * (-m / (2.0 + m)).copysign(speed)
+    let m = (-2.0 * x.abs()).exp_m1();
+    law.coefficient(speed) * normal_n * (-m / (2.0 + m)).copysign(x)
+}
+
+impl super::Friction {
+    /// Rolling-resistance force at wheel speed v and swivel torque at swivel rate δ̇ (arm ρ).
+    fn roll_and_swivel(&self, normal_n: f64, rho: f64, roll_speed: f64, swivel_rate: f64) -> (f64, f64) {
+        (
+            friction_force(&self.roll, normal_n, roll_speed, roll_speed / self.eps_mps),
+            rho * friction_force(&self.swivel, normal_n, rho * swivel_rate, swivel_rate / self.eps_swivel_radps),
+        )
+    }
 }
 
 /// The constrained model: no lateral slip, 3 platform DOF, 10 states.
@@ -163,12 +174,7 @@ impl NoSlip {
 
     /// Rolling-friction force and swivel-friction torque opposing the motion of caster i.
     fn caster_friction(&self, roll_speed: f64, swivel_rate: f64) -> (f64, f64) {
-        let f = &self.friction;
-        let n = self.derived.normal_n;
-        let rho = self.derived.swivel_arm_m;
-        let roll = friction_force(&f.roll, n, roll_speed, f.eps_mps);
-        let torque = rho * friction_force(&f.swivel, n, rho * swivel_rate, f.eps_mps);
-        (roll, torque)
+        self.friction.roll_and_swivel(self.derived.normal_n, self.derived.swivel_arm_m, roll_speed, swivel_rate)
     }
 
     /// Mass matrix, the right-hand side Q − Σ Jᵀm J̇ν, and δ̇.
@@ -282,14 +288,9 @@ impl Slip {
 
     /// Rolling force, swivel torque and sideways force opposing caster i's motion.
     fn caster_friction(&self, roll_speed: f64, swivel_rate: f64, side_speed: f64) -> (f64, f64, f64) {
-        let f = &self.friction;
         let n = self.derived.normal_n;
-        let rho = self.derived.swivel_arm_m;
-        (
-            friction_force(&f.roll, n, roll_speed, f.eps_mps),
-            rho * friction_force(&f.swivel, n, rho * swivel_rate, f.eps_mps),
-            self.lateral.mu * n * (side_speed / self.lateral.eps_mps).tanh(),
-        )
+        let (roll, torque) = self.friction.roll_and_swivel(n, self.derived.swivel_arm_m, roll_speed, swivel_rate);
+        (roll, torque, self.lateral.mu * n * (side_speed / self.lateral.eps_mps).tanh())
     }
 
     /// Per caster: its frame, wheel-centre velocity, rolling, sideways and swivel speeds.

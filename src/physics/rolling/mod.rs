@@ -17,7 +17,8 @@
 //! - the swivel friction torque is μ_δ N ρ with an explicit lever arm ρ (ρ = 1 m reproduces the
 //!   study's numbers literally) and its Stribeck law reads the bearing's sliding speed ρ|δ̇|, so
 //!   β keeps the study's unit (s/m) for both friction laws;
-//! - the sign of friction is regularised, tanh(v/ε), or the cart sticks exactly (no creep) with
+//! - the sign of friction is regularised, tanh(v/ε) for rolling and tanh(δ̇/ε_sw) for the swivel
+//!   (its own rate, not ε/ρ), or the cart sticks exactly (no creep) with
 //!   a breakaway located where the floor's inertial load leaves the set static friction can hold;
 //! - a lateral-slip variant frees each caster's heading, with a regularised Coulomb side force,
 //!   and covers the study's literal zero trail.
@@ -47,6 +48,9 @@ pub const MIN_DEFAULT_TRAIL_M: f64 = 0.005;
 pub const DEFAULT_SWIVEL_ARM_M: f64 = 0.02;
 /// Default friction regularisation speed ε.
 pub const DEFAULT_FRICTION_EPS_MPS: f64 = 1e-4;
+/// Default regularisation rate ε_sw of the swivel's sign (rad/s), from the convergence study in
+/// docs/models/rolling.md.
+pub const DEFAULT_FRICTION_EPS_SWIVEL_RADPS: f64 = 1e-3;
 
 /// Geometry and masses of a cart.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -161,10 +165,13 @@ pub enum FrictionLaw {
 pub struct Friction {
     /// Rolling resistance, on the wheel-centre speed along the wheel heading.
     pub roll: Stribeck,
-    /// Swivel bearing, on its sliding speed ρ|δ̇|.
+    /// Swivel bearing: its Stribeck law reads the bearing's sliding speed ρ|δ̇| (β is in s/m).
     pub swivel: Stribeck,
-    /// ε of the regularised sign (m/s; the swivel bearing's sliding speed too).
+    /// ε of the rolling friction's regularised sign tanh(v/ε), m/s.
     pub eps_mps: f64,
+    /// ε_sw of the swivel friction's regularised sign tanh(δ̇/ε_sw), rad/s: the swivel's own, so
+    /// that its creep does not scale with 1/ρ (4WMC-NOTES.md, erratum of 2026-11-25).
+    pub eps_swivel_radps: f64,
     pub law: FrictionLaw,
 }
 
@@ -174,6 +181,9 @@ impl Friction {
         self.swivel.check("swivel")?;
         if !(self.eps_mps.is_finite() && self.eps_mps > 0.0) {
             return Err(format!("friction_eps must be a positive speed, got {}", self.eps_mps));
+        }
+        if !(self.eps_swivel_radps.is_finite() && self.eps_swivel_radps > 0.0) {
+            return Err(format!("friction_eps_swivel must be a positive rate, got {}", self.eps_swivel_radps));
         }
         Ok(())
     }
@@ -254,13 +264,15 @@ impl Table4 {
         }
     }
 
-    /// Rolling and swivel friction (one β, γ_n and p for both, as in Table 4).
+    /// Rolling and swivel friction (one β, γ_n and p for both, as in Table 4), with the default
+    /// swivel regularisation.
     pub fn friction(&self, eps_mps: f64, law: FrictionLaw) -> Friction {
         let law_with = |mu_s, mu_k| Stribeck { mu_s, mu_k, beta_spm: self.beta_spm, gamma_n: self.gamma_n, p: self.p };
         Friction {
             roll: law_with(self.mu_s_roll, self.mu_k_roll),
             swivel: law_with(self.mu_s_swivel, self.mu_k_swivel),
             eps_mps,
+            eps_swivel_radps: DEFAULT_FRICTION_EPS_SWIVEL_RADPS,
             law,
         }
     }

@@ -73,9 +73,14 @@ fn through_building(x: &[f64], y: &[f64], dt: f64, peak_g: f64, base: Base) -> F
 /// 1994 Northridge, Rinaldi Receiving Station, components 228 (X) and 318 (Y), scaled to a
 /// 0.25 g ground peak, floor 4 of the fixed-base demo building: 19.9 s at 100 Hz.
 pub fn rinaldi_floor() -> Floor {
+    rinaldi_floor_at(0.25, Base::Fixed)
+}
+
+/// The same record scaled to another ground peak, on either building.
+pub fn rinaldi_floor_at(peak_g: f64, base: Base) -> Floor {
     let read = |name| shakeflow::io::records::read_at2(&ground_motion(name)).unwrap_or_else(|e| panic!("{e}"));
     let (x, y) = (read("Rinaldi228.AT2"), read("Rinaldi318.AT2"));
-    through_building(&x.channels[0].values, &y.channels[0].values, x.dt.unwrap(), 0.25, Base::Fixed)
+    through_building(&x.channels[0].values, &y.channels[0].values, x.dt.unwrap(), peak_g, base)
 }
 
 /// 2002 Denali, PEER RSN2113 (TAPS Pump Station #9, the study's DEN record), both horizontal
@@ -124,6 +129,12 @@ pub fn model_from_peer(spec: &Value, law: FrictionLaw) -> (Cart, Friction, Optio
         roll: stribeck("mu_s_roll", "mu_k_roll"),
         swivel: stribeck("mu_s_swivel", "mu_k_swivel"),
         eps_mps: number(spec, "friction_eps"),
+        // A peer that regularises the swivel with tanh(ρδ̇/ε) (as shakeflow did before the swivel
+        // had its own ε_sw) states no friction_eps_swivel: the same law is ε_sw = ε/ρ.
+        eps_swivel_radps: spec
+            .get("friction_eps_swivel")
+            .and_then(Value::as_f64)
+            .unwrap_or_else(|| number(spec, "friction_eps") / number(spec, "swivel_arm_m")),
         law,
     };
     let steer: Vec<f64> =

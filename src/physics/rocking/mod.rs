@@ -28,6 +28,8 @@
 use crate::physics::ode::{Advance, Dopri5, Rk4, Stats, Stepper};
 use crate::physics::sdof::Sdof;
 
+mod coupled;
+
 /// Geometry as the cases' `equipment.yaml` states it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Shape {
@@ -165,12 +167,16 @@ pub struct Anchorage {
     pub yield_rotation_rad: f64,
 }
 
-/// Linear isolation under the block: an SDOF of period T_b and damping ξ carries the block;
-/// the block's mass is taken as small against the isolated mass, so the base is not loaded back.
+/// Linear isolation under the block: a base on an isolator of period T_b and damping ξ (both
+/// referred to the base and block together).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct IsolatedBase {
     pub period_s: f64,
     pub damping_ratio: f64,
+    /// m_b/m, the base's mass over the block's: the base carries the block's reaction and
+    /// impacts conserve the system's momentum (`coupled`). None: the limit m_b ≫ m, where the
+    /// base moves as a prescribed SDOF that the block does not load back.
+    pub mass_ratio: Option<f64>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -425,6 +431,19 @@ impl RockingOnSide<'_> {
     }
 }
 
+/// Absolute acceleration (horizontal, vertical) of a sensor at height h on the block's centre
+/// line while it rocks on `side` with θ, θ̇, θ̈ over a base accelerating by (ax, av).
+fn sensor_acceleration(block: &Block, side: i8, motion: [f64; 3], h: f64, ax: f64, av: f64) -> (f64, f64) {
+    let [theta, theta_dot, acc] = motion;
+    let (sin, cos) = theta.sin_cos();
+    let sb = f64::from(side) * block.half_base_m;
+    let w2 = theta_dot * theta_dot;
+    // The sensor relative to the pivot: x = −sb cos θ + h sin θ, z = sb sin θ + h cos θ.
+    let ax_rel = (sb * sin + h * cos) * acc + (sb * cos - h * sin) * w2;
+    let az_rel = (sb * cos - h * sin) * acc - (sb * sin + h * cos) * w2;
+    (ax + ax_rel, av + az_rel)
+}
+
 /// The first time in [t, t_end] at which the floor uplifts a block at rest, and the side.
 fn uplift_time(block: &Block, seg: &Segment, t: f64, t_end: f64) -> Option<(f64, i8)> {
     let tan = block.alpha_rad.tan();
@@ -549,6 +568,34 @@ pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -
                     iso.period_s, iso.damping_ratio
                 ));
             }
+            if let Some(ratio) = iso.mass_ratio {
+                if !(ratio.is_finite() && ratio > 0.0) {
+                    return Err(format!("the base's mass ratio m_b/m must be a positive number, got {ratio}"));
+                }
+                let other = [
+                    (options.anchorage.is_some(), "anchorage"),
+                    (options.friction.is_some(), "sliding"),
+                    (options.obstacle.is_some(), "an obstacle"),
+                    (options.mass_change.is_some(), "a mass change"),
+                ];
+                if let Some((_, what)) = other.iter().find(|(given, _)| *given) {
+                    return Err(format!(
+                        "the coupled isolated base (a base mass ratio) does not combine with {what}; leave the mass ratio out for a prescribed base motion"
+                    ));
+                }
+                return match options.method {
+                    Method::Adaptive { rtol, atol_rad } => coupled::simulate(
+                        block,
+                        excitation,
+                        options,
+                        &iso,
+                        ratio,
+                        // Base displacement and velocity to the same absolute tolerance (m, m/s).
+                        Dopri5::new(rtol, [atol_rad, atol_rad * block.p_radps, atol_rad, atol_rad], dt),
+                    ),
+                    Method::Rk4 { dt_s } => coupled::simulate(block, excitation, options, &iso, ratio, Rk4::new(dt_s)),
+                };
+            }
             Sdof::new(1.0 / iso.period_s, iso.damping_ratio).absolute_acceleration(excitation.horizontal_mps2, dt)
         }
         None => excitation.horizontal_mps2.to_vec(),
@@ -667,14 +714,8 @@ impl Setup<'_> {
                 Regime::Rocking { side } => {
                     let model = self.on_side(block, side, segment(k), anchors);
                     let acc = model.theta_ddot(exc.t0_s + k as f64 * dt, &y);
-                    let (sin, cos) = y[0].sin_cos();
-                    let sb = model.side * block.half_base_m;
                     let h = options.sensor_height_m.unwrap_or(block.height_m);
-                    let w2 = y[1] * y[1];
-                    // The sensor relative to the pivot: x = −sb cos θ + h sin θ, z = sb sin θ + h cos θ.
-                    let ax_rel = (sb * sin + h * cos) * acc + (sb * cos - h * sin) * w2;
-                    let az_rel = (sb * cos - h * sin) * acc - (sb * sin + h * cos) * w2;
-                    (acc, (ax + ax_rel, av + az_rel))
+                    (acc, sensor_acceleration(block, side, [y[0], y[1], acc], h, ax, av))
                 }
             };
             response.theta_rad.push(y[0]);

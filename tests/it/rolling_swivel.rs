@@ -1,0 +1,102 @@
+//! The swivel friction of the rolling model (4WMC-NOTES.md, erratum of 2026-11-25): its Stribeck
+//! law reads the bearing's sliding speed ρ|δ̇| and its sign is regularised on its own rate,
+//! tanh(δ̇/ε_sw), ε_sw in rad/s (`friction_eps_swivel`).
+//!
+//! - Against tests/reference/rolling_notes.py, a numpy/scipy implementation written from the
+//!   notes' equations alone (finite-difference J̇, no symbolic derivation shared with shakeflow),
+//!   on the metal cart MC2 — the unit whose swivel friction matters most (μ_sδ = μ_sφ) — over the
+//!   whole Rinaldi floor record.
+//! - Convergence: peak displacement and peak yaw of MC2 on fixed-base floor records (Rinaldi at
+//!   0.25 g and 0.5 g, Denali at 0.15 g) settle as ε and ε_sw shrink together by 10× and 100× from
+//!   the defaults: within 1.5 % and 1.5° of the finest (docs/models/rolling.md; a base-isolated
+//!   floor needs a finer rolling ε than the default, documented there).
+
+use crate::rolling_common::*;
+use shakeflow::physics::rolling::{self, Cart, Friction, FrictionLaw, Method, Options, Response};
+
+fn mc2(eps_mps: f64, eps_swivel_radps: f64) -> (Cart, Friction, Options) {
+    let table = rolling::preset("MC2").unwrap();
+    let cart = table.cart(Cart::default_trail_m(table.wheel_diameter_m), rolling::DEFAULT_SWIVEL_ARM_M);
+    let friction = Friction { eps_swivel_radps, ..table.friction(eps_mps, FrictionLaw::Regularised) };
+    let (yaw0_rad, steer0_rad) = table.initial_pose();
+    (cart, friction, Options { yaw0_rad, steer0_rad, ..Options::default() })
+}
+
+fn peaks(r: &Response) -> (f64, f64) {
+    (r.peak_displacement().0, r.peak_yaw().0)
+}
+
+#[test]
+fn mc2_matches_a_peer_written_from_the_notes() {
+    let peer = peer_json("rolling_notes_rinaldi.json", "rolling_notes.py");
+    let floor = Floor::read_csv(&reference("rolling_floor_rinaldi.csv"));
+    let (cart, friction, options) = model_from_peer(&peer["model"], FrictionLaw::Regularised);
+    assert_eq!(
+        (friction.eps_mps, friction.eps_swivel_radps, cart.swivel_arm_m),
+        (1e-4, 1e-4, 0.02),
+        "the peer's regularisation: the rolling default, a swivel scale 10 times finer than the default"
+    );
+    let ours = run(&floor, &cart, &friction, &options, Method::Adaptive { rtol: 1e-10, atol: 1e-12 });
+    let (x, y, yaw) = (series(&peer, "x_m"), series(&peer, "y_m"), series(&peer, "yaw_change_rad"));
+    assert_eq!(x.len(), ours.x_m.len());
+    let position = (0..x.len())
+        .map(|k| (ours.x_m[k] - ours.x_m[0] - x[k]).hypot(ours.y_m[k] - ours.y_m[0] - y[k]))
+        .fold(0.0, f64::max);
+    let angle = (0..x.len()).map(|k| (ours.yaw_rad[k] - ours.yaw_rad[0] - yaw[k]).abs()).fold(0.0, f64::max);
+    let (peak, peak_yaw) = peaks(&ours);
+    let (peer_peak, peer_yaw) =
+        (peer["peak_displacement_m"].as_f64().unwrap(), peer["peak_yaw_change_rad"].as_f64().unwrap());
+    // The swivel regularised the old way, tanh(ρδ̇/ε) = tanh(δ̇/(ε/ρ)), for comparison.
+    let old = run(
+        &floor,
+        &cart,
+        &Friction { eps_swivel_radps: friction.eps_mps / cart.swivel_arm_m, ..friction },
+        &options,
+        Method::default(),
+    );
+    println!(
+        "notes peer, MC2 on Rinaldi (19.9 s): path within {position:.2e} m, yaw within {angle:.2e} rad; peak {peak:.4} m vs {peer_peak:.4} m, yaw {peak_yaw:.4} vs {peer_yaw:.4} rad (ε_sw = ε/ρ: peak {:.4} m, yaw {:.4} rad)",
+        old.peak_displacement().0,
+        old.peak_yaw().0
+    );
+    assert!(peer_peak > 0.5, "the record moves the cart: {peer_peak} m");
+    // Measured: 3.5e-6 m and 3.8e-6 rad (integrator tolerances).
+    assert!(position < 1e-4, "path differs by {position} m");
+    assert!(angle < 1e-4, "yaw differs by {angle} rad");
+    // The check discriminates: the swivel regularised as before moves the peak by millimetres.
+    assert!((old.peak_displacement().0 - peer_peak).abs() > 1e-3, "the old swivel scale is indistinguishable here");
+}
+
+#[test]
+fn mc2_converges_as_both_regularisations_shrink() {
+    for (name, floor) in [
+        ("Rinaldi 0.25 g", Floor::read_csv(&reference("rolling_floor_rinaldi.csv"))),
+        ("Denali 0.15 g", Floor::read_csv(&reference("rolling_floor_denali.csv"))),
+        ("Rinaldi 0.5 g", rinaldi_floor_at(0.5, shakeflow::demo::study::Base::Fixed)),
+    ] {
+        let results: Vec<(f64, f64)> = [1.0, 0.1, 0.01]
+            .iter()
+            .map(|factor| {
+                let (cart, friction, options) = mc2(
+                    factor * rolling::DEFAULT_FRICTION_EPS_MPS,
+                    factor * rolling::DEFAULT_FRICTION_EPS_SWIVEL_RADPS,
+                );
+                peaks(&run(&floor, &cart, &friction, &options, Method::default()))
+            })
+            .collect();
+        println!(
+            "MC2 on {name}: peak displacement {:.4} → {:.4} → {:.4} m, peak yaw {:.2} → {:.2} → {:.2}° as ε, ε_sw shrink 10× and 100×",
+            results[0].0,
+            results[1].0,
+            results[2].0,
+            results[0].1.to_degrees(),
+            results[1].1.to_degrees(),
+            results[2].1.to_degrees()
+        );
+        let (finest_peak, finest_yaw) = results[2];
+        for (peak, yaw) in &results[..2] {
+            assert!((peak - finest_peak).abs() <= 0.015 * finest_peak, "{name}: peak {peak} vs {finest_peak} m");
+            assert!((yaw - finest_yaw).abs() <= 1.5f64.to_radians(), "{name}: yaw {yaw} vs {finest_yaw} rad");
+        }
+    }
+}
