@@ -19,7 +19,7 @@ VENV_PY := $(VENV)/bin/python
 PY_STAMP := $(VENV)/.requirements-$(shell cksum < tests/reference/requirements.txt | cut -d' ' -f1)
 BIN := $(CARGO_TARGET_DIR)/release/shakeflow
 
-.PHONY: all demo test bench prove prove-check release schema fmt lint clean help rolling-findings
+.PHONY: all demo test bench prove prove-check release schema fmt lint clean help rolling-findings fuzz
 
 help:
 	@echo "make demo    build (release) and run the demo study: runs/demo-archive -> runs/demo"
@@ -29,6 +29,8 @@ help:
 	@echo "             [SEED=n] [PER_EFFECT=5] [PROVE_JOBS=2]; make prove-check re-checks the generator's physics"
 	@echo "make schema  regenerate schemas/pipeline.schema.json from the stage registry"
 	@echo "make rolling-findings  the study's rolling findings on the demo archive, as tables (docs/models/rolling.md)"
+	@echo "make fuzz    coverage-guided fuzzing of every file reader and the pipeline parser (docs/fuzzing.md)"
+	@echo "             [FUZZ_SECONDS=120 per target] [FUZZ_TARGETS=\"at2 pipeline ...\"]"
 
 release:
 	$(CARGO) build --release --locked
@@ -87,6 +89,36 @@ fmt:
 
 lint:
 	$(CARGO) clippy --all-targets -- -D warnings
+
+# Coverage-guided fuzzing (cargo-fuzz, libFuzzer) of the readers and the pipeline parser, seeded
+# with the real files in ../shared and the pipelines; fuzz/ is its own workspace, outside `make
+# test`. Stable Rust: RUSTC_BOOTSTRAP lets cargo-fuzz pass its -Z flags (docs/fuzzing.md).
+FUZZ_SECONDS ?= 120
+FUZZ_TARGETS ?= at2 renadic_v1 simcenter_json delimited control_points equipment pipeline load
+FUZZ_SEEDS_at2 := ../shared/data/ground_motions/*.AT2 ../shared/data/records/nga/*
+FUZZ_SEEDS_renadic_v1 := ../shared/data/ground_motions/*.v1
+FUZZ_SEEDS_simcenter_json := ../shared/data/ground_motions/*.json
+FUZZ_SEEDS_delimited := ../shared/cases/*/demo_01/*.csv ../shared/data/records/esm/* ../shared/data/records/knet/*.EW
+FUZZ_SEEDS_control_points := fuzz/seeds/control_points.csv
+FUZZ_SEEDS_equipment := ../shared/cases/demo/demo_01/equipment.yaml ../shared/cases/rolling_demo/demo_01/equipment.yaml
+FUZZ_SEEDS_pipeline := pipelines/*.yaml
+FUZZ_SEEDS_load := ../shared/data/ground_motions/Rinaldi228.AT2 ../shared/cases/demo/demo_01/floor.csv
+
+fuzz:
+	command -v cargo-fuzz >/dev/null || $(CARGO) install cargo-fuzz --locked
+	@for t in $(FUZZ_TARGETS); do \
+	  mkdir -p fuzz/corpus/$$t && \
+	  case $$t in \
+	    at2) seeds="$(FUZZ_SEEDS_at2)";; renadic_v1) seeds="$(FUZZ_SEEDS_renadic_v1)";; \
+	    simcenter_json) seeds="$(FUZZ_SEEDS_simcenter_json)";; delimited) seeds="$(FUZZ_SEEDS_delimited)";; \
+	    control_points) seeds="$(FUZZ_SEEDS_control_points)";; equipment) seeds="$(FUZZ_SEEDS_equipment)";; \
+	    pipeline) seeds="$(FUZZ_SEEDS_pipeline)";; load) seeds="$(FUZZ_SEEDS_load)";; \
+	  esac; \
+	  for f in $$seeds; do cp -n "$$f" fuzz/corpus/$$t/ || exit 1; done; \
+	  echo "fuzzing $$t for $(FUZZ_SECONDS) s"; \
+	  CARGO_TARGET_DIR=$(CARGO_TARGET_DIR)/fuzz RUSTC_BOOTSTRAP=1 $(CARGO) fuzz run --sanitizer none $$t fuzz/corpus/$$t -- \
+	    -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=4096 -max_len=262144 -print_final_stats=1 || exit 1; \
+	done
 
 clean:
 	rm -rf runs

@@ -98,7 +98,7 @@ pub fn read_case(dir: &Path) -> Result<Case, UserError> {
                 .hint("shape is rectangular or trapezoidal"))
         }
     };
-    let block = Block::new(shape, equipment.mass_kg.unwrap_or(1.0), equipment.g_mps2.unwrap_or(9.81))
+    let block = Block::new(shape, equipment.mass_kg.unwrap_or(1.0), equipment.g_mps2.unwrap_or(crate::units::G0))
         .map_err(|e| UserError::new(format!("invalid unit: {e}")).in_file(&equipment_path))?;
     let floor_path = dir.join(FLOOR);
     let floor = columns(&floor_path, &["time_s", "ax_mps2", "az_mps2"], true)?.expect("required");

@@ -360,7 +360,7 @@ mod tests {
         );
         for k in 1..10 {
             let prev = format!("*a{}", k - 1);
-            text.push_str(&format!("  a{k}: &a{k} [{}]\n", vec![prev.as_str(); 9].join(", ")));
+            text.push_str(&format!("  a{k}: &a{k} [{}]\n", [prev.as_str(); 9].join(", ")));
         }
         let err = PipelineFile::parse(Path::new("p.yaml"), text).unwrap_err();
         assert!(err.message.contains("alias bomb"), "{err}");
@@ -373,7 +373,7 @@ mod tests {
         let path = dir.path().join("p.yaml");
         let text = "version: 1\noutput_dir: out\nstages: {}\n";
         let utf16: Vec<u8> = text.encode_utf16().flat_map(u16::to_le_bytes).collect();
-        for bytes in [[&[0xfe, 0xff][..], &utf16].concat(), utf16.clone(), b"\x1f\x8b\x08\x00\x1b[2J".to_vec()] {
+        for bytes in [[&[0xfe, 0xff][..], &utf16].concat(), utf16, b"\x1f\x8b\x08\x00\x1b[2J".to_vec()] {
             std::fs::write(&path, &bytes).unwrap();
             let err = PipelineFile::read(&path).unwrap_err().to_string();
             assert!(err.contains("not a pipeline file: binary or UTF-16 file"), "{err}");

@@ -166,7 +166,7 @@ fn a_csv_a_million_columns_wide_loads() {
     for i in 0..width {
         text.push_str(&format!(",c{i}"));
     }
-    for row in 0..3 {
+    for row in 0..2 {
         text.push_str(&format!("\n{}", row as f64 * 0.01));
         text.push_str(&",1".repeat(width));
     }
@@ -175,7 +175,7 @@ fn a_csv_a_million_columns_wide_loads() {
     let table = load::load_record(&source(spec), &part(&path, "")).unwrap();
     assert_eq!(table.columns.len(), width + 1);
     assert_eq!(table.columns[width].name, format!("c{}", width - 1));
-    assert_eq!(table.f64_column("c123456").unwrap(), [9.80665; 3]);
+    assert_eq!(table.f64_column("c123456").unwrap(), [9.80665; 2]);
 }
 
 /// `validate` reads the first record as `load` does: a repeated column is its error too.
