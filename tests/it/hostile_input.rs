@@ -57,6 +57,7 @@ fn a_source_column_named_time_s_is_refused() {
     assert!(message.contains("time_column: time_s"), "{message}");
 }
 
+/// (With `component_as: label`: by default an AT2 component is named by its axis, `ax_mps2`.)
 #[test]
 fn an_at2_component_labelled_time_s_is_refused() {
     let dir = tempfile::tempdir().unwrap();
@@ -65,7 +66,7 @@ fn an_at2_component_labelled_time_s_is_refused() {
     let mut lines: Vec<&str> = text.split('\n').collect();
     lines[1] = "Northridge-01, 1/17/1994, Rinaldi Receiving Sta, time_s";
     std::fs::write(&path, lines.join("\n")).unwrap();
-    let message = load_error(json!({"format": "at2", "path": "t.AT2"}), &path);
+    let message = load_error(json!({"format": "at2", "path": "t.AT2", "component_as": "label"}), &path);
     assert!(message.contains("t.AT2:2:1: the file's column `time_s` would collide"), "{message}");
 }
 
