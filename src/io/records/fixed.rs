@@ -166,11 +166,11 @@ impl<'a> Lines<'a> {
         while values.len() < count {
             let line = self.line(i, &format!("{what} ({} of {count} read)", values.len()))?;
             for token in line.split_ascii_whitespace() {
-                let column = char_column(line, offset_in(line, token));
+                let column = || char_column(line, offset_in(line, token));
                 if values.len() == count {
                     return Err(self.error(
                         i,
-                        Some(column),
+                        Some(column()),
                         format!("'{token}' is one value more than the {count} {what} the header announces"),
                         "the count in the header is wrong or two blocks run together",
                     ));
@@ -178,7 +178,7 @@ impl<'a> Lines<'a> {
                 let Some(value) = parse_finite(token) else {
                     return Err(self.error(
                         i,
-                        Some(column),
+                        Some(column()),
                         format!("cannot read '{token}' as a number ({what} value {} of {count})", values.len() + 1),
                         "data lines hold only numbers separated by blanks: the file may be truncated or edited",
                     ));
