@@ -43,15 +43,17 @@ impl<'a> Lines<'a> {
 
     /// Line `i`, or an error saying the file ends inside `what`.
     pub fn line(&self, i: usize, what: &str) -> Result<&'a str, ParseError> {
-        self.get(i).ok_or_else(|| {
-            ParseError::new(
-                self.path,
-                Some(self.count()),
-                None,
-                format!("the file ends after line {} inside {what}", self.count()),
-                "the file looks truncated: get a fresh copy of the record",
-            )
-        })
+        self.get(i).ok_or_else(|| self.ends_inside(what))
+    }
+
+    fn ends_inside(&self, what: &str) -> ParseError {
+        ParseError::new(
+            self.path,
+            Some(self.count()),
+            None,
+            format!("the file ends after line {} inside {what}", self.count()),
+            "the file looks truncated: get a fresh copy of the record",
+        )
     }
 
     /// An error at 0-based line `i`, 1-based character column `column`.
@@ -111,7 +113,9 @@ impl<'a> Lines<'a> {
         let mut values = Vec::with_capacity(count);
         let mut i = first;
         while values.len() < count {
-            let line = self.line(i, &format!("{what} ({} of {count} read)", values.len()))?;
+            // The message is built only when the file ends: this runs once per line.
+            let line =
+                self.get(i).ok_or_else(|| self.ends_inside(&format!("{what} ({} of {count} read)", values.len())))?;
             let on_line = per_line.min(count - values.len());
             for k in 0..on_line {
                 let start = k * width;
@@ -164,13 +168,15 @@ impl<'a> Lines<'a> {
         let mut values = Vec::with_capacity(count);
         let mut i = first;
         while values.len() < count {
-            let line = self.line(i, &format!("{what} ({} of {count} read)", values.len()))?;
+            // The message is built only when the file ends: this runs once per line.
+            let line =
+                self.get(i).ok_or_else(|| self.ends_inside(&format!("{what} ({} of {count} read)", values.len())))?;
             for token in line.split_ascii_whitespace() {
-                let column = char_column(line, offset_in(line, token));
+                let column = || char_column(line, offset_in(line, token));
                 if values.len() == count {
                     return Err(self.error(
                         i,
-                        Some(column),
+                        Some(column()),
                         format!("'{token}' is one value more than the {count} {what} the header announces"),
                         "the count in the header is wrong or two blocks run together",
                     ));
@@ -178,7 +184,7 @@ impl<'a> Lines<'a> {
                 let Some(value) = parse_finite(token) else {
                     return Err(self.error(
                         i,
-                        Some(column),
+                        Some(column()),
                         format!("cannot read '{token}' as a number ({what} value {} of {count})", values.len() + 1),
                         "data lines hold only numbers separated by blanks: the file may be truncated or edited",
                     ));
