@@ -85,16 +85,7 @@ impl Table {
 
     /// Adds a column; panics on a length mismatch because that is always a bug in the stage, never bad input.
     pub fn push(&mut self, column: Column) {
-        if let Some(first) = self.columns.first() {
-            assert_eq!(
-                first.data.len(),
-                column.data.len(),
-                "column `{}` has {} rows but the table has {}",
-                column.name,
-                column.data.len(),
-                first.data.len()
-            );
-        }
+        self.assert_rows_match(&column);
         assert!(self.column(&column.name).is_none(), "duplicate column `{}`", column.name);
         self.columns.push(column);
     }
@@ -105,18 +96,23 @@ impl Table {
     pub fn extend(&mut self, columns: impl IntoIterator<Item = Column>) {
         let mut names: HashSet<String> = self.columns.iter().map(|c| c.name.clone()).collect();
         for column in columns {
-            if let Some(first) = self.columns.first() {
-                assert_eq!(
-                    first.data.len(),
-                    column.data.len(),
-                    "column `{}` has {} rows but the table has {}",
-                    column.name,
-                    column.data.len(),
-                    first.data.len()
-                );
-            }
+            self.assert_rows_match(&column);
             assert!(names.insert(column.name.clone()), "duplicate column `{}`", column.name);
             self.columns.push(column);
+        }
+    }
+
+    /// A column's length must be the table's: a mismatch is a bug in a stage, never bad input.
+    fn assert_rows_match(&self, column: &Column) {
+        if let Some(first) = self.columns.first() {
+            assert_eq!(
+                first.data.len(),
+                column.data.len(),
+                "column `{}` has {} rows but the table has {}",
+                column.name,
+                column.data.len(),
+                first.data.len()
+            );
         }
     }
 

@@ -2,8 +2,8 @@
 //! values, any number per line.
 
 use super::{
-    char_column, decode, empty_file_error, numbered_lines, offset_in, parse_finite, quote, read_bytes, ParseError,
-    RawChannel, RawRecord,
+    char_column, numbered_lines, offset_in, parse_finite, quote, read_bytes, record_text, ParseError, RawChannel,
+    RawRecord,
 };
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -18,10 +18,7 @@ pub fn read_at2(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_at2`] of a file's bytes; `path` only names the file in errors.
 pub fn parse_at2(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
-    let text = decode(path, bytes)?;
-    if text.trim().is_empty() {
-        return Err(empty_file_error(path, "a PEER AT2 record (4 header lines, then values)"));
-    }
+    let text = record_text(path, bytes, "a PEER AT2 record (4 header lines, then values)")?;
     let mut lines = numbered_lines(&text);
     let mut head: Vec<&str> = Vec::with_capacity(HEADER_LINES);
     for (_, line) in lines.by_ref().take(HEADER_LINES) {

@@ -6,7 +6,7 @@
 //! data line with the count, units and format, the values, and optionally `End-of-data`.
 
 use super::fixed::{after, fortran_format, is_blank, leading_count, Lines};
-use super::{decode, empty_file_error, quote, read_bytes, ParseError, RawChannel, RawRecord};
+use super::{quote, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -19,10 +19,7 @@ pub fn read_cosmos(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_cosmos`] of a file's bytes (read once and hashed by `load`); `path` only names the file in errors.
 pub fn parse_cosmos(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
-    let text = decode(path, bytes)?;
-    if text.trim().is_empty() {
-        return Err(empty_file_error(path, "a COSMOS record (text header, integer and real headers, data)"));
-    }
+    let text = record_text(path, bytes, "a COSMOS record (text header, integer and real headers, data)")?;
     let lines = Lines::new(path, &text);
     let mut header = BTreeMap::new();
     let mut channels: Vec<RawChannel> = Vec::new();

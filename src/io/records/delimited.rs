@@ -4,9 +4,7 @@
 //! Built for files of tens of MB: the file is read once and cells are parsed
 //! straight from `&str` slices, with no per-cell allocation.
 
-use super::{
-    char_column, decode, empty_file_error, numbered_lines, offset_in, read_bytes, ParseError, RawChannel, RawRecord,
-};
+use super::{char_column, numbered_lines, offset_in, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -83,10 +81,7 @@ pub fn read_delimited(path: &Path, opts: &DelimitedOptions) -> Result<RawRecord,
 /// [`read_delimited`] of a file's bytes; `path` only names the file in errors (and, without a
 /// delimiter in `opts`, its extension picks tab for `.tsv`/`.tab`).
 pub fn parse_delimited(path: &Path, bytes: &[u8], opts: &DelimitedOptions) -> Result<RawRecord, ParseError> {
-    let text = decode(path, bytes)?;
-    if text.trim().is_empty() {
-        return Err(empty_file_error(path, "rows of numbers, optionally under a column-name row"));
-    }
+    let text = record_text(path, bytes, "rows of numbers, optionally under a column-name row")?;
     // Blank lines at the end are not rows. Cut after the last non-blank line
     // rather than trimming it, so a trailing tab (empty last cell) survives.
     let last_char = text.trim_end().len();

@@ -10,7 +10,7 @@
 //! Vol.1 and Vol.2 layouts (13 or 25 text lines) and older upper-case files read alike.
 
 use super::fixed::{after, fortran_format, is_blank, leading_count, Lines};
-use super::{decode, empty_file_error, quote, read_bytes, ParseError, RawChannel, RawRecord};
+use super::{quote, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -23,10 +23,7 @@ pub fn read_dmg(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_dmg`] of a file's bytes (read once and hashed by `load`); `path` only names the file in errors.
 pub fn parse_dmg(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
-    let text = decode(path, bytes)?;
-    if text.trim().is_empty() {
-        return Err(empty_file_error(path, "a CSMIP/DMG Vol.1 or Vol.2 record"));
-    }
+    let text = record_text(path, bytes, "a CSMIP/DMG Vol.1 or Vol.2 record")?;
     let lines = Lines::new(path, &text);
     let mut header = BTreeMap::new();
     let mut channels: Vec<RawChannel> = Vec::new();

@@ -5,7 +5,7 @@
 //! key is kept (lower-cased); the AFAD-derived files' other date layouts are kept as written.
 
 use super::fixed::{is_blank, Lines};
-use super::{decode, empty_file_error, quote, read_bytes, ParseError, RawChannel, RawRecord};
+use super::{quote, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -15,10 +15,7 @@ pub fn read_esm(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_esm`] of a file's bytes (read once and hashed by `load`); `path` only names the file in errors.
 pub fn parse_esm(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
-    let text = decode(path, bytes)?;
-    if text.trim().is_empty() {
-        return Err(empty_file_error(path, "an ESM ASCII record (KEY: value header lines, then values)"));
-    }
+    let text = record_text(path, bytes, "an ESM ASCII record (KEY: value header lines, then values)")?;
     let lines = Lines::new(path, &text);
     let mut keys: BTreeMap<String, (String, usize)> = BTreeMap::new();
     let mut k = 0;

@@ -8,7 +8,7 @@
 //! displacement blocks, which the reader skips.
 
 use super::fixed::{after, compass_azimuth, is_blank, Lines};
-use super::{decode, empty_file_error, quote, read_bytes, ParseError, RawChannel, RawRecord};
+use super::{quote, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -22,10 +22,7 @@ pub fn read_geonet(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_geonet`] of a file's bytes (read once and hashed by `load`); `path` only names the file in errors.
 pub fn parse_geonet(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
-    let text = decode(path, bytes)?;
-    if text.trim().is_empty() {
-        return Err(empty_file_error(path, "a GeoNet V1A/V2A record"));
-    }
+    let text = record_text(path, bytes, "a GeoNet V1A/V2A record")?;
     let lines = Lines::new(path, &text);
     let mut header = BTreeMap::new();
     let mut channels: Vec<RawChannel> = Vec::new();

@@ -8,7 +8,7 @@
 //! baseline step. The number of values must be `Duration Time(s)` × `Sampling Freq(Hz)`.
 
 use super::fixed::{is_blank, Lines};
-use super::{char_column, decode, empty_file_error, quote, read_bytes, ParseError, RawChannel, RawRecord};
+use super::{char_column, quote, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -39,10 +39,7 @@ pub fn read_knet(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_knet`] of a file's bytes (read once and hashed by `load`); `path` only names the file in errors.
 pub fn parse_knet(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
-    let text = decode(path, bytes)?;
-    if text.trim().is_empty() {
-        return Err(empty_file_error(path, "a K-NET/KiK-net ASCII record (17 header lines, then counts)"));
-    }
+    let text = record_text(path, bytes, "a K-NET/KiK-net ASCII record (17 header lines, then counts)")?;
     let lines = Lines::new(path, &text);
     let mut header = BTreeMap::new();
     for (k, (key, name)) in KEYS.iter().enumerate() {

@@ -277,14 +277,20 @@ pub fn not_text(bytes: &[u8]) -> Option<NotText> {
     })
 }
 
-fn empty_file_error(path: &Path, what: &str) -> ParseError {
-    ParseError::new(
-        path,
-        None,
-        None,
-        "the file is empty",
-        format!("expected {what}; the download or export probably failed"),
-    )
+/// The text of a record file ([`decode`]), refused when it holds nothing but blanks: `what` says
+/// what the file should have held.
+fn record_text<'a>(path: &Path, bytes: &'a [u8], what: &str) -> Result<Cow<'a, str>, ParseError> {
+    let text = decode(path, bytes)?;
+    if text.trim().is_empty() {
+        return Err(ParseError::new(
+            path,
+            None,
+            None,
+            "the file is empty",
+            format!("expected {what}; the download or export probably failed"),
+        ));
+    }
+    Ok(text)
 }
 
 /// Lines numbered from 1, without the `\r` of CRLF endings.

@@ -7,8 +7,8 @@
 //! are cut by fixed width, never split on whitespace.
 
 use super::{
-    char_column, decode, empty_file_error, numbered_lines, offset_in, parse_finite, quote, read_bytes, ParseError,
-    RawChannel, RawRecord,
+    char_column, numbered_lines, offset_in, parse_finite, quote, read_bytes, record_text, ParseError, RawChannel,
+    RawRecord,
 };
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -47,10 +47,7 @@ pub fn read_renadic_v1(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_renadic_v1`] of a file's bytes; `path` only names the file in errors.
 pub fn parse_renadic_v1(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
-    let text = decode(path, bytes)?;
-    if text.trim().is_empty() {
-        return Err(empty_file_error(path, "a RENADIC Vol.1 file (27 header lines per channel, then data)"));
-    }
+    let text = record_text(path, bytes, "a RENADIC Vol.1 file (27 header lines per channel, then data)")?;
     // Trailing blank lines are not a channel.
     let lines: Vec<(usize, &str)> = numbered_lines(text.trim_end()).collect();
     let mut header = BTreeMap::new();

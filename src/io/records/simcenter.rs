@@ -2,7 +2,7 @@
 //! `{"dT": 0.005, "data_x": [...], "data_y": [...], "PGA_x": ..., "name": ...}`,
 //! values in g by convention.
 
-use super::{char_column, decode, empty_file_error, read_bytes, ParseError, RawChannel, RawRecord};
+use super::{char_column, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -33,10 +33,7 @@ pub fn read_simcenter_json(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_simcenter_json`] of a file's bytes; `path` only names the file in errors.
 pub fn parse_simcenter_json(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
-    let text = decode(path, bytes)?;
-    if text.trim().is_empty() {
-        return Err(empty_file_error(path, LAYOUT));
-    }
+    let text = record_text(path, bytes, LAYOUT)?;
     let event: Event = serde_json::from_str(&text).map_err(|e| json_error(path, &text, &e))?;
 
     let Some(dt) = event.dt else {

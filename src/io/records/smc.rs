@@ -6,7 +6,7 @@
 //! sampling rate. Integer I(1) and real R(1) hold the file's "unknown" markers.
 
 use super::fixed::{after, is_blank, Lines};
-use super::{decode, empty_file_error, quote, read_bytes, ParseError, RawChannel, RawRecord};
+use super::{quote, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -20,10 +20,7 @@ pub fn read_smc(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_smc`] of a file's bytes (read once and hashed by `load`); `path` only names the file in errors.
 pub fn parse_smc(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
-    let text = decode(path, bytes)?;
-    if text.trim().is_empty() {
-        return Err(empty_file_error(path, "a USGS SMC record"));
-    }
+    let text = record_text(path, bytes, "a USGS SMC record")?;
     let lines = Lines::new(path, &text);
     let head: Vec<&str> =
         (0..TEXT_LINES).map(|k| lines.line(k, "the 11-line SMC text header")).collect::<Result<_, _>>()?;
