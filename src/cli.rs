@@ -226,6 +226,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
             crate::pipeline::ownership::check_output_dir(&plan.file, &input_files)?;
             let output_dir = plan.file.output_dir();
             let lock = crate::pipeline::lock::LockFile::read(&output_dir.join(crate::pipeline::lock::LOCK_FILE))?;
+            crate::pipeline::ownership::check_pipeline(&plan.file, &lock)?;
             crate::pipeline::ownership::check_stage_folders(
                 &plan.file,
                 &output_dir,

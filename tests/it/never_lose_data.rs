@@ -255,7 +255,7 @@ fn a_second_pipeline_writing_into_anothers_output_dir_is_refused() {
     assert!(out.status.success(), "{}", stderr(&out));
     write(root, "other.yaml", PIPELINE);
     let before = snapshot(&root.join("out"));
-    for command in ["run", "status"] {
+    for command in ["run", "status", "validate"] {
         let refused = shakeflow(&[command, "other.yaml"], root);
         let message = stderr(&refused);
         assert_eq!(refused.status.code(), Some(1), "{message}");
