@@ -12,6 +12,7 @@ pub mod paths;
 pub mod plan;
 pub mod progress;
 pub mod sink;
+pub mod slurm;
 pub mod sources;
 pub mod spec;
 pub mod txn;
