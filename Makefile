@@ -50,8 +50,13 @@ $(PY_STAMP): tests/reference/requirements.txt
 	$(VENV_PY) -m pip install --quiet --disable-pip-version-check -r tests/reference/requirements.txt
 	touch $@
 
+# The Slurm tests run against a single-node Slurm started here and stopped after (by pid, also when
+# tests fail; left running if it already ran). Without root it cannot start: those tests then fail, saying so.
 test: $(PY_STAMP)
-	SHAKEFLOW_PYTHON=$(VENV_PY) $(CARGO) test --locked --no-fail-fast
+	@was_running=$$(tests/system/slurm.sh status >/dev/null 2>&1 && echo yes); \
+	tests/system/slurm.sh start || echo "make test: the test Slurm did not start; the Slurm tests will fail"; \
+	SHAKEFLOW_PYTHON=$(VENV_PY) $(CARGO) test --locked --no-fail-fast; status=$$?; \
+	[ -n "$$was_running" ] || tests/system/slurm.sh stop; exit $$status
 
 bench: release $(PY_STAMP)
 	$(BIN) demo-archive runs/demo-archive

@@ -33,6 +33,7 @@ mod rolling_peers;
 mod rolling_stage;
 mod rolling_swivel;
 mod sdof_identification;
+mod slurm_client;
 mod tidy;
 mod toppling_demo_archive;
 mod toppling_demo_cases;

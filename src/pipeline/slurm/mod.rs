@@ -323,3 +323,23 @@ fn status_misses_some(status: &RunStatus, observations: &[status::Observation]) 
             .any(|p| p.tasks.iter().any(|&t| !states[&t].is_terminal() && !seen.contains(&(p.job_id.0, t - p.offset))))
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_missing_command_is_a_user_error_saying_where_slurm_comes_from() {
+        let e = Slurm::new().run("shakeflow-no-such-sbatch", &[], None).unwrap_err();
+        assert!(e.message.contains("`shakeflow-no-such-sbatch` was not found"), "{e}");
+        assert!(e.hint.as_deref().is_some_and(|h| h.contains("login node")), "{e}");
+    }
+
+    #[test]
+    fn commands_get_stdin_and_report_stderr_and_slurm_conf() {
+        let slurm = Slurm::with_conf("/x/slurm.conf");
+        let echo = |script: &str, stdin| slurm.run("sh", &["-c".to_string(), script.to_string()], stdin).unwrap();
+        assert_eq!(echo("cat; echo \" $SLURM_CONF\"", Some("script")), Ok("script /x/slurm.conf\n".to_string()));
+        assert_eq!(echo("echo oops >&2; exit 3", None), Err("oops".to_string()));
+    }
+}

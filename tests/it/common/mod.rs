@@ -219,3 +219,29 @@ pub fn cpt_project() -> tempfile::TempDir {
     std::fs::write(dir.path().join("pipeline.yaml"), CPT_PIPELINE).unwrap();
     dir
 }
+
+/// The configuration of the test Slurm (`SLURM_CONF` for commands that should use it):
+/// `$SHAKEFLOW_SLURM_DIR/slurm.conf`, by default under ~/.cache/shakeflow/slurm, as `tests/system/slurm.sh` writes it.
+pub fn test_slurm_conf() -> PathBuf {
+    let dir = std::env::var_os("SHAKEFLOW_SLURM_DIR").map(PathBuf::from).unwrap_or_else(|| {
+        PathBuf::from(std::env::var_os("HOME").expect("HOME is set")).join(".cache/shakeflow/slurm")
+    });
+    dir.join("slurm.conf")
+}
+
+/// The test Slurm that `tests/system/slurm.sh start` runs (`make test` starts and stops it): a
+/// client pointed at its configuration. Its absence fails the test, saying how to start it.
+pub fn test_slurm() -> shakeflow::pipeline::slurm::Slurm {
+    let conf = test_slurm_conf();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/system/slurm.sh");
+    let answers = conf.is_file()
+        && Command::new("scontrol").arg("ping").env("SLURM_CONF", &conf).output().is_ok_and(|o| o.status.success());
+    assert!(
+        answers,
+        "the test Slurm is not running (no controller answers for {}): start it with `{} start` as root \
+         (it installs slurm-wlm and munge), or run the tests through `make test`, which starts and stops it",
+        conf.display(),
+        script.display()
+    );
+    shakeflow::pipeline::slurm::Slurm::with_conf(conf)
+}
