@@ -39,12 +39,43 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run a pipeline: stale stages run (in parallel where independent), up-to-date ones are cached.
+    /// Run a pipeline in work units: each record of a per-record stage (and each gathering stage
+    /// as a whole) is cached, run and committed on its own; stale units run in parallel.
     ///
-    /// All-or-nothing: outputs and the lockfile change only when every stage succeeded.
+    /// A unit that fails does not discard the others: what finished is committed, the failed
+    /// units keep their previous outputs (stale), what depends on them does not run, and the run
+    /// exits 1 naming each. Records a source with `on_error: skip` cannot read are listed in the
+    /// load stage's `flagged` table and the run exits 2.
+    ///
+    /// Examples:
+    ///   shakeflow run pipelines/demo.yaml                       everything that is stale
+    ///   shakeflow run pipelines/demo.yaml baseline_floors       that stage and what it needs
+    ///   shakeflow run pipelines/demo.yaml --dry-run             the units that would run, and why
+    ///   shakeflow run pipelines/demo.yaml --keep-going          past failures, all that does not depend on them
+    #[command(verbatim_doc_comment)]
     Run {
         /// The pipeline YAML file.
         pipeline: PathBuf,
+        /// Run only these stages and the stages they read (default: all).
+        stages: Vec<String>,
+        /// Print the units that would run and why; run nothing.
+        #[arg(long)]
+        dry_run: bool,
+        /// After a failed unit, still run everything that does not depend on it.
+        #[arg(long)]
+        keep_going: bool,
+        /// Where the work units run: `local` (this machine, rayon) or `slurm` (one job array per
+        /// stage and a commit job; returns once submitted unless --wait; docs/slurm.md).
+        #[arg(long, value_enum, default_value_t = ExecutorKind::Local)]
+        executor: ExecutorKind,
+        /// With --executor slurm: poll until the run is committed and exit as a local run would.
+        #[arg(long)]
+        wait: bool,
+        /// With --executor slurm: work units per array task (records per shard).
+        #[arg(long, default_value_t = 50)]
+        units_per_task: usize,
+        #[command(flatten)]
+        slurm: crate::pipeline::slurm::ExecutorFlags,
         /// Worker threads for stages and records (default: all cores).
         #[arg(long, short = 'j')]
         jobs: Option<usize>,
@@ -154,27 +185,98 @@ enum Command {
     },
     /// Print the JSON Schema of pipeline files (the source of schemas/pipeline.schema.json).
     Schema,
+    /// One array task of a Slurm run (submitted by `run --executor slurm`; its shard is
+    /// `$SLURM_ARRAY_TASK_ID`).
+    #[command(hide = true)]
+    SlurmTask { run_dir: PathBuf, stage: String },
+    /// The commit job of a Slurm run (submitted by `run --executor slurm`).
+    #[command(hide = true)]
+    SlurmCommit { run_dir: PathBuf },
 }
 
 pub fn main() -> anyhow::Result<ExitCode> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Run { pipeline, jobs, force, quiet } => {
+        Command::Run {
+            pipeline,
+            stages,
+            dry_run,
+            keep_going,
+            executor,
+            wait,
+            units_per_task,
+            slurm,
+            jobs,
+            force,
+            quiet,
+        } => {
             if let Some(jobs) = jobs {
                 rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build_global().context("setting --jobs")?;
             }
             let plan = Plan::new(PipelineFile::read(&pipeline)?)?;
+            let options = RunOptions { force, only: stages, keep_going };
+            if dry_run {
+                let lines = executor::dry_run(&plan, &options)?;
+                let mut stale = 0;
+                for line in &lines {
+                    for unit in &line.stale {
+                        stale += 1;
+                        println!(
+                            "would run {} {}: {}",
+                            line.name,
+                            crate::pipeline::units::describe(&unit.id),
+                            unit.reasons.join("; ")
+                        );
+                    }
+                    for unit in &line.vanished {
+                        println!(
+                            "would remove {} {}: its record is gone from the inputs",
+                            line.name,
+                            crate::pipeline::units::describe(unit)
+                        );
+                    }
+                }
+                let total: usize = lines.iter().map(|l| l.units).sum();
+                println!("{stale} of {total} unit(s) would run; nothing was run");
+                return Ok(ExitCode::SUCCESS);
+            }
             let reporter = Reporter::new(quiet);
             let started = std::time::Instant::now();
-            let reports = executor::run(&plan, &RunOptions { force }, &reporter)?;
+            if executor == ExecutorKind::Slurm {
+                let file_options = plan.file.spec.executor.clone().unwrap_or_default();
+                let slurm = executor::slurm::SlurmOptions {
+                    executor: file_options.merged_with(&slurm.options()),
+                    units_per_task,
+                    wait,
+                };
+                let summary = executor::slurm::submit(&plan, &options, &slurm, &reporter)?;
+                return Ok(exit_status(&summary));
+            }
+            let summary = executor::run(&plan, &options, &reporter)?;
+            let reports = &summary.reports;
             let ran = reports.iter().filter(|r| matches!(r.outcome, Outcome::Ran { .. })).count();
+            let skipped = reports.iter().filter(|r| r.outcome == Outcome::Skipped).count();
+            let units: usize = reports.iter().map(|r| r.ran).sum();
             reporter.line(&format!(
-                "{} stage(s): {ran} ran, {} cached, in {:.2} s; artifacts in {}",
+                "{} stage(s): {ran} ran, {} cached{} ({units} unit(s) ran), in {:.2} s; artifacts in {}",
                 reports.len(),
-                reports.len() - ran,
+                reports.len() - ran - skipped,
+                if skipped > 0 { format!(", {skipped} not run") } else { String::new() },
                 started.elapsed().as_secs_f64(),
                 plan.file.output_dir().display()
             ));
+            Ok(exit_status(&summary))
+        }
+        Command::SlurmTask { run_dir, stage } => {
+            let shard: usize = std::env::var("SLURM_ARRAY_TASK_ID")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .context("`slurm-task` runs inside a Slurm array task ($SLURM_ARRAY_TASK_ID)")?;
+            let ok = executor::slurm::task(&run_dir, &stage, shard)?;
+            Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
+        }
+        Command::SlurmCommit { run_dir } => {
+            executor::slurm::commit(&run_dir)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Status { pipeline } => {
@@ -184,12 +286,23 @@ pub fn main() -> anyhow::Result<ExitCode> {
             for note in &notes {
                 println!("note: {note}");
             }
-            let stale = lines.iter().filter(|l| !l.reasons.is_empty()).count();
+            for line in executor::slurm::progress(&plan.file.output_dir()) {
+                println!("{line}");
+            }
+            let stale = lines.iter().filter(|l| l.is_stale()).count();
             for line in &lines {
-                if line.reasons.is_empty() {
-                    println!("{:<18} up to date", line.name);
+                if line.is_stale() {
+                    println!("{:<18} stale: {}", line.name, line.summary());
                 } else {
-                    println!("{:<18} stale: {}", line.name, line.reasons.join("; "));
+                    println!("{:<18} up to date ({} unit(s))", line.name, line.units);
+                }
+                for flagged in &line.flagged {
+                    println!(
+                        "{:<18} flagged {}: {}",
+                        "",
+                        crate::pipeline::units::describe(&flagged.id),
+                        flagged.reasons.join("; ")
+                    );
                 }
             }
             println!("{stale} of {} stage(s) stale; lockfile {}", lines.len(), executor::lock_path(&plan).display());
@@ -693,4 +806,45 @@ fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Resu
     result?;
     eprintln!("{} case(s) in {:.1} s", results.len(), started.elapsed().as_secs_f64());
     Ok(())
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum ExecutorKind {
+    Local,
+    Slurm,
+}
+
+/// A run's exit status: 1 when a unit failed (each named), 2 when records were skipped.
+fn exit_status(summary: &executor::RunSummary) -> ExitCode {
+    for flagged in &summary.flagged {
+        eprintln!(
+            "skipped record: {} {}: {}",
+            flagged.stage,
+            crate::pipeline::units::describe(&flagged.unit),
+            flagged.reason
+        );
+    }
+    if !summary.failed.is_empty() {
+        for failed in &summary.failed {
+            eprintln!(
+                "error: {} {} failed: {}",
+                failed.stage,
+                crate::pipeline::units::describe(&failed.unit),
+                failed.reason
+            );
+        }
+        eprintln!(
+            "{} unit(s) failed; the units that finished were committed (`shakeflow status` says what is stale)",
+            summary.failed.len()
+        );
+        return ExitCode::from(1);
+    }
+    if !summary.flagged.is_empty() {
+        eprintln!(
+            "{} record(s) skipped (on_error: skip); listed in each load stage's `flagged` table",
+            summary.flagged.len()
+        );
+        return ExitCode::from(2);
+    }
+    ExitCode::SUCCESS
 }

@@ -75,6 +75,22 @@ pub fn pipeline_schema() -> Value {
             "version": {"const": 1, "description": "pipeline format version"},
             "description": {"type": "string"},
             "output_dir": {"type": "string", "description": "where artifacts and shakeflow.lock are written"},
+            "executor": {
+                "type": "object",
+                "additionalProperties": false,
+                "description": "Slurm options for `shakeflow run --executor slurm` (flags override them; docs/slurm.md)",
+                "properties": {
+                    "partition": {"type": "string"},
+                    "account": {"type": "string"},
+                    "time_limit": {"type": "string", "description": "per array task: MM, HH:MM:SS, D-HH:MM:SS"},
+                    "cpus_per_task": {"type": "integer", "minimum": 1},
+                    "mem": {"type": "string", "description": "per task, e.g. 4G"},
+                    "array_throttle": {"type": "integer", "minimum": 1, "description": "at most this many tasks of one array at once"},
+                    "retries": {"type": "integer", "minimum": 0, "description": "attempts again a failed task this many times"},
+                    "requeue": {"type": "boolean", "description": "let Slurm requeue preempted tasks"},
+                    "sbatch_args": {"type": "array", "items": {"type": "string"}}
+                }
+            },
             "inputs": {"type": "object", "description": "record sources by name", "additionalProperties": {"$ref": "#/definitions/source"}},
             "stages": {"type": "object", "description": "processing stages by name", "additionalProperties": {"$ref": "#/definitions/stage"}}
         },
@@ -99,6 +115,7 @@ pub fn pipeline_schema() -> Value {
                     "scale": {"type": "number", "default": 1.0, "description": "factor applied after unit conversion"},
                     "gaps": {"enum": ["error", "interpolate"], "default": "error", "description": "what to do with empty/NaN samples"},
                     "non_uniform": {"enum": ["error", "resample"], "default": "error", "description": "what to do with a non-uniform time column"},
+                    "on_error": {"enum": ["fail", "skip"], "default": "fail", "description": "a record that cannot be read: `fail` fails its work unit; `skip` lists it in the load stage's `flagged` table and goes on (exit status 2)"},
                     "component_as": {"enum": ["ax", "ay", "label"], "default": "ax", "description": "accelerogram formats without `columns`: the axis a record's lone horizontal component becomes, or `label` to keep the file's channel names (docs/formats.md)"}
                 }
             },

@@ -13,6 +13,11 @@
 //! Taking over is itself exclusive: the taker first creates `lease.break` (`O_EXCL`), checks the
 //! lease is still the stale one it read, removes it and creates its own; a `lease.break` left by
 //! a taker that died is ignored after [`BREAK_STALE_AFTER`].
+//!
+//! A Slurm run outlives the process that submitted it: that process [`Lease::hand_over`]s the
+//! lease to the run (its holder then names the run and its commit job, which alone takes it
+//! back with [`Lease::take_handed`]). Such a lease is stale once `squeue` no longer knows the
+//! commit job.
 
 use std::fs::{self, File, OpenOptions};
 use std::io::Write;
@@ -48,13 +53,25 @@ pub struct Holder {
     /// Seconds since the Unix epoch.
     pub started: u64,
     pub command: String,
-    /// Unique to this lease: a holder removes only its own.
+    /// Unique to this lease: a holder removes only its own. A Slurm run's: the run's id.
     pub token: String,
+    /// Set while a Slurm run holds the lease: its commit job's id.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub slurm_job: Option<String>,
 }
 
 impl Holder {
     fn describe(&self) -> String {
         let age = now_secs().saturating_sub(self.started);
+        if let Some(job) = &self.slurm_job {
+            return format!(
+                "the Slurm run `{}` (commit job {job}), submitted {} ({} ago) by `{}`",
+                self.token,
+                format_utc(self.started),
+                format_age(age),
+                self.command
+            );
+        }
         format!(
             "pid {} on host `{}`, started {} ({} ago): `{}`",
             self.pid,
@@ -93,6 +110,7 @@ impl Lease {
             started: now_secs(),
             command: std::env::args().collect::<Vec<_>>().join(" "),
             token: format!("{}-{}-{}", hostname(), std::process::id(), now_nanos()),
+            slurm_job: None,
         };
         let mut took_over = None;
         for _attempt in 0..50 {
@@ -156,6 +174,81 @@ impl Lease {
     pub fn root(&self) -> &Path {
         &self.root
     }
+
+    /// Gives the lease to the Slurm run `run` whose commit job is `job`: the lease stays after
+    /// this process ends, naming the run, until the commit job takes it ([`Lease::take_handed`])
+    /// or `squeue` no longer knows that job.
+    pub fn hand_over(self, run: &str, job: &str) -> Result<(), UserError> {
+        let holder = Holder {
+            host: hostname(),
+            pid: std::process::id(),
+            process_start: None,
+            started: now_secs(),
+            command: std::env::args().collect::<Vec<_>>().join(" "),
+            token: run.to_string(),
+            slurm_job: Some(job.to_string()),
+        };
+        replace_holder(&self.path, &holder)
+    }
+
+    /// Takes back the lease handed to the Slurm run `run` (in its commit job).
+    pub fn take_handed(root: &Path, run: &str) -> Result<Lease, UserError> {
+        let path = root.join(STATE_DIR).join(LEASE_FILE);
+        // The submitting process hands the lease over just after submitting this job: give it a
+        // moment, should this job start first.
+        for _ in 0..120 {
+            match read_holder(&path) {
+                Some(h) if h.token != run && h.slurm_job.is_none() && staleness(&path, &h).is_none() => {
+                    std::thread::sleep(Duration::from_millis(500));
+                }
+                _ => break,
+            }
+        }
+        match read_holder(&path) {
+            Some(h) if h.token == run && h.slurm_job.is_some() => {}
+            Some(h) => {
+                return Err(UserError::new(format!(
+                    "the lease of `{}` is not the Slurm run `{run}`'s: {}",
+                    root.display(),
+                    h.describe()
+                ))
+                .hint("the run's outputs stay in its folder under .shakeflow/slurm; rerun the pipeline"))
+            }
+            None => {
+                return Err(UserError::new(format!("the Slurm run `{run}` lost its lease on `{}`", root.display())))
+            }
+        }
+        let holder = Holder {
+            host: hostname(),
+            pid: std::process::id(),
+            process_start: process_start(std::process::id()),
+            started: now_secs(),
+            command: std::env::args().collect::<Vec<_>>().join(" "),
+            token: format!("{}-{}-{}", hostname(), std::process::id(), now_nanos()),
+            slurm_job: None,
+        };
+        replace_holder(&path, &holder)?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let heartbeat = spawn_heartbeat(path.clone(), holder.token.clone(), stop.clone());
+        Ok(Lease {
+            path,
+            root: root.to_path_buf(),
+            token: holder.token,
+            stop,
+            heartbeat: Some(heartbeat),
+            took_over: None,
+        })
+    }
+}
+
+/// Rewrites the lease file of its holder (temp file and rename, forced to disk).
+fn replace_holder(path: &Path, holder: &Holder) -> Result<(), UserError> {
+    let body = serde_json::to_vec_pretty(holder).expect("holders serialise");
+    let tmp = path.with_extension("tmp");
+    let _ = fs::remove_file(&tmp);
+    crate::io::atomic::write_new_durable(&tmp, &body)
+        .and_then(|()| fs::rename(&tmp, path))
+        .map_err(|e| UserError::new(format!("cannot rewrite the lease `{}`: {e}", path.display())))
 }
 
 impl Drop for Lease {
@@ -191,6 +284,13 @@ fn read_holder(path: &Path) -> Option<Holder> {
 
 /// Why `holder`'s lease is stale, or None when it may still be alive.
 fn staleness(path: &Path, holder: &Holder) -> Option<String> {
+    if let Some(job) = &holder.slurm_job {
+        // Alive while Slurm knows its commit job; where `squeue` cannot answer, it holds.
+        let out = std::process::Command::new("squeue").args(["-h", "-j", job, "-o", "%T"]).output().ok()?;
+        let known = out.status.success() && !String::from_utf8_lossy(&out.stdout).trim().is_empty();
+        let gone = String::from_utf8_lossy(&out.stderr).contains("Invalid job id");
+        return (!known && (out.status.success() || gone)).then(|| format!("Slurm no longer knows job {job}"));
+    }
     if holder.host == hostname() {
         if !process_exists(holder.pid) {
             return Some(format!("process {} no longer exists", holder.pid));
@@ -344,6 +444,7 @@ mod tests {
             started: now_secs(),
             command: "shakeflow run p.yaml".into(),
             token: "t".into(),
+            slurm_job: None,
         }
     }
 

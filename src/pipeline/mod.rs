@@ -1,4 +1,4 @@
-//! The pipeline engine: spec → plan (DAG) → cached, parallel, all-or-nothing execution.
+//! The pipeline engine: spec → plan (DAG) → work units, cached, run locally or on Slurm, committed atomically.
 
 pub mod executor;
 pub mod failpoint;
@@ -16,3 +16,4 @@ pub mod slurm;
 pub mod sources;
 pub mod spec;
 pub mod txn;
+pub mod units;

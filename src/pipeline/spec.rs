@@ -25,6 +25,9 @@ pub struct PipelineSpec {
     pub inputs: IndexMap<String, SourceSpec>,
     /// The processing steps, by name, in the order a reader should follow them.
     pub stages: IndexMap<String, StageSpec>,
+    /// Options of the Slurm executor (`run --executor slurm`); flags override them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub executor: Option<crate::pipeline::slurm::ExecutorOptions>,
 }
 
 #[derive(Debug, Clone, Deserialize, Serialize)]
@@ -189,6 +192,25 @@ pub struct SourceSpec {
     pub gaps: GapPolicy,
     #[serde(default)]
     pub non_uniform: NonUniformPolicy,
+    /// What a record of this source that cannot be read does to the run: `fail` (default) fails
+    /// its work unit; `skip` lists it (file, line, reason) in the `load` stage's `flagged` table
+    /// and goes on, and the run exits with status 2.
+    #[serde(default, skip_serializing_if = "OnError::is_fail")]
+    pub on_error: OnError,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OnError {
+    #[default]
+    Fail,
+    Skip,
+}
+
+impl OnError {
+    fn is_fail(&self) -> bool {
+        *self == OnError::Fail
+    }
 }
 
 #[derive(Debug, Clone, Deserialize, Serialize)]

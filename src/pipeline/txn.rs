@@ -161,6 +161,14 @@ fn roll_forward(root: &Path, dir: &Path) -> anyhow::Result<()> {
     }
     for entry in &journal.remove {
         move_aside(entry)?;
+        // The folders a removed record leaves empty (`records/motion=FB-2/`) go too.
+        let mut parent = Path::new(entry).parent();
+        while let Some(dir) = parent.filter(|d| d.components().count() > 1) {
+            if fs::remove_dir(root.join(dir)).is_err() {
+                break;
+            }
+            parent = dir.parent();
+        }
     }
     let new_lock = dir.join(LOCK_FILE);
     if journal.lockfile && exists(&new_lock) {

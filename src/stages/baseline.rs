@@ -55,6 +55,10 @@ impl Stage for Baseline {
         &INFO
     }
 
+    fn work_units(&self) -> super::WorkUnits {
+        super::WorkUnits::EachRecord
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let order = ctx.params.i64_of("order") as usize;
         let wanted = ctx.params.list_of("columns");

@@ -31,6 +31,10 @@ impl Stage for Compare {
         &INFO
     }
 
+    fn work_units(&self) -> super::WorkUnits {
+        super::WorkUnits::PerRecordOf { primary: 0 }
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let [measured, reference] = ctx.inputs else {
             return Err(UserError::new("`compare` reads two inputs: [measured, reference]")

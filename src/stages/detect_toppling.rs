@@ -29,6 +29,10 @@ impl Stage for DetectToppling {
         &INFO
     }
 
+    fn work_units(&self) -> super::WorkUnits {
+        super::WorkUnits::EachRecord
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let channels: Vec<(String, Option<String>)> =
             ctx.params.list_of("channels").iter().map(|c| split_pair(c)).collect();

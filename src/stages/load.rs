@@ -22,17 +22,28 @@ static INFO: StageInfo = StageInfo {
     version: 1,
     summary: "Read record files into SI time-series tables: checks sampling, gaps and point counts, converts units.",
     inputs: InputKind::Sources,
-    outputs: &[OutputInfo {
-        name: "records",
-        description: "one table per record file: time_s plus each channel in SI",
-        kind: OutputKind::Table,
-    }],
+    outputs: &[
+        OutputInfo {
+            name: "records",
+            description: "one table per record file: time_s plus each channel in SI",
+            kind: OutputKind::Table,
+        },
+        OutputInfo {
+            name: "flagged",
+            description: "written by the engine when a source has `on_error: skip`: one row per record that could not be read (record, source, file, line, column, reason)",
+            kind: OutputKind::Table,
+        },
+    ],
     params: &[],
 };
 
 impl Stage for Load {
     fn info(&self) -> &'static StageInfo {
         &INFO
+    }
+
+    fn work_units(&self) -> super::WorkUnits {
+        super::WorkUnits::EachRecord
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {

@@ -157,9 +157,40 @@ impl StageContext<'_> {
     }
 }
 
+/// How the engine splits a stage into work units, each with its own cache key and lockfile entry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WorkUnits {
+    /// One unit per record of any of its inputs (a file of a source, a part of a dataset); the
+    /// unit writes that record's partition only.
+    EachRecord,
+    /// One unit per part of input number `primary`, with the parts of its other inputs that
+    /// [`Stage::companions`] pairs with it; the unit writes that part's partition only.
+    PerRecordOf { primary: usize },
+    /// One unit over all its inputs (a fragility fit, a report, a diagnosis over cases).
+    Gather,
+}
+
 pub trait Stage: Sync + Send {
     fn info(&self) -> &'static StageInfo;
+    /// Runs on the records `ctx.inputs` holds: all of them for a gathering stage, one record
+    /// (and its companions) per call for a per-record stage.
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()>;
+
+    fn work_units(&self) -> WorkUnits {
+        WorkUnits::Gather
+    }
+
+    /// For a per-record stage, the parts of the secondary input `other` that the unit of
+    /// record `primary` reads: by default the part with the same partition, else the input's only
+    /// part, else all of them.
+    fn companions(&self, _params: &Params, primary: &InputPart, other: &StageInput) -> Vec<InputPart> {
+        let same: Vec<InputPart> = other.parts().iter().filter(|p| p.partition == primary.partition).cloned().collect();
+        if same.is_empty() {
+            other.parts().to_vec()
+        } else {
+            same
+        }
+    }
 
     /// Checks that need several parameters at once, or the files they name, before anything
     /// runs (so `shakeflow validate` reports them at the parameter's line).

@@ -203,6 +203,10 @@ impl Stage for SimulateRolling {
         Setup::resolve(params, base_dir).map(|_| ())
     }
 
+    fn work_units(&self) -> super::WorkUnits {
+        super::WorkUnits::EachRecord
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let setup = Setup::resolve(ctx.params, ctx.base_dir)
             .map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;

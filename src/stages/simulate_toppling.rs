@@ -70,6 +70,10 @@ impl Stage for SimulateToppling {
         &INFO
     }
 
+    fn work_units(&self) -> super::WorkUnits {
+        super::WorkUnits::EachRecord
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let (block, mut options) = model_from_params(ctx.params, ctx.file_param("equipment").as_deref())?;
         options.initial_theta_rad = ctx.params.f64_of("initial_theta_rad");

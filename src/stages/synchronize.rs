@@ -56,6 +56,17 @@ impl Stage for Synchronize {
         })
     }
 
+    fn work_units(&self) -> super::WorkUnits {
+        super::WorkUnits::PerRecordOf { primary: 1 }
+    }
+
+    /// A target record reads the reference records that share its `join` key.
+    fn companions(&self, params: &Params, primary: &InputPart, other: &super::StageInput) -> Vec<InputPart> {
+        let join = params.str_of("join");
+        let key = partition_value(primary, join);
+        other.parts().iter().filter(|r| key.is_some() && partition_value(r, join) == key).cloned().collect()
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let [reference, target] = ctx.inputs else {
             anyhow::bail!("`synchronize` reads exactly two inputs: [reference, target] (e.g. [baseline_floors, baseline_equipment])");

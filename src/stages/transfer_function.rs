@@ -37,6 +37,10 @@ impl Stage for TransferFunction {
         &INFO
     }
 
+    fn work_units(&self) -> super::WorkUnits {
+        super::WorkUnits::EachRecord
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let pairs: Vec<(String, String)> = ctx
             .params

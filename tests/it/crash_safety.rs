@@ -31,8 +31,8 @@ fn names(tree: &[(String, Option<Vec<u8>>)]) -> Vec<&str> {
     tree.iter().map(|(n, _)| n.as_str()).collect()
 }
 
-/// The second version of the pipeline: a source option and a stage parameter changed, so both
-/// stages rerun and the commit replaces two folders and the lockfile.
+/// The second version of the pipeline: a source option and a stage parameter changed, so every
+/// unit of both stages reruns and the commit replaces their six files and the lockfile.
 fn second_version(root: &Path) {
     let text =
         PIPELINE.replace("      order: 3", "      order: 2").replace("    unit: g\n", "    unit: g\n    scale: 2.0\n");
@@ -76,7 +76,8 @@ fn a_run_killed_at_any_step_of_its_commit_ends_as_a_clean_run_does() {
     }
     for step in ["commit.moved_aside.", "commit.moved_in."] {
         let n = points.iter().filter(|p| p.starts_with(step)).count();
-        assert_eq!(n, 2, "both stages move ({step}*): {points:?}");
+        // load: 2 records; baseline: 2 records, each a Parquet file and its MCAP twin.
+        assert_eq!(n, 6, "every file of both stages moves ({step}*): {points:?}");
     }
     let commit_point = points.iter().position(|p| p == "commit.committed").unwrap();
     for (i, point) in points.iter().enumerate() {

@@ -209,7 +209,10 @@ fn a_baseline_that_overflows_fails_the_run() {
     let message = stderr(&out);
     assert!(!out.status.success(), "{message}");
     assert!(message.contains("column `ax_mps2`: the order-3 baseline fit is not finite"), "{message}");
-    assert!(!root.join("out/shakeflow.lock").exists(), "a failed run commits nothing");
+    // The failed unit writes nothing; the record that succeeded is committed.
+    assert!(!root.join("out/baseline/records/motion=FB-1").exists(), "a failed unit commits nothing");
+    assert!(root.join("out/baseline/records/motion=FB-2/data.parquet").is_file(), "{message}");
+    assert!(message.contains("baseline record motion=FB-1 failed"), "{message}");
 }
 
 /// A pipeline saved as UTF-16 is named as such; the terminal gets no NUL bytes.

@@ -46,8 +46,16 @@ fn changed_input_file_is_reported_and_recomputed() {
     assert!(shakeflow(&["run", "pipeline.yaml"], project.path()).status.success());
     write_daq_csv(&project.path().join("archive/FB-2/daq.csv"), 400, 200.0, 2.0);
     let text = stdout(&shakeflow(&["status", "pipeline.yaml"], project.path()));
-    assert!(text.contains("load               stale: input `daq` changed"), "{text}");
-    assert!(text.contains("baseline           stale: an upstream stage will rerun"), "{text}");
+    assert!(
+        text.contains(
+            "load               stale: 1 of 2 records: record motion=FB-2: input `archive/FB-2/daq.csv` changed"
+        ),
+        "{text}"
+    );
+    assert!(
+        text.contains("baseline           stale: 1 of 2 records: record motion=FB-2: an upstream unit will rerun"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -58,10 +66,13 @@ fn tampered_output_is_detected() {
     let bytes = std::fs::read(&part).unwrap();
     std::fs::write(&part, &bytes[..bytes.len() - 1]).unwrap();
     let text = stdout(&shakeflow(&["status", "pipeline.yaml"], project.path()));
-    assert!(text.contains("load               stale: output `records` was modified on disk"), "{text}");
+    assert!(
+        text.contains("stale: 1 of 2 records: record motion=FB-1: output file `records/motion=FB-1/data.parquet` was modified on disk"),
+        "{text}"
+    );
     std::fs::remove_file(&part).unwrap();
     let text = stdout(&shakeflow(&["status", "pipeline.yaml"], project.path()));
-    assert!(text.contains("load               stale: output `records` lost files: 1 of its 2 are left"), "{text}");
+    assert!(text.contains("output file `records/motion=FB-1/data.parquet` missing"), "{text}");
 }
 
 #[test]

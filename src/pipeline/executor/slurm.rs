@@ -1,0 +1,607 @@
+//! The Slurm executor: the same work units as a local run, run by job arrays.
+//!
+//! `shakeflow run P.yaml --executor slurm` plans on the login node as a local run does, then:
+//! 1. takes the output folder's lease and writes the run's folder
+//!    `<output_dir>/.shakeflow/slurm/<run>/` (`run.json`: the pipeline, the options, and per stage
+//!    its shards — the predicted unit ids, in order, cut into shards of `units_per_task`);
+//! 2. submits one job array per stage with stale units (only the shards that hold one), named
+//!    after the run, each task `shakeflow slurm-task <run folder> <stage>` with its shard in
+//!    `$SLURM_ARRAY_TASK_ID`: `aftercorr` on the upstream array when both are per-record stages
+//!    cut into the same shards (task i waits for task i only), `afterok` otherwise, `afterany`
+//!    with `--keep-going`; and a commit job (`shakeflow slurm-commit`) after all of them
+//!    (`afterany`);
+//! 3. hands the lease to the run (its holder names the run and the commit job) and returns.
+//!
+//! A task computes its stage's units from the committed outputs and the upstream tasks'
+//! manifests, runs the stale units of its shard (rayon inside) into
+//! `results/<stage>/<shard>.tmp-<host>-<job>/`, renames that to `results/<stage>/<shard>/`,
+//! and writes `manifests/<stage>/<shard>.json` (what became of each unit) the same way. It
+//! exits 1 when a unit failed. No task writes the lockfile or a stage folder: the commit job
+//! takes the lease back, folds the manifests as a local run folds its units, moves the results
+//! into a transaction and commits it. Rerunning the same command resubmits only the shards
+//! whose units are still stale (a cancelled task's, a failed unit's).
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::{anyhow, bail, Context};
+use serde::{Deserialize, Serialize};
+
+use super::{
+    assess_stage, execute, fold, param_file_hashes, predict, resolve_sources, selected_stages, upstream_stages,
+    Produced, ProducedFile, RunOptions, RunSummary, UnitOutcome, UnitProblem, UnitRecord,
+};
+use crate::error::UserError;
+use crate::pipeline::lease::{Lease, STATE_DIR};
+use crate::pipeline::lock::{LockFile, LOCK_FILE};
+use crate::pipeline::memo::TableMemo;
+use crate::pipeline::ownership;
+use crate::pipeline::plan::Plan;
+use crate::pipeline::progress::Reporter;
+use crate::pipeline::slurm::{ArrayJob, DepKind, Dependency, ExecutorOptions, Slurm, SubmittedArray};
+use crate::pipeline::spec::PipelineFile;
+use crate::pipeline::txn::{self, Transaction};
+use crate::stages::WorkUnits;
+
+/// Where Slurm runs keep their folders, under the output folder's `.shakeflow`.
+pub const RUNS_DIR: &str = "slurm";
+const RUN_FILE: &str = "run.json";
+/// What the commit job leaves for `--wait` and `status`: `<run>.summary.json` beside the run folders.
+const SUMMARY_SUFFIX: &str = ".summary.json";
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SlurmOptions {
+    pub executor: ExecutorOptions,
+    /// Work units per array task.
+    pub units_per_task: usize,
+    /// Poll until the run is committed, and report as a local run does.
+    pub wait: bool,
+}
+
+#[derive(Debug, Clone, Serialize, Deserialize)]
+struct RunFile {
+    id: String,
+    /// The pipeline file, absolute, and its bytes' hash (a task refuses an edited pipeline).
+    pipeline: PathBuf,
+    pipeline_hash: String,
+    force: Vec<String>,
+    only: Vec<String>,
+    keep_going: bool,
+    /// Per stage with an array: its shards, each the unit ids it runs.
+    shards: BTreeMap<String, Vec<Vec<String>>>,
+    arrays: BTreeMap<String, SubmittedArray>,
+    commit: Option<SubmittedArray>,
+}
+
+/// A task's manifest: every unit of its shard, and what the stage's planning found.
+#[derive(Debug, Serialize, Deserialize)]
+struct Manifest {
+    records: Vec<UnitRecord>,
+    vanished: Vec<String>,
+    upstream_tainted: bool,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct Summary {
+    failed: Vec<(String, String, String)>,
+    flagged: Vec<(String, String, String)>,
+    committed_units: usize,
+}
+
+fn runs_dir(output_dir: &Path) -> PathBuf {
+    output_dir.join(STATE_DIR).join(RUNS_DIR)
+}
+
+fn read_run(run_dir: &Path) -> anyhow::Result<RunFile> {
+    let path = run_dir.join(RUN_FILE);
+    let bytes = std::fs::read(&path).with_context(|| format!("reading `{}`", path.display()))?;
+    serde_json::from_slice(&bytes).with_context(|| format!("`{}` is damaged", path.display()))
+}
+
+/// Writes `bytes` to `path` through a temp file named by host and job, then a rename.
+fn publish(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let tmp = path.with_extension(format!("tmp-{}", task_tag()));
+    std::fs::write(&tmp, bytes).with_context(|| format!("writing `{}`", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("renaming into `{}`", path.display()))
+}
+
+/// `<host>-<job id>`: unique to one attempt of one task.
+fn task_tag() -> String {
+    let host =
+        std::env::var("SLURMD_NODENAME").or_else(|_| std::env::var("HOSTNAME")).unwrap_or_else(|_| "host".into());
+    let job = std::env::var("SLURM_JOB_ID").unwrap_or_else(|_| std::process::id().to_string());
+    format!("{host}-{job}")
+}
+
+fn pipeline_plan(run: &RunFile) -> anyhow::Result<Plan> {
+    let file = PipelineFile::read(&run.pipeline)?;
+    if crate::io::hash::hash_bytes(file.text.as_bytes()) != run.pipeline_hash {
+        bail!(
+            "the pipeline `{}` changed since the Slurm run `{}` was submitted; rerun `shakeflow run` to submit the new one",
+            run.pipeline.display(),
+            run.id
+        );
+    }
+    Ok(Plan::new(file)?)
+}
+
+/// Submits the run and returns at once (or, with `wait`, when it is committed).
+pub fn submit(
+    plan: &Plan,
+    options: &RunOptions,
+    slurm: &SlurmOptions,
+    reporter: &Reporter,
+) -> anyhow::Result<RunSummary> {
+    slurm.executor.check().map_err(|e| e.error)?;
+    let selected = selected_stages(plan, options)?;
+    let forced: BTreeSet<String> = options.force.iter().flat_map(|n| plan.with_dependents(n)).collect();
+    let forced: Vec<&str> = forced.iter().map(String::as_str).collect();
+    let output_dir = plan.file.output_dir();
+    let sources = resolve_sources(plan)?;
+    let files = param_file_hashes(plan)?;
+    ownership::check_output_dir(&plan.file, &super::input_paths(plan, &sources))?;
+    std::fs::create_dir_all(&output_dir).with_context(|| format!("creating `{}`", output_dir.display()))?;
+    let lease = Lease::acquire(&output_dir)?;
+    txn::recover(&lease)?;
+    let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
+    ownership::check_pipeline(&plan.file, &lock)?;
+    ownership::check_stage_folders(&plan.file, &output_dir, plan.stages.keys().map(String::as_str), &lock)?;
+    let lines = predict(plan, &lock, &sources, &files, &forced)?;
+
+    let stem = plan.file.path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let stem: String =
+        stem.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).take(24).collect();
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+    let id = format!("shakeflow-{stem}-{:x}", nanos % 0xffff_ffff);
+    let run_dir = runs_dir(&output_dir).join(&id);
+    let shakeflow = std::env::current_exe().context("locating the shakeflow binary")?;
+    let client = Slurm::new();
+    let limits = client.limits()?;
+    std::fs::create_dir_all(&run_dir)?;
+    let submitted = submit_arrays(
+        plan,
+        options,
+        slurm,
+        reporter,
+        &lines,
+        &selected,
+        &client,
+        &limits,
+        RunNaming { id: &id, run_dir: &run_dir, shakeflow: &shakeflow },
+    );
+    let run = match submitted {
+        Ok(Some(run)) => run,
+        Ok(None) => {
+            let _ = std::fs::remove_dir_all(&run_dir);
+            let _ = std::fs::remove_dir(runs_dir(&output_dir));
+            reporter.line("every unit is up to date: nothing submitted");
+            return Ok(RunSummary::default());
+        }
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&run_dir);
+            let _ = std::fs::remove_dir(runs_dir(&output_dir));
+            return Err(e);
+        }
+    };
+    let commit_job = run.commit.as_ref().expect("submitted runs have a commit job").parts[0].job_id.to_string();
+    lease.hand_over(&id, &commit_job)?;
+    reporter.line(&format!(
+        "Slurm run `{id}` submitted (commit job {commit_job}); `shakeflow status {}` follows it",
+        plan.file.path.display()
+    ));
+    if !slurm.wait {
+        return Ok(RunSummary::default());
+    }
+    wait(&client, &limits, &run, &output_dir, reporter)
+}
+
+/// The run's name, folder and the binary its tasks run.
+struct RunNaming<'a> {
+    id: &'a str,
+    run_dir: &'a Path,
+    shakeflow: &'a Path,
+}
+
+/// Submits an array per stage with stale units and the commit job; None when nothing is stale.
+#[allow(clippy::too_many_arguments)]
+fn submit_arrays(
+    plan: &Plan,
+    options: &RunOptions,
+    slurm: &SlurmOptions,
+    reporter: &Reporter,
+    lines: &[super::StatusLine],
+    selected: &BTreeSet<String>,
+    client: &Slurm,
+    limits: &crate::pipeline::slurm::ClusterLimits,
+    naming: RunNaming<'_>,
+) -> anyhow::Result<Option<RunFile>> {
+    let RunNaming { id, run_dir, shakeflow } = naming;
+    let per_task = slurm.units_per_task.max(1);
+    let mut run = RunFile {
+        id: id.to_string(),
+        pipeline: std::fs::canonicalize(&plan.file.path)?,
+        pipeline_hash: crate::io::hash::hash_bytes(plan.file.text.as_bytes()),
+        force: options.force.clone(),
+        only: options.only.clone(),
+        keep_going: options.keep_going,
+        shards: BTreeMap::new(),
+        arrays: BTreeMap::new(),
+        commit: None,
+    };
+    let mut submitted_tasks: BTreeMap<String, BTreeSet<u32>> = BTreeMap::new();
+    let quote = |p: &Path| format!("'{}'", p.display().to_string().replace('\'', r"'\''"));
+    for line in lines.iter().filter(|l| selected.contains(&l.name)) {
+        if line.stale.is_empty() {
+            continue;
+        }
+        let stage = &plan.stages[&line.name];
+        let shards: Vec<Vec<String>> = line.ids.chunks(per_task).map(<[String]>::to_vec).collect();
+        let stale: BTreeSet<&str> = line.stale.iter().map(|u| u.id.as_str()).collect();
+        let only: BTreeSet<u32> = (0..shards.len() as u32)
+            .filter(|&i| shards[i as usize].iter().any(|id| stale.contains(id.as_str())))
+            .collect();
+        let mut dependencies = Vec::new();
+        for upstream in upstream_stages(stage) {
+            let Some(array) = run.arrays.get(upstream) else { continue };
+            let aligned = stage.stage.work_units() == WorkUnits::EachRecord
+                && plan.stages[upstream].stage.work_units() == WorkUnits::EachRecord
+                && run.shards.get(upstream) == Some(&shards)
+                && only.is_subset(&submitted_tasks[upstream]);
+            let kind = if options.keep_going {
+                DepKind::AfterAny
+            } else if aligned {
+                DepKind::AfterCorr
+            } else {
+                DepKind::AfterOk
+            };
+            dependencies.push(Dependency { on: array.clone(), kind });
+        }
+        let retries = slurm.executor.retries.unwrap_or(0);
+        let command = format!(
+            "for attempt in $(seq 0 {retries}); do {} slurm-task {} {} && exit 0; done; exit 1",
+            quote(shakeflow),
+            quote(run_dir),
+            line.name
+        );
+        let job = ArrayJob {
+            name: id.to_string(),
+            command,
+            n_tasks: shards.len() as u32,
+            only: Some(only.clone()),
+            dependencies,
+            options: slurm.executor.clone(),
+            log_dir: run_dir.join("logs"),
+        };
+        let array = client.submit(&job, limits).map_err(|e| cancel_all(client, &run, e))?;
+        reporter.line(&format!(
+            "{:<18} submitted: {} of {} shard(s), {} stale unit(s) of {} ({})",
+            line.name,
+            only.len(),
+            shards.len(),
+            line.stale.len(),
+            line.units,
+            array.parts.iter().map(|p| p.job_id.to_string()).collect::<Vec<_>>().join(", ")
+        ));
+        submitted_tasks.insert(line.name.clone(), only);
+        run.shards.insert(line.name.clone(), shards);
+        run.arrays.insert(line.name.clone(), array);
+    }
+    if run.arrays.is_empty() {
+        return Ok(None);
+    }
+    let commit = ArrayJob {
+        name: id.clone(),
+        command: format!("{} slurm-commit {}", quote(shakeflow), quote(run_dir)),
+        n_tasks: 1,
+        only: None,
+        dependencies: run.arrays.values().map(|a| Dependency { on: a.clone(), kind: DepKind::AfterAny }).collect(),
+        options: ExecutorOptions { array_throttle: None, ..slurm.executor.clone() },
+        log_dir: run_dir.join("logs"),
+    };
+    let commit = client.submit(&commit, limits).map_err(|e| cancel_all(client, &run, e))?;
+    run.commit = Some(commit);
+    publish(&run_dir.join(RUN_FILE), &serde_json::to_vec_pretty(&run)?)?;
+    Ok(Some(run))
+}
+
+/// Cancels what was submitted before `error` stopped the submission.
+fn cancel_all(client: &Slurm, run: &RunFile, error: UserError) -> UserError {
+    let arrays: Vec<SubmittedArray> = run.arrays.values().cloned().collect();
+    let _ = client.cancel(&arrays);
+    error
+}
+
+/// `--wait`: polls with backoff until the commit job ended, then reads its summary.
+fn wait(
+    client: &Slurm,
+    limits: &crate::pipeline::slurm::ClusterLimits,
+    run: &RunFile,
+    output_dir: &Path,
+    reporter: &Reporter,
+) -> anyhow::Result<RunSummary> {
+    let mut arrays: Vec<SubmittedArray> = run.arrays.values().cloned().collect();
+    arrays.extend(run.commit.clone());
+    let mut status = crate::pipeline::slurm::RunStatus::new(&arrays);
+    client.wait(&mut status, limits, Default::default(), |s| {
+        reporter.line(&format!("Slurm run `{}`: {} task(s) not finished", run.id, s.unfinished()))
+    })?;
+    let path = runs_dir(output_dir).join(format!("{}{SUMMARY_SUFFIX}", run.id));
+    let summary: Summary = serde_json::from_slice(
+        &std::fs::read(&path).with_context(|| format!("the commit job left no summary `{}`", path.display()))?,
+    )?;
+    let problem = |(stage, unit, reason): &(String, String, String)| UnitProblem {
+        stage: stage.clone(),
+        unit: unit.clone(),
+        reason: reason.clone(),
+    };
+    Ok(RunSummary {
+        reports: Vec::new(),
+        failed: summary.failed.iter().map(problem).collect(),
+        flagged: summary.flagged.iter().map(problem).collect(),
+    })
+}
+
+/// The files each upstream stage of `stage` has this run: committed ones (lockfile) overlaid
+/// with what its tasks' manifests say; and whether any upstream unit failed or did not finish.
+fn upstream_produced(
+    run_dir: &Path,
+    run: &RunFile,
+    plan: &Plan,
+    lock: &LockFile,
+    stage: &str,
+) -> anyhow::Result<(BTreeMap<String, Produced>, bool)> {
+    let output_dir = plan.file.output_dir();
+    let mut produced = BTreeMap::new();
+    let mut tainted = false;
+    // Stages are in dependency order: everything before `stage` may be read (transitively).
+    for (name, _) in plan.stages.iter().take_while(|(n, _)| n.as_str() != stage) {
+        let stage_dir = output_dir.join(name);
+        let committed = |id: &str| -> Produced {
+            lock.stages
+                .get(name)
+                .and_then(|e| e.units.get(id))
+                .map(|u| super::cached_files(u, &stage_dir))
+                .unwrap_or_default()
+        };
+        let mut files = Produced::new();
+        match run.shards.get(name) {
+            None => {
+                for unit in
+                    lock.stages.get(name).map(|e| e.units.keys().cloned().collect::<Vec<_>>()).unwrap_or_default()
+                {
+                    files.extend(committed(&unit));
+                }
+            }
+            Some(shards) => {
+                for shard in 0..shards.len() {
+                    let path = run_dir.join("manifests").join(name).join(format!("{shard}.json"));
+                    let Ok(bytes) = std::fs::read(&path) else {
+                        // Not submitted (all cached) or not finished: what is committed stands.
+                        let submitted = run.arrays[name].tasks().any(|t| t as usize == shard);
+                        tainted |= submitted;
+                        for id in &shards[shard] {
+                            if !submitted {
+                                files.extend(committed(id));
+                            }
+                        }
+                        continue;
+                    };
+                    let manifest: Manifest = serde_json::from_slice(&bytes)?;
+                    tainted |= manifest.upstream_tainted;
+                    for record in manifest.records {
+                        match record.outcome {
+                            UnitOutcome::Cached => files.extend(committed(&record.id)),
+                            UnitOutcome::Ran { dir, files: written } => files.extend(
+                                written
+                                    .into_iter()
+                                    .map(|(f, hash)| (f.clone(), ProducedFile { path: dir.join(&f), hash })),
+                            ),
+                            UnitOutcome::Failed { .. } => tainted = true,
+                            UnitOutcome::Flagged { .. } => {}
+                        }
+                    }
+                }
+            }
+        }
+        produced.insert(name.clone(), files);
+    }
+    Ok((produced, tainted))
+}
+
+/// `shakeflow slurm-task RUN_DIR STAGE`: one array task, its shard from `$SLURM_ARRAY_TASK_ID`.
+pub fn task(run_dir: &Path, stage_name: &str, shard: usize) -> anyhow::Result<bool> {
+    let run = read_run(run_dir)?;
+    let plan = pipeline_plan(&run)?;
+    let stage = plan.stages.get(stage_name).ok_or_else(|| anyhow!("the pipeline has no stage `{stage_name}`"))?;
+    let shards = run.shards.get(stage_name).ok_or_else(|| anyhow!("stage `{stage_name}` has no array in this run"))?;
+    let mine: BTreeSet<&str> =
+        shards.get(shard).ok_or_else(|| anyhow!("no shard {shard}"))?.iter().map(String::as_str).collect();
+    let known: BTreeSet<&str> = shards.iter().flatten().map(String::as_str).collect();
+    let last = shard + 1 == shards.len();
+    let output_dir = plan.file.output_dir();
+    let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
+    let sources = resolve_sources(&plan)?;
+    let files = param_file_hashes(&plan)?;
+    let (produced, upstream_tainted) = upstream_produced(run_dir, &run, &plan, &lock, stage_name)?;
+    let forced: BTreeSet<String> = run.force.iter().flat_map(|n| plan.with_dependents(n)).collect();
+    let forced: Vec<&str> = forced.iter().map(String::as_str).collect();
+    let assessed = assess_stage(&plan, stage, &sources, &produced, &files, &lock, &output_dir, &forced)?;
+    // A unit nobody predicted (a partition no earlier output had) goes to the last shard.
+    let ours: Vec<&(crate::pipeline::units::Unit, String, Vec<String>)> = assessed
+        .units
+        .iter()
+        .filter(|(u, _, _)| mine.contains(u.id.as_str()) || (last && !known.contains(u.id.as_str())))
+        .collect();
+    let stale: Vec<&(crate::pipeline::units::Unit, String, Vec<String>)> =
+        ours.iter().copied().filter(|(_, _, r)| !r.is_empty()).collect();
+    let results = run_dir.join("results").join(stage_name);
+    std::fs::create_dir_all(&results)?;
+    let tmp = results.join(format!("{shard}.tmp-{}", task_tag()));
+    let done = results.join(shard.to_string());
+    let _ = std::fs::remove_dir_all(&tmp);
+    let memo = Arc::new(TableMemo::new(0));
+    let ran = execute(&plan, stage, &stale, &tmp, &memo, 0, &indicatif::ProgressBar::hidden());
+    if done.exists() {
+        std::fs::remove_dir_all(&done)?; // an earlier attempt of this shard
+    }
+    if tmp.exists() {
+        std::fs::rename(&tmp, &done)?;
+    }
+    let mut by_id: BTreeMap<String, UnitRecord> = ran.into_iter().map(|r| (r.id.clone(), r)).collect();
+    let records: Vec<UnitRecord> = ours
+        .iter()
+        .map(|(unit, key, _)| {
+            let mut record = by_id.remove(&unit.id).unwrap_or_else(|| UnitRecord {
+                id: unit.id.clone(),
+                key: key.clone(),
+                inputs: unit.hashes.clone(),
+                outcome: UnitOutcome::Cached,
+            });
+            if let UnitOutcome::Ran { dir, .. } = &mut record.outcome {
+                *dir = done.clone();
+            }
+            record
+        })
+        .collect();
+    let failed = records.iter().filter(|r| matches!(r.outcome, UnitOutcome::Failed { .. })).count();
+    for record in &records {
+        if let UnitOutcome::Failed { reason } = &record.outcome {
+            eprintln!("error: {stage_name} {} failed: {reason}", crate::pipeline::units::describe(&record.id));
+        }
+    }
+    let manifest = Manifest { records, vanished: assessed.vanished.clone(), upstream_tainted };
+    let manifests = run_dir.join("manifests").join(stage_name);
+    std::fs::create_dir_all(&manifests)?;
+    publish(&manifests.join(format!("{shard}.json")), &serde_json::to_vec(&manifest)?)?;
+    eprintln!("{stage_name} shard {shard}: {} unit(s), {} ran, {failed} failed", ours.len(), stale.len());
+    Ok(failed == 0)
+}
+
+/// `shakeflow slurm-commit RUN_DIR`: folds every task's manifest and commits, under the lease.
+pub fn commit(run_dir: &Path) -> anyhow::Result<()> {
+    let run = read_run(run_dir)?;
+    let plan = pipeline_plan(&run)?;
+    let output_dir = plan.file.output_dir();
+    let lease = Lease::take_handed(&output_dir, &run.id)?;
+    let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
+    let transaction = Transaction::begin(&lease)?;
+    let mut new_lock = lock.clone();
+    new_lock.pipeline = Some(ownership::pipeline_label(&plan.file));
+    let mut install: BTreeSet<String> = BTreeSet::new();
+    let mut remove: BTreeSet<String> = BTreeSet::new();
+    let mut tainted: BTreeSet<String> = BTreeSet::new();
+    let mut summary = Summary { failed: Vec::new(), flagged: Vec::new(), committed_units: 0 };
+    for (name, stage) in &plan.stages {
+        let Some(shards) = run.shards.get(name) else {
+            if upstream_stages(stage).iter().any(|u| tainted.contains(*u)) {
+                tainted.insert(name.clone());
+            }
+            continue;
+        };
+        let mut records = Vec::new();
+        let mut vanished = BTreeSet::new();
+        let mut upstream_tainted = upstream_stages(stage).iter().any(|u| tainted.contains(*u));
+        for (shard, ids) in shards.iter().enumerate() {
+            let path = run_dir.join("manifests").join(name).join(format!("{shard}.json"));
+            match std::fs::read(&path) {
+                Ok(bytes) => {
+                    let manifest: Manifest = serde_json::from_slice(&bytes)?;
+                    upstream_tainted |= manifest.upstream_tainted;
+                    vanished.extend(manifest.vanished);
+                    records.extend(manifest.records);
+                }
+                Err(_) if run.arrays[name].tasks().any(|t| t as usize == shard) => {
+                    // The task did not finish (cancelled, timed out, killed): its units keep
+                    // their committed state and count as failed.
+                    records.extend(ids.iter().map(|id| UnitRecord {
+                        id: id.clone(),
+                        key: String::new(),
+                        inputs: BTreeMap::new(),
+                        outcome: UnitOutcome::Failed {
+                            reason: format!("its Slurm task (shard {shard}) did not finish"),
+                        },
+                    }));
+                }
+                Err(_) => records.extend(ids.iter().map(|id| UnitRecord {
+                    id: id.clone(),
+                    key: String::new(),
+                    inputs: BTreeMap::new(),
+                    outcome: UnitOutcome::Cached,
+                })),
+            }
+        }
+        let vanished: Vec<String> = vanished.into_iter().collect();
+        let staging = transaction.new_path(name);
+        let entry = lock.stages.get(name);
+        // A unit the lockfile does not have cannot be cached: drop such records of shards not run.
+        records.retain(|r| {
+            !matches!(r.outcome, UnitOutcome::Cached) || entry.is_some_and(|e| e.units.contains_key(&r.id))
+        });
+        let folded = fold(&plan, stage, entry, records, &vanished, upstream_tainted, &output_dir, &staging)?;
+        for (relative, from) in &folded.install {
+            let to = transaction.new_path(relative);
+            if *from != to {
+                std::fs::create_dir_all(to.parent().expect("below the transaction"))?;
+                std::fs::rename(from, &to).with_context(|| format!("moving `{}` into the commit", from.display()))?;
+            }
+            install.insert(relative.clone());
+        }
+        remove.extend(folded.remove);
+        if !folded.complete {
+            tainted.insert(name.clone());
+        }
+        let triple = |p: &UnitProblem| (p.stage.clone(), p.unit.clone(), p.reason.clone());
+        summary.failed.extend(folded.failed.iter().map(triple));
+        summary.flagged.extend(folded.flagged.iter().map(triple));
+        let entry = folded.entry.expect("fold makes the entry");
+        summary.committed_units += entry.units.len();
+        new_lock.stages.insert(name.clone(), entry);
+    }
+    let install: Vec<String> = install.into_iter().collect();
+    let remove: Vec<String> = remove.into_iter().filter(|r| !install.contains(r)).collect();
+    transaction.commit(&install, &remove, Some(&new_lock))?;
+    let runs = runs_dir(&output_dir);
+    publish(&runs.join(format!("{}{SUMMARY_SUFFIX}", run.id)), &serde_json::to_vec_pretty(&summary)?)?;
+    // The logs stay (`<run>/logs`); results and manifests were moved or are no longer needed.
+    for folder in ["results", "manifests"] {
+        let _ = std::fs::remove_dir_all(run_dir.join(folder));
+    }
+    for (stage, unit, reason) in &summary.failed {
+        eprintln!("error: {stage} {} failed: {reason}", crate::pipeline::units::describe(unit));
+    }
+    drop(lease);
+    if summary.failed.is_empty() {
+        Ok(())
+    } else {
+        Err(anyhow!("{} unit(s) failed; the units that finished were committed", summary.failed.len()))
+    }
+}
+
+/// What `status` says of a Slurm run holding the folder: per stage, its tasks' states.
+pub fn progress(output_dir: &Path) -> Vec<String> {
+    let Ok(entries) = std::fs::read_dir(runs_dir(output_dir)) else { return Vec::new() };
+    let mut lines = Vec::new();
+    let client = Slurm::new();
+    let Ok(limits) = client.limits() else { return lines };
+    for entry in entries.flatten() {
+        let Ok(run) = read_run(&entry.path()) else { continue };
+        if runs_dir(output_dir).join(format!("{}{SUMMARY_SUFFIX}", run.id)).exists() {
+            continue;
+        }
+        let mut arrays: Vec<SubmittedArray> = run.arrays.values().cloned().collect();
+        arrays.extend(run.commit.clone());
+        let mut status = crate::pipeline::slurm::RunStatus::new(&arrays);
+        if client.poll(&mut status, &limits).is_err() {
+            lines.push(format!("Slurm run `{}`: Slurm did not answer", run.id));
+            continue;
+        }
+        lines.push(format!("Slurm run `{}` ({} task(s) not finished):", run.id, status.unfinished()));
+        for (i, name) in run.arrays.keys().enumerate() {
+            let counts = status.counts(i);
+            let text: Vec<String> = counts.iter().map(|(state, n)| format!("{n} {state}")).collect();
+            lines.push(format!("  {name:<18} {}", text.join(", ")));
+        }
+    }
+    lines
+}

@@ -1,0 +1,128 @@
+//! Work units: a stage split into what is cached, run, committed and reported on its own — one
+//! record of a per-record stage, or the whole of a gathering stage (see [`WorkUnits`]).
+
+use std::collections::BTreeMap;
+
+use serde_json::json;
+
+use super::plan::PlannedStage;
+use crate::io::hash;
+use crate::stages::{partition_path, InputPart, StageInput, WorkUnits};
+
+/// The id of a gathering stage's one unit.
+pub const GATHER: &str = "*";
+
+pub struct Unit {
+    /// The record's partition (`motion=FB-4/floor=5`; empty for a record without keys), or [`GATHER`].
+    pub id: String,
+    /// The stage's inputs, each holding only the parts this unit reads.
+    pub inputs: Vec<StageInput>,
+    /// What the unit reads → content hash: its parts (by label), the way each source is read,
+    /// and the files its parameters name.
+    pub hashes: BTreeMap<String, String>,
+}
+
+impl Unit {
+    /// blake3 of type, version, params, select and input hashes: equal key, equal result.
+    pub fn key(&self, stage: &PlannedStage) -> String {
+        let info = stage.stage.info();
+        let material = json!({"type": info.name, "version": info.version, "params": stage.params,
+            "select": stage.select, "inputs": self.hashes});
+        hash::hash_bytes(material.to_string().as_bytes())
+    }
+
+    /// The source a per-record unit's record comes from, when it is a raw record file.
+    pub fn source(&self) -> Option<(&str, &crate::pipeline::spec::SourceSpec, &InputPart)> {
+        self.inputs.iter().find_map(|input| match input {
+            StageInput::Source { name, spec, files, .. } if files.len() == 1 => Some((name.as_str(), spec, &files[0])),
+            _ => None,
+        })
+    }
+}
+
+/// How messages name a unit: `record motion=FB-4/floor=5`, or the whole stage.
+pub fn describe(id: &str) -> String {
+    match id {
+        "" => "(the record)".to_string(),
+        GATHER => "(all inputs)".to_string(),
+        id => format!("record {id}"),
+    }
+}
+
+/// Splits a stage over its (selected) inputs into units, in a deterministic order.
+pub fn split(
+    stage: &PlannedStage,
+    inputs: &[StageInput],
+    param_files: &BTreeMap<String, String>,
+) -> anyhow::Result<Vec<Unit>> {
+    let unit = |id: String, inputs: Vec<StageInput>| {
+        let mut hashes: BTreeMap<String, String> = param_files.clone();
+        for input in &inputs {
+            if let StageInput::Source { name, spec, .. } = input {
+                // How a file is read; `on_error` changes what a failure does, not what is read.
+                let spec = crate::pipeline::spec::SourceSpec { on_error: Default::default(), ..spec.clone() };
+                let how = serde_json::to_string(&spec).expect("specs serialise");
+                hashes.insert(format!("source {name}"), hash::hash_bytes(how.as_bytes()));
+            }
+            for part in input.parts() {
+                hashes.insert(part.label.clone(), part.hash.clone());
+            }
+        }
+        Unit { id, inputs, hashes }
+    };
+    let mut units: Vec<Unit> = match stage.stage.work_units() {
+        WorkUnits::Gather => vec![unit(GATHER.to_string(), inputs.to_vec())],
+        WorkUnits::EachRecord => inputs
+            .iter()
+            .flat_map(|input| input.parts().iter().map(move |part| (input, part)))
+            .map(|(input, part)| unit(partition_path(&part.partition), vec![only(input, vec![part.clone()])]))
+            .collect(),
+        WorkUnits::PerRecordOf { primary } => {
+            let Some(main) = inputs.get(primary) else {
+                anyhow::bail!(
+                    "stage `{}` reads its records from input number {} but has {} input(s)",
+                    stage.name,
+                    primary + 1,
+                    inputs.len()
+                );
+            };
+            main.parts()
+                .iter()
+                .map(|part| {
+                    let parts = inputs
+                        .iter()
+                        .enumerate()
+                        .map(|(i, input)| {
+                            let chosen = if i == primary {
+                                vec![part.clone()]
+                            } else {
+                                stage.stage.companions(&stage.params, part, input)
+                            };
+                            only(input, chosen)
+                        })
+                        .collect();
+                    unit(partition_path(&part.partition), parts)
+                })
+                .collect()
+        }
+    };
+    units.sort_by(|a, b| a.id.cmp(&b.id));
+    if let Some(pair) = units.windows(2).find(|w| w[0].id == w[1].id) {
+        anyhow::bail!(
+            "stage `{}` has two records with the partition `{}`: two inputs share these partition keys; give the sources distinct `partition:` values",
+            stage.name,
+            describe(&pair[0].id)
+        );
+    }
+    Ok(units)
+}
+
+/// `input` holding only `parts`.
+fn only(input: &StageInput, parts: Vec<InputPart>) -> StageInput {
+    match input {
+        StageInput::Source { name, spec, base_dir, .. } => {
+            StageInput::Source { name: name.clone(), spec: spec.clone(), base_dir: base_dir.clone(), files: parts }
+        }
+        StageInput::Dataset { name, .. } => StageInput::Dataset { name: name.clone(), parts },
+    }
+}
