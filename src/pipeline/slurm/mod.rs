@@ -168,20 +168,26 @@ impl Slurm {
             UserError::new(format!("cannot create the Slurm log folder `{}`: {e}", job.log_dir.display()))
         })?;
         let submitted_unix_s = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
+        let requeue = job.options.requeue == Some(true);
         let mut parts: Vec<ArrayPart> = Vec::new();
         for plan in plans {
             match self.sbatch(&plan) {
                 Ok(job_id) => parts.push(ArrayPart { job_id, offset: plan.offset, tasks: plan.tasks }),
                 Err(e) => {
-                    let submitted =
-                        SubmittedArray { name: job.name.clone(), n_tasks: job.n_tasks, parts, submitted_unix_s };
+                    let submitted = SubmittedArray {
+                        name: job.name.clone(),
+                        n_tasks: job.n_tasks,
+                        parts,
+                        submitted_unix_s,
+                        requeue,
+                    };
                     // Best effort: the refusal is the error to report.
                     let _ = self.cancel(&[submitted]);
                     return Err(e);
                 }
             }
         }
-        Ok(SubmittedArray { name: job.name.clone(), n_tasks: job.n_tasks, parts, submitted_unix_s })
+        Ok(SubmittedArray { name: job.name.clone(), n_tasks: job.n_tasks, parts, submitted_unix_s, requeue })
     }
 
     fn sbatch(&self, plan: &PartPlan) -> Result<JobId, UserError> {
@@ -322,10 +328,9 @@ fn status_misses_some(status: &RunStatus, observations: &[status::Observation]) 
     let seen: BTreeSet<(u64, u32)> =
         observations.iter().flat_map(|o| o.indices.iter().map(move |&i| (o.array_job, i))).collect();
     status.arrays.iter().zip(&status.states).any(|(array, states)| {
-        array
-            .parts
-            .iter()
-            .any(|p| p.tasks.iter().any(|&t| !states[&t].is_terminal() && !seen.contains(&(p.job_id.0, t - p.offset))))
+        array.parts.iter().any(|p| {
+            p.tasks.iter().any(|&t| !states[&t].is_final(array.requeue) && !seen.contains(&(p.job_id.0, t - p.offset)))
+        })
     })
 }
 
