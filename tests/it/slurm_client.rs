@@ -207,3 +207,25 @@ fn sbatch_refusing_a_job_is_a_user_error_naming_the_command() {
     assert!(e.message.contains("sbatch refused the job array") && e.message.contains("invalid partition"), "{e}");
     assert!(e.hint.as_deref().is_some_and(|h| h.contains("--partition=nosuchpartition")), "{e}");
 }
+
+#[test]
+fn tasks_the_queue_no_longer_shows_are_read_from_the_job_completion_file() {
+    let slurm = test_slurm();
+    let limits = slurm.limits().unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let submitted =
+        slurm.submit(&job("sf-jobcomp", dir.path(), 2, "[ $SLURM_ARRAY_TASK_ID = 0 ]".into()), &limits).unwrap();
+    let done = wait(&slurm, &limits, std::slice::from_ref(&submitted));
+    assert_eq!(done[0], states(&[(0, TaskState::Completed), (1, TaskState::Failed)]));
+    // The same jobs under a name squeue does not know: as when slurmctld has forgotten them
+    // (MinJobAge). Only the job-completion file can tell.
+    let forgotten = SubmittedArray { name: "sf-jobcomp-forgotten".into(), ..submitted };
+    let mut status = RunStatus::new(std::slice::from_ref(&forgotten));
+    assert!(slurm.poll(&mut status, &limits).unwrap());
+    assert_eq!(status.states[0], done[0]);
+    // Without that file the tasks stay as last seen: pending, never lost.
+    let mut status = RunStatus::new(&[forgotten]);
+    let no_file = ClusterLimits { jobcomp_file: None, ..limits };
+    assert!(!slurm.poll(&mut status, &no_file).unwrap());
+    assert_eq!(status.states[0], states(&[(0, TaskState::Pending), (1, TaskState::Pending)]));
+}

@@ -77,6 +77,8 @@ pub struct SubmittedArray {
     pub parts: Vec<ArrayPart>,
     /// When it was submitted (seconds since the Unix epoch): `sacct` is asked from then on.
     pub submitted_unix_s: u64,
+    /// Submitted with `--requeue`: a preempted or node-failed task may come back as pending.
+    pub requeue: bool,
 }
 
 /// One Slurm job array of a split array: its array index `i` runs task `offset + i`.
@@ -296,6 +298,7 @@ mod tests {
                 })
                 .collect(),
             submitted_unix_s: 0,
+            requeue: false,
         }
     }
 

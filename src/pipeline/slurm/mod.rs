@@ -168,20 +168,26 @@ impl Slurm {
             UserError::new(format!("cannot create the Slurm log folder `{}`: {e}", job.log_dir.display()))
         })?;
         let submitted_unix_s = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
+        let requeue = job.options.requeue == Some(true);
         let mut parts: Vec<ArrayPart> = Vec::new();
         for plan in plans {
             match self.sbatch(&plan) {
                 Ok(job_id) => parts.push(ArrayPart { job_id, offset: plan.offset, tasks: plan.tasks }),
                 Err(e) => {
-                    let submitted =
-                        SubmittedArray { name: job.name.clone(), n_tasks: job.n_tasks, parts, submitted_unix_s };
+                    let submitted = SubmittedArray {
+                        name: job.name.clone(),
+                        n_tasks: job.n_tasks,
+                        parts,
+                        submitted_unix_s,
+                        requeue,
+                    };
                     // Best effort: the refusal is the error to report.
                     let _ = self.cancel(&[submitted]);
                     return Err(e);
                 }
             }
         }
-        Ok(SubmittedArray { name: job.name.clone(), n_tasks: job.n_tasks, parts, submitted_unix_s })
+        Ok(SubmittedArray { name: job.name.clone(), n_tasks: job.n_tasks, parts, submitted_unix_s, requeue })
     }
 
     fn sbatch(&self, plan: &PartPlan) -> Result<JobId, UserError> {
@@ -210,32 +216,16 @@ impl Slurm {
         if limits.accounting {
             let since = status.arrays.iter().map(|a| a.submitted_unix_s).min().unwrap_or(0);
             let now = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
-            // An hour's margin for clocks that disagree between this node and the controller.
-            let args = [
-                format!("--name={names}"),
-                "-X".into(),
-                "--parsable2".into(),
-                "--noheader".into(),
-                "--format=JobID,State".into(),
-                format!("--starttime=now-{}", now.saturating_sub(since) + 3600),
-                "--endtime=now".into(),
-            ];
+            let args = sacct_args(&names, now.saturating_sub(since));
             match self.run("sacct", &args, None)? {
                 Ok(text) => return Ok(status.apply(&status::parse_status_lines(&text))),
                 Err(e) if e.contains("accounting storage is disabled") => {}
                 Err(e) => return Err(UserError::new(format!("`sacct` failed: {e}"))),
             }
         }
-        let args = [
-            format!("--name={names}"),
-            "-h".into(),
-            "-r".into(),
-            "-t".into(),
-            "all".into(),
-            "-o".into(),
-            "%i|%T|%r".into(),
-        ];
-        let text = self.run("squeue", &args, None)?.map_err(|e| UserError::new(format!("`squeue` failed: {e}")))?;
+        let text = self
+            .run("squeue", &squeue_args(&names), None)?
+            .map_err(|e| UserError::new(format!("`squeue` failed: {e}")))?;
         let observations = status::parse_status_lines(&text);
         let mut changed = false;
         if let Some(file) = &limits.jobcomp_file {
@@ -312,21 +302,58 @@ impl Slurm {
     }
 }
 
+/// `sacct` for the jobs named `names` (comma-separated) submitted `age_s` seconds ago: one line
+/// `JobID|State` per array task (a pending array as one line `id_[a-b%t]`), from an hour before
+/// submission (clocks of this node and the controller may disagree) until now.
+fn sacct_args(names: &str, age_s: u64) -> Vec<String> {
+    vec![
+        format!("--name={names}"),
+        "-X".into(),
+        "--parsable2".into(),
+        "--noheader".into(),
+        "--format=JobID,State".into(),
+        format!("--starttime=now-{}", age_s + 3600),
+        "--endtime=now".into(),
+    ]
+}
+
+/// `squeue` for the jobs named `names`: every state (`-t all`: finished tasks until
+/// `MinJobAge`), one line `JobID|State|Reason` per array task (`-r`), no header.
+fn squeue_args(names: &str) -> Vec<String> {
+    [&format!("--name={names}"), "-h", "-r", "-t", "all", "-o", "%i|%T|%r"].map(|s| s.to_string()).to_vec()
+}
+
 /// Some unfinished task of `status` is not among `observations` (slurmctld forgot it).
 fn status_misses_some(status: &RunStatus, observations: &[status::Observation]) -> bool {
     let seen: BTreeSet<(u64, u32)> =
         observations.iter().flat_map(|o| o.indices.iter().map(move |&i| (o.array_job, i))).collect();
     status.arrays.iter().zip(&status.states).any(|(array, states)| {
-        array
-            .parts
-            .iter()
-            .any(|p| p.tasks.iter().any(|&t| !states[&t].is_terminal() && !seen.contains(&(p.job_id.0, t - p.offset))))
+        array.parts.iter().any(|p| {
+            p.tasks.iter().any(|&t| !states[&t].is_final(array.requeue) && !seen.contains(&(p.job_id.0, t - p.offset)))
+        })
     })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn status_queries_ask_once_for_every_array_of_the_run() {
+        assert_eq!(
+            sacct_args("run-1,run-2", 600),
+            [
+                "--name=run-1,run-2",
+                "-X",
+                "--parsable2",
+                "--noheader",
+                "--format=JobID,State",
+                "--starttime=now-4200",
+                "--endtime=now"
+            ]
+        );
+        assert_eq!(squeue_args("run-1"), ["--name=run-1", "-h", "-r", "-t", "all", "-o", "%i|%T|%r"]);
+    }
 
     #[test]
     fn a_missing_command_is_a_user_error_saying_where_slurm_comes_from() {

@@ -52,6 +52,12 @@ impl TaskState {
         !matches!(self, TaskState::Pending | TaskState::Running | TaskState::Other(_))
     }
 
+    /// [`TaskState::is_terminal`] for a task submitted with `--requeue` or not: Slurm puts a
+    /// requeueable task that was preempted or lost its node back in the queue.
+    pub fn is_final(&self, requeue: bool) -> bool {
+        self.is_terminal() && !(requeue && matches!(self, TaskState::Preempted | TaskState::NodeFail))
+    }
+
     pub fn is_success(&self) -> bool {
         *self == TaskState::Completed
     }
@@ -163,21 +169,23 @@ impl RunStatus {
         changed
     }
 
-    /// Every submitted task has ended.
+    /// Every submitted task has ended for good ([`TaskState::is_final`]).
     pub fn all_terminal(&self) -> bool {
-        self.states.iter().all(|s| s.values().all(TaskState::is_terminal))
+        self.unfinished() == 0
     }
 
-    /// Tasks not in a terminal state (pending, running, unknown).
+    /// Tasks that have not ended for good (pending, running, unknown; preempted or node-failed
+    /// ones of arrays submitted with `--requeue`).
     pub fn unfinished(&self) -> usize {
-        self.states.iter().map(|s| s.values().filter(|t| !t.is_terminal()).count()).sum()
+        self.arrays.iter().zip(&self.states).map(|(a, s)| s.values().filter(|t| !t.is_final(a.requeue)).count()).sum()
     }
 
-    /// The tasks of array `a` that ended without success, with their states.
+    /// The tasks of array `a` that ended for good without success, with their states.
     pub fn failed(&self, a: usize) -> Vec<(u32, TaskState)> {
+        let requeue = self.arrays[a].requeue;
         self.states[a]
             .iter()
-            .filter(|(_, s)| s.is_terminal() && !s.is_success())
+            .filter(|(_, s)| s.is_final(requeue) && !s.is_success())
             .map(|(&t, s)| (t, s.clone()))
             .collect()
     }
@@ -268,6 +276,7 @@ mod tests {
                 ArrayPart { job_id: JobId(11), offset: 3, tasks: vec![3, 4] },
             ],
             submitted_unix_s: 0,
+            requeue: false,
         };
         let mut status = RunStatus::new(&[array]);
         assert_eq!(status.unfinished(), 5);
@@ -283,5 +292,27 @@ mod tests {
         status.apply(&parse_status_lines("10_[1-2]|COMPLETED\n11_0|COMPLETED\n"));
         assert!(status.all_terminal());
         assert_eq!(status.counts(0).get("Completed"), Some(&4));
+    }
+
+    #[test]
+    fn a_requeueable_task_preempted_is_not_over() {
+        let array = |requeue| SubmittedArray {
+            name: "r".into(),
+            n_tasks: 2,
+            parts: vec![ArrayPart { job_id: JobId(10), offset: 0, tasks: vec![0, 1] }],
+            submitted_unix_s: 0,
+            requeue,
+        };
+        let lines = parse_status_lines("10_0|PREEMPTED\n10_1|NODE_FAIL\n");
+        let mut plain = RunStatus::new(&[array(false)]);
+        plain.apply(&lines);
+        assert!(plain.all_terminal());
+        assert_eq!(plain.failed(0).len(), 2);
+        let mut requeued = RunStatus::new(&[array(true)]);
+        requeued.apply(&lines);
+        assert_eq!(requeued.unfinished(), 2);
+        assert!(requeued.failed(0).is_empty());
+        requeued.apply(&parse_status_lines("10_0|COMPLETED\n10_1|TIMEOUT\n"));
+        assert!(requeued.all_terminal());
     }
 }
