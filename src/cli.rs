@@ -122,6 +122,33 @@ enum Command {
         #[arg(long, value_delimiter = ',')]
         columns: Vec<String>,
     },
+    /// Export stage outputs as one tidy table for Python, R or a spreadsheet, with its units and provenance.
+    ///
+    /// DATASET is a Parquet file or a stage's output folder (all its partitions). Partition keys
+    /// become plain columns (`motion=FB-4` → a column `motion` holding `FB-4`); columns are
+    /// matched by name across partitions (one missing from a partition is null there, with a
+    /// warning). The extension of FILE picks the format: `.csv` (RFC 4180, a header row, `NA`
+    /// for null) or `.parquet` (one file). Beside it, always, `<stem>.meta.json`: per column its
+    /// unit and description, and the provenance (stage, parameters, input hashes, shakeflow
+    /// version).
+    ///
+    /// Examples:
+    ///
+    ///   shakeflow export runs/demo/report/summary --out exports/summary.csv
+    ///   shakeflow export runs/demo/fragility_PS2/runs --out exports/fragility_runs.parquet
+    ///   shakeflow export runs/demo/rolling_PS1/events runs/demo/rolling_WSU1/events --out exports/rolling.csv
+    ///
+    /// In R:       d <- read.csv("exports/summary.csv")   (or data.table::fread)
+    /// In Python:  pandas.read_csv("exports/summary.csv"); json.load(open("exports/summary.meta.json"))
+    #[command(verbatim_doc_comment)]
+    Export {
+        /// Stage outputs: output folders (every partition) or Parquet files.
+        #[arg(required = true, value_name = "DATASET")]
+        datasets: Vec<PathBuf>,
+        /// The table to write, `.csv` or `.parquet`; `<stem>.meta.json` is written beside it.
+        #[arg(long, short = 'o', value_name = "FILE")]
+        out: PathBuf,
+    },
     /// Diagnose a unit: where the toppling model and its records disagree, which physics explains it.
     ///
     /// A case folder holds equipment.yaml, floor.csv (time_s, ax_mps2, ay_mps2, az_mps2),
@@ -259,6 +286,20 @@ pub fn main() -> anyhow::Result<ExitCode> {
         }
         Command::Show { table, rows, columns } => {
             print!("{}", crate::inspect::show(&table, rows, &columns)?);
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Export { datasets, out } => {
+            let done = crate::export::export(&datasets, &out)?;
+            for warning in &done.warnings {
+                eprintln!("warning: {warning}");
+            }
+            println!(
+                "{}: {} rows × {} columns; units, descriptions and provenance in {}",
+                out.display(),
+                done.rows,
+                done.columns,
+                done.meta.display()
+            );
             Ok(ExitCode::SUCCESS)
         }
         Command::DemoArchive { dir, force } => {

@@ -9,6 +9,7 @@ pub mod cli;
 pub mod demo;
 pub mod diagnose;
 pub mod error;
+pub mod export;
 pub mod inspect;
 pub mod io;
 pub mod physics;
