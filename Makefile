@@ -51,6 +51,7 @@ $(PY_STAMP): tests/reference/requirements.txt
 	touch $@
 
 test: $(PY_STAMP)
+	sh tests/system/install-r.sh
 	SHAKEFLOW_PYTHON=$(VENV_PY) $(CARGO) test --locked --no-fail-fast
 
 bench: release $(PY_STAMP)

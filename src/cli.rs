@@ -112,15 +112,26 @@ enum Command {
         #[arg(long, default_value_t = 5)]
         rows: usize,
     },
-    /// Print a (small) Parquet table, e.g. a study summary: a file, or an output folder of one part.
+    /// Print a (small) table: a Parquet file, or a stage's output folder (every partition, its
+    /// partition keys as columns), as aligned text or, with --csv, as CSV.
+    ///
+    /// Examples:
+    ///
+    ///   shakeflow show runs/demo/report/summary
+    ///   shakeflow show runs/demo/detect_toppling/events --columns motion,channel,toppled,impact_time_s
+    ///   shakeflow show runs/demo/fragility_PS2/runs --csv > runs.csv
+    #[command(verbatim_doc_comment)]
     Show {
         table: PathBuf,
-        /// Rows to print at most.
-        #[arg(long, default_value_t = 100)]
-        rows: usize,
+        /// Rows to print at most (default: 100 as text, all with --csv).
+        #[arg(long)]
+        rows: Option<usize>,
         /// Only these columns, in this order (comma-separated).
         #[arg(long, value_delimiter = ',')]
         columns: Vec<String>,
+        /// Print CSV (RFC 4180, `NA` for null) instead of an aligned table.
+        #[arg(long)]
+        csv: bool,
     },
     /// Export stage outputs as one tidy table for Python, R or a spreadsheet, with its units and provenance.
     ///
@@ -202,6 +213,13 @@ pub fn main() -> anyhow::Result<ExitCode> {
                 started.elapsed().as_secs_f64(),
                 plan.file.output_dir().display()
             ));
+            // One line of results per stage that has one (fragility, detections, verdicts, …).
+            for (name, stage) in &plan.stages {
+                let dir = plan.file.output_dir().join(name);
+                if let Some(line) = crate::summary::stage_line(&dir, stage.stage.info().name) {
+                    reporter.line(&format!("  {name}: {line}"));
+                }
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::Status { pipeline } => {
@@ -284,8 +302,12 @@ pub fn main() -> anyhow::Result<ExitCode> {
             print!("{}", crate::inspect::describe(&artifact, rows)?);
             Ok(ExitCode::SUCCESS)
         }
-        Command::Show { table, rows, columns } => {
-            print!("{}", crate::inspect::show(&table, rows, &columns)?);
+        Command::Show { table, rows, columns, csv } => {
+            let (text, warnings) = crate::inspect::show(&table, rows, &columns, csv)?;
+            for warning in &warnings {
+                eprintln!("warning: {warning}");
+            }
+            print!("{text}");
             Ok(ExitCode::SUCCESS)
         }
         Command::Export { datasets, out } => {

@@ -122,10 +122,39 @@ struct Union {
     partition_key: bool,
 }
 
-/// Writes the stage outputs `datasets` (Parquet files or output folders) as one table `out`
-/// (`.csv` or `.parquet`) and its `<stem>.meta.json`.
-pub fn export(datasets: &[PathBuf], out: &Path) -> anyhow::Result<Exported> {
-    let format = format_of(out)?;
+/// Stage outputs read as one table: the frame, and what the parts said about its columns.
+pub struct Dataset {
+    /// Partition keys first, then the columns of the parts, aligned by name.
+    pub frame: DataFrame,
+    /// Things the user should know (columns missing from some partitions).
+    pub warnings: Vec<String>,
+    columns: IndexMap<String, Union>,
+    parts: Vec<Part>,
+}
+
+impl Dataset {
+    /// Per row, the record it came from: its partition values joined by `/` (as the stages'
+    /// `record` columns name records), empty for an unpartitioned output.
+    pub fn record_labels(&self) -> anyhow::Result<Vec<String>> {
+        let mut labels = vec![String::new(); self.frame.height()];
+        for (name, column) in &self.columns {
+            // The `stage` column of several stages is no partition of theirs.
+            if column.partition_key && !column.present.is_empty() {
+                for (label, value) in labels.iter_mut().zip(self.frame.column(name)?.str()?.iter()) {
+                    if !label.is_empty() {
+                        label.push('/');
+                    }
+                    label.push_str(value.unwrap_or(""));
+                }
+            }
+        }
+        Ok(labels)
+    }
+}
+
+/// Reads stage outputs (Parquet files or output folders) as one table; `out`, when given, is
+/// where it is going, which may not lie inside a folder read.
+pub fn read(datasets: &[PathBuf], out: Option<&Path>) -> anyhow::Result<Dataset> {
     let mut parts = Vec::new();
     for dataset in datasets {
         parts.extend(parts_of(dataset, out)?);
@@ -144,22 +173,32 @@ pub fn export(datasets: &[PathBuf], out: &Path) -> anyhow::Result<Exported> {
     let columns = union_columns(&parts, several_stages)?;
     let warnings = missing_warnings(&parts, &columns);
     let frame = stack(&parts, &columns, several_stages)?;
+    Ok(Dataset { frame, warnings, columns, parts })
+}
+
+/// Writes the stage outputs `datasets` (Parquet files or output folders) as one table `out`
+/// (`.csv` or `.parquet`) and its `<stem>.meta.json`.
+pub fn export(datasets: &[PathBuf], out: &Path) -> anyhow::Result<Exported> {
+    let format = format_of(out)?;
+    let dataset = read(datasets, Some(out))?;
     if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(parent).with_context(|| format!("cannot create `{}`", parent.display()))?;
     }
-    let provenance = provenance(&parts);
+    let provenance = provenance(&dataset.parts);
     match format {
-        Format::Csv => write_csv(out, &frame, &columns)?,
-        Format::Parquet => write_parquet(out, &frame, &columns, &provenance)?,
+        Format::Csv => atomic::write_file(out, |w| write_csv(w, &dataset.frame))
+            .with_context(|| format!("writing `{}`", out.display()))?,
+        Format::Parquet => write_parquet(out, &dataset.frame, &dataset.columns, &provenance)?,
     }
     let meta = meta_path(out);
-    let meta_json = meta_json(out, format, frame.height(), &columns, &provenance, &warnings);
+    let rows = dataset.frame.height();
+    let meta_json = meta_json(out, format, rows, &dataset.columns, &provenance, &dataset.warnings);
     atomic::write_file(&meta, |w| {
         w.write_all(serde_json::to_string_pretty(&meta_json)?.as_bytes())?;
         w.write_all(b"\n")?;
         Ok(())
     })?;
-    Ok(Exported { rows: frame.height(), columns: columns.len(), meta, warnings })
+    Ok(Exported { rows, columns: dataset.columns.len(), meta, warnings: dataset.warnings })
 }
 
 /// `FILE`'s sibling `<stem>.meta.json`.
@@ -184,16 +223,17 @@ fn format_of(out: &Path) -> anyhow::Result<Format> {
 }
 
 /// The Parquet files of one dataset argument, with their partition keys and metadata.
-fn parts_of(dataset: &Path, out: &Path) -> anyhow::Result<Vec<Part>> {
+fn parts_of(dataset: &Path, out: Option<&Path>) -> anyhow::Result<Vec<Part>> {
     let not_output = |what: &str| {
         UserError::new(format!("`{}` is not a shakeflow output: {what}", dataset.display()))
             .hint("name a stage's output folder or one of its files, e.g. runs/demo/report/summary or runs/demo/baseline_floors/records/motion=FB-4/floor=5/data.parquet")
     };
     let files: Vec<PathBuf> = if dataset.is_dir() {
-        if let (Ok(folder), Some(Ok(target))) = (
-            std::fs::canonicalize(dataset),
-            out.parent().map(|p| std::fs::canonicalize(if p.as_os_str().is_empty() { Path::new(".") } else { p })),
-        ) {
+        let target = out.and_then(|out| {
+            let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+            std::fs::canonicalize(parent).ok().map(|p| (out, p))
+        });
+        if let (Ok(folder), Some((out, target))) = (std::fs::canonicalize(dataset), target) {
             if target.starts_with(&folder) {
                 return Err(UserError::new(format!(
                     "`{}` lies inside the dataset `{}`: the export would become part of what it reads",
@@ -530,48 +570,48 @@ fn text_field(s: &str) -> String {
     }
 }
 
-fn write_csv(out: &Path, frame: &DataFrame, columns: &IndexMap<String, Union>) -> anyhow::Result<()> {
-    enum Cells<'a> {
-        Float(&'a polars::prelude::Float64Chunked),
-        Int(&'a polars::prelude::Int64Chunked),
-        Bool(&'a polars::prelude::BooleanChunked),
-        Text(&'a polars::prelude::StringChunked),
+/// `frame` as CSV (RFC 4180: a header row, CRLF line ends, quotes where needed), `NA` for null,
+/// `TRUE`/`FALSE` for booleans, floats as the shortest text that reads back to the same number.
+pub fn write_csv(w: &mut impl std::io::Write, frame: &DataFrame) -> anyhow::Result<()> {
+    enum Cells {
+        Float(polars::prelude::Float64Chunked),
+        Int(polars::prelude::Int64Chunked),
+        Bool(polars::prelude::BooleanChunked),
+        Text(polars::prelude::StringChunked),
     }
-    let mut cells = Vec::with_capacity(columns.len());
-    for (name, column) in columns {
-        let c = frame.column(name)?;
-        cells.push(match column.kind {
-            Kind::Float => Cells::Float(c.f64()?),
-            Kind::Int => Cells::Int(c.i64()?),
-            Kind::Bool => Cells::Bool(c.bool()?),
-            Kind::Text => Cells::Text(c.str()?),
+    let mut cells = Vec::with_capacity(frame.width());
+    for c in frame.columns() {
+        let series = c.as_materialized_series();
+        cells.push(match series.dtype() {
+            DataType::Float64 | DataType::Float32 => Cells::Float(series.cast(&DataType::Float64)?.f64()?.clone()),
+            DataType::Boolean => Cells::Bool(series.bool()?.clone()),
+            DataType::String => Cells::Text(series.str()?.clone()),
+            t if t.is_integer() => Cells::Int(series.cast(&DataType::Int64)?.i64()?.clone()),
+            other => anyhow::bail!("column `{}` has the type {other}, which CSV output does not write", c.name()),
         });
     }
-    atomic::write_file(out, |w| {
-        let header: Vec<String> = columns.keys().map(|n| text_field(n)).collect();
-        w.write_all(header.join(",").as_bytes())?;
-        w.write_all(b"\r\n")?;
-        let mut line = String::new();
-        for row in 0..frame.height() {
-            line.clear();
-            for (i, cell) in cells.iter().enumerate() {
-                if i > 0 {
-                    line.push(',');
-                }
-                let text = match cell {
-                    Cells::Float(c) => c.get(row).map(float_text),
-                    Cells::Int(c) => c.get(row).map(|v| v.to_string()),
-                    Cells::Bool(c) => c.get(row).map(|v| if v { "TRUE" } else { "FALSE" }.to_string()),
-                    Cells::Text(c) => c.get(row).map(text_field),
-                };
-                line.push_str(text.as_deref().unwrap_or("NA"));
+    let header: Vec<String> = frame.get_column_names().iter().map(|n| text_field(n)).collect();
+    w.write_all(header.join(",").as_bytes())?;
+    w.write_all(b"\r\n")?;
+    let mut line = String::new();
+    for row in 0..frame.height() {
+        line.clear();
+        for (i, cell) in cells.iter().enumerate() {
+            if i > 0 {
+                line.push(',');
             }
-            line.push_str("\r\n");
-            w.write_all(line.as_bytes())?;
+            let text = match cell {
+                Cells::Float(c) => c.get(row).map(float_text),
+                Cells::Int(c) => c.get(row).map(|v| v.to_string()),
+                Cells::Bool(c) => c.get(row).map(|v| if v { "TRUE" } else { "FALSE" }.to_string()),
+                Cells::Text(c) => c.get(row).map(text_field),
+            };
+            line.push_str(text.as_deref().unwrap_or("NA"));
         }
-        Ok(())
-    })
-    .with_context(|| format!("writing `{}`", out.display()))
+        line.push_str("\r\n");
+        w.write_all(line.as_bytes())?;
+    }
+    Ok(())
 }
 
 fn write_parquet(

@@ -19,6 +19,7 @@ pub mod schema;
 pub mod signal;
 pub mod stages;
 pub mod stats;
+pub mod summary;
 pub mod table;
 pub mod units;
 pub mod vision;

@@ -141,7 +141,8 @@ fn nullable<W: Write + Send>(
 }
 
 /// The table's Arrow schema: each column's type and nullability, its unit and description as
-/// field metadata.
+/// field metadata, and the table's metadata (provenance) as schema metadata, which is where
+/// pyarrow (`read_schema(f).metadata`, `read_table(f).schema.metadata`) looks for it.
 fn arrow_schema(table: &Table) -> Schema {
     let fields: Vec<Field> = table
         .columns
@@ -162,7 +163,8 @@ fn arrow_schema(table: &Table) -> Schema {
             Field::new(&column.name, data_type, nullable).with_metadata(metadata)
         })
         .collect();
-    Schema::new(fields)
+    let metadata: HashMap<String, String> = table.metadata.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+    Schema::new_with_metadata(fields, metadata)
 }
 
 /// Reads a whole Parquet file written by any tool; units come back when the writer stored them.

@@ -17,7 +17,7 @@ pub struct Report;
 
 static INFO: StageInfo = StageInfo {
     name: "report",
-    version: 2,
+    version: 3,
     summary: "Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time, confidence); rolling units' peak displacement, yaw and caster flips per motion.",
     inputs: InputKind::Datasets,
     outputs: &[
