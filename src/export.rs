@@ -282,9 +282,10 @@ fn parts_of(dataset: &Path, out: Option<&Path>) -> anyhow::Result<Vec<Part>> {
             })
             .collect();
         let decoded: Vec<String> = keys.iter().map(|(k, v)| format!("{k}={v}")).collect();
-        let label = match decoded.is_empty() {
-            true => format!("{stage}.{output}"),
-            false => format!("{stage}.{output}/{}", decoded.join("/")),
+        let label = if decoded.is_empty() {
+            format!("{stage}.{output}")
+        } else {
+            format!("{stage}.{output}/{}", decoded.join("/"))
         };
         parts.push(Part { path, label, keys, columns, metadata });
     }

@@ -113,15 +113,15 @@ fn rolling(dir: &Path) -> anyhow::Result<String> {
     let displacement = floats(&events.frame, "displacement_m")?;
     let mut peak: Option<(f64, &str)> = None;
     let mut rolled = BTreeSet::new();
-    for i in 0..kinds.len() {
-        match kinds[i].as_str() {
+    for ((kind, record), d) in kinds.iter().zip(&records).zip(&displacement) {
+        match kind.as_str() {
             "peak_displacement" => {
-                if let Some(d) = displacement[i].filter(|d| peak.is_none_or(|(p, _)| *d > p)) {
-                    peak = Some((d, &records[i]));
+                if let Some(d) = d.filter(|d| peak.is_none_or(|(p, _)| *d > p)) {
+                    peak = Some((d, record));
                 }
             }
             "breakaway" => {
-                rolled.insert(&records[i]);
+                rolled.insert(record);
             }
             _ => {}
         }

@@ -9,7 +9,7 @@ use std::path::Path;
 use std::process::Command;
 
 /// Two sources into one `load`: `daq` (two channels; motions FB-1 and `090 (CUE)`) and `extra`
-/// (one channel; WN-1), so `ay_mps2` is missing from one partition.
+/// (one channel, files named otherwise; WN-1), so `ay_mps2` is missing from one partition.
 const PIPELINE: &str = "\
 version: 1
 output_dir: out
@@ -25,7 +25,7 @@ inputs:
       ay_mps2: NS
   extra:
     format: csv
-    path: extra/{motion}/daq.csv
+    path: extra/{motion}/wn.csv
     header_lines: 2
     time_column: Time
     unit: g
@@ -42,7 +42,7 @@ fn project() -> tempfile::TempDir {
     std::fs::write(dir.path().join("pipeline.yaml"), PIPELINE).unwrap();
     write_daq_csv(&dir.path().join("archive/FB-1/daq.csv"), 300, 200.0, 0.0);
     write_daq_csv(&dir.path().join("archive/090 (CUE)/daq.csv"), 200, 200.0, 1.0);
-    write_daq_csv(&dir.path().join("extra/WN-1/daq.csv"), 100, 200.0, 2.0);
+    write_daq_csv(&dir.path().join("extra/WN-1/wn.csv"), 100, 200.0, 2.0);
     let out = shakeflow(&["run", "pipeline.yaml"], dir.path());
     assert!(out.status.success(), "{}", stderr(&out));
     dir
@@ -90,6 +90,10 @@ fn an_export_reads_the_same_in_pyarrow_duckdb_polars_and_r() {
         serde_json::from_str(&std::fs::read_to_string(root.join("exports/records.meta.json")).unwrap()).unwrap();
     assert_eq!(meta["columns"]["ax_mps2"]["unit"], "m/s^2");
     assert_eq!(meta["provenance"][0]["stage"], "load");
+    // `load`'s descriptions hold for every record (the files are named differently): one each.
+    for column in ["ax_mps2", "ay_mps2"] {
+        assert!(meta["columns"][column].get("descriptions").is_none(), "{column}: {}", meta["columns"][column]);
+    }
 
     run_r(&reference_script("export_check.R"), &["exports/records.csv", "r_read_csv.csv", "r_fread.csv"], root);
     let csv_path = root.join("exports/records.csv");
@@ -157,10 +161,10 @@ fn show_prints_every_partition_with_its_keys_and_as_csv() {
 }
 
 /// A table written as a stage would write it: provenance and partition metadata, `v` in `unit`.
-fn fake_part(path: &Path, partition: &str, unit: &str) {
+fn fake_part(path: &Path, partition: &str, unit: &str, description: &str) {
     use shakeflow::table::{Column, Table};
     let mut t = Table::new();
-    t.push(Column::f64("v", unit, "a value", vec![1.0, 2.0]));
+    t.push(Column::f64("v", unit, description, vec![1.0, 2.0]));
     for (k, v) in [("shakeflow.stage", "s"), ("shakeflow.output", "o"), ("shakeflow.partition", partition)] {
         t.metadata.insert(k.into(), v.into());
     }
@@ -186,11 +190,28 @@ fn bad_arguments_are_refused_with_what_to_do() {
     refused(&["export", "archive", "--out", "t.csv"], &["not a shakeflow output", "data.parquet"]);
     refused(&["export", "pipeline.yaml", "--out", "t.csv"], &["not a shakeflow output"]);
     refused(&["export", "out/load", "--out", "out/load/records/t.csv"], &["inside the dataset"]);
-    fake_part(&root.join("mixed/k=a/data.parquet"), "k=a", "m");
-    fake_part(&root.join("mixed/k=b/data.parquet"), "k=b", "mm");
+    fake_part(&root.join("mixed/k=a/data.parquet"), "k=a", "m", "a value");
+    fake_part(&root.join("mixed/k=b/data.parquet"), "k=b", "mm", "a value");
     refused(&["export", "mixed", "--out", "t.csv"], &["column `v`", "`m`", "`mm`", "s.o/k=b", "one unit"]);
     refused(&["export", "out/load/records", "out/load/records", "--out", "t.csv"], &["named twice"]);
     assert!(!root.join("t.csv").exists() && !root.join("t.meta.json").exists(), "nothing written");
     let help = shakeflow(&["export", "--help"], root);
     assert!(stdout(&help).contains("shakeflow export runs/demo/report/summary --out exports/summary.csv"));
+}
+
+#[test]
+fn descriptions_that_differ_by_partition_are_given_per_partition() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    fake_part(&root.join("d/k=a/data.parquet"), "k=a", "m", "height of a");
+    fake_part(&root.join("d/k=b/data.parquet"), "k=b", "m", "height of b");
+    let out = shakeflow(&["export", "d", "--out", "t.parquet"], root);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(root.join("t.meta.json")).unwrap()).unwrap();
+    let v = &meta["columns"]["v"];
+    assert_eq!(v["unit"], "m");
+    assert!(v["description"].as_str().unwrap().contains("differs by partition"), "{v}");
+    assert_eq!(v["descriptions"]["s.o/k=a"], "height of a");
+    assert_eq!(v["descriptions"]["s.o/k=b"], "height of b");
 }

@@ -50,7 +50,8 @@ def text_value(cell, kind):
 
 def expected_rows(dataset):
     """The stage output as pyarrow reads it, part by part: (column names, rows, units, metadata)."""
-    files = sorted(p for p in pathlib.Path(dataset).rglob("data.parquet") if not any(c.startswith(".") for c in p.parts))
+    root = pathlib.Path(dataset)
+    files = sorted(p for p in root.rglob("data.parquet") if not any(c.startswith(".") for c in p.relative_to(root).parts))
     assert files, f"no data.parquet below {dataset}"
     key_names, columns, units, rows, metadata = [], [], {}, [], []
     parts = []
@@ -127,7 +128,7 @@ def main():
     assert b"shakeflow.export" in table.schema.metadata
     data = table.to_pydict()
     compare("parquet", rows, [[data[n][i] for n in names] for i in range(table.num_rows)], names)
-    count = duckdb.sql(f"SELECT count(*) FROM read_parquet('{args.parquet}')").fetchone()[0]
+    count = duckdb.sql(f"SELECT count(*) FROM read_parquet('{args.parquet}')").fetchall()[0][0]
     assert count == len(rows), count
     frame = pl.read_parquet(args.parquet)
     compare("polars parquet", rows, [list(r) for r in frame.iter_rows()], names)
