@@ -192,6 +192,15 @@ mod tests {
     }
 
     #[test]
+    fn toppling_counts_the_summary_rows_only() {
+        let dir = tempfile::tempdir().unwrap();
+        let kinds = ["uplift", "impact", "overturn", "summary"];
+        part(dir.path(), "events", "record=A", vec![text("event", &kinds), flag("overturned", &[true; 4])]);
+        part(dir.path(), "events", "record=B", vec![text("event", &["summary"]), flag("overturned", &[false])]);
+        assert_eq!(stage_line(dir.path(), "simulate_toppling").unwrap(), "overturned in 1 of 2 records (A)");
+    }
+
+    #[test]
     fn verdicts_are_counted_and_rolling_peaks_named() {
         let dir = tempfile::tempdir().unwrap();
         part(dir.path(), "diagnosis", "", vec![text("verdict", &["sliding", "none", "sliding"])]);

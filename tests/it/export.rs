@@ -63,7 +63,8 @@ fn run_r(script: &Path, args: &[&str], cwd: &Path) -> String {
     let out = Command::new(rscript()).arg(script).args(args).current_dir(cwd).output().unwrap();
     assert!(
         out.status.success(),
-        "{} failed:\n{}\n{}",
+        "{} failed (a missing R package? `make test` installs them as root, tests/system/install-r.sh; or: \
+         sudo apt-get install r-base-core r-cran-data.table r-cran-jsonlite):\n{}\n{}",
         script.display(),
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
