@@ -147,7 +147,7 @@ enum Command {
     ///
     ///   shakeflow export runs/demo/report/summary --out exports/summary.csv
     ///   shakeflow export runs/demo/fragility_PS2/runs --out exports/fragility_runs.parquet
-    ///   shakeflow export runs/demo/rolling_PS1/events runs/demo/rolling_WSU1/events --out exports/rolling.csv
+    ///   shakeflow export runs/demo/rolling_*/events --out exports/rolling.csv
     ///
     /// In R:       d <- read.csv("exports/summary.csv")   (or data.table::fread)
     /// In Python:  pandas.read_csv("exports/summary.csv"); json.load(open("exports/summary.meta.json"))

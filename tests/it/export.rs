@@ -162,11 +162,11 @@ fn show_prints_every_partition_with_its_keys_and_as_csv() {
 }
 
 /// A table written as a stage would write it: provenance and partition metadata, `v` in `unit`.
-fn fake_part(path: &Path, partition: &str, unit: &str, description: &str) {
+fn fake_part(path: &Path, stage: &str, partition: &str, unit: &str, description: &str) {
     use shakeflow::table::{Column, Table};
     let mut t = Table::new();
     t.push(Column::f64("v", unit, description, vec![1.0, 2.0]));
-    for (k, v) in [("shakeflow.stage", "s"), ("shakeflow.output", "o"), ("shakeflow.partition", partition)] {
+    for (k, v) in [("shakeflow.stage", stage), ("shakeflow.output", "o"), ("shakeflow.partition", partition)] {
         t.metadata.insert(k.into(), v.into());
     }
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
@@ -191,8 +191,8 @@ fn bad_arguments_are_refused_with_what_to_do() {
     refused(&["export", "archive", "--out", "t.csv"], &["not a shakeflow output", "data.parquet"]);
     refused(&["export", "pipeline.yaml", "--out", "t.csv"], &["not a shakeflow output"]);
     refused(&["export", "out/load", "--out", "out/load/records/t.csv"], &["inside the dataset"]);
-    fake_part(&root.join("mixed/k=a/data.parquet"), "k=a", "m", "a value");
-    fake_part(&root.join("mixed/k=b/data.parquet"), "k=b", "mm", "a value");
+    fake_part(&root.join("mixed/k=a/data.parquet"), "s", "k=a", "m", "a value");
+    fake_part(&root.join("mixed/k=b/data.parquet"), "s", "k=b", "mm", "a value");
     refused(&["export", "mixed", "--out", "t.csv"], &["column `v`", "`m`", "`mm`", "s.o/k=b", "one unit"]);
     refused(&["export", "out/load/records", "out/load/records", "--out", "t.csv"], &["named twice"]);
     assert!(!root.join("t.csv").exists() && !root.join("t.meta.json").exists(), "nothing written");
@@ -204,8 +204,8 @@ fn bad_arguments_are_refused_with_what_to_do() {
 fn descriptions_that_differ_by_partition_are_given_per_partition() {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path();
-    fake_part(&root.join("d/k=a/data.parquet"), "k=a", "m", "height of a");
-    fake_part(&root.join("d/k=b/data.parquet"), "k=b", "m", "height of b");
+    fake_part(&root.join("d/k=a/data.parquet"), "s", "k=a", "m", "height of a");
+    fake_part(&root.join("d/k=b/data.parquet"), "s", "k=b", "m", "height of b");
     let out = shakeflow(&["export", "d", "--out", "t.parquet"], root);
     assert!(out.status.success(), "{}", stderr(&out));
     let meta: serde_json::Value =
@@ -215,4 +215,19 @@ fn descriptions_that_differ_by_partition_are_given_per_partition() {
     assert!(v["description"].as_str().unwrap().contains("differs by partition"), "{v}");
     assert_eq!(v["descriptions"]["s.o/k=a"], "height of a");
     assert_eq!(v["descriptions"]["s.o/k=b"], "height of b");
+}
+
+#[test]
+fn outputs_of_several_stages_are_told_apart_by_a_stage_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    fake_part(&root.join("one/k=a/data.parquet"), "first", "k=a", "m", "v");
+    fake_part(&root.join("two/k=a/data.parquet"), "second", "k=a", "m", "v");
+    let out = shakeflow(&["export", "one", "two", "--out", "t.csv"], root);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = std::fs::read_to_string(root.join("t.csv")).unwrap();
+    assert_eq!(text, "stage,k,v\r\nfirst,a,1.0\r\nfirst,a,2.0\r\nsecond,a,1.0\r\nsecond,a,2.0\r\n");
+    let meta: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(root.join("t.meta.json")).unwrap()).unwrap();
+    assert_eq!(meta["provenance"].as_array().unwrap().len(), 2);
 }
