@@ -9,7 +9,9 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::{partition_values, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
+use super::{
+    partition_values, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput,
+};
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::table::{Column, ColumnData, Table};
 
