@@ -53,6 +53,7 @@ $(PY_STAMP): tests/reference/requirements.txt
 # The Slurm tests run against a single-node Slurm started here and stopped after (by pid, also when
 # tests fail; left running if it already ran). Without root it cannot start: those tests then fail, saying so.
 test: $(PY_STAMP)
+	sh tests/system/install-r.sh
 	@was_running=$$(tests/system/slurm.sh status >/dev/null 2>&1 && echo yes); \
 	tests/system/slurm.sh start || echo "make test: the test Slurm did not start; the Slurm tests will fail"; \
 	SHAKEFLOW_PYTHON=$(VENV_PY) $(CARGO) test --locked --no-fail-fast; status=$$?; \

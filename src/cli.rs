@@ -143,15 +143,53 @@ enum Command {
         #[arg(long, default_value_t = 5)]
         rows: usize,
     },
-    /// Print a (small) Parquet table, e.g. a study summary: a file, or an output folder of one part.
+    /// Print a (small) table: a Parquet file, or a stage's output folder (every partition, its
+    /// partition keys as columns), as aligned text or, with --csv, as CSV.
+    ///
+    /// Examples:
+    ///
+    ///   shakeflow show runs/demo/report/summary
+    ///   shakeflow show runs/demo/detect_toppling/events --columns motion,channel,toppled,impact_time_s
+    ///   shakeflow show runs/demo/fragility_PS2/runs --csv > runs.csv
+    #[command(verbatim_doc_comment)]
     Show {
         table: PathBuf,
-        /// Rows to print at most.
-        #[arg(long, default_value_t = 100)]
-        rows: usize,
+        /// Rows to print at most (default: 100 as text, all with --csv).
+        #[arg(long)]
+        rows: Option<usize>,
         /// Only these columns, in this order (comma-separated).
         #[arg(long, value_delimiter = ',')]
         columns: Vec<String>,
+        /// Print CSV (RFC 4180, `NA` for null) instead of an aligned table.
+        #[arg(long)]
+        csv: bool,
+    },
+    /// Export stage outputs as one tidy table for Python, R or a spreadsheet, with its units and provenance.
+    ///
+    /// DATASET is a Parquet file or a stage's output folder (all its partitions). Partition keys
+    /// become plain columns (`motion=FB-4` → a column `motion` holding `FB-4`); columns are
+    /// matched by name across partitions (one missing from a partition is null there, with a
+    /// warning). The extension of FILE picks the format: `.csv` (RFC 4180, a header row, `NA`
+    /// for null) or `.parquet` (one file). Beside it, always, `<stem>.meta.json`: per column its
+    /// unit and description, and the provenance (stage, parameters, input hashes, shakeflow
+    /// version).
+    ///
+    /// Examples:
+    ///
+    ///   shakeflow export runs/demo/report/summary --out exports/summary.csv
+    ///   shakeflow export runs/demo/fragility_PS2/runs --out exports/fragility_runs.parquet
+    ///   shakeflow export runs/demo/rolling_*/events --out exports/rolling.csv
+    ///
+    /// In R:       d <- read.csv("exports/summary.csv")   (or data.table::fread)
+    /// In Python:  pandas.read_csv("exports/summary.csv"); json.load(open("exports/summary.meta.json"))
+    #[command(verbatim_doc_comment)]
+    Export {
+        /// Stage outputs: output folders (every partition) or Parquet files.
+        #[arg(required = true, value_name = "DATASET")]
+        datasets: Vec<PathBuf>,
+        /// The table to write, `.csv` or `.parquet`; `<stem>.meta.json` is written beside it.
+        #[arg(long, short = 'o', value_name = "FILE")]
+        out: PathBuf,
     },
     /// Diagnose a unit: where the toppling model and its records disagree, which physics explains it.
     ///
@@ -265,6 +303,13 @@ pub fn main() -> anyhow::Result<ExitCode> {
                 started.elapsed().as_secs_f64(),
                 plan.file.output_dir().display()
             ));
+            // One line of results per stage that has one (fragility, detections, verdicts, …).
+            for (name, stage) in &plan.stages {
+                let dir = plan.file.output_dir().join(name);
+                if let Some(line) = crate::summary::stage_line(&dir, stage.stage.info().name) {
+                    reporter.line(&format!("  {name}: {line}"));
+                }
+            }
             Ok(exit_status(&summary))
         }
         Command::SlurmTask { run_dir, stage } => {
@@ -370,8 +415,26 @@ pub fn main() -> anyhow::Result<ExitCode> {
             print!("{}", crate::inspect::describe(&artifact, rows)?);
             Ok(ExitCode::SUCCESS)
         }
-        Command::Show { table, rows, columns } => {
-            print!("{}", crate::inspect::show(&table, rows, &columns)?);
+        Command::Show { table, rows, columns, csv } => {
+            let (text, warnings) = crate::inspect::show(&table, rows, &columns, csv)?;
+            for warning in &warnings {
+                eprintln!("warning: {warning}");
+            }
+            print!("{text}");
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Export { datasets, out } => {
+            let done = crate::export::export(&datasets, &out)?;
+            for warning in &done.warnings {
+                eprintln!("warning: {warning}");
+            }
+            println!(
+                "{}: {} rows × {} columns; units, descriptions and provenance in {}",
+                out.display(),
+                done.rows,
+                done.columns,
+                done.meta.display()
+            );
             Ok(ExitCode::SUCCESS)
         }
         Command::DemoArchive { dir, force } => {

@@ -92,34 +92,26 @@ fn describe_parquet(path: &Path, preview_rows: usize) -> anyhow::Result<String> 
     Ok(out)
 }
 
-/// A whole (small) Parquet table as aligned text, for summaries printed at the end of a run.
-/// Prints a small table; `columns` (when not empty) picks and orders the columns shown.
-pub fn show(path: &Path, max_rows: usize, columns: &[String]) -> anyhow::Result<String> {
-    // A stage's output is a folder of partitions: one part is shown as it is.
-    if path.is_dir() {
-        let parts: Vec<String> = crate::io::hash::list_files(path)?
-            .into_iter()
-            .filter(|f| f.ends_with(crate::pipeline::sink::DATA_FILE))
-            .collect();
-        return match parts.as_slice() {
-            [one] => show(&path.join(one), max_rows, columns),
-            [] => anyhow::bail!("`{}` holds no {} file", path.display(), crate::pipeline::sink::DATA_FILE),
-            many => {
-                let listed: Vec<String> =
-                    many.iter().take(5).map(|p| format!("  {}", path.join(p).display())).collect();
-                anyhow::bail!(
-                    "`{}` holds {} parts; show one of them, e.g.\n{}\n(or `shakeflow inspect` the folder for all of them)",
-                    path.display(),
-                    many.len(),
-                    listed.join("\n")
-                )
-            }
-        };
-    }
-    let file = File::open(path).map_err(|e| anyhow::anyhow!("cannot open `{}`: {e}", path.display()))?;
-    let mut frame = ParquetReader::new(file)
-        .finish()
-        .map_err(|e| anyhow::anyhow!("polars could not read `{}`: {e}", path.display()))?;
+/// A (small) table as aligned text, or as CSV: a Parquet file, or a stage's output folder with
+/// every partition (keys as columns, as `export` reads them). `max_rows` defaults to 100 as
+/// text and to every row as CSV; `columns` (when not empty) picks and orders the columns shown.
+/// Returns the text and warnings (columns missing from some partitions).
+pub fn show(
+    path: &Path,
+    max_rows: Option<usize>,
+    columns: &[String],
+    csv: bool,
+) -> anyhow::Result<(String, Vec<String>)> {
+    let (mut frame, warnings) = if path.is_dir() {
+        let dataset = crate::export::read(&[path.to_path_buf()], None)?;
+        (dataset.frame, dataset.warnings)
+    } else {
+        let file = File::open(path).map_err(|e| anyhow::anyhow!("cannot open `{}`: {e}", path.display()))?;
+        let frame = ParquetReader::new(file)
+            .finish()
+            .map_err(|e| anyhow::anyhow!("polars could not read `{}`: {e}", path.display()))?;
+        (frame, Vec::new())
+    };
     if !columns.is_empty() {
         let names: Vec<String> = frame.get_column_names().iter().map(|n| n.to_string()).collect();
         if let Some(missing) = columns.iter().find(|c| !names.contains(c)) {
@@ -127,12 +119,18 @@ pub fn show(path: &Path, max_rows: usize, columns: &[String]) -> anyhow::Result<
         }
         frame = frame.select(columns.iter().map(String::as_str))?;
     }
+    if csv {
+        let frame = max_rows.map_or(frame.clone(), |n| frame.head(Some(n)));
+        let mut bytes = Vec::new();
+        crate::export::write_csv(&mut bytes, &frame)?;
+        return Ok((String::from_utf8(bytes)?, warnings));
+    }
     // polars reads its display limits from the environment; set them for this process only.
-    std::env::set_var("POLARS_FMT_MAX_ROWS", max_rows.to_string());
+    std::env::set_var("POLARS_FMT_MAX_ROWS", max_rows.unwrap_or(100).to_string());
     std::env::set_var("POLARS_FMT_MAX_COLS", "30");
     std::env::set_var("POLARS_FMT_STR_LEN", "40");
     std::env::set_var("POLARS_FMT_TABLE_HIDE_DATAFRAME_SHAPE_INFORMATION", "1");
-    Ok(format!("{frame}\n"))
+    Ok((format!("{frame}\n"), warnings))
 }
 
 fn describe_mcap(path: &Path) -> anyhow::Result<String> {

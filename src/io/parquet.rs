@@ -141,7 +141,8 @@ fn nullable<W: Write + Send>(
 }
 
 /// The table's Arrow schema: each column's type and nullability, its unit and description as
-/// field metadata.
+/// field metadata, and the table's metadata (provenance) as schema metadata, which is where
+/// pyarrow (`read_schema(f).metadata`, `read_table(f).schema.metadata`) looks for it.
 fn arrow_schema(table: &Table) -> Schema {
     let fields: Vec<Field> = table
         .columns
@@ -162,7 +163,8 @@ fn arrow_schema(table: &Table) -> Schema {
             Field::new(&column.name, data_type, nullable).with_metadata(metadata)
         })
         .collect();
-    Schema::new(fields)
+    let metadata: HashMap<String, String> = table.metadata.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+    Schema::new_with_metadata(fields, metadata)
 }
 
 /// Reads a whole Parquet file written by any tool; units come back when the writer stored them.
@@ -197,6 +199,65 @@ pub fn read_table(path: &Path) -> anyhow::Result<Table> {
         });
     }
     Ok(table)
+}
+
+/// One column of a Parquet file's schema: its name, type and the unit and description a
+/// shakeflow writer stored (empty when the writer stored none).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ColumnInfo {
+    pub name: String,
+    pub data_type: DataType,
+    pub nullable: bool,
+    pub unit: String,
+    pub description: String,
+}
+
+/// A Parquet file's columns and key-value metadata, read from its footer only (no data).
+pub fn read_schema(path: &Path) -> anyhow::Result<(Vec<ColumnInfo>, BTreeMap<String, String>)> {
+    let file = std::fs::File::open(path).with_context(|| format!("cannot open `{}`", path.display()))?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(file)
+        .with_context(|| format!("`{}` is not a readable Parquet file", path.display()))?;
+    let mut metadata = BTreeMap::new();
+    if let Some(kv) = builder.metadata().file_metadata().key_value_metadata() {
+        for entry in kv.iter().filter(|e| e.key != ARROW_SCHEMA_KEY) {
+            metadata.insert(entry.key.clone(), entry.value.clone().unwrap_or_default());
+        }
+    }
+    let columns = builder
+        .schema()
+        .fields()
+        .iter()
+        .map(|f| ColumnInfo {
+            name: f.name().clone(),
+            data_type: f.data_type().clone(),
+            nullable: f.is_nullable(),
+            unit: f.metadata().get("unit").cloned().unwrap_or_default(),
+            description: f.metadata().get("description").cloned().unwrap_or_default(),
+        })
+        .collect();
+    Ok((columns, metadata))
+}
+
+/// Writes Arrow columns as one Parquet file (atomically; zstd, one row group per million rows),
+/// the schema's field and schema metadata embedded and the schema metadata also as the file's
+/// key-value metadata, as [`write_table`] stamps its tables.
+pub fn write_arrays(path: &Path, schema: Schema, columns: Vec<ArrayRef>) -> anyhow::Result<()> {
+    let sorted: BTreeMap<&String, &String> = schema.metadata().iter().collect();
+    let kv: Vec<KeyValue> = sorted.into_iter().map(|(k, v)| KeyValue::new(k.clone(), v.clone())).collect();
+    let props = WriterProperties::builder()
+        .set_compression(Compression::ZSTD(ZstdLevel::try_new(1)?))
+        .set_statistics_enabled(EnabledStatistics::Chunk)
+        .set_key_value_metadata(Some(kv))
+        .build();
+    let schema = Arc::new(schema);
+    let batch = RecordBatch::try_new(schema.clone(), columns)?;
+    atomic::write_file(path, |w| {
+        let mut writer = parquet::arrow::ArrowWriter::try_new(w, schema, Some(props))?;
+        writer.write(&batch)?;
+        writer.close()?;
+        Ok(())
+    })
+    .with_context(|| format!("writing Parquet `{}`", path.display()))
 }
 
 fn column_data(data_type: &DataType, nullable: bool, parts: &[&ArrayRef]) -> anyhow::Result<ColumnData> {

@@ -14,7 +14,7 @@ pub struct Baseline;
 
 static INFO: StageInfo = StageInfo {
     name: "baseline",
-    version: 3,
+    version: 4,
     summary: "Remove a least-squares polynomial trend (default cubic) from each channel; no filtering, peaks kept.",
     inputs: InputKind::Datasets,
     outputs: &[OutputInfo {

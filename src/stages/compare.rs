@@ -13,7 +13,7 @@ pub struct Compare;
 
 static INFO: StageInfo = StageInfo {
     name: "compare",
-    version: 1,
+    version: 2,
     summary: "Errors of measured time series against a reference (interpolated onto the measured times, units reconciled): RMS and largest error per column pair, and a PNG overlay.",
     inputs: InputKind::Datasets,
     outputs: &[

@@ -19,7 +19,7 @@ pub struct CptCalibrate;
 
 static INFO: StageInfo = StageInfo {
     name: "cpt_calibrate",
-    version: 1,
+    version: 2,
     summary: "Camera calibration from control points (X_mm, Y_mm, Z_mm, u_px, v_px; ≥ 8, not coplanar): normalised DLT, Levenberg–Marquardt on the reprojection error, optional radial distortion k1 (k2).",
     inputs: InputKind::Files(&[RecordFormat::ControlPoints]),
     outputs: &[

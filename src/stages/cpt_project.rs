@@ -21,7 +21,7 @@ pub struct CptProject;
 
 static INFO: StageInfo = StageInfo {
     name: "cpt_project",
-    version: 1,
+    version: 2,
     summary: "Back-project tracked pixels onto a plane aX + bY + cZ + d = 0 (Eq. 4) with a cpt_calibrate camera; for two points on one unit, its translation and in-plane rotation (rolling) or rocking angle θ (rocking).",
     inputs: InputKind::Datasets,
     outputs: &[

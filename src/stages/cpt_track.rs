@@ -19,7 +19,7 @@ pub struct CptTrack;
 
 static INFO: StageInfo = StageInfo {
     name: "cpt_track",
-    version: 2,
+    version: 3,
     summary: "Track points through an image sequence (PNG/JPEG folder, or a video through ffmpeg): ZNCC or SSD template matching against a reference template, sub-pixel, lost points flagged, optional camera-shake correction.",
     inputs: InputKind::Files(&[RecordFormat::Frames]),
     outputs: &[

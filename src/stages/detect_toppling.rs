@@ -13,7 +13,7 @@ pub struct DetectToppling;
 
 static INFO: StageInfo = StageInfo {
     name: "detect_toppling",
-    version: 1,
+    version: 2,
     summary: "Toppling impacts from top accelerometers: STA/LTA spike confirmed by a lasting amplitude drop; optional floor-vertical cross-check.",
     inputs: InputKind::Datasets,
     outputs: &[OutputInfo { name: "events", description: "per channel: toppled, impact_time_s, peak_mps2, confidence, and why", kind: OutputKind::Table }],

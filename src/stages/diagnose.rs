@@ -17,7 +17,7 @@ pub struct Diagnose;
 
 static INFO: StageInfo = StageInfo {
     name: "diagnose",
-    version: 2,
+    version: 3,
     summary: "Where the toppling model and a unit's records disagree, which physics it left out (sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt), fitted, ranked by BIC, or `unexplained`.",
     inputs: InputKind::Files(&[RecordFormat::Case]),
     outputs: &[
@@ -67,7 +67,7 @@ impl Stage for Diagnose {
                 let name = if name.is_empty() { d.case.clone() } else { name };
                 ctx.sink.write_file("reports", &format!("{name}.json"), json_bytes(&d).as_bytes())?;
                 ctx.sink.write_file("reports", &format!("{name}.png"), &figure(&d).map_err(anyhow::Error::msg)?)?;
-                Ok((super::partition_path(&part.partition), d))
+                Ok((super::partition_values(&part.partition), d))
             })
             .collect::<anyhow::Result<_>>()?;
         rows.sort_by(|a, b| a.0.cmp(&b.0));
@@ -174,7 +174,11 @@ fn summary_table(rows: &[(String, Diagnosis)]) -> Table {
         data: crate::table::ColumnData::OptF64(v),
     };
     let mut t = Table::new();
-    t.push(text("case", "the case (its partition)", rows.iter().map(|r| r.0.clone()).collect()));
+    t.push(text(
+        "case",
+        "the case: its partition values (`demo_01` for case=demo_01)",
+        rows.iter().map(|r| r.0.clone()).collect(),
+    ));
     t.push(Column {
         name: "mismatch".into(),
         unit: String::new(),

@@ -19,7 +19,7 @@ pub struct Load;
 
 static INFO: StageInfo = StageInfo {
     name: "load",
-    version: 1,
+    version: 2,
     summary: "Read record files into SI time-series tables: checks sampling, gaps and point counts, converts units.",
     inputs: InputKind::Sources,
     outputs: &[
@@ -351,8 +351,10 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
             return Err(err(format!("column `{}`: output sample {} is not finite: {cause}", channel.name, i + 1))
                 .hint("check the column in the file, or leave it out with `columns:`"));
         }
+        // True for every record of the dataset (readers of a partitioned dataset show one part's
+        // field metadata for all); which file and column it came from is this file's metadata.
         let description = detail.and_then(|d| d.description.clone()).unwrap_or_else(|| {
-            format!("`{}` of {}", channel.name, path.file_name().map(|f| f.to_string_lossy()).unwrap_or_default())
+            format!("the record's channel read as `{out_name}` (its file, column and unit: metadata shakeflow.input_file, shakeflow.load)")
         });
         conversions
             .insert(out_name.clone(), json!({"file_column": channel.name, "file_unit": unit_name, "factor": factor}));

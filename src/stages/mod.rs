@@ -94,6 +94,12 @@ pub fn partition_path(partition: &Partition) -> String {
         .join("/")
 }
 
+/// How a record's partition is named inside tables (a `record` or `case` column): its values
+/// joined by `/`, as other tables' key columns hold them (`CIGO360`, not `record=CIGO360`).
+pub fn partition_values(partition: &Partition) -> String {
+    partition.iter().map(|(_, v)| v.as_str()).collect::<Vec<_>>().join("/")
+}
+
 /// One file a stage reads: a raw record file or one part of an upstream dataset.
 #[derive(Debug, Clone)]
 pub struct InputPart {

@@ -9,7 +9,9 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
+use super::{
+    partition_values, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput,
+};
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::table::{Column, ColumnData, Table};
 
@@ -17,7 +19,7 @@ pub struct Report;
 
 static INFO: StageInfo = StageInfo {
     name: "report",
-    version: 2,
+    version: 3,
     summary: "Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time, confidence); rolling units' peak displacement, yaw and caster flips per motion.",
     inputs: InputKind::Datasets,
     outputs: &[
@@ -251,7 +253,7 @@ fn summarize_rolling(rolling: &[(String, String, Arc<Table>)]) -> anyhow::Result
     Ok(table)
 }
 
-/// Every part of a dataset with the partition path that names it (`motion=WN-1`).
+/// Every part of a dataset with the name of its record: its `motion` (`WN-1`), else its partition values.
 fn read_all(ctx: &StageContext<'_>, input: &StageInput) -> anyhow::Result<Vec<(String, Arc<Table>)>> {
     input.parts().iter().map(|p: &InputPart| Ok((motion_of(p), ctx.read_table(p)?))).collect()
 }
@@ -261,7 +263,7 @@ fn motion_of(part: &InputPart) -> String {
         .iter()
         .find(|(k, _)| k == "motion")
         .map(|(_, v)| v.clone())
-        .unwrap_or_else(|| partition_path(&part.partition))
+        .unwrap_or_else(|| partition_values(&part.partition))
 }
 
 fn strings<'a>(table: &'a Table, name: &str) -> anyhow::Result<&'a [String]> {

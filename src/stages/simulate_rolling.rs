@@ -183,7 +183,7 @@ static PARAMS: [ParamSpec; MODEL_KEYS + 15] = [
 
 static INFO: StageInfo = StageInfo {
     name: "simulate_rolling",
-    version: 2,
+    version: 3,
     summary: "Rolling, turning and pivot steering of equipment on four swivel casters under the two horizontal floor components (the study's 4WMC, made well posed).",
     inputs: InputKind::Datasets,
     outputs: &[

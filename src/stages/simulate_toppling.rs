@@ -51,7 +51,7 @@ pub(crate) use rocking_params;
 
 static INFO: StageInfo = StageInfo {
     name: "simulate_toppling",
-    version: 2,
+    version: 3,
     summary: "The study's 2D rigid-block toppling model on floor records: rest, uplift (Eq. 20/21), rocking (Eq. 22), impacts (Eq. 24), overturning; adaptive integration with located events.",
     inputs: InputKind::Datasets,
     outputs: &[

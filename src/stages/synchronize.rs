@@ -24,7 +24,7 @@ pub struct Synchronize;
 
 static INFO: StageInfo = StageInfo {
     name: "synchronize",
-    version: 3,
+    version: 4,
     summary: "Align a second DAQ with the reference DAQ: band-limited resampling, FFT cross-correlation lag (sub-sample), shift onto the reference clock.",
     inputs: InputKind::Datasets,
     outputs: &[

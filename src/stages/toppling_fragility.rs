@@ -7,7 +7,7 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::simulate_toppling::{model_from_params, rocking_params, simulate_record};
-use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{partition_values, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::stats::fragility::{fit_lognormal, FitOutcome, LognormalFit};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -16,11 +16,11 @@ pub struct TopplingFragility;
 
 static INFO: StageInfo = StageInfo {
     name: "toppling_fragility",
-    version: 2,
+    version: 3,
     summary: "Overturning fragility of one unit: floor records scaled over intensities, all runs simulated in parallel, lognormal curve (median, beta) by maximum likelihood.",
     inputs: InputKind::Datasets,
     outputs: &[
-        OutputInfo { name: "runs", description: "every run: record, scale, im, overturned, overturn_time_s, overturn_side, max_abs_theta_rad", kind: OutputKind::Table },
+        OutputInfo { name: "runs", description: "every run: record, level, scale, im, overturned, overturn_time_s, overturn_side, max_abs_theta_rad, n_impacts", kind: OutputKind::Table },
         OutputInfo { name: "fragility", description: "one row: im_measure, median, beta, log_likelihood, n_runs, n_overturned, note", kind: OutputKind::Table },
         OutputInfo { name: "figures", description: "fragility.png: the fitted curve with the runs and the overturned fraction per level", kind: OutputKind::Files },
     ],
@@ -58,23 +58,24 @@ impl Stage for TopplingFragility {
                 let table = ctx.read_table(part)?;
                 let im =
                     intensity(&table, &horizontal, by_velocity).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
-                Ok((partition_path(&part.partition), table, im))
+                Ok((partition_values(&part.partition), table, im))
             })
             .collect::<anyhow::Result<_>>()?;
-        // Every (record, level) pair, in a fixed order so the runs table is deterministic.
-        let runs: Vec<(usize, f64)> = records
+        // Every (record, level) pair, in a fixed order so the runs table is deterministic: the
+        // record, the index of its level and the factor that scales the record to it.
+        let runs: Vec<(usize, usize, f64)> = records
             .iter()
             .enumerate()
             .flat_map(|(r, (_, _, im))| {
                 let factors: Vec<f64> =
                     if scales.is_empty() { levels.iter().map(|l| l / im).collect() } else { scales.clone() };
-                factors.into_iter().map(move |s| (r, s))
+                factors.into_iter().enumerate().map(move |(level, s)| (r, level, s))
             })
             .collect();
         ctx.sink.set_total(runs.len());
         let results: Vec<(bool, Option<f64>, i64, f64, i64)> = runs
             .par_iter()
-            .map(|&(r, scale)| {
+            .map(|&(r, _, scale)| {
                 let table = scaled(&records[r].1, scale, &horizontal, vertical.as_deref());
                 let (_, response) = simulate_record(&table, &block, &options, &horizontal, vertical.as_deref())
                     .map_err(|e| anyhow::anyhow!("{} × {scale}: {e}", records[r].0))?;
@@ -84,7 +85,12 @@ impl Stage for TopplingFragility {
                 Ok((response.overturn.is_some(), time, side, response.max_abs_theta(), impacts))
             })
             .collect::<anyhow::Result<_>>()?;
-        let ims: Vec<f64> = runs.iter().map(|&(r, s)| records[r].2 * s).collect();
+        // A target level is the run's intensity exactly (record × (level / record) may differ
+        // from it in the last bit), so equal levels are equal numbers and group as one.
+        let ims: Vec<f64> = runs
+            .iter()
+            .map(|&(r, level, s)| if scales.is_empty() { levels[level] } else { records[r].2 * s })
+            .collect();
         let overturned: Vec<bool> = results.iter().map(|r| r.0).collect();
         let outcome = fit_lognormal(&ims, &overturned);
         let unit = if by_velocity { "m/s" } else { "m/s^2" };
@@ -94,11 +100,28 @@ impl Stage for TopplingFragility {
         table.push(Column {
             name: "record".into(),
             unit: String::new(),
-            description: "the floor record (its partition)".into(),
-            data: ColumnData::Str(runs.iter().map(|&(r, _)| records[r].0.clone()).collect()),
+            description: "the floor record: its partition values (`CIGO360` for record=CIGO360; several joined by /)"
+                .into(),
+            data: ColumnData::Str(runs.iter().map(|&(r, _, _)| records[r].0.clone()).collect()),
         });
-        table.push(Column::f64("scale", "", "factor applied to the record", runs.iter().map(|r| r.1).collect()));
-        table.push(Column::f64("im", unit, &format!("intensity of the scaled record ({im_name})"), ims.clone()));
+        let level_description = if scales.is_empty() {
+            "index of the target intensity in `im_levels`, from 0"
+        } else {
+            "index of the scale factor in `scales`, from 0"
+        };
+        table.push(Column {
+            name: "level".into(),
+            unit: String::new(),
+            description: level_description.into(),
+            data: ColumnData::I64(runs.iter().map(|r| r.1 as i64).collect()),
+        });
+        table.push(Column::f64("scale", "", "factor applied to the record", runs.iter().map(|r| r.2).collect()));
+        let im_description = if scales.is_empty() {
+            format!("the target intensity ({im_name}) the record was scaled to: equal levels are equal numbers")
+        } else {
+            format!("intensity of the scaled record ({im_name})")
+        };
+        table.push(Column::f64("im", unit, &im_description, ims.clone()));
         table.push(Column {
             name: "overturned".into(),
             unit: String::new(),

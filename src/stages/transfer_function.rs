@@ -13,7 +13,7 @@ pub struct TransferFunction;
 
 static INFO: StageInfo = StageInfo {
     name: "transfer_function",
-    version: 1,
+    version: 2,
     summary: "Welch transfer functions H1, H2 and coherence (MATLAB tfestimate defaults) and the identified fundamental frequency with half-power damping.",
     inputs: InputKind::Datasets,
     outputs: &[

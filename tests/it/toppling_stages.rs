@@ -177,3 +177,35 @@ fn an_unknown_preset_is_caught_by_validate_with_its_line() {
     assert!(!out.status.success());
     assert!(message.contains("pipeline.yaml:20:7") && message.contains("PS3") && message.contains("PS2"), "{message}");
 }
+
+/// What issue 22 found in fragility tables, checked with pyarrow, DuckDB and polars
+/// (tests/reference/fragility_tables_check.py): records named as other tables name them,
+/// an integer `level`, `im` exactly the level, provenance in the Arrow schema metadata; and
+/// `run` ends with the fragility in one line.
+#[test]
+fn fragility_runs_group_by_level_and_name_records_as_other_tables_do() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    std::fs::create_dir(root.join("gm")).unwrap();
+    let records = ["NIS090", "Rinaldi228", "Rinaldi318"];
+    for record in records {
+        std::fs::copy(ground_motion(&format!("{record}.AT2")), root.join(format!("gm/{record}.AT2"))).unwrap();
+    }
+    let levels = "[1.0, 2.5, 4.0, 7.5]";
+    let pipeline = format!(
+        "version: 1\noutput_dir: out\ninputs:\n  gm:\n    format: at2\n    path: gm/{{record}}.AT2\n\
+         stages:\n  load:\n    type: load\n    inputs: [gm]\n  fragility:\n    type: toppling_fragility\n    \
+         inputs: [load]\n    params:\n      preset: PS2\n      horizontal: ax_mps2\n      im_levels: {levels}\n"
+    );
+    std::fs::write(root.join("pipeline.yaml"), pipeline).unwrap();
+    let run = shakeflow(&["run", "pipeline.yaml"], root);
+    assert!(run.status.success(), "{}", stderr(&run));
+    let said = stderr(&run);
+    assert!(said.contains("  fragility: ") && said.contains("/3 records overturned at some level"), "{said}");
+    let runs = root.join("out/fragility/runs/data.parquet");
+    let report = run_python(
+        &reference_script("fragility_tables_check.py"),
+        &["--runs", runs.to_str().unwrap(), "--levels", levels, "--records", &serde_json::to_string(&records).unwrap()],
+    );
+    assert!(report.starts_with("ok:"), "{report}");
+}
