@@ -26,7 +26,7 @@ use super::spec::RecordFormat;
 use super::txn::{self, Recovery, Transaction};
 use crate::error::UserError;
 use crate::io::hash::{self, KnownHashes};
-use crate::stages::{InputPart, StageContext, StageInput};
+use crate::stages::{InputPart, OutputKind, StageContext, StageInput};
 
 #[derive(Debug, Clone, Default)]
 pub struct RunOptions {
@@ -181,7 +181,7 @@ fn assess(
     }
     for (name, out) in &entry.outputs {
         let dir = output_dir.join(&out.path);
-        if !dir.is_dir() {
+        if !dir.exists() {
             reasons.push(format!("output `{name}` missing ({})", dir.display()));
         } else {
             let (hash, files) = super::sink::output_hash(&output_dir.join(&stage.name), name, &KnownHashes::new())?;
@@ -653,7 +653,9 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
         let written = sink.into_hashes();
         let mut outputs = BTreeMap::new();
         for output in info.outputs {
-            std::fs::create_dir_all(dir.join(output.name))?;
+            if output.kind != OutputKind::Page {
+                std::fs::create_dir_all(dir.join(output.name))?;
+            }
             let (hash, files) = super::sink::output_hash(&dir, output.name, &written)?;
             outputs.insert(
                 output.name.to_string(),

@@ -63,8 +63,7 @@ impl Stage for Diagnose {
                 }
                 ctx.sink.write("accel", &part.partition, accel)?;
                 ctx.sink.write("camera", &part.partition, camera)?;
-                let name = super::partition_path(&part.partition).replace('/', "_");
-                let name = if name.is_empty() { d.case.clone() } else { name };
+                let name = super::figure_stem(&part.partition, &d.case);
                 ctx.sink.write_file("reports", &format!("{name}.json"), json_bytes(&d).as_bytes())?;
                 ctx.sink.write_file("reports", &format!("{name}.png"), &figure(&d).map_err(anyhow::Error::msg)?)?;
                 Ok((super::partition_path(&part.partition), d))

@@ -7,7 +7,7 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
 
-use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::physics::rolling::{
     self, simulate, Cart, EventKind, Excitation, Friction, FrictionLaw, LateralSlip, Method, Options, Response,
     Stribeck,
@@ -218,10 +218,7 @@ impl Stage for SimulateRolling {
             ctx.sink.write("trajectory", &part.partition, trajectory)?;
             ctx.sink.write("events", &part.partition, events)?;
             if let Some(png) = png {
-                let name = match partition_path(&part.partition) {
-                    p if p.is_empty() => setup.unit.clone(),
-                    p => p.replace('/', "_"),
-                };
+                let name = super::figure_stem(&part.partition, &setup.unit);
                 ctx.sink.write_file("figures", &format!("{name}.png"), &png)?;
             }
             Ok(())

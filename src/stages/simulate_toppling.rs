@@ -6,7 +6,7 @@ use std::path::Path;
 
 use rayon::prelude::*;
 
-use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::equipment;
 use crate::physics::rocking::{self, Anchorage, Block, Excitation, IsolatedBase, Method, Options, Response, Shape};
@@ -88,10 +88,7 @@ impl Stage for SimulateToppling {
                 t.metadata.extend(super::record_provenance(part));
                 t.metadata.insert("shakeflow.rocking".into(), facts.clone());
             }
-            let name = match partition_path(&part.partition) {
-                p if p.is_empty() => "response".to_string(),
-                p => p.replace('/', "_"),
-            };
+            let name = super::figure_stem(&part.partition, "response");
             let png = figure(&name, &floor, &response).map_err(anyhow::Error::msg)?;
             ctx.sink.write_file("figures", &format!("{name}.png"), &png)?;
             ctx.sink.write("events", &part.partition, events)?;
