@@ -44,6 +44,7 @@ demo: release
 	@$(BIN) show runs/demo/report/rolling/data.parquet
 	@echo "Mismatch diagnosis of the archive's cases (runs/demo/diagnosis/: diagnosis.json and a figure per case in reports/):"
 	@$(BIN) show runs/demo/diagnosis/diagnosis/data.parquet --columns case,verdict,window_start_s,window_end_s,rmse_before,rmse_after
+	@echo "The study report: open runs/demo/report/index.html in a browser"
 
 $(PY_STAMP): tests/reference/requirements.txt
 	$(PYTHON) -m venv $(VENV)
@@ -51,6 +52,7 @@ $(PY_STAMP): tests/reference/requirements.txt
 	touch $@
 
 test: $(PY_STAMP)
+	sh tests/system/chromium.sh
 	SHAKEFLOW_PYTHON=$(VENV_PY) $(CARGO) test --locked --no-fail-fast
 
 bench: release $(PY_STAMP)

@@ -13,7 +13,7 @@ pub struct Compare;
 
 static INFO: StageInfo = StageInfo {
     name: "compare",
-    version: 1,
+    version: 2,
     summary: "Errors of measured time series against a reference (interpolated onto the measured times, units reconciled): RMS and largest error per column pair, and a PNG overlay.",
     inputs: InputKind::Datasets,
     outputs: &[
@@ -63,7 +63,17 @@ impl Stage for Compare {
                 }
             };
             let (m, r) = (ctx.read_table(part)?, ctx.read_table(reference_part)?);
-            let (mut errors, png) = compare(&m, &r, &pairs, relative, &part.label, &reference_part.label)?;
+            let title = format!(
+                "{} against {}{}",
+                stage_of(&part.label),
+                stage_of(&reference_part.label),
+                if part.partition.is_empty() {
+                    String::new()
+                } else {
+                    format!(", {}", super::record_title(&part.partition, ""))
+                }
+            );
+            let (mut errors, png) = compare(&m, &r, &pairs, relative, &part.label, &reference_part.label, &title)?;
             errors.metadata.extend(super::record_provenance(part));
             errors.metadata.insert("shakeflow.reference_file".into(), reference_part.label.clone());
             errors.metadata.insert("shakeflow.reference_hash".into(), reference_part.hash.clone());
@@ -106,6 +116,7 @@ fn compare(
     relative: bool,
     m_label: &str,
     r_label: &str,
+    title: &str,
 ) -> anyhow::Result<(Table, Vec<u8>)> {
     let time = measured.f64_column(TIME_COLUMN).ok_or_else(|| anyhow::anyhow!("{m_label}: no time_s column"))?;
     let r_time = reference.f64_column(TIME_COLUMN).ok_or_else(|| anyhow::anyhow!("{r_label}: no time_s column"))?;
@@ -204,8 +215,8 @@ fn compare(
                     x_label: "time [s]".into(),
                     y_label: label.clone(),
                     series: vec![
-                        Series { label: "measured".into(), x: time, y: m },
-                        Series { label: "reference".into(), x: time, y: r },
+                        Series::new("reference", time, r).model(),
+                        Series::new("measured", time, m).observed(),
                     ],
                     markers: vec![],
                     log_y: false,
@@ -215,7 +226,7 @@ fn compare(
                     title: format!("{label}: measured − reference"),
                     x_label: "time [s]".into(),
                     y_label: label.clone(),
-                    series: vec![Series { label: "error".into(), x: time, y: d }],
+                    series: vec![Series::new("error", time, d)],
                     markers: vec![],
                     log_y: false,
                     spans: Vec::new(),
@@ -224,7 +235,7 @@ fn compare(
         })
         .collect();
     let height = (380 * panels.len()).clamp(400, 2400) as u32;
-    let png = render_png(&format!("{m_label} vs {r_label}"), &panels, 1100, height).map_err(anyhow::Error::msg)?;
+    let png = render_png(title, &panels, 1100, height).map_err(anyhow::Error::msg)?;
     Ok((table, png))
 }
 
@@ -246,5 +257,14 @@ mod tests {
         let max = errors.f64_column("max_abs_error").unwrap()[0];
         assert!((max - 0.1).abs() < 1e-9, "{max}");
         assert!(png.starts_with(b"\x89PNG"));
+    }
+}
+
+/// The stage an input file comes from (`cpt_rolling.motion/…` → `cpt_rolling`), as titles name
+/// it; a source file's label as it is.
+fn stage_of(label: &str) -> &str {
+    match label.split_once('.') {
+        Some((stage, _)) if !stage.is_empty() && !stage.contains('/') => stage,
+        _ => label,
     }
 }

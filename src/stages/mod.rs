@@ -108,6 +108,17 @@ pub fn figure_stem(partition: &Partition, fallback: &str) -> String {
     }
 }
 
+/// A record as a figure's title names it: its partition values, `motion` bare and other keys
+/// with their name (`FB-4`, `FB-4, floor 5`), or `fallback` without partition keys.
+pub fn record_title(partition: &Partition, fallback: &str) -> String {
+    if partition.is_empty() {
+        return fallback.to_string();
+    }
+    let named: Vec<String> =
+        partition.iter().map(|(k, v)| if k == "motion" { v.clone() } else { format!("{k} {v}") }).collect();
+    named.join(", ")
+}
+
 /// One file a stage reads: a raw record file or one part of an upstream dataset.
 #[derive(Debug, Clone)]
 pub struct InputPart {

@@ -31,7 +31,7 @@ static INFO: StageInfo = StageInfo {
     outputs: &[
         OutputInfo { name: "summary", description: "one row per unit and toppling event (or one row when none)", kind: OutputKind::Table },
         OutputInfo { name: "rolling", description: "one row per rolling unit and motion: peak_displacement_m, peak_yaw_rad, caster_flips, breakaway_time_s (from simulate_rolling.events inputs)", kind: OutputKind::Table },
-        OutputInfo { name: "figures", description: "<unit>.png: floor vs top acceleration, transfer functions with picked peaks", kind: OutputKind::Files },
+        OutputInfo { name: "figures", description: "<unit>.png: floor vs top acceleration in `figure_motion`, transfer functions in their band with the picked peaks, coherence", kind: OutputKind::Files },
         OutputInfo { name: "index.html", description: "the study report for a browser: summary, per unit its frequencies, toppling events, simulations, fragility, rolling results and figures, the diagnosis, provenance (figures linked relatively: open it where `run` wrote it)", kind: OutputKind::Page },
     ],
     params: &[
@@ -380,8 +380,24 @@ fn cases(table: &Table) -> anyhow::Result<Vec<html::Case>> {
         .collect())
 }
 
-/// Equipment modes sit at 2-5 Hz: spectra are drawn up to here, not to Nyquist.
-const FIGURE_MAX_HZ: f64 = 20.0;
+/// Where the transfer functions are drawn: the band the `transfer_function` stage searched for
+/// peaks (its `band_min_hz`/`band_max_hz`, recorded in the spectra's provenance), else 0-20 Hz
+/// (equipment modes sit at 2-5 Hz; above, the spectra are noise).
+fn figure_band(spectra: &Table) -> (f64, f64) {
+    let params: serde_json::Value = serde_json::from_str(meta(spectra, "shakeflow.params")).unwrap_or_default();
+    match (params["band_min_hz"].as_f64(), params["band_max_hz"].as_f64()) {
+        (Some(lo), Some(hi)) if lo < hi => (lo, hi),
+        _ => (0.0, 20.0),
+    }
+}
+
+/// A floor channel as titles name it (`floor4_ax_mps2` → `floor 4`), else as it is.
+fn floor_name(channel: &str) -> String {
+    match channel.strip_prefix("floor").and_then(|rest| rest.split_once('_')) {
+        Some((level, _)) if !level.is_empty() => format!("floor {level}"),
+        _ => channel.to_string(),
+    }
+}
 
 /// One PNG per unit of the identified tables.
 fn figures(
@@ -419,22 +435,28 @@ fn figures(
                     }
                 }
             }
-            let mut spectrum_series = Vec::new();
-            let mut peaks = Vec::new();
-            let selected: Vec<(String, Vec<f64>, Vec<f64>)> = spectra
+            // Per white-noise test, |H1| and the coherence of this unit inside the band.
+            let selected: Vec<(String, Vec<f64>, Vec<f64>, Vec<f64>)> = spectra
                 .iter()
                 .map(|(m, t)| {
+                    let (lo, hi) = figure_band(t);
                     let outputs = strings(t, "output")?;
-                    let f = t.f64_column("frequency_hz").unwrap_or_default();
-                    let g = t.f64_column("h1_gain").unwrap_or_default();
+                    let column = |name: &str| {
+                        t.f64_column(name).ok_or_else(|| anyhow::anyhow!("the spectra have no `{name}` column"))
+                    };
+                    let (f, g, c) = (column("frequency_hz")?, column("h1_gain")?, column("coherence")?);
                     let rows: Vec<usize> =
-                        (0..outputs.len()).filter(|&i| outputs[i] == *channel && f[i] <= FIGURE_MAX_HZ).collect();
-                    Ok((m.clone(), rows.iter().map(|&i| f[i]).collect(), rows.iter().map(|&i| g[i]).collect()))
+                        (0..outputs.len()).filter(|&i| outputs[i] == *channel && f[i] >= lo && f[i] <= hi).collect();
+                    let pick = |v: &[f64]| rows.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+                    Ok((m.clone(), pick(f), pick(g), pick(c)))
                 })
                 .collect::<anyhow::Result<_>>()?;
-            for (m, f, g) in &selected {
-                spectrum_series.push(Series { label: format!("|H1| {m}"), x: f, y: g });
-            }
+            let band = spectra.first().map_or((0.0, 20.0), |(_, t)| figure_band(t));
+            let gains: Vec<Series> =
+                selected.iter().map(|(m, f, g, _)| Series::new(format!("|H1| {m}"), f, g)).collect();
+            let coherences: Vec<Series> =
+                selected.iter().map(|(m, f, _, c)| Series::new(format!("coherence {m}"), f, c)).collect();
+            let mut peaks = Vec::new();
             for (m, t) in identified {
                 let outputs = strings(t, "output")?;
                 let frequencies = optionals(t, "frequency_hz")?;
@@ -444,30 +466,41 @@ fn figures(
                     }
                 }
             }
+            let floor_label = floor_name(input);
             let panels = [
                 Panel {
-                    title: format!("{motion}: floor and top acceleration"),
+                    title: format!("{motion}: recorded acceleration, {floor_label} and {unit} top"),
                     x_label: "time [s]".into(),
                     y_label: "acceleration [m/s^2]".into(),
                     series: vec![
-                        Series { label: input.clone(), x: time, y: floor },
-                        Series { label: channel.clone(), x: time, y: top },
+                        Series::new(floor_label.clone(), time, floor),
+                        Series::new(format!("{unit} top"), time, top).observed(),
                     ],
                     markers: impacts,
-                    log_y: false,
-                    spans: Vec::new(),
+                    ..Panel::default()
                 },
                 Panel {
-                    title: format!("transfer function {input} -> {channel}"),
+                    title: format!(
+                        "transfer function {floor_label} → {unit} top, in the searched band {:.1}-{:.1} Hz",
+                        band.0, band.1
+                    ),
                     x_label: "frequency [Hz]".into(),
                     y_label: "|H1|".into(),
-                    series: spectrum_series,
+                    series: gains,
                     markers: peaks,
                     log_y: true,
-                    spans: Vec::new(),
+                    ..Panel::default()
+                },
+                Panel {
+                    title: "coherence (near 1: the top moves with the floor; low: noise)".into(),
+                    x_label: "frequency [Hz]".into(),
+                    y_label: "coherence".into(),
+                    series: coherences,
+                    ..Panel::default()
                 },
             ];
-            let png = render_png(&unit, &panels, 1200, 900).map_err(anyhow::Error::msg)?;
+            let title = format!("{unit}: recorded response in {motion} and frequencies from the white-noise tests");
+            let png = render_png(&title, &panels, 1200, 1100).map_err(anyhow::Error::msg)?;
             Ok(Some((unit, png)))
         })
         .collect::<anyhow::Result<_>>()?;
@@ -666,4 +699,27 @@ fn summarize(
         data: ColumnData::OptF64(rows.iter().map(|(_, e)| e.as_ref().map(|e| e.2)).collect()),
     });
     Ok(table)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn transfer_functions_are_drawn_in_the_band_their_stage_searched() {
+        let mut spectra = Table::new();
+        spectra.metadata.insert("shakeflow.params".into(), r#"{"band_max_hz":8.0,"band_min_hz":1.5}"#.into());
+        assert_eq!(figure_band(&spectra), (1.5, 8.0));
+        spectra.metadata.insert("shakeflow.params".into(), r#"{"band_max_hz":null}"#.into());
+        assert_eq!(figure_band(&spectra), (0.0, 20.0));
+    }
+
+    #[test]
+    fn titles_name_floors_units_and_motions_as_people_do() {
+        assert_eq!(floor_name("floor4_ax_mps2"), "floor 4");
+        assert_eq!(floor_name("ax_mps2"), "ax_mps2");
+        let partition = vec![("motion".to_string(), "FB-4".to_string()), ("floor".to_string(), "5".to_string())];
+        assert_eq!(super::super::record_title(&partition, "x"), "FB-4, floor 5");
+        assert_eq!(super::super::record_title(&Vec::new(), "record.csv"), "record.csv");
+    }
 }

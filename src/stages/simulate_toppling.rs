@@ -51,7 +51,7 @@ pub(crate) use rocking_params;
 
 static INFO: StageInfo = StageInfo {
     name: "simulate_toppling",
-    version: 2,
+    version: 3,
     summary: "The study's 2D rigid-block toppling model on floor records: rest, uplift (Eq. 20/21), rocking (Eq. 22), impacts (Eq. 24), overturning; adaptive integration with located events.",
     inputs: InputKind::Datasets,
     outputs: &[
@@ -89,7 +89,12 @@ impl Stage for SimulateToppling {
                 t.metadata.insert("shakeflow.rocking".into(), facts.clone());
             }
             let name = super::figure_stem(&part.partition, "response");
-            let png = figure(&name, &floor, &response).map_err(anyhow::Error::msg)?;
+            let title = format!(
+                "{}: rocking model under {}",
+                unit_name(ctx.params, ctx.stage_name),
+                super::record_title(&part.partition, &part.label)
+            );
+            let png = figure(&title, &floor, &response).map_err(anyhow::Error::msg)?;
             ctx.sink.write_file("figures", &format!("{name}.png"), &png)?;
             ctx.sink.write("events", &part.partition, events)?;
             ctx.sink.write("response", &part.partition, series)
@@ -218,6 +223,11 @@ pub fn model_from_params(params: &Params, equipment_file: Option<&Path>) -> Resu
     Ok((block, options))
 }
 
+/// The unit a rocking stage models, as titles name it: its preset, else the stage's name.
+pub fn unit_name<'a>(params: &'a Params, stage: &'a str) -> &'a str {
+    params.get("preset").and_then(|v| v.as_str()).unwrap_or(stage)
+}
+
 /// The derived quantities a reader needs to interpret the results (artifact metadata).
 pub fn model_facts(block: &Block, options: &Options) -> serde_json::Value {
     serde_json::json!({
@@ -336,7 +346,7 @@ fn events_table(r: &Response) -> Table {
     t
 }
 
-fn figure(name: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
+fn figure(title: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
     use crate::plot::{render_png, Marker, Panel, Series};
     let mut markers: Vec<Marker> = r
         .events
@@ -354,8 +364,8 @@ fn figure(name: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
             x_label: "time [s]".into(),
             y_label: "acceleration [m/s^2]".into(),
             series: vec![
-                Series { label: "floor horizontal".into(), x: &floor.time, y: &floor.horizontal },
-                Series { label: "top (model)".into(), x: &floor.time, y: &r.top_ax_mps2 },
+                Series::new("floor horizontal", &floor.time, &floor.horizontal),
+                Series::new("top (model)", &floor.time, &r.top_ax_mps2).model(),
             ],
             markers: Vec::new(),
             log_y: false,
@@ -368,11 +378,11 @@ fn figure(name: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
             },
             x_label: "time [s]".into(),
             y_label: "theta [rad]".into(),
-            series: vec![Series { label: "theta".into(), x: &floor.time, y: &r.theta_rad }],
+            series: vec![Series::new("theta", &floor.time, &r.theta_rad)],
             markers,
             log_y: false,
             spans: Vec::new(),
         },
     ];
-    render_png(&format!("simulate_toppling: {name}"), &panels, 1200, 800)
+    render_png(title, &panels, 1200, 800)
 }
