@@ -251,7 +251,9 @@ mod tests {
         let mut reference = Table::new();
         reference.push(Column::f64("time_s", "s", "", vec![0.0, 1.0, 2.0]));
         reference.push(Column::f64("x_m", "m", "", vec![0.0, 0.0101, 0.02]));
-        let (errors, png) = compare(&measured, &reference, &[("dx_mm".into(), "x_m".into())], false, "m", "r").unwrap();
+        let (errors, png) =
+            compare(&measured, &reference, &[("dx_mm".into(), "x_m".into())], false, "m", "r", "cart against truth")
+                .unwrap();
         assert_eq!(errors.column("samples").unwrap().data, ColumnData::I64(vec![3]));
         assert_eq!(errors.column("missing").unwrap().data, ColumnData::I64(vec![1]));
         let max = errors.f64_column("max_abs_error").unwrap()[0];

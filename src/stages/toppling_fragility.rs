@@ -289,9 +289,10 @@ fn figure(
         x_label: x_label.into(),
         y_label: "P(overturn)".into(),
         series: vec![
+            // The runs first, so the curve and each level's fraction stay in view over them.
+            Series::new("runs (1: overturned, 0: stood)", &ims, &runs).points(),
             Series::new("lognormal fit", &curve_x, &curve_y),
             Series::new("overturned fraction per level", &points_x, &points_y).points(),
-            Series::new("runs (1: overturned, 0: stood)", &ims, &runs).points(),
         ],
         markers: Vec::new(),
         log_y: false,

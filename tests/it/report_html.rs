@@ -17,7 +17,7 @@ pub struct Rendered {
     pub images: Vec<(String, u64)>,
     /// The `data-unit` of every unit section, in page order.
     pub units: Vec<String>,
-    /// Every `src` and `href` of the page.
+    /// Every `src` and `href` in the page's body (not the `<base>` the probe adds).
     pub links: Vec<String>,
 }
 
@@ -44,7 +44,7 @@ fn chromium() -> PathBuf {
 const PROBE: &str = "<script>window.addEventListener('load',()=>{const r={\
 images:[...document.images].map(i=>[i.getAttribute('src'),i.naturalWidth]),\
 units:[...document.querySelectorAll('section.unit')].map(s=>s.dataset.unit),\
-links:[...document.querySelectorAll('[src],[href]')].map(e=>e.getAttribute('src')||e.getAttribute('href'))};\
+links:[...document.querySelectorAll('body [src],body [href]')].map(e=>e.getAttribute('src')||e.getAttribute('href'))};\
 const p=document.createElement('pre');p.id='shakeflow-probe';p.textContent=JSON.stringify(r);\
 document.body.appendChild(p);});</script>";
 
@@ -105,8 +105,7 @@ pub fn assert_page_shows(index: &Path, units: &[&str], min_images: usize) -> Ren
     page
 }
 
-const REPORT_STAGES: &str = "\
-  rocking:
+const REPORT_STAGES: &str = r#"  rocking:
     type: simulate_toppling
     inputs: [baseline]
     params:
@@ -116,8 +115,8 @@ const REPORT_STAGES: &str = "\
     type: report
     inputs: [rocking.events]
     params:
-      title: a small study <with> \"quotes\"
-";
+      title: a small study <with> "quotes"
+"#;
 
 fn project_with_report() -> tempfile::TempDir {
     let project = common::small_project();
