@@ -239,6 +239,15 @@ fn compare(
     Ok((table, png))
 }
 
+/// The stage an input file comes from (`cpt_rolling.motion/…` → `cpt_rolling`), as titles name
+/// it; a source file's label as it is.
+fn stage_of(label: &str) -> &str {
+    match label.split_once('.') {
+        Some((stage, _)) if !stage.is_empty() && !stage.contains('/') => stage,
+        _ => label,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -260,13 +269,11 @@ mod tests {
         assert!((max - 0.1).abs() < 1e-9, "{max}");
         assert!(png.starts_with(b"\x89PNG"));
     }
-}
 
-/// The stage an input file comes from (`cpt_rolling.motion/…` → `cpt_rolling`), as titles name
-/// it; a source file's label as it is.
-fn stage_of(label: &str) -> &str {
-    match label.split_once('.') {
-        Some((stage, _)) if !stage.is_empty() && !stage.contains('/') => stage,
-        _ => label,
+    #[test]
+    fn titles_name_stages_not_files() {
+        assert_eq!(stage_of("cpt_rolling.motion/data.parquet"), "cpt_rolling");
+        assert_eq!(stage_of("load_cpt_truth.records/data.parquet"), "load_cpt_truth");
+        assert_eq!(stage_of("../archive/truth.csv"), "../archive/truth.csv");
     }
 }
