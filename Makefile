@@ -44,6 +44,7 @@ demo: release
 	@$(BIN) show runs/demo/report/rolling/data.parquet
 	@echo "Mismatch diagnosis of the archive's cases (runs/demo/diagnosis/: diagnosis.json and a figure per case in reports/):"
 	@$(BIN) show runs/demo/diagnosis/diagnosis/data.parquet --columns case,verdict,window_start_s,window_end_s,rmse_before,rmse_after
+	@echo "The study report: open runs/demo/report/index.html in a browser"
 
 $(PY_STAMP): tests/reference/requirements.txt
 	$(PYTHON) -m venv $(VENV)
@@ -54,6 +55,7 @@ $(PY_STAMP): tests/reference/requirements.txt
 # tests fail; left running if it already ran). Without root it cannot start: those tests then fail, saying so.
 test: $(PY_STAMP)
 	sh tests/system/install-r.sh
+	sh tests/system/chromium.sh
 	@was_running=$$(tests/system/slurm.sh status >/dev/null 2>&1 && echo yes); \
 	tests/system/slurm.sh start || echo "make test: the test Slurm did not start; the Slurm tests will fail"; \
 	SHAKEFLOW_PYTHON=$(VENV_PY) $(CARGO) test --locked --no-fail-fast; status=$$?; \

@@ -615,7 +615,7 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
             memo: None,
         };
         let staged = stage.run(&ctx).and_then(|()| {
-            for o in info.outputs {
+            for o in info.outputs.iter().filter(|o| o.kind != crate::stages::OutputKind::Page) {
                 std::fs::create_dir_all(root.join(o.name))?;
             }
             crate::pipeline::ownership::write_marker(&root, name, info.name)

@@ -27,6 +27,38 @@ pub struct Series<'a> {
     pub label: String,
     pub x: &'a [f64],
     pub y: &'a [f64],
+    pub look: Look,
+}
+
+/// How a series is drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Look {
+    /// A line in the panel's next palette colour.
+    Line,
+    /// What was measured: near-black, drawn after (over) every other series of its panel.
+    Observed,
+    /// A prediction to compare with what was measured: its palette colour, lighter and thinner.
+    Model,
+    /// Points without a line (one per run, say), in the palette colour.
+    Points,
+}
+
+impl<'a> Series<'a> {
+    pub fn new(label: impl Into<String>, x: &'a [f64], y: &'a [f64]) -> Self {
+        Series { label: label.into(), x, y, look: Look::Line }
+    }
+
+    pub fn observed(self) -> Self {
+        Series { look: Look::Observed, ..self }
+    }
+
+    pub fn model(self) -> Self {
+        Series { look: Look::Model, ..self }
+    }
+
+    pub fn points(self) -> Self {
+        Series { look: Look::Points, ..self }
+    }
 }
 
 /// A vertical dashed line at `x` with a text label.
@@ -60,6 +92,7 @@ const PALETTE: [RGBColor; 8] = [
     RGBColor(23, 190, 207),  // cyan
 ];
 const MARKER_COLOR: RGBColor = RGBColor(90, 90, 90);
+const OBSERVED_COLOR: RGBColor = RGBColor(20, 20, 20);
 const SPAN_COLOR: RGBColor = RGBColor(255, 236, 204);
 
 /// Render `panels` stacked vertically under an overall `title` into a PNG
@@ -147,7 +180,7 @@ fn clone_panel<'a>(p: &Panel<'a>) -> Panel<'a> {
         title: p.title.clone(),
         x_label: p.x_label.clone(),
         y_label: p.y_label.clone(),
-        series: p.series.iter().map(|s| Series { label: s.label.clone(), x: s.x, y: s.y }).collect(),
+        series: p.series.iter().map(|s| Series { label: s.label.clone(), ..*s }).collect(),
         markers: Vec::new(),
         log_y: false,
         spans: Vec::new(),
@@ -336,51 +369,83 @@ where
     }
 
     let log_y = p.log_y;
-    for (si, s) in p.series.iter().enumerate() {
+    // Palette colours go by position; what was observed is drawn last, over the models.
+    let order = draw_order(&p.series);
+    for si in order {
+        let s = &p.series[si];
         let color = PALETTE[si % PALETTE.len()];
-        let style = color.stroke_width(2);
-        // Split into runs of usable points so NaNs (and non-positive values
-        // on a log axis) break the line.
-        let mut segments: Vec<Vec<(f64, f64)>> = Vec::new();
-        let mut cur: Vec<(f64, f64)> = Vec::new();
-        for (&x, &y) in s.x.iter().zip(s.y) {
-            if x.is_finite() && y_ok(y, log_y) {
-                cur.push((x, y));
-            } else if !cur.is_empty() {
-                segments.push(std::mem::take(&mut cur));
+        let (color, alpha) = match s.look {
+            Look::Observed => (OBSERVED_COLOR, 1.0),
+            Look::Model => (color, 0.75),
+            Look::Line | Look::Points => (color, 1.0),
+        };
+        let style = color.mix(alpha).stroke_width(2);
+        if s.look == Look::Points {
+            let points = s.x.iter().zip(s.y).filter(|(x, y)| x.is_finite() && y_ok(**y, log_y));
+            chart.draw_series(points.map(|(&x, &y)| Circle::new((x, y), 4, color.mix(0.6).filled()))).map_err(err)?;
+        } else {
+            // Split into runs of usable points so NaNs (and non-positive values
+            // on a log axis) break the line.
+            let mut segments: Vec<Vec<(f64, f64)>> = Vec::new();
+            let mut cur: Vec<(f64, f64)> = Vec::new();
+            for (&x, &y) in s.x.iter().zip(s.y) {
+                if x.is_finite() && y_ok(y, log_y) {
+                    cur.push((x, y));
+                } else if !cur.is_empty() {
+                    segments.push(std::mem::take(&mut cur));
+                }
             }
-        }
-        if !cur.is_empty() {
-            segments.push(cur);
-        }
-        for seg in segments {
-            if seg.len() == 1 {
-                chart.draw_series(std::iter::once(Circle::new(seg[0], 2, color.filled()))).map_err(err)?;
-            } else {
-                // Very dense lines look jagged with a 2 px stroke (plotters draws
-                // wide polylines as separate quads); use 1 px for those.
-                let plot_w = (chart.plotting_area().dim_in_pixel().0).max(1) as usize;
-                let w = if seg.len() > 2 * plot_w { 1 } else { 2 };
-                chart.draw_series(LineSeries::new(seg, color.stroke_width(w))).map_err(err)?;
+            if !cur.is_empty() {
+                segments.push(cur);
+            }
+            for seg in segments {
+                if seg.len() == 1 {
+                    chart.draw_series(std::iter::once(Circle::new(seg[0], 2, color.filled()))).map_err(err)?;
+                } else {
+                    // Very dense lines look jagged with a 2 px stroke (plotters draws
+                    // wide polylines as separate quads); use 1 px for those, and for models.
+                    let plot_w = (chart.plotting_area().dim_in_pixel().0).max(1) as usize;
+                    let w = if seg.len() > 2 * plot_w || s.look == Look::Model { 1 } else { 2 };
+                    chart.draw_series(LineSeries::new(seg, color.mix(alpha).stroke_width(w))).map_err(err)?;
+                }
             }
         }
         // Legend entry (drawn as an empty series so it exists even without data).
         if !s.label.is_empty() {
+            let points = s.look == Look::Points;
             chart
                 .draw_series(std::iter::empty::<PathElement<(f64, f64)>>())
                 .map_err(err)?
                 .label(s.label.as_str())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], style));
+                .legend(move |(x, y)| -> DynElement<'static, BitMapBackend<'_>, (i32, i32)> {
+                    if points {
+                        Circle::new((x + 10, y), 4, style.color.filled()).into_dyn()
+                    } else {
+                        PathElement::new(vec![(x, y), (x + 20, y)], style).into_dyn()
+                    }
+                });
         }
     }
 
     // Markers: vertical dashed lines drawn in pixel space on the root area.
     let label_font = ("sans-serif", 13).into_font().color(&MARKER_COLOR);
-    for (mi, m) in p.markers.iter().enumerate() {
-        if !(m.x.is_finite() && m.x >= xr.start && m.x <= xr.end) {
-            continue;
-        }
-        let (mx, _) = chart.backend_coord(&(m.x, 1.0)); // y is irrelevant for the x pixel
+    let shown: Vec<&Marker> =
+        p.markers.iter().filter(|m| m.x.is_finite() && m.x >= xr.start && m.x <= xr.end).collect();
+    let spans: Vec<(i32, i32)> = shown
+        .iter()
+        .map(|m| {
+            let (mx, _) = chart.backend_coord(&(m.x, 1.0)); // y is irrelevant for the x pixel
+            let width = if m.label.is_empty() {
+                0
+            } else {
+                root.estimate_text_size(&m.label, &label_font).map_or(0, |s| s.0 as i32)
+            };
+            (mx + 4, width)
+        })
+        .collect();
+    let rows = label_rows(&spans, LABEL_GAP_PX, MAX_LABEL_ROWS);
+    for ((m, row), (label_x, _)) in shown.iter().zip(rows).zip(&spans) {
+        let mx = label_x - 4;
         let (dash, gap) = (6, 4);
         let mut y = py.start;
         while y < py.end {
@@ -388,10 +453,9 @@ where
             root.draw(&PathElement::new(vec![(mx, y), (mx, ye)], MARKER_COLOR.stroke_width(1))).map_err(err)?;
             y += dash + gap;
         }
-        if !m.label.is_empty() {
-            // Stagger labels of successive markers so they overlap less.
-            let ty = py.start + 4 + (mi as i32 % 3) * 16;
-            root.draw(&Text::new(m.label.clone(), (mx + 4, ty), label_font.clone())).map_err(err)?;
+        if let (false, Some(row)) = (m.label.is_empty(), row) {
+            let ty = py.start + 4 + row as i32 * LABEL_ROW_PX;
+            root.draw(&Text::new(m.label.clone(), (*label_x, ty), label_font.clone())).map_err(err)?;
         }
     }
 
@@ -406,6 +470,66 @@ where
             .map_err(err)?;
     }
     Ok(())
+}
+
+/// Marker labels stack in up to this many rows below the panel's top; a label that fits in none
+/// is left out (its dashed line stays).
+const MAX_LABEL_ROWS: usize = 4;
+const LABEL_ROW_PX: i32 = 16;
+const LABEL_GAP_PX: i32 = 6;
+
+/// The indices of `series` in drawing order: every other series in its order, then the
+/// observed ones, so a measurement is never hidden under a model.
+fn draw_order(series: &[Series<'_>]) -> Vec<usize> {
+    let (observed, others): (Vec<usize>, Vec<usize>) =
+        (0..series.len()).partition(|&i| series[i].look == Look::Observed);
+    others.into_iter().chain(observed).collect()
+}
+
+/// Rows for labels starting at pixel `x` with a `width` (in any order): each label goes in the
+/// first row where it starts `gap` pixels after the end of every label already there, else
+/// nowhere (None). Labels of width 0 need no row.
+fn label_rows(labels: &[(i32, i32)], gap: i32, max_rows: usize) -> Vec<Option<usize>> {
+    let mut order: Vec<usize> = (0..labels.len()).collect();
+    order.sort_by_key(|&i| (labels[i].0, i));
+    let mut row_ends: Vec<i32> = Vec::new();
+    let mut rows = vec![None; labels.len()];
+    for i in order {
+        let (x, width) = labels[i];
+        if width == 0 {
+            continue;
+        }
+        match row_ends.iter().position(|&end| x >= end + gap) {
+            Some(row) => {
+                row_ends[row] = x + width;
+                rows[i] = Some(row);
+            }
+            None if row_ends.len() < max_rows => {
+                row_ends.push(x + width);
+                rows[i] = Some(row_ends.len() - 1);
+            }
+            None => {}
+        }
+    }
+    rows
+}
+
+/// Angles in degrees made continuous: each sample moved by whole turns to lie within 180° of
+/// the one before, so a caster turning past ±180° draws as a turn, not a jump across the plot.
+pub fn unwrap_degrees(angles: &[f64]) -> Vec<f64> {
+    let mut out = Vec::with_capacity(angles.len());
+    let mut previous: Option<f64> = None;
+    for &a in angles {
+        let value = match previous {
+            Some(p) if a.is_finite() => a - 360.0 * ((a - p) / 360.0).round(),
+            _ => a,
+        };
+        if value.is_finite() {
+            previous = Some(value);
+        }
+        out.push(value);
+    }
+    out
 }
 
 #[cfg(test)]
@@ -435,10 +559,7 @@ mod tests {
                 title: "Time history".into(),
                 x_label: "time [s]".into(),
                 y_label: "amplitude [m]".into(),
-                series: vec![
-                    Series { label: "heave".into(), x: &t, y: &a },
-                    Series { label: "pitch".into(), x: &t, y: &b },
-                ],
+                series: vec![Series::new("heave", &t, &a).model(), Series::new("pitch", &t, &b).observed()],
                 markers: vec![],
                 log_y: false,
                 spans: vec![(10.0, 20.0)],
@@ -447,10 +568,7 @@ mod tests {
                 title: "Spectrum".into(),
                 x_label: "frequency [Hz]".into(),
                 y_label: "PSD [m²/Hz]".into(),
-                series: vec![
-                    Series { label: "heave PSD".into(), x: &f, y: &spec },
-                    Series { label: "pitch PSD".into(), x: &f, y: &spec2 },
-                ],
+                series: vec![Series::new("heave PSD", &f, &spec), Series::new("pitch PSD", &f, &spec2).points()],
                 markers: vec![Marker { x: 3.1, label: "f₀ = 3.1 Hz".into() }],
                 log_y: true,
                 spans: vec![],
@@ -478,8 +596,62 @@ mod tests {
             colors.insert((c[0], c[1], c[2]));
         }
         assert!(colors.len() > 10, "only {} colours", colors.len());
-        for c in [PALETTE[0], PALETTE[1]] {
+        for c in [PALETTE[0], OBSERVED_COLOR] {
             assert!(colors.contains(&(c.0, c.1, c.2)), "series colour {c:?} missing");
+        }
+    }
+
+    #[test]
+    fn marker_labels_never_overlap_in_a_row() {
+        // Ten impacts in two seconds, labels 60-90 px wide and 15-40 px apart: the old stagger
+        // (three rows by index) overlapped them.
+        let labels: Vec<(i32, i32)> = (0..10).map(|i| (100 + i * 15 + (i % 3) * 25, 60 + (i % 4) * 10)).collect();
+        let rows = label_rows(&labels, LABEL_GAP_PX, MAX_LABEL_ROWS);
+        for i in 0..labels.len() {
+            for j in 0..i {
+                if let (Some(a), Some(b)) = (rows[i], rows[j]) {
+                    let (lo, hi) =
+                        if labels[i].0 < labels[j].0 { (labels[i], labels[j]) } else { (labels[j], labels[i]) };
+                    assert!(a != b || lo.0 + lo.1 + LABEL_GAP_PX <= hi.0, "labels {i} and {j} overlap in row {a}");
+                }
+            }
+        }
+        assert!(rows.iter().flatten().all(|&r| r < MAX_LABEL_ROWS));
+        // A label is left out only when it overlaps a placed label in every row.
+        let overlaps = |a: (i32, i32), b: (i32, i32)| a.0 < b.0 + b.1 + LABEL_GAP_PX && b.0 < a.0 + a.1 + LABEL_GAP_PX;
+        for (i, row) in rows.iter().enumerate().filter(|(_, r)| r.is_none()) {
+            for r in 0..MAX_LABEL_ROWS {
+                let blocked = (0..labels.len()).any(|j| rows[j] == Some(r) && overlaps(labels[i], labels[j]));
+                assert!(blocked, "label {i} ({row:?}) would fit in row {r}: {rows:?}");
+            }
+        }
+        assert_eq!(rows.iter().flatten().count(), 7, "{rows:?}");
+        // Far apart, they all sit in the first row.
+        assert_eq!(label_rows(&[(0, 50), (100, 50), (200, 50)], 6, 4), [Some(0), Some(0), Some(0)]);
+        assert_eq!(label_rows(&[(0, 0), (0, 50)], 6, 4), [None, Some(0)], "an empty label takes no room");
+    }
+
+    #[test]
+    fn observed_series_are_drawn_after_the_models() {
+        let v = [0.0, 1.0];
+        let series = [
+            Series::new("observed", &v, &v).observed(),
+            Series::new("model", &v, &v).model(),
+            Series::new("floor", &v, &v),
+        ];
+        assert_eq!(draw_order(&series), [1, 2, 0]);
+    }
+
+    #[test]
+    fn unwrapped_angles_turn_instead_of_jumping() {
+        let wrapped = [170.0, 179.0, -179.0, -170.0, 175.0, f64::NAN, -175.0, 10.0];
+        let unwrapped = unwrap_degrees(&wrapped);
+        assert_eq!(&unwrapped[..5], [170.0, 179.0, 181.0, 190.0, 175.0]);
+        assert!(unwrapped[5].is_nan());
+        assert_eq!(unwrapped[6], 185.0, "continues from the last finite angle");
+        assert_eq!(unwrapped[7], 10.0, "175° back is a turn back");
+        for (a, w) in unwrapped.iter().zip(&wrapped) {
+            assert!(a.is_nan() || ((a - w) / 360.0).fract() == 0.0, "moved by whole turns only");
         }
     }
 
@@ -493,7 +665,7 @@ mod tests {
             title: "orbit".into(),
             x_label: "x [m]".into(),
             y_label: "y [m]".into(),
-            series: vec![Series { label: "path".into(), x: &x, y: &y }],
+            series: vec![Series::new("path", &x, &y)],
             markers: vec![],
             log_y: false,
             spans: Vec::new(),
@@ -507,7 +679,7 @@ mod tests {
             title: "t".into(),
             x_label: "t".into(),
             y_label: "x".into(),
-            series: vec![Series { label: "x".into(), x: &t, y: &x }],
+            series: vec![Series::new("x", &t, &x)],
             markers: vec![],
             log_y: false,
             spans: Vec::new(),
@@ -526,7 +698,7 @@ mod tests {
             title: "bad".into(),
             x_label: String::new(),
             y_label: String::new(),
-            series: vec![Series { label: "s".into(), x: &x, y: &y }],
+            series: vec![Series::new("s", &x, &y)],
             markers: vec![],
             ..Panel::default()
         };
@@ -536,7 +708,7 @@ mod tests {
             title: "all nan".into(),
             x_label: "x".into(),
             y_label: "y".into(),
-            series: vec![Series { label: "s".into(), x: &x, y: &nan }],
+            series: vec![Series::new("s", &x, &nan)],
             markers: vec![Marker { x: 1.5, label: "m".into() }],
             log_y: true,
             spans: vec![],

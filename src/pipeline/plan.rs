@@ -252,9 +252,19 @@ fn resolve_inputs(
             }
             let outputs = stages::find(&upstream.stage_type).map(|s| s.info().outputs).unwrap_or(&[]);
             let found = match output {
-                None => outputs.first().map(|o| o.name),
-                Some(wanted) => outputs.iter().map(|o| o.name).find(|o| *o == wanted),
+                None => outputs.first(),
+                Some(wanted) => outputs.iter().find(|o| o.name == wanted),
             };
+            if let Some(page) = found.filter(|o| o.kind == stages::OutputKind::Page) {
+                return Err(file
+                    .error_at_value(
+                        &key_path,
+                        name,
+                        format!("`{head}.{}` is a page for people, not a dataset", page.name),
+                    )
+                    .hint("read one of the stage's tables instead"));
+            }
+            let found = found.map(|o| o.name);
             let Some(output) = found else {
                 let names: Vec<&str> = outputs.iter().map(|o| o.name).collect();
                 let wanted = output.unwrap_or_default();

@@ -99,7 +99,7 @@ impl OutputSink {
         key: Option<&str>,
     ) -> anyhow::Result<()> {
         let info = self.output_info(output)?;
-        if info.kind == OutputKind::Files {
+        if matches!(info.kind, OutputKind::Files | OutputKind::Page) {
             bail!("stage type `{}` declares `{output}` as an output of files, not of tables", self.info.name);
         }
         let relative = partition_path(partition);
@@ -159,6 +159,21 @@ impl OutputSink {
         Ok(())
     }
 
+    /// Writes a page output: the one file `<stage>/<output>` (an `index.html`).
+    pub fn write_page(&self, output: &str, bytes: &[u8]) -> anyhow::Result<()> {
+        if self.output_info(output)?.kind != OutputKind::Page {
+            bail!("stage type `{}` does not declare `{output}` as a page", self.info.name);
+        }
+        std::fs::create_dir_all(&self.root).map_err(|e| anyhow!("cannot create `{}`: {e}", self.root.display()))?;
+        let path = self.root.join(output);
+        crate::io::atomic::write_file(&path, |w| {
+            std::io::Write::write_all(w, bytes)?;
+            Ok(())
+        })?;
+        self.hashes.lock().expect("no panics while holding the lock").insert(path, hash::hash_bytes(bytes));
+        Ok(())
+    }
+
     /// The hashes of the files written.
     pub fn into_hashes(self) -> KnownHashes {
         self.hashes.into_inner().expect("no panics while holding the lock")
@@ -203,6 +218,12 @@ fn split_by(table: &Table, key: &str) -> anyhow::Result<Vec<(String, Table)>> {
 /// Hash and file count of one output of a stage: its Parquet tree plus its MCAP twin tree. Files
 /// in `known` are not read again.
 pub fn output_hash(stage_dir: &Path, output: &str, known: &KnownHashes) -> anyhow::Result<(String, usize)> {
+    let page = stage_dir.join(output);
+    if page.is_file() {
+        // A page output: one file at the stage folder's root.
+        let known_hash = known.get(&page).cloned();
+        return Ok((known_hash.map_or_else(|| hash::hash_file(&page), Ok)?, 1));
+    }
     let (parquet_hash, parquet_files) = hash::hash_dir_known(&stage_dir.join(output), known)?;
     let mcap_dir = stage_dir.join(MCAP_DIR).join(output);
     if !mcap_dir.is_dir() {

@@ -67,7 +67,17 @@ impl Stage for Compare {
                 }
             };
             let (m, r) = (ctx.read_table(part)?, ctx.read_table(reference_part)?);
-            let (mut errors, png) = compare(&m, &r, &pairs, relative, &part.label, &reference_part.label)?;
+            let title = format!(
+                "{} against {}{}",
+                stage_of(&part.label),
+                stage_of(&reference_part.label),
+                if part.partition.is_empty() {
+                    String::new()
+                } else {
+                    format!(", {}", super::record_title(&part.partition, ""))
+                }
+            );
+            let (mut errors, png) = compare(&m, &r, &pairs, relative, &part.label, &reference_part.label, &title)?;
             errors.metadata.extend(super::record_provenance(part));
             errors.metadata.insert("shakeflow.reference_file".into(), reference_part.label.clone());
             errors.metadata.insert("shakeflow.reference_hash".into(), reference_part.hash.clone());
@@ -110,6 +120,7 @@ fn compare(
     relative: bool,
     m_label: &str,
     r_label: &str,
+    title: &str,
 ) -> anyhow::Result<(Table, Vec<u8>)> {
     let time = measured.f64_column(TIME_COLUMN).ok_or_else(|| anyhow::anyhow!("{m_label}: no time_s column"))?;
     let r_time = reference.f64_column(TIME_COLUMN).ok_or_else(|| anyhow::anyhow!("{r_label}: no time_s column"))?;
@@ -208,8 +219,8 @@ fn compare(
                     x_label: "time [s]".into(),
                     y_label: label.clone(),
                     series: vec![
-                        Series { label: "measured".into(), x: time, y: m },
-                        Series { label: "reference".into(), x: time, y: r },
+                        Series::new("reference", time, r).model(),
+                        Series::new("measured", time, m).observed(),
                     ],
                     markers: vec![],
                     log_y: false,
@@ -219,7 +230,7 @@ fn compare(
                     title: format!("{label}: measured − reference"),
                     x_label: "time [s]".into(),
                     y_label: label.clone(),
-                    series: vec![Series { label: "error".into(), x: time, y: d }],
+                    series: vec![Series::new("error", time, d)],
                     markers: vec![],
                     log_y: false,
                     spans: Vec::new(),
@@ -228,8 +239,17 @@ fn compare(
         })
         .collect();
     let height = (380 * panels.len()).clamp(400, 2400) as u32;
-    let png = render_png(&format!("{m_label} vs {r_label}"), &panels, 1100, height).map_err(anyhow::Error::msg)?;
+    let png = render_png(title, &panels, 1100, height).map_err(anyhow::Error::msg)?;
     Ok((table, png))
+}
+
+/// The stage an input file comes from (`cpt_rolling.motion/…` → `cpt_rolling`), as titles name
+/// it; a source file's label as it is.
+fn stage_of(label: &str) -> &str {
+    match label.split_once('.') {
+        Some((stage, _)) if !stage.is_empty() && !stage.contains('/') => stage,
+        _ => label,
+    }
 }
 
 #[cfg(test)]
@@ -244,11 +264,20 @@ mod tests {
         let mut reference = Table::new();
         reference.push(Column::f64("time_s", "s", "", vec![0.0, 1.0, 2.0]));
         reference.push(Column::f64("x_m", "m", "", vec![0.0, 0.0101, 0.02]));
-        let (errors, png) = compare(&measured, &reference, &[("dx_mm".into(), "x_m".into())], false, "m", "r").unwrap();
+        let (errors, png) =
+            compare(&measured, &reference, &[("dx_mm".into(), "x_m".into())], false, "m", "r", "cart against truth")
+                .unwrap();
         assert_eq!(errors.column("samples").unwrap().data, ColumnData::I64(vec![3]));
         assert_eq!(errors.column("missing").unwrap().data, ColumnData::I64(vec![1]));
         let max = errors.f64_column("max_abs_error").unwrap()[0];
         assert!((max - 0.1).abs() < 1e-9, "{max}");
         assert!(png.starts_with(b"\x89PNG"));
+    }
+
+    #[test]
+    fn titles_name_stages_not_files() {
+        assert_eq!(stage_of("cpt_rolling.motion/data.parquet"), "cpt_rolling");
+        assert_eq!(stage_of("load_cpt_truth.records/data.parquet"), "load_cpt_truth");
+        assert_eq!(stage_of("../archive/truth.csv"), "../archive/truth.csv");
     }
 }

@@ -234,8 +234,8 @@ fn figure(
             x_label: "u [px]".into(),
             y_label: "−v [px]".into(),
             series: vec![
-                Series { label: "measured".into(), x: &mu, y: &mv },
-                Series { label: format!("reprojected − measured, ×{MAGNIFY}"), x: &ru, y: &rv },
+                Series::new("measured", &mu, &mv),
+                Series::new(format!("reprojected − measured, ×{MAGNIFY}"), &ru, &rv),
             ],
             markers: vec![],
             log_y: false,
@@ -246,13 +246,9 @@ fn figure(
             x_label: "control point".into(),
             y_label: "distance [px]".into(),
             series: vec![
-                Series { label: "dist_px".into(), x: &index, y: &distance },
-                Series {
-                    label: "loo_dist_px (fitted without the point)".into(),
-                    x: &index,
-                    y: &result.leave_one_out_px,
-                },
-                Series { label: "outlier threshold (on loo_dist_px)".into(), x: &index, y: &threshold },
+                Series::new("dist_px", &index, &distance),
+                Series::new("loo_dist_px (fitted without the point)", &index, &result.leave_one_out_px),
+                Series::new("outlier threshold (on loo_dist_px)", &index, &threshold),
             ],
             markers: vec![],
             log_y: false,

@@ -300,7 +300,7 @@ fn figure(motion: &Table, unit_motion: &str, label: &str) -> anyhow::Result<Vec<
         title: rotation_title.into(),
         x_label: "time [s]".into(),
         y_label: "rad".into(),
-        series: vec![Series { label: rotation_name.into(), x: time, y: column(rotation_name) }],
+        series: vec![Series::new(rotation_name, time, column(rotation_name))],
         markers: vec![],
         log_y: false,
         spans: Vec::new(),
@@ -309,10 +309,7 @@ fn figure(motion: &Table, unit_motion: &str, label: &str) -> anyhow::Result<Vec<
         title: "midpoint displacement".into(),
         x_label: "time [s]".into(),
         y_label: "mm".into(),
-        series: ["dx_mm", "dy_mm", "dz_mm"]
-            .iter()
-            .map(|n| Series { label: (*n).into(), x: time, y: column(n) })
-            .collect(),
+        series: ["dx_mm", "dy_mm", "dz_mm"].iter().map(|n| Series::new(*n, time, column(n))).collect(),
         markers: vec![],
         log_y: false,
         spans: Vec::new(),
@@ -322,7 +319,7 @@ fn figure(motion: &Table, unit_motion: &str, label: &str) -> anyhow::Result<Vec<
             title: "trajectory of the midpoint (plan view)".into(),
             x_label: "dx [mm]".into(),
             y_label: "dy [mm]".into(),
-            series: vec![Series { label: "midpoint".into(), x: column("dx_mm"), y: column("dy_mm") }],
+            series: vec![Series::new("midpoint", column("dx_mm"), column("dy_mm"))],
             markers: vec![],
             log_y: false,
             spans: Vec::new(),

@@ -323,7 +323,7 @@ fn figure(tracks: &Table, label: &str) -> anyhow::Result<Vec<u8>> {
             title: title.into(),
             x_label: "time [s]".into(),
             y_label: y_label.into(),
-            series: data.iter().map(|(n, x, y)| Series { label: n.clone(), x, y }).collect(),
+            series: data.iter().map(|(n, x, y)| Series::new(n.clone(), x, y)).collect(),
             markers: vec![],
             log_y: false,
             spans: Vec::new(),

@@ -63,8 +63,7 @@ impl Stage for Diagnose {
                 }
                 ctx.sink.write("accel", &part.partition, accel)?;
                 ctx.sink.write("camera", &part.partition, camera)?;
-                let name = super::partition_path(&part.partition).replace('/', "_");
-                let name = if name.is_empty() { d.case.clone() } else { name };
+                let name = super::figure_stem(&part.partition, &d.case);
                 ctx.sink.write_file("reports", &format!("{name}.json"), json_bytes(&d).as_bytes())?;
                 ctx.sink.write_file("reports", &format!("{name}.png"), &figure(&d).map_err(anyhow::Error::msg)?)?;
                 Ok((super::partition_values(&part.partition), d))
@@ -240,9 +239,9 @@ pub fn figure(d: &Diagnosis) -> Result<Vec<u8>, String> {
             x_label: "time [s]".into(),
             y_label: "m/s^2".into(),
             series: vec![
-                Series { label: "observed".into(), x: &ta, y: &oa },
-                Series { label: "nominal model".into(), x: &ta, y: &ba },
-                Series { label: model_label.clone(), x: &ta, y: &ma },
+                Series::new("observed", &ta, &oa).observed(),
+                Series::new("nominal model", &ta, &ba).model(),
+                Series::new(model_label.clone(), &ta, &ma).model(),
             ],
             spans: spans.clone(),
             ..Panel::default()
@@ -252,9 +251,9 @@ pub fn figure(d: &Diagnosis) -> Result<Vec<u8>, String> {
             x_label: "time [s]".into(),
             y_label: "theta [rad]".into(),
             series: vec![
-                Series { label: "observed".into(), x: &tc, y: &oc },
-                Series { label: "nominal model".into(), x: &tc, y: &bc },
-                Series { label: model_label, x: &tc, y: &mc },
+                Series::new("observed", &tc, &oc).observed(),
+                Series::new("nominal model", &tc, &bc).model(),
+                Series::new(model_label, &tc, &mc).model(),
             ],
             spans: spans.clone(),
             ..Panel::default()
@@ -266,17 +265,14 @@ pub fn figure(d: &Diagnosis) -> Result<Vec<u8>, String> {
             ),
             x_label: "time [s]".into(),
             y_label: "residual / sigma".into(),
-            series: vec![
-                Series { label: "nominal model".into(), x: &ta, y: &za },
-                Series { label: "accepted model".into(), x: &ta, y: &zm },
-            ],
+            series: vec![Series::new("nominal model", &ta, &za), Series::new("accepted model", &ta, &zm)],
             spans,
             ..Panel::default()
         },
     ];
     let title = match d.window {
-        Some((a, b)) => format!("{}: {} (mismatch {a:.2}-{b:.2} s, shaded)", d.case, d.verdict),
-        None => format!("{}: no mismatch", d.case),
+        Some((a, b)) => format!("case {}: {} (records and model disagree {a:.2}-{b:.2} s, shaded)", d.case, d.verdict),
+        None => format!("case {}: the model agrees with the records", d.case),
     };
     render_png(&title, &panels, 1400, 1100)
 }

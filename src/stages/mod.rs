@@ -56,6 +56,9 @@ pub enum OutputKind {
     TimeSeries,
     /// Files written as they are (figures, reports).
     Files,
+    /// One file written as it is, at the root of the stage's folder and named by the output
+    /// (`report`'s `index.html`, opened by a person rather than read by another stage).
+    Page,
 }
 
 impl OutputKind {
@@ -65,6 +68,7 @@ impl OutputKind {
             OutputKind::Table => "Parquet",
             OutputKind::TimeSeries => "Parquet + MCAP",
             OutputKind::Files => "files",
+            OutputKind::Page => "one file",
         }
     }
 }
@@ -98,6 +102,27 @@ pub fn partition_path(partition: &Partition) -> String {
 /// joined by `/`, as other tables' key columns hold them (`CIGO360`, not `record=CIGO360`).
 pub fn partition_values(partition: &Partition) -> String {
     partition.iter().map(|(_, v)| v.as_str()).collect::<Vec<_>>().join("/")
+}
+
+/// The file stem of a per-record figure: the partition path with `/` as `_` (`motion=FB-4`), or
+/// `fallback` for a record without partition keys. Stages name their figures with it and `report`
+/// links to them by it.
+pub fn figure_stem(partition: &Partition, fallback: &str) -> String {
+    match partition_path(partition) {
+        p if p.is_empty() => fallback.to_string(),
+        p => p.replace('/', "_"),
+    }
+}
+
+/// A record as a figure's title names it: its partition values, `motion` bare and other keys
+/// with their name (`FB-4`, `FB-4, floor 5`), or `fallback` without partition keys.
+pub fn record_title(partition: &Partition, fallback: &str) -> String {
+    if partition.is_empty() {
+        return fallback.to_string();
+    }
+    let named: Vec<String> =
+        partition.iter().map(|(k, v)| if k == "motion" { v.clone() } else { format!("{k} {v}") }).collect();
+    named.join(", ")
 }
 
 /// One file a stage reads: a raw record file or one part of an upstream dataset.

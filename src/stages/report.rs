@@ -1,8 +1,13 @@
 //! `report`: the study's summary per unit — identified frequencies per white-noise test and the
-//! toppling events — as one small table, and per unit a PNG: floor vs top acceleration in one
-//! motion (toppling impacts marked) over the transfer functions with their picked peaks. Given
-//! `simulate_rolling` event tables too, a second table summarises each rolling unit per motion
-//! (kept apart so the first table's columns stay as they were).
+//! toppling events — as one small table, per unit a PNG (floor vs top acceleration in one motion,
+//! toppling impacts marked, over the transfer functions with their picked peaks and coherence),
+//! and the study report `index.html`: every unit with its frequencies, toppling events, rocking
+//! simulations, fragility, rolling results and figures, the diagnosed cases, and what each stage
+//! ran with. Given `simulate_rolling` event tables too, a second table summarises each rolling
+//! unit per motion (kept apart so the first table's columns stay as they were). Inputs are
+//! recognised by the stage type and output their files record, so any of them may be absent.
+
+mod html;
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -10,7 +15,8 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::{
-    partition_values, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput,
+    partition_values, figure_stem, partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext,
+    StageInfo, StageInput,
 };
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::table::{Column, ColumnData, Table};
@@ -20,12 +26,13 @@ pub struct Report;
 static INFO: StageInfo = StageInfo {
     name: "report",
     version: 3,
-    summary: "Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time, confidence); rolling units' peak displacement, yaw and caster flips per motion.",
+    summary: "Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time, confidence); rolling units' peak displacement, yaw and caster flips per motion; the study report index.html.",
     inputs: InputKind::Datasets,
     outputs: &[
         OutputInfo { name: "summary", description: "one row per unit and toppling event (or one row when none)", kind: OutputKind::Table },
         OutputInfo { name: "rolling", description: "one row per rolling unit and motion: peak_displacement_m, peak_yaw_rad, caster_flips, breakaway_time_s (from simulate_rolling.events inputs)", kind: OutputKind::Table },
-        OutputInfo { name: "figures", description: "<unit>.png: floor vs top acceleration, transfer functions with picked peaks", kind: OutputKind::Files },
+        OutputInfo { name: "figures", description: "<unit>.png: floor vs top acceleration in `figure_motion`, transfer functions in their band with the picked peaks, coherence", kind: OutputKind::Files },
+        OutputInfo { name: "index.html", description: "the study report for a browser: summary, per unit its frequencies, toppling events, simulations, fragility, rolling results and figures, the diagnosis, provenance (figures linked relatively: open it where `run` wrote it)", kind: OutputKind::Page },
     ],
     params: &[
         ParamSpec {
@@ -41,11 +48,34 @@ static INFO: StageInfo = StageInfo {
             kind: ParamKind::Str,
             default: Some("\"FB-4\""),
             unit: "",
-            description: "motion whose time histories the figures show (with the optional 3rd and 4th inputs)",
+            description: "motion whose time histories the figures show (with transfer_function.spectra and synchronize.records inputs)",
+            range: None,
+        },
+        ParamSpec {
+            name: "title",
+            kind: ParamKind::Str,
+            default: Some("\"Study report\""),
+            unit: "",
+            description: "heading of index.html",
             range: None,
         },
     ],
 };
+
+/// The inputs `report` reads, sorted by what they hold.
+#[derive(Default)]
+struct Inputs<'a> {
+    identified: Vec<&'a StageInput>,
+    events: Vec<&'a StageInput>,
+    spectra: Vec<&'a StageInput>,
+    records: Vec<&'a StageInput>,
+    rocking: Vec<&'a StageInput>,
+    fragility: Vec<&'a StageInput>,
+    rolling: Vec<&'a StageInput>,
+    diagnosis: Vec<&'a StageInput>,
+}
+
+const READS: &str = "transfer_function.identified and .spectra, detect_toppling.events, synchronize.records (or another table of records with time_s), simulate_toppling.events, toppling_fragility.fragility, simulate_rolling.events, diagnose.diagnosis";
 
 impl Stage for Report {
     fn info(&self) -> &'static StageInfo {
@@ -53,26 +83,41 @@ impl Stage for Report {
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let mut rolling = Vec::new();
-        let mut others = Vec::new();
+        let mut inputs = Inputs::default();
+        let mut provenance: Vec<html::Provenance> = Vec::new();
         for input in ctx.inputs {
-            match rolling_events(ctx, input)? {
-                Some(tables) => rolling.extend(tables),
-                None => others.push(input),
-            }
+            // An input with no records (nothing selected upstream) has nothing to show.
+            let Some(first) = input.parts().first() else { continue };
+            let table = ctx.read_table(first)?;
+            let meta = |key: &str| table.metadata.get(key).map_or("", String::as_str);
+            let list = match (meta("shakeflow.stage_type"), meta("shakeflow.output")) {
+                ("transfer_function", "identified") => &mut inputs.identified,
+                ("transfer_function", "spectra") => &mut inputs.spectra,
+                ("detect_toppling", "events") => &mut inputs.events,
+                ("simulate_toppling", "events") => &mut inputs.rocking,
+                ("toppling_fragility", "fragility") => &mut inputs.fragility,
+                ("simulate_rolling", "events") => &mut inputs.rolling,
+                ("diagnose", "diagnosis") => &mut inputs.diagnosis,
+                _ if table.column(crate::table::TIME_COLUMN).is_some() => &mut inputs.records,
+                (stage_type, output) => anyhow::bail!(
+                    "`report` cannot show `{}` (output `{output}` of a `{stage_type}` stage); it reads {READS}",
+                    input.name()
+                ),
+            };
+            list.push(input);
+            note_provenance(&mut provenance, &table, input.name());
         }
-        let (identified, events, figure_inputs) = match others.as_slice() {
-            [identified, events] => (*identified, *events, None),
-            [identified, events, spectra, records] => (*identified, *events, Some((*spectra, *records))),
-            _ => anyhow::bail!(
-                "`report` reads [transfer_function.identified, detect_toppling.events] and, for figures, also [transfer_function.spectra, synchronize.records]; any number of simulate_rolling.events besides"
-            ),
-        };
+        let mut rolling: RollingEvents = Vec::new();
+        for input in &inputs.rolling {
+            rolling.extend(rolling_events(ctx, input)?);
+        }
         ctx.sink.write("rolling", &Vec::new(), summarize_rolling(&rolling)?)?;
         ctx.sink.set_total(1);
-        let (identified, events) = (read_all(ctx, identified)?, read_all(ctx, events)?);
+        let identified = read_every(ctx, &inputs.identified)?;
+        let events = read_every(ctx, &inputs.events)?;
         let suffix = ctx.params.str_of("unit_suffix");
-        if let Some((spectra, records)) = figure_inputs {
+        let mut drawn = Vec::new();
+        if let ([spectra, ..], [records, ..]) = (inputs.spectra.as_slice(), inputs.records.as_slice()) {
             let motion = ctx.params.str_of("figure_motion");
             let spectra = read_all(ctx, spectra)?;
             let record = records.parts().iter().find(|p| motion_of(p) == motion).ok_or_else(|| {
@@ -81,15 +126,278 @@ impl Stage for Report {
             let record = ctx.read_table(record)?;
             for (unit, png) in figures(&identified, &events, &spectra, &record, motion, suffix)? {
                 ctx.sink.write_file("figures", &format!("{unit}.png"), &png)?;
+                drawn.push(unit);
             }
         }
+        let mut page = study_page(ctx, &inputs, &identified, &events, &rolling, suffix, &drawn)?;
+        page.stages = provenance;
+        page.stages.push(html::Provenance {
+            stage: ctx.stage_name.to_string(),
+            stage_type: INFO.name.into(),
+            version: INFO.version.to_string(),
+            read: Vec::new(),
+            params: serde_json::to_string_pretty(ctx.params)?,
+            inputs: ctx.inputs.iter().map(|i| (i.name().to_string(), String::new())).collect(),
+            shakeflow_version: env!("CARGO_PKG_VERSION").into(),
+        });
+        ctx.sink.write_page("index.html", html::render(&page).as_bytes())?;
         let summary = summarize(identified, events, suffix)?;
         ctx.sink.write("summary", &Vec::new(), summary)
     }
 }
 
-/// Equipment modes sit at 2-5 Hz: spectra are drawn up to here, not to Nyquist.
-const FIGURE_MAX_HZ: f64 = 20.0;
+/// Records which stage made `table` and with what, once per stage (several of its outputs may
+/// be read).
+fn note_provenance(list: &mut Vec<html::Provenance>, table: &Table, input: &str) {
+    let meta = |key: &str| table.metadata.get(key).cloned().unwrap_or_default();
+    let stage = meta("shakeflow.stage");
+    if let Some(known) = list.iter_mut().find(|p| p.stage == stage) {
+        known.read.push(input.to_string());
+        return;
+    }
+    let params = serde_json::from_str::<serde_json::Value>(&meta("shakeflow.params"))
+        .and_then(|v| serde_json::to_string_pretty(&v))
+        .unwrap_or_else(|_| meta("shakeflow.params"));
+    let inputs: BTreeMap<String, String> = serde_json::from_str(&meta("shakeflow.inputs")).unwrap_or_default();
+    list.push(html::Provenance {
+        stage,
+        stage_type: meta("shakeflow.stage_type"),
+        version: meta("shakeflow.stage_version"),
+        read: vec![input.to_string()],
+        params,
+        inputs: inputs.into_iter().collect(),
+        shakeflow_version: meta("shakeflow.version"),
+    });
+}
+
+/// Every part of every input of one kind, in input order.
+fn read_every(ctx: &StageContext<'_>, inputs: &[&StageInput]) -> anyhow::Result<Vec<(String, Arc<Table>)>> {
+    Ok(inputs.iter().map(|i| read_all(ctx, i)).collect::<anyhow::Result<Vec<_>>>()?.concat())
+}
+
+/// A metadata value of a table, or "".
+fn meta<'t>(table: &'t Table, key: &str) -> &'t str {
+    table.metadata.get(key).map_or("", String::as_str)
+}
+
+/// The unit a simulation stage modelled: its preset, else the stage's name.
+fn unit_of_stage(table: &Table) -> String {
+    let params: serde_json::Value = serde_json::from_str(meta(table, "shakeflow.params")).unwrap_or_default();
+    params["preset"].as_str().map_or_else(|| meta(table, "shakeflow.stage").to_string(), String::from)
+}
+
+/// A link from the report's folder to a figure another stage wrote: `../<stage>/<output>/<file>`.
+fn figure_link(table: &Table, output: &str, file: &str) -> String {
+    html::relative_url(&["..", meta(table, "shakeflow.stage"), output, file])
+}
+
+fn first_bool(table: &Table, name: &str) -> bool {
+    matches!(table.column(name).map(|c| &c.data), Some(ColumnData::Bool(v)) if v.first() == Some(&true))
+}
+
+fn first_i64(table: &Table, name: &str) -> i64 {
+    match table.column(name).map(|c| &c.data) {
+        Some(ColumnData::I64(v)) => v.first().copied().unwrap_or(0),
+        _ => 0,
+    }
+}
+
+fn first_f64(table: &Table, name: &str) -> Option<f64> {
+    match table.column(name).map(|c| &c.data) {
+        Some(ColumnData::F64(v)) => v.first().copied(),
+        Some(ColumnData::OptF64(v)) => v.first().copied().flatten(),
+        _ => None,
+    }
+}
+
+fn first_str(table: &Table, name: &str) -> String {
+    match table.column(name).map(|c| &c.data) {
+        Some(ColumnData::Str(v)) => v.first().cloned().unwrap_or_default(),
+        _ => String::new(),
+    }
+}
+
+/// Everything the page shows, gathered from the inputs.
+fn study_page(
+    ctx: &StageContext<'_>,
+    inputs: &Inputs<'_>,
+    identified: &[(String, Arc<Table>)],
+    events: &[(String, Arc<Table>)],
+    rolling: &RollingEvents,
+    suffix: &str,
+    drawn: &[String],
+) -> anyhow::Result<html::Page> {
+    let mut page = html::Page { title: ctx.params.str_of("title").to_string(), ..html::Page::default() };
+    page.tests = identified.iter().map(|(m, _)| m.clone()).collect();
+    let unit_name = |channel: &str| channel.strip_suffix(suffix).unwrap_or(channel).to_string();
+    for (i, (_, table)) in identified.iter().enumerate() {
+        for (channel, f) in strings(table, "output")?.iter().zip(optionals(table, "frequency_hz")?) {
+            let unit = unit_entry(&mut page.units, &unit_name(channel), page.tests.len());
+            unit.frequencies[i] = *f;
+        }
+    }
+    for (motion, table) in events {
+        let toppled = match table.column("toppled").map(|c| &c.data) {
+            Some(ColumnData::Bool(v)) => v,
+            _ => anyhow::bail!("the events table has no `toppled` column"),
+        };
+        let confidence = table.f64_column("confidence").ok_or_else(|| anyhow::anyhow!("no `confidence` column"))?;
+        let times = optionals(table, "impact_time_s")?;
+        for (i, channel) in strings(table, "channel")?.iter().enumerate() {
+            let unit = unit_entry(&mut page.units, &unit_name(channel), page.tests.len());
+            unit.detected = true;
+            if toppled[i] {
+                unit.topplings.push((motion.clone(), times[i].unwrap_or(f64::NAN), confidence[i]));
+            }
+        }
+    }
+    for name in drawn {
+        let unit = unit_entry(&mut page.units, name, page.tests.len());
+        unit.figure = Some(html::relative_url(&["figures", &format!("{name}.png")]));
+    }
+    for input in &inputs.rocking {
+        let mut runs: BTreeMap<String, (String, Vec<html::RockingRun>)> = BTreeMap::new();
+        for part in input.parts() {
+            let table = ctx.read_table(part)?;
+            let stage = meta(&table, "shakeflow.stage").to_string();
+            let (_, list) = runs.entry(stage).or_insert_with(|| (unit_of_stage(&table), Vec::new()));
+            list.push(html::RockingRun {
+                motion: motion_of(part),
+                overturned: first_bool(&table, "overturned"),
+                overturn_time_s: first_f64(&table, "overturn_time_s"),
+                max_abs_theta_rad: first_f64(&table, "max_abs_theta_rad").unwrap_or(f64::NAN),
+                impacts: first_i64(&table, "n_impacts"),
+                figure: Some(figure_link(
+                    &table,
+                    "figures",
+                    &format!("{}.png", figure_stem(&part.partition, "response")),
+                )),
+            });
+        }
+        for (stage, (unit, runs)) in runs {
+            unit_entry(&mut page.units, &unit, page.tests.len()).rocking.push(html::Rocking { stage, runs });
+        }
+    }
+    for input in &inputs.fragility {
+        for part in input.parts() {
+            let table = ctx.read_table(part)?;
+            let fragility = html::Fragility {
+                stage: meta(&table, "shakeflow.stage").to_string(),
+                im_measure: first_str(&table, "im_measure"),
+                median: first_f64(&table, "median"),
+                beta: first_f64(&table, "beta"),
+                runs: first_i64(&table, "n_runs"),
+                overturned: first_i64(&table, "n_overturned"),
+                note: first_str(&table, "note"),
+                figure: Some(figure_link(&table, "figures", "fragility.png")),
+            };
+            unit_entry(&mut page.units, &unit_of_stage(&table), page.tests.len()).fragility.push(fragility);
+        }
+    }
+    let summary = summarize_rolling(rolling)?;
+    let peaks = summary.f64_column("peak_displacement_m").unwrap_or_default();
+    let yaws = summary.f64_column("peak_yaw_rad").unwrap_or_default();
+    let flips = match summary.column("caster_flips").map(|c| &c.data) {
+        Some(ColumnData::I64(v)) => v.clone(),
+        _ => Vec::new(),
+    };
+    let breakaways = optionals(&summary, "breakaway_time_s")?;
+    for (i, run) in rolling.iter().enumerate() {
+        let unit = unit_entry(&mut page.units, &run.unit, page.tests.len());
+        let stage = meta(&run.table, "shakeflow.stage").to_string();
+        let drawn = serde_json::from_str::<serde_json::Value>(meta(&run.table, "shakeflow.params"))
+            .is_ok_and(|p| p["figure"].as_bool() == Some(true));
+        let figure = drawn.then(|| figure_link(&run.table, "figures", &format!("{}.png", run.figure_stem)));
+        let entry = html::RollingRun {
+            motion: run.motion.clone(),
+            peak_displacement_m: peaks[i],
+            peak_yaw_rad: yaws[i],
+            caster_flips: flips[i],
+            breakaway_time_s: breakaways[i],
+            figure,
+        };
+        match unit.rolling.iter_mut().find(|r| r.stage == stage) {
+            Some(r) => r.runs.push(entry),
+            None => unit.rolling.push(html::Rolling { stage, runs: vec![entry] }),
+        }
+    }
+    for input in &inputs.diagnosis {
+        for part in input.parts() {
+            page.cases.extend(cases(&*ctx.read_table(part)?)?);
+        }
+    }
+    let absent = [
+        (inputs.identified.is_empty(), "frequencies (transfer_function.identified)"),
+        (inputs.events.is_empty(), "toppling in the records (detect_toppling.events)"),
+        (inputs.rocking.is_empty(), "rocking simulations (simulate_toppling.events)"),
+        (inputs.fragility.is_empty(), "fragility (toppling_fragility.fragility)"),
+        (inputs.rolling.is_empty(), "rolling simulations (simulate_rolling.events)"),
+        (inputs.diagnosis.is_empty(), "diagnosis (diagnose.diagnosis)"),
+    ];
+    page.absent = absent.iter().filter(|a| a.0).map(|a| a.1).collect();
+    Ok(page)
+}
+
+/// The page's entry of a unit, added (after those already there) when new.
+fn unit_entry<'p>(units: &'p mut Vec<html::Unit>, name: &str, tests: usize) -> &'p mut html::Unit {
+    let index = match units.iter().position(|u| u.name == name) {
+        Some(i) => i,
+        None => {
+            units.push(html::Unit { name: name.to_string(), frequencies: vec![None; tests], ..html::Unit::default() });
+            units.len() - 1
+        }
+    };
+    &mut units[index]
+}
+
+/// The rows of a `diagnose.diagnosis` table.
+fn cases(table: &Table) -> anyhow::Result<Vec<html::Case>> {
+    let names = strings(table, "case")?;
+    let verdicts = strings(table, "verdict")?;
+    let explanations = strings(table, "explanation")?;
+    let mismatch = match table.column("mismatch").map(|c| &c.data) {
+        Some(ColumnData::Bool(v)) => v.clone(),
+        _ => anyhow::bail!("the diagnosis table has no `mismatch` column"),
+    };
+    let (start, end) = (optionals(table, "window_start_s")?, optionals(table, "window_end_s")?);
+    let before = table.f64_column("rmse_before").unwrap_or_default();
+    let after = table.f64_column("rmse_after").unwrap_or_default();
+    Ok((0..names.len())
+        .map(|i| {
+            let stem = if names[i].is_empty() { None } else { Some(names[i].replace('/', "_")) };
+            html::Case {
+                stage: meta(table, "shakeflow.stage").to_string(),
+                case: names[i].split_once('=').map_or(names[i].as_str(), |(_, v)| v).to_string(),
+                mismatch: mismatch[i],
+                verdict: verdicts[i].clone(),
+                window: start[i].zip(end[i]),
+                rmse_before: before.get(i).copied().unwrap_or(f64::NAN),
+                rmse_after: after.get(i).copied().unwrap_or(f64::NAN),
+                explanation: explanations[i].clone(),
+                figure: stem.map(|s| figure_link(table, "reports", &format!("{s}.png"))),
+            }
+        })
+        .collect())
+}
+
+/// Where the transfer functions are drawn: the band the `transfer_function` stage searched for
+/// peaks (its `band_min_hz`/`band_max_hz`, recorded in the spectra's provenance), else 0-20 Hz
+/// (equipment modes sit at 2-5 Hz; above, the spectra are noise).
+fn figure_band(spectra: &Table) -> (f64, f64) {
+    let params: serde_json::Value = serde_json::from_str(meta(spectra, "shakeflow.params")).unwrap_or_default();
+    match (params["band_min_hz"].as_f64(), params["band_max_hz"].as_f64()) {
+        (Some(lo), Some(hi)) if lo < hi => (lo, hi),
+        _ => (0.0, 20.0),
+    }
+}
+
+/// A floor channel as titles name it (`floor4_ax_mps2` → `floor 4`), else as it is.
+fn floor_name(channel: &str) -> String {
+    match channel.strip_prefix("floor").and_then(|rest| rest.split_once('_')) {
+        Some((level, _)) if !level.is_empty() => format!("floor {level}"),
+        _ => channel.to_string(),
+    }
+}
 
 /// One PNG per unit of the identified tables.
 fn figures(
@@ -127,22 +435,28 @@ fn figures(
                     }
                 }
             }
-            let mut spectrum_series = Vec::new();
-            let mut peaks = Vec::new();
-            let selected: Vec<(String, Vec<f64>, Vec<f64>)> = spectra
+            // Per white-noise test, |H1| and the coherence of this unit inside the band.
+            let selected: Vec<(String, Vec<f64>, Vec<f64>, Vec<f64>)> = spectra
                 .iter()
                 .map(|(m, t)| {
+                    let (lo, hi) = figure_band(t);
                     let outputs = strings(t, "output")?;
-                    let f = t.f64_column("frequency_hz").unwrap_or_default();
-                    let g = t.f64_column("h1_gain").unwrap_or_default();
+                    let column = |name: &str| {
+                        t.f64_column(name).ok_or_else(|| anyhow::anyhow!("the spectra have no `{name}` column"))
+                    };
+                    let (f, g, c) = (column("frequency_hz")?, column("h1_gain")?, column("coherence")?);
                     let rows: Vec<usize> =
-                        (0..outputs.len()).filter(|&i| outputs[i] == *channel && f[i] <= FIGURE_MAX_HZ).collect();
-                    Ok((m.clone(), rows.iter().map(|&i| f[i]).collect(), rows.iter().map(|&i| g[i]).collect()))
+                        (0..outputs.len()).filter(|&i| outputs[i] == *channel && f[i] >= lo && f[i] <= hi).collect();
+                    let pick = |v: &[f64]| rows.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+                    Ok((m.clone(), pick(f), pick(g), pick(c)))
                 })
                 .collect::<anyhow::Result<_>>()?;
-            for (m, f, g) in &selected {
-                spectrum_series.push(Series { label: format!("|H1| {m}"), x: f, y: g });
-            }
+            let band = spectra.first().map_or((0.0, 20.0), |(_, t)| figure_band(t));
+            let gains: Vec<Series> =
+                selected.iter().map(|(m, f, g, _)| Series::new(format!("|H1| {m}"), f, g)).collect();
+            let coherences: Vec<Series> =
+                selected.iter().map(|(m, f, _, c)| Series::new(format!("coherence {m}"), f, c)).collect();
+            let mut peaks = Vec::new();
             for (m, t) in identified {
                 let outputs = strings(t, "output")?;
                 let frequencies = optionals(t, "frequency_hz")?;
@@ -152,61 +466,76 @@ fn figures(
                     }
                 }
             }
+            let floor_label = floor_name(input);
             let panels = [
                 Panel {
-                    title: format!("{motion}: floor and top acceleration"),
+                    title: format!("{motion}: recorded acceleration, {floor_label} and {unit} top"),
                     x_label: "time [s]".into(),
                     y_label: "acceleration [m/s^2]".into(),
                     series: vec![
-                        Series { label: input.clone(), x: time, y: floor },
-                        Series { label: channel.clone(), x: time, y: top },
+                        Series::new(floor_label.clone(), time, floor),
+                        Series::new(format!("{unit} top"), time, top).observed(),
                     ],
                     markers: impacts,
-                    log_y: false,
-                    spans: Vec::new(),
+                    ..Panel::default()
                 },
                 Panel {
-                    title: format!("transfer function {input} -> {channel}"),
+                    title: format!(
+                        "transfer function {floor_label} → {unit} top, in the searched band {:.1}-{:.1} Hz",
+                        band.0, band.1
+                    ),
                     x_label: "frequency [Hz]".into(),
                     y_label: "|H1|".into(),
-                    series: spectrum_series,
+                    series: gains,
                     markers: peaks,
                     log_y: true,
-                    spans: Vec::new(),
+                    ..Panel::default()
+                },
+                Panel {
+                    title: "coherence (near 1: the top moves with the floor; low: noise)".into(),
+                    x_label: "frequency [Hz]".into(),
+                    y_label: "coherence".into(),
+                    series: coherences,
+                    ..Panel::default()
                 },
             ];
-            let png = render_png(&unit, &panels, 1200, 900).map_err(anyhow::Error::msg)?;
+            let title = format!("{unit}: recorded response in {motion} and frequencies from the white-noise tests");
+            let png = render_png(&title, &panels, 1200, 1100).map_err(anyhow::Error::msg)?;
             Ok(Some((unit, png)))
         })
         .collect::<anyhow::Result<_>>()?;
     Ok(figures.into_iter().flatten().collect())
 }
 
-/// Per rolling run: unit, motion and its events table.
-type RollingEvents = Vec<(String, String, Arc<Table>)>;
+/// One rolling run: its unit, motion, figure name and events table.
+struct RollingRun {
+    unit: String,
+    motion: String,
+    figure_stem: String,
+    table: Arc<Table>,
+}
 
-/// The event tables of a `simulate_rolling` dataset with their unit and motion, or None when
-/// the input is something else (told by the stage type its files record).
-fn rolling_events(ctx: &StageContext<'_>, input: &StageInput) -> anyhow::Result<Option<RollingEvents>> {
+type RollingEvents = Vec<RollingRun>;
+
+/// The event tables of a `simulate_rolling` dataset with their unit and motion.
+fn rolling_events(ctx: &StageContext<'_>, input: &StageInput) -> anyhow::Result<RollingEvents> {
     let mut out = Vec::new();
     for part in input.parts() {
         let table = ctx.read_table(part)?;
-        if table.metadata.get("shakeflow.stage_type").map(String::as_str) != Some("simulate_rolling") {
-            return Ok(None);
-        }
         let facts: serde_json::Value =
             serde_json::from_str(table.metadata.get("shakeflow.rolling").map_or("{}", |s| s))?;
         let unit = facts["unit"].as_str().unwrap_or("cart").to_string();
-        out.push((unit, motion_of(part), table));
+        let figure_stem = figure_stem(&part.partition, &unit);
+        out.push(RollingRun { unit, motion: motion_of(part), figure_stem, table });
     }
-    Ok(Some(out))
+    Ok(out)
 }
 
 /// One row per rolling unit and motion, in input order.
-fn summarize_rolling(rolling: &[(String, String, Arc<Table>)]) -> anyhow::Result<Table> {
+fn summarize_rolling(rolling: &[RollingRun]) -> anyhow::Result<Table> {
     let (mut units, mut motions, mut peaks, mut yaws, mut flips, mut breakaways) =
         (vec![], vec![], vec![], vec![], vec![], vec![]);
-    for (unit, motion, table) in rolling {
+    for RollingRun { unit, motion, table, .. } in rolling {
         let kinds = strings(table, "event")?;
         let time = table.f64_column("time_s").ok_or_else(|| anyhow::anyhow!("rolling events without time_s"))?;
         let at = |kind: &str, column: &str| -> anyhow::Result<Option<f64>> {
@@ -370,4 +699,27 @@ fn summarize(
         data: ColumnData::OptF64(rows.iter().map(|(_, e)| e.as_ref().map(|e| e.2)).collect()),
     });
     Ok(table)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn transfer_functions_are_drawn_in_the_band_their_stage_searched() {
+        let mut spectra = Table::new();
+        spectra.metadata.insert("shakeflow.params".into(), r#"{"band_max_hz":8.0,"band_min_hz":1.5}"#.into());
+        assert_eq!(figure_band(&spectra), (1.5, 8.0));
+        spectra.metadata.insert("shakeflow.params".into(), r#"{"band_max_hz":null}"#.into());
+        assert_eq!(figure_band(&spectra), (0.0, 20.0));
+    }
+
+    #[test]
+    fn titles_name_floors_units_and_motions_as_people_do() {
+        assert_eq!(floor_name("floor4_ax_mps2"), "floor 4");
+        assert_eq!(floor_name("ax_mps2"), "ax_mps2");
+        let partition = vec![("motion".to_string(), "FB-4".to_string()), ("floor".to_string(), "5".to_string())];
+        assert_eq!(super::super::record_title(&partition, "x"), "FB-4, floor 5");
+        assert_eq!(super::super::record_title(&Vec::new(), "record.csv"), "record.csv");
+    }
 }

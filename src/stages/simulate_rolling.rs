@@ -7,7 +7,7 @@ use std::path::Path;
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
 
-use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::physics::rolling::{
     self, simulate, Cart, EventKind, Excitation, Friction, FrictionLaw, LateralSlip, Method, Options, Response,
     Stribeck,
@@ -214,7 +214,9 @@ impl Stage for SimulateRolling {
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
             let table = ctx.read_table(part)?;
-            let outputs = setup.simulate(&table, ctx.params).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
+            let record = super::record_title(&part.partition, &part.label);
+            let outputs =
+                setup.simulate(&table, ctx.params, &record).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
             let (mut trajectory, mut events, png) = outputs;
             for t in [&mut trajectory, &mut events] {
                 t.metadata.extend(super::record_provenance(part));
@@ -222,10 +224,7 @@ impl Stage for SimulateRolling {
             ctx.sink.write("trajectory", &part.partition, trajectory)?;
             ctx.sink.write("events", &part.partition, events)?;
             if let Some(png) = png {
-                let name = match partition_path(&part.partition) {
-                    p if p.is_empty() => setup.unit.clone(),
-                    p => p.replace('/', "_"),
-                };
+                let name = super::figure_stem(&part.partition, &setup.unit);
                 ctx.sink.write_file("figures", &format!("{name}.png"), &png)?;
             }
             Ok(())
@@ -395,7 +394,13 @@ impl Setup {
         Ok(Setup { unit, cart, friction, options, resolved })
     }
 
-    fn simulate(&self, table: &Table, params: &Params) -> Result<(Table, Table, Option<Vec<u8>>), String> {
+    /// Runs the model on one record (`record`: how the figure's title names it).
+    fn simulate(
+        &self,
+        table: &Table,
+        params: &Params,
+        record: &str,
+    ) -> Result<(Table, Table, Option<Vec<u8>>), String> {
         let time = table.f64_column(TIME_COLUMN).ok_or("no time_s column")?;
         let column = |name: &str| {
             table.f64_column(name).ok_or_else(|| {
@@ -425,7 +430,7 @@ impl Setup {
         let trajectory = self.trajectory(time, ax, ay, &response, x_name, y_name);
         let events = self.events(time, &response);
         let png = if params.bool_of("figure") {
-            Some(self.figure(time, ax, ay, &response).map_err(|e| format!("drawing the figure: {e}"))?)
+            Some(self.figure(record, time, ax, ay, &response).map_err(|e| format!("drawing the figure: {e}"))?)
         } else {
             None
         };
@@ -575,9 +580,10 @@ impl Setup {
         t
     }
 
-    fn figure(&self, time: &[f64], ax: &[f64], ay: &[f64], r: &Response) -> Result<Vec<u8>, String> {
-        use crate::plot::{render_png_with_side, Marker, Panel, Series};
-        let degrees = |v: &[f64]| v.iter().map(|x| x.to_degrees()).collect::<Vec<f64>>();
+    fn figure(&self, record: &str, time: &[f64], ax: &[f64], ay: &[f64], r: &Response) -> Result<Vec<u8>, String> {
+        use crate::plot::{render_png_with_side, unwrap_degrees, Marker, Panel, Series};
+        // Casters swivel through whole turns: unwrapped, a turn past ±180° is no jump.
+        let degrees = |v: &[f64]| unwrap_degrees(&v.iter().map(|x| x.to_degrees()).collect::<Vec<f64>>());
         let yaw = degrees(&r.yaw_rad);
         let deltas: Vec<Vec<f64>> = r.delta_rad.iter().map(|d| degrees(d)).collect();
         let flips: Vec<Marker> = r
@@ -594,19 +600,16 @@ impl Setup {
             .map(|e| Marker { x: e.time_s, label: "breakaway".into() })
             .collect();
         let wheel = ["δ1 front left", "δ2 rear left", "δ3 rear right", "δ4 front right"];
-        let mut angle_series = vec![Series { label: "θ platform".into(), x: time, y: &yaw }];
+        let mut angle_series = vec![Series::new("θ platform", time, &yaw)];
         for (i, d) in deltas.iter().enumerate() {
-            angle_series.push(Series { label: wheel[i].into(), x: time, y: d });
+            angle_series.push(Series::new(wheel[i], time, d));
         }
         let panels = [
             Panel {
                 title: "floor acceleration (input)".into(),
                 x_label: "time [s]".into(),
                 y_label: "[m/s^2]".into(),
-                series: vec![
-                    Series { label: "X (E-W)".into(), x: time, y: ax },
-                    Series { label: "Y (N-S)".into(), x: time, y: ay },
-                ],
+                series: vec![Series::new("X (E-W)", time, ax), Series::new("Y (N-S)", time, ay)],
                 markers: breakaway,
                 log_y: false,
                 spans: Vec::new(),
@@ -615,16 +618,13 @@ impl Setup {
                 title: "platform displacement relative to the floor".into(),
                 x_label: "time [s]".into(),
                 y_label: "[m]".into(),
-                series: vec![
-                    Series { label: "x".into(), x: time, y: &r.x_m },
-                    Series { label: "y".into(), x: time, y: &r.y_m },
-                ],
+                series: vec![Series::new("x", time, &r.x_m), Series::new("y", time, &r.y_m)],
                 markers: Vec::new(),
                 log_y: false,
                 spans: Vec::new(),
             },
             Panel {
-                title: "platform yaw and caster steering angles (dashed: caster flips, by caster)".into(),
+                title: "platform yaw and caster steering angles, unwrapped (dashed: caster flips, by caster)".into(),
                 x_label: "time [s]".into(),
                 y_label: "[deg]".into(),
                 series: angle_series,
@@ -637,7 +637,7 @@ impl Setup {
             title: "x–y orbit of the platform centre".into(),
             x_label: "x [m]".into(),
             y_label: "y [m]".into(),
-            series: vec![Series { label: String::new(), x: &r.x_m, y: &r.y_m }],
+            series: vec![Series::new(String::new(), &r.x_m, &r.y_m)],
             markers: Vec::new(),
             log_y: false,
             spans: Vec::new(),
@@ -645,7 +645,7 @@ impl Setup {
         let (peak, _) = r.peak_displacement();
         let (peak_yaw, _) = r.peak_yaw();
         let title = format!(
-            "{}: peak displacement {:.3} m, peak yaw {:.1}°, caster flips {:?}",
+            "{} on unlocked casters under {record}: peak displacement {:.3} m, peak yaw {:.1}°, caster flips {:?}",
             self.unit,
             peak,
             peak_yaw.to_degrees(),

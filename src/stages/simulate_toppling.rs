@@ -6,7 +6,7 @@ use std::path::Path;
 
 use rayon::prelude::*;
 
-use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::equipment;
 use crate::physics::rocking::{self, Anchorage, Block, Excitation, IsolatedBase, Method, Options, Response, Shape};
@@ -92,11 +92,13 @@ impl Stage for SimulateToppling {
                 t.metadata.extend(super::record_provenance(part));
                 t.metadata.insert("shakeflow.rocking".into(), facts.clone());
             }
-            let name = match partition_path(&part.partition) {
-                p if p.is_empty() => "response".to_string(),
-                p => p.replace('/', "_"),
-            };
-            let png = figure(&name, &floor, &response).map_err(anyhow::Error::msg)?;
+            let name = super::figure_stem(&part.partition, "response");
+            let title = format!(
+                "{}: rocking model under {}",
+                unit_name(ctx.params, ctx.stage_name),
+                super::record_title(&part.partition, &part.label)
+            );
+            let png = figure(&title, &floor, &response).map_err(anyhow::Error::msg)?;
             ctx.sink.write_file("figures", &format!("{name}.png"), &png)?;
             ctx.sink.write("events", &part.partition, events)?;
             ctx.sink.write("response", &part.partition, series)
@@ -225,6 +227,11 @@ pub fn model_from_params(params: &Params, equipment_file: Option<&Path>) -> Resu
     Ok((block, options))
 }
 
+/// The unit a rocking stage models, as titles name it: its preset, else the stage's name.
+pub fn unit_name<'a>(params: &'a Params, stage: &'a str) -> &'a str {
+    params.get("preset").and_then(|v| v.as_str()).unwrap_or(stage)
+}
+
 /// The derived quantities a reader needs to interpret the results (artifact metadata).
 pub fn model_facts(block: &Block, options: &Options) -> serde_json::Value {
     serde_json::json!({
@@ -343,7 +350,7 @@ fn events_table(r: &Response) -> Table {
     t
 }
 
-fn figure(name: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
+fn figure(title: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
     use crate::plot::{render_png, Marker, Panel, Series};
     let mut markers: Vec<Marker> = r
         .events
@@ -361,8 +368,8 @@ fn figure(name: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
             x_label: "time [s]".into(),
             y_label: "acceleration [m/s^2]".into(),
             series: vec![
-                Series { label: "floor horizontal".into(), x: &floor.time, y: &floor.horizontal },
-                Series { label: "top (model)".into(), x: &floor.time, y: &r.top_ax_mps2 },
+                Series::new("floor horizontal", &floor.time, &floor.horizontal),
+                Series::new("top (model)", &floor.time, &r.top_ax_mps2).model(),
             ],
             markers: Vec::new(),
             log_y: false,
@@ -375,11 +382,11 @@ fn figure(name: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
             },
             x_label: "time [s]".into(),
             y_label: "theta [rad]".into(),
-            series: vec![Series { label: "theta".into(), x: &floor.time, y: &r.theta_rad }],
+            series: vec![Series::new("theta", &floor.time, &r.theta_rad)],
             markers,
             log_y: false,
             spans: Vec::new(),
         },
     ];
-    render_png(&format!("simulate_toppling: {name}"), &panels, 1200, 800)
+    render_png(title, &panels, 1200, 800)
 }

@@ -22,7 +22,7 @@ static INFO: StageInfo = StageInfo {
     outputs: &[
         OutputInfo { name: "runs", description: "every run: record, level, scale, im, overturned, overturn_time_s, overturn_side, max_abs_theta_rad, n_impacts", kind: OutputKind::Table },
         OutputInfo { name: "fragility", description: "one row: im_measure, median, beta, log_likelihood, n_runs, n_overturned, note", kind: OutputKind::Table },
-        OutputInfo { name: "figures", description: "fragility.png: the fitted curve with the runs and the overturned fraction per level", kind: OutputKind::Files },
+        OutputInfo { name: "figures", description: "fragility.png: the fitted curve, every run at 0 (stood) or 1 (overturned) and the overturned fraction per level; pfa in g", kind: OutputKind::Files },
     ],
     params: rocking_params![
         ParamSpec { name: "im", kind: ParamKind::Choice(&["pfa", "pfv"]), default: Some("\"pfa\""), unit: "", description: "intensity measure: peak floor acceleration (m/s^2) or peak floor velocity (m/s, trapezoidal integral of the horizontal record)", range: None },
@@ -201,7 +201,12 @@ impl Stage for TopplingFragility {
             data: ColumnData::Str(vec![note.clone()]),
         });
 
-        let png = figure(&ims, &overturned, fit.as_ref(), im_name, unit, &note).map_err(anyhow::Error::msg)?;
+        let title = format!(
+            "{}: probability of overturning ({} runs)",
+            super::simulate_toppling::unit_name(ctx.params, ctx.stage_name),
+            ims.len()
+        );
+        let png = figure(&title, &ims, &overturned, fit.as_ref(), by_velocity, &note).map_err(anyhow::Error::msg)?;
         ctx.sink.write_file("figures", "fragility.png", &png)?;
         ctx.sink.write("runs", &Vec::new(), table)?;
         ctx.sink.write("fragility", &Vec::new(), summary)
@@ -262,14 +267,21 @@ fn describe(outcome: &FitOutcome, unit: &str) -> (Option<LognormalFit>, String) 
 }
 
 fn figure(
+    title: &str,
     ims: &[f64],
     overturned: &[bool],
     fit: Option<&LognormalFit>,
-    name: &str,
-    unit: &str,
+    by_velocity: bool,
     note: &str,
 ) -> Result<Vec<u8>, String> {
     use crate::plot::{render_png, Panel, Series};
+    // Accelerations are read in g on a fragility curve.
+    let (x_label, per_unit) = if by_velocity {
+        ("peak floor velocity [m/s]", 1.0)
+    } else {
+        ("peak floor acceleration [g]", crate::units::G0)
+    };
+    let ims: Vec<f64> = ims.iter().map(|im| im / per_unit).collect();
     // Overturned fraction per distinct intensity level (levels repeat across records when
     // `im_levels` is used; with `scales`, every run is its own point).
     let mut levels: Vec<(f64, bool)> = ims.iter().copied().zip(overturned.iter().copied()).collect();
@@ -288,18 +300,26 @@ fn figure(
     }
     let (lo, hi) = (levels[0].0, levels[levels.len() - 1].0);
     let curve_x: Vec<f64> = (0..=200).map(|i| lo + (hi - lo) * i as f64 / 200.0).collect();
-    let curve_y: Vec<f64> = curve_x.iter().map(|&x| fit.map_or(f64::NAN, |f| f.probability(x))).collect();
+    let curve_y: Vec<f64> = curve_x.iter().map(|&x| fit.map_or(f64::NAN, |f| f.probability(x * per_unit))).collect();
+    let runs: Vec<f64> = overturned.iter().map(|&o| if o { 1.0 } else { 0.0 }).collect();
+    let panel_title = match fit {
+        Some(f) if by_velocity => format!("lognormal fit: median {:.3} m/s, β {:.2}", f.median, f.beta),
+        Some(f) => format!("lognormal fit: median {:.3} g, β {:.2}", f.median / per_unit, f.beta),
+        None => note.to_string(),
+    };
     let panels = [Panel {
-        title: note.to_string(),
-        x_label: format!("{name} [{unit}]"),
+        title: panel_title,
+        x_label: x_label.into(),
         y_label: "P(overturn)".into(),
         series: vec![
-            Series { label: "lognormal fit".into(), x: &curve_x, y: &curve_y },
-            Series { label: "overturned fraction".into(), x: &points_x, y: &points_y },
+            // The runs first, so the curve and each level's fraction stay in view over them.
+            Series::new("runs (1: overturned, 0: stood)", &ims, &runs).points(),
+            Series::new("lognormal fit", &curve_x, &curve_y),
+            Series::new("overturned fraction per level", &points_x, &points_y).points(),
         ],
         markers: Vec::new(),
         log_y: false,
         spans: Vec::new(),
     }];
-    render_png("toppling fragility", &panels, 1000, 600)
+    render_png(title, &panels, 1000, 600)
 }

@@ -51,6 +51,13 @@ fn demo_pipeline_recovers_the_archive_truth() {
         let png = std::fs::read(runs.join(format!("report/figures/{unit}.png"))).unwrap();
         assert!(png.starts_with(b"\x89PNG\r\n\x1a\n") && png.len() > 10_000, "{unit}.png is not a drawn PNG");
     }
+    // The study report in a browser: every unit's section, every figure loaded (the report's own
+    // 7, the rocking units' 36 and rolling units' 40 per motion, the fragility and the 5 cases).
+    crate::report_html::assert_page_shows(
+        &runs.join("report/index.html"),
+        &["UI3", "MC2", "PB1", "PB2", "PS1", "PS2", "WSU1"],
+        7 + 36 + 40 + 1 + 5,
+    );
     let shown = common::shakeflow(&["show", "runs/demo/report/summary/data.parquet"], work.path());
     assert!(common::stdout(&shown).contains("FB-4"), "{}", common::stdout(&shown));
     rolling_results_exist_and_are_sane(&runs);

@@ -25,6 +25,7 @@ mod mutation_harness;
 mod never_lose_data;
 mod pipeline_runs;
 mod record_formats;
+mod report_html;
 mod rocking_demo_cases;
 mod rocking_isolated;
 mod rocking_published;

@@ -371,7 +371,7 @@ fn pending_files(stage: &PlannedStage, unit: &Unit, old: Option<&UnitLock>) -> P
         .info()
         .outputs
         .iter()
-        .filter(|o| o.kind != OutputKind::Files && o.name != FLAGGED)
+        .filter(|o| matches!(o.kind, OutputKind::Table | OutputKind::TimeSeries) && o.name != FLAGGED)
         .map(|o| {
             let inner = if partition.is_empty() { DATA_FILE.to_string() } else { format!("{partition}/{DATA_FILE}") };
             pending(format!("{}/{inner}", o.name))
