@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use indexmap::IndexMap;
 
 use super::params::{self, Params};
-use super::spec::{ColumnSpec, PipelineFile, SourceSpec};
+use super::spec::{ColumnSpec, PipelineFile, RecordFormat, SourceSpec};
 use crate::error::{did_you_mean_hint, UserError};
 use crate::stages::{self, InputKind, Stage};
 
@@ -50,9 +50,18 @@ pub struct Plan {
 }
 
 impl Plan {
-    pub fn new(file: PipelineFile) -> Result<Plan, UserError> {
+    pub fn new(mut file: PipelineFile) -> Result<Plan, UserError> {
         for (name, source) in &file.spec.inputs {
             check_source(&file, name, source)?;
+        }
+        let tables = file
+            .spec
+            .inputs
+            .iter()
+            .map(|(name, source)| calibration_table(&file, name, source))
+            .collect::<Result<Vec<_>, _>>()?;
+        for (source, table) in file.spec.inputs.values_mut().zip(tables) {
+            source.calibration_table = table;
         }
         let mut planned = IndexMap::new();
         for (name, spec) in &file.spec.stages {
@@ -138,6 +147,29 @@ pub fn param_files(
     Ok(files)
 }
 
+/// The rows of a source's sensitivity table (`calibration:`), read now: they become part of the
+/// source's spec, and so of its hash.
+fn calibration_table(
+    file: &PipelineFile,
+    name: &str,
+    source: &SourceSpec,
+) -> Result<Vec<crate::io::records::Calibration>, UserError> {
+    let Some(table) = &source.calibration else { return Ok(Vec::new()) };
+    let path = file.base_dir().join(table);
+    if !path.is_file() {
+        return Err(file
+            .error_at(&["inputs", name, "calibration"], format!("source `{name}`: no calibration table `{}`", path.display()))
+            .hint("the path is relative to the pipeline file's folder; the table is CSV `channel,sensitivity,unit,offset`"));
+    }
+    crate::io::records::read_calibration(&path).map_err(|e| UserError {
+        file: Some(e.path),
+        line: e.line,
+        column: e.column,
+        message: e.message,
+        hint: Some(e.hint),
+    })
+}
+
 fn check_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<(), UserError> {
     // Constant partitions become folders `key=value` of every dataset made from this source.
     for (key, value) in &source.partition {
@@ -181,6 +213,23 @@ fn check_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<
             return Err(
                 file.error_at(&["inputs", name, "dt"], format!("`dt` must be a positive number of seconds, not {dt}"))
             );
+        }
+    }
+    let names_line = source.header_lines + usize::from(source.column_names);
+    for (key, row) in [("units_row", source.units_row), ("description_row", source.description_row)] {
+        let Some(row) = row else { continue };
+        if !matches!(source.format, RecordFormat::Delimited | RecordFormat::Csv | RecordFormat::Tsv) {
+            return Err(file
+                .error_at(
+                    &["inputs", name, key],
+                    format!("`{key}` applies to delimited text, not `{}`", source.format.name()),
+                )
+                .hint("the other formats state their units in their headers"));
+        }
+        if row <= names_line {
+            return Err(file
+                .error_at(&["inputs", name, key], format!("`{key}: {row}` is not below the column-name row (line {names_line})"))
+                .hint(format!("`{key}` is the file's line number (1-based); `header_lines` counts the lines before the column names")));
         }
     }
     if let Some(d) = &source.delimiter {

@@ -21,6 +21,7 @@ mod hostile_input;
 mod interop;
 mod load_shared_records;
 mod mutation_harness;
+mod nees_archive;
 mod never_lose_data;
 mod pipeline_runs;
 mod record_formats;

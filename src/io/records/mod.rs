@@ -7,6 +7,7 @@
 //! line and column where that makes sense, and a hint on the likely cause.
 
 mod at2;
+mod calibration;
 mod cosmos;
 mod delimited;
 mod dmg;
@@ -16,6 +17,7 @@ mod fixed;
 mod formats_tests;
 mod geonet;
 mod knet;
+mod lvm;
 mod renadic;
 pub mod roles;
 mod simcenter;
@@ -24,12 +26,14 @@ mod smc;
 mod tests;
 
 pub use at2::{parse_at2, read_at2};
+pub use calibration::{parse_calibration, read_calibration, Calibration};
 pub use cosmos::{parse_cosmos, read_cosmos};
 pub use delimited::{parse_delimited, read_delimited, DelimitedOptions};
 pub use dmg::{parse_dmg, read_dmg};
 pub use esm::{parse_esm, read_esm};
 pub use geonet::{parse_geonet, read_geonet};
 pub use knet::{parse_knet, read_knet};
+pub use lvm::{parse_lvm, read_lvm};
 pub use renadic::{parse_renadic_v1, read_renadic_v1};
 pub use simcenter::{parse_simcenter_json, read_simcenter_json};
 pub use smc::{parse_smc, read_smc};
@@ -157,6 +161,9 @@ pub fn sniff_format(path: &Path) -> Option<&'static str> {
     if upper(0).contains("PEER") || (upper(2).contains("UNITS OF") && upper(3).contains("NPTS")) {
         return Some("at2");
     }
+    if upper(0).starts_with("LABVIEW MEASUREMENT") {
+        return Some("lvm");
+    }
     if head.trim_start().starts_with('{') {
         return Some("simcenter_json");
     }
@@ -165,9 +172,11 @@ pub fn sniff_format(path: &Path) -> Option<&'static str> {
         "at2" => Some("at2"),
         "v1" => Some("renadic_v1"),
         "json" => Some("simcenter_json"),
-        "csv" | "tsv" | "tab" | "txt" => Some("delimited"),
+        // NEES sensor data: `.asc` (ESM's `.asc` is recognised by its content above).
+        "csv" | "tsv" | "tab" | "txt" | "asc" => Some("delimited"),
         "v0c" | "v1c" | "v2c" => Some("cosmos"),
         "smc" => Some("smc"),
+        "lvm" => Some("lvm"),
         "raw" => Some("dmg"),
         "v1a" | "v2a" => Some("geonet"),
         "ew" | "ns" | "ud" | "ew1" | "ns1" | "ud1" | "ew2" | "ns2" | "ud2" => Some("knet"),
