@@ -115,19 +115,7 @@ fn parse(spec: &SourceSpec, part: &InputPart) -> Result<RawRecord, UserError> {
     }
     let bytes = records::read_bytes(path).map_err(user_error)?;
     records::unchanged(path, &part.hash, &bytes).map_err(user_error)?;
-    let delimited = |delimiter: Option<u8>| DelimitedOptions {
-        delimiter,
-        header_lines: spec.header_lines,
-        has_column_names: spec.column_names,
-        units_row: spec.units_row,
-        description_row: spec.description_row,
-    };
-    let delimiter = match spec.delimiter.as_deref() {
-        None => None,
-        Some("whitespace") => Some(b' '),
-        Some("\\t") => Some(b'\t'),
-        Some(d) => d.bytes().next(),
-    };
+    let delimited = delimited_options(spec).unwrap_or_default();
     match spec.format {
         RecordFormat::At2 => records::parse_at2(path, &bytes),
         RecordFormat::RenadicV1 => records::parse_renadic_v1(path, &bytes),
@@ -139,12 +127,35 @@ fn parse(spec: &SourceSpec, part: &InputPart) -> Result<RawRecord, UserError> {
         RecordFormat::Esm => records::parse_esm(path, &bytes),
         RecordFormat::Geonet => records::parse_geonet(path, &bytes),
         RecordFormat::Lvm => records::parse_lvm(path, &bytes),
-        RecordFormat::Csv => records::parse_delimited(path, &bytes, &delimited(delimiter.or(Some(b',')))),
-        RecordFormat::Tsv => records::parse_delimited(path, &bytes, &delimited(delimiter.or(Some(b'\t')))),
-        RecordFormat::Delimited => records::parse_delimited(path, &bytes, &delimited(delimiter)),
+        RecordFormat::Csv | RecordFormat::Tsv | RecordFormat::Delimited => {
+            records::parse_delimited(path, &bytes, &delimited)
+        }
         RecordFormat::Frames | RecordFormat::ControlPoints | RecordFormat::Case => unreachable!("refused above"),
     }
     .map_err(user_error)
+}
+
+/// How a delimited source's files parse; None for the other formats.
+pub fn delimited_options(spec: &SourceSpec) -> Option<DelimitedOptions> {
+    let delimiter = match spec.delimiter.as_deref() {
+        None => None,
+        Some("whitespace") => Some(b' '),
+        Some("\\t") => Some(b'\t'),
+        Some(d) => d.bytes().next(),
+    };
+    let delimiter = match spec.format {
+        RecordFormat::Csv => delimiter.or(Some(b',')),
+        RecordFormat::Tsv => delimiter.or(Some(b'\t')),
+        RecordFormat::Delimited => delimiter,
+        _ => return None,
+    };
+    Some(DelimitedOptions {
+        delimiter,
+        header_lines: spec.header_lines,
+        has_column_names: spec.column_names,
+        units_row: spec.units_row,
+        description_row: spec.description_row,
+    })
 }
 
 /// Reads one file as the source spec says; every refusal names the file and, where it can, the line.

@@ -10,7 +10,7 @@ use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageConte
 use crate::error::UserError;
 use crate::io::equipment;
 use crate::physics::rocking::{self, Anchorage, Block, Excitation, IsolatedBase, Method, Options, Response, Shape};
-use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
+use crate::pipeline::params::{ParamError, ParamKind, ParamSpec, Params, ParamsExt};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct SimulateToppling;
@@ -68,6 +68,11 @@ static INFO: StageInfo = StageInfo {
 impl Stage for SimulateToppling {
     fn info(&self) -> &'static StageInfo {
         &INFO
+    }
+
+    /// `horizontal` and `vertical` must be columns of the floor records.
+    fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {
+        (None, floor_column_errors(params, input))
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
@@ -378,4 +383,11 @@ fn figure(name: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
         },
     ];
     render_png(&format!("simulate_toppling: {name}"), &panels, 1200, 800)
+}
+
+/// The floor columns the rocking stages read (`horizontal`, `vertical`) that `input` lacks.
+pub fn floor_column_errors(params: &Params, input: Option<&[String]>) -> Vec<ParamError> {
+    let Some(input) = input else { return Vec::new() };
+    let wanted = [("horizontal", Some(params.str_of("horizontal"))), ("vertical", params.opt_str("vertical"))];
+    wanted.into_iter().filter_map(|(key, column)| super::require_column(key, column?, input).err()).collect()
 }

@@ -39,4 +39,5 @@ mod toppling_demo_archive;
 mod toppling_demo_cases;
 mod toppling_robustness;
 mod toppling_stages;
+mod validate_all;
 mod welch_scipy;
