@@ -365,21 +365,51 @@ pub fn main() -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Validate { pipeline, skip_inputs } => {
-            let plan = Plan::new(PipelineFile::read(&pipeline)?)?;
+            // Every error is reported, not only the first.
+            let refused = |errors: Vec<crate::error::UserError>| {
+                for e in &errors {
+                    eprintln!("error: {e}");
+                }
+                anyhow::anyhow!("{}: {} error(s)", pipeline.display(), errors.len())
+            };
+            let plan = Plan::checked(PipelineFile::read(&pipeline)?).map_err(refused)?;
             let mut input_files: Vec<PathBuf> = plan.stages.values().flat_map(|s| s.files.values().cloned()).collect();
+            let mut errors = Vec::new();
             if !skip_inputs {
+                let mut columns = BTreeMap::new();
                 for (name, source) in &plan.file.spec.inputs {
                     let folders = source.format == RecordFormat::Frames;
-                    let files = sources::resolve(&plan.file.base_dir(), &source.path, &source.partition, folders)
-                        .map_err(|e| {
-                            plan.file
-                                .error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message))
-                                .hint(e.hint.unwrap_or_default())
-                        })?;
+                    let files = match sources::resolve(&plan.file.base_dir(), &source.path, &source.partition, folders)
+                    {
+                        Ok(files) => files,
+                        Err(e) => {
+                            errors.push(
+                                plan.file
+                                    .error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message))
+                                    .hint(e.hint.unwrap_or_default()),
+                            );
+                            continue;
+                        }
+                    };
                     println!("source {name:<16} {} file(s)", files.len());
                     input_files.extend(files.iter().map(|f| f.path.clone()));
-                    check_first_record(&plan, name, source, files.first())?;
+                    match check_first_record(&plan, name, source, files.first()) {
+                        Ok(Some(names)) => {
+                            columns.insert(name.clone(), names);
+                        }
+                        Ok(None) => {}
+                        Err(e) => errors.push(e),
+                    }
+                    if source.format.is_record() {
+                        errors.extend(
+                            files.iter().skip(1).filter_map(|f| check_record_header(name, source, &f.path).err()),
+                        );
+                    }
                 }
+                errors.extend(plan.column_errors(&columns));
+            }
+            if !errors.is_empty() {
+                return Err(refused(errors));
             }
             crate::pipeline::ownership::check_output_dir(&plan.file, &input_files)?;
             let output_dir = plan.file.output_dir();
@@ -641,17 +671,51 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
     Ok(())
 }
 
+/// `validate`'s look at a record file past a source's first: its header (`records::check_header`),
+/// and for delimited text the columns the source names (`time_column`, `columns:`).
+fn check_record_header(name: &str, source: &SourceSpec, path: &Path) -> Result<(), crate::error::UserError> {
+    let in_source = |e: crate::io::records::ParseError| {
+        let mut e = crate::error::UserError {
+            file: Some(e.path),
+            line: e.line,
+            column: e.column,
+            message: e.message,
+            hint: Some(e.hint),
+        };
+        e.message = format!("source `{name}`: {}", e.message);
+        e
+    };
+    let options = stages::load::delimited_options(source);
+    let Some(names) =
+        crate::io::records::check_header(path, &source.format.name(), options.as_ref()).map_err(in_source)?
+    else {
+        return Ok(());
+    };
+    let wanted = source.time_column.iter().map(String::as_str).chain(source.columns.values().map(|c| c.file_column()));
+    for column in wanted {
+        if !names.iter().any(|n| n == column) {
+            let suggestion = crate::error::did_you_mean_hint(column, names.iter().map(String::as_str));
+            return Err(crate::error::UserError::new(format!("source `{name}`: the file has no column `{column}`"))
+                .in_file(path)
+                .at(source.column_names.then_some((source.header_lines + 1, 1)))
+                .hint(format!("{suggestion}its columns are: {}", names.join(", "))));
+        }
+    }
+    Ok(())
+}
+
 /// `validate` reads a record source's first file as `load` would, so a misspelt column, a wrong
-/// `header_lines` or unit shows now rather than in the middle of a run.
+/// `header_lines` or unit shows now rather than in the middle of a run; the columns `load` makes
+/// of it are returned (None: not a record source, or no file).
 fn check_first_record(
     plan: &Plan,
     name: &str,
     source: &SourceSpec,
     first: Option<&sources::MatchedFile>,
-) -> Result<(), crate::error::UserError> {
-    let Some(file) = first else { return Ok(()) };
+) -> Result<Option<Vec<String>>, crate::error::UserError> {
+    let Some(file) = first else { return Ok(None) };
     if !source.format.is_record() {
-        return Ok(());
+        return Ok(None);
     }
     let part = InputPart {
         partition: file.partition.clone(),
@@ -659,27 +723,32 @@ fn check_first_record(
         label: file_label(&file.path),
         hash: String::new(),
     };
-    stages::load::load_record(source, &part).map(|_| ()).map_err(|mut e| {
-        let position = e.message.split('`').nth(1).and_then(|column| {
-            let output = source.columns.iter().find(|(_, c)| c.file_column() == column).map(|(out, _)| out.as_str());
-            match output {
-                Some(out) => crate::pipeline::locate::key_position(&plan.file.text, &["inputs", name, "columns", out]),
-                None if source.time_column.as_deref() == Some(column) => {
-                    crate::pipeline::locate::key_position(&plan.file.text, &["inputs", name, "time_column"])
+    stages::load::load_record(source, &part)
+        .map(|table| Some(table.column_names().into_iter().map(String::from).collect()))
+        .map_err(|mut e| {
+            let position = e.message.split('`').nth(1).and_then(|column| {
+                let output =
+                    source.columns.iter().find(|(_, c)| c.file_column() == column).map(|(out, _)| out.as_str());
+                match output {
+                    Some(out) => {
+                        crate::pipeline::locate::key_position(&plan.file.text, &["inputs", name, "columns", out])
+                    }
+                    None if source.time_column.as_deref() == Some(column) => {
+                        crate::pipeline::locate::key_position(&plan.file.text, &["inputs", name, "time_column"])
+                    }
+                    None => None,
                 }
-                None => None,
+            });
+            e.message = format!("source `{name}`, read as `load` would: {}", e.message);
+            if let Some((line, column)) = position {
+                e.hint = Some(format!(
+                    "{} (the column is named at {}:{line}:{column})",
+                    e.hint.clone().unwrap_or_default(),
+                    plan.file.path.display()
+                ));
             }
-        });
-        e.message = format!("source `{name}`, read as `load` would: {}", e.message);
-        if let Some((line, column)) = position {
-            e.hint = Some(format!(
-                "{} (the column is named at {}:{line}:{column})",
-                e.hint.clone().unwrap_or_default(),
-                plan.file.path.display()
-            ));
-        }
-        e
-    })
+            e
+        })
 }
 
 /// What `shakeflow stage` writes in its output folder: the outputs, their MCAP twins, its marker.

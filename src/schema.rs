@@ -107,6 +107,9 @@ pub fn pipeline_schema() -> Value {
                     "header_lines": {"type": "integer", "minimum": 0, "default": 0, "description": "delimited: lines before the column-name row"},
                     "column_names": {"type": "boolean", "default": true, "description": "delimited: a column-name row follows the header lines"},
                     "delimiter": {"type": ["string", "null"], "description": "delimited: one character, \\t, or whitespace; absent: detected"},
+                    "units_row": {"type": ["integer", "null"], "minimum": 1, "description": "delimited: the file's line (1-based, below the column names) holding each column's unit, as NEES files have; converted to SI like declared units"},
+                    "description_row": {"type": ["integer", "null"], "minimum": 1, "description": "delimited: the file's line (1-based, below the column names) holding each column's description"},
+                    "calibration": {"type": ["string", "null"], "description": "raw data (V, mV, counts): a sensitivity table, CSV `channel,sensitivity,unit,offset`; a channel it names is (raw − offset) / sensitivity in `unit` (docs/formats.md)"},
                     "time_column": {"type": ["string", "null"], "description": "delimited: the time column"},
                     "time_unit": {"type": ["string", "null"], "description": "unit of the time column (s, ms)"},
                     "dt": {"type": ["number", "null"], "exclusiveMinimum": 0, "description": "sample interval [s] when the file has no time"},
@@ -154,10 +157,10 @@ mod tests {
 
     #[test]
     fn source_properties_match_the_parser() {
-        // `component_as` is left out of the serialised spec when absent (source hashes stay as
-        // they were): give it, so every key shows.
+        // `component_as`, `units_row`, `description_row` and `calibration` are left out of the
+        // serialised spec when absent (source hashes stay as they were): give them, so every key shows.
         let spec: SourceSpec =
-            serde_json::from_value(json!({"format": "at2", "path": "x", "component_as": "ax"})).unwrap();
+            serde_json::from_value(json!({"format": "at2", "path": "x", "component_as": "ax", "units_row": 3, "description_row": 2, "calibration": "c.csv"})).unwrap();
         let parsed: Vec<String> = serde_json::to_value(spec).unwrap().as_object().unwrap().keys().cloned().collect();
         let schema = pipeline_schema();
         let documented: Vec<String> =

@@ -53,6 +53,20 @@ pub fn conversion(unit: &str) -> Option<UnitConversion> {
         .map(|&(_, si_unit, factor)| UnitConversion { si_unit, factor })
 }
 
+/// Units of raw DAQ data (volts, counts): not physical quantities, they need a per-channel
+/// calibration (sensitivity and offset) before they mean anything.
+const RAW_UNITS: &[&str] = &["V", "volts", "volt", "mV", "counts", "count"];
+
+/// The raw unit `unit` names (`Volts` → `V`, `mV`, `counts`), or None for any other name.
+pub fn raw_unit(unit: &str) -> Option<&'static str> {
+    let wanted = normalise(unit);
+    RAW_UNITS.iter().find(|name| normalise(name) == wanted).map(|name| match *name {
+        "volts" | "volt" => "V",
+        "count" => "counts",
+        other => other,
+    })
+}
+
 pub fn known_units() -> Vec<&'static str> {
     UNITS.iter().map(|(name, _, _)| *name).collect()
 }
@@ -73,6 +87,15 @@ mod tests {
         assert!((conversion("g/10").unwrap().factor - 0.980665).abs() < 1e-15);
         assert_eq!(conversion("cm/s2").unwrap().factor, 0.01);
         assert!(conversion("furlong").is_none());
+    }
+
+    #[test]
+    fn raw_units_are_recognised_but_not_converted() {
+        assert_eq!(raw_unit("Volts"), Some("V"));
+        assert_eq!(raw_unit("mv"), Some("mV"));
+        assert_eq!(raw_unit(" Counts "), Some("counts"));
+        assert_eq!(raw_unit("g"), None);
+        assert!(conversion("V").is_none());
     }
 
     /// The US customary and CGS factors are exact by definition (NIST SP 811 B.8/B.9: 1 in =

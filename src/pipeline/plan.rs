@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use indexmap::IndexMap;
 
 use super::params::{self, Params};
-use super::spec::{ColumnSpec, PipelineFile, SourceSpec};
+use super::spec::{ColumnSpec, PipelineFile, RecordFormat, SourceSpec};
 use crate::error::{did_you_mean_hint, UserError};
 use crate::stages::{self, InputKind, Stage};
 
@@ -51,54 +51,87 @@ pub struct Plan {
 
 impl Plan {
     pub fn new(file: PipelineFile) -> Result<Plan, UserError> {
+        Plan::checked(file).map_err(|mut errors| errors.swap_remove(0))
+    }
+
+    /// [`Plan::new`] reporting every source and stage it refuses, not only the first (`validate`).
+    pub fn checked(mut file: PipelineFile) -> Result<Plan, Vec<UserError>> {
+        let mut errors = Vec::new();
         for (name, source) in &file.spec.inputs {
-            check_source(&file, name, source)?;
+            errors.extend(check_source(&file, name, source).err());
+        }
+        let tables: Vec<_> =
+            file.spec.inputs.iter().map(|(name, source)| calibration_table(&file, name, source)).collect();
+        for (source, table) in file.spec.inputs.values_mut().zip(tables) {
+            match table {
+                Ok(table) => source.calibration_table = table,
+                Err(e) => errors.push(e),
+            }
         }
         let mut planned = IndexMap::new();
         for (name, spec) in &file.spec.stages {
-            if let Some(problem) = super::paths::component_problem(name) {
-                return Err(file
-                    .error_at(&["stages", name], format!("stage name `{name}` cannot name a folder: {problem}"))
-                    .hint(
-                        "each stage writes the folder `<output_dir>/<stage name>`: use letters, digits, `_`, `-`, `.`",
-                    ));
+            match plan_stage(&file, name, spec) {
+                Ok(stage) => {
+                    planned.insert(name.clone(), stage);
+                }
+                Err(e) => errors.push(e),
             }
-            if name == super::lock::LOCK_FILE {
-                return Err(file
-                    .error_at(&["stages", name], format!("stage name `{name}` is the lockfile's name"))
-                    .hint("choose another stage name"));
-            }
-            let stage = stages::find(&spec.stage_type).ok_or_else(|| {
-                let suggestion = did_you_mean_hint(&spec.stage_type, stages::names());
-                file.error_at(&["stages", name, "type"], format!("unknown stage type `{}`", spec.stage_type)).hint(
-                    format!("{suggestion}known stage types: {} (see `shakeflow stages`)", stages::names().join(", ")),
-                )
-            })?;
-            let info = stage.info();
-            let given = spec.params.iter().map(|(k, v)| (k.as_str(), params::yaml_to_json(v)));
-            let located = |e: params::ParamError| {
-                let position = match &e.key {
-                    Some(key) => super::locate::key_position(&file.text, &["stages", name, "params", key]),
-                    None => super::locate::key_position(&file.text, &["stages", name]),
-                };
-                UserError::new(e.message).in_file(&file.path).at(position).hint(e.hint)
-            };
-            let params = params::normalize(info.params, info.name, given).map_err(located)?;
-            let files = param_files(info.params, &params, &file.base_dir(), info.name).map_err(located)?;
-            stage.check(&params, &file.base_dir()).map_err(located)?;
-            let inputs = resolve_inputs(&file, name, &spec.inputs, info.inputs)?;
-            planned.insert(
-                name.clone(),
-                PlannedStage { name: name.clone(), stage, params, inputs, select: spec.select.clone(), files },
-            );
         }
-        let order = topological_order(&file, &planned)?;
+        if !errors.is_empty() {
+            return Err(errors);
+        }
+        let order = topological_order(&file, &planned).map_err(|e| vec![e])?;
         let mut sorted = IndexMap::new();
         for name in order {
             let stage = planned.swap_remove(&name).expect("order lists planned stages");
             sorted.insert(name, stage);
         }
         Ok(Plan { file, stages: sorted })
+    }
+
+    /// Column names carried through the stages for `validate`: `sources` gives the columns of
+    /// each source's records (as `load` makes them from its first file); each stage says what its
+    /// first output holds, given the columns of its inputs (their union: a name in none of them is
+    /// a typo whatever record it meets). Every parameter naming a column its input lacks is
+    /// reported at its line; below a stage whose columns are not known, nothing is checked.
+    pub fn column_errors(&self, sources: &BTreeMap<String, Vec<String>>) -> Vec<UserError> {
+        let mut outputs: BTreeMap<&str, Option<Vec<String>>> = BTreeMap::new();
+        let mut errors = Vec::new();
+        for (name, stage) in &self.stages {
+            let mut union: Option<Vec<String>> = Some(Vec::new());
+            for input in &stage.inputs {
+                let columns = match input {
+                    InputRef::Source(source) => sources.get(source).cloned(),
+                    InputRef::Stage { stage: up, output } if Some(*output) == self.first_output(up) => {
+                        outputs.get(up.as_str()).cloned().flatten()
+                    }
+                    InputRef::Stage { .. } => None,
+                };
+                union = union.zip(columns).map(|(mut all, columns)| {
+                    all.extend(columns.into_iter().filter(|c| !all.contains(c)).collect::<Vec<_>>());
+                    all
+                });
+            }
+            let made = if stage.stage.info().inputs == InputKind::Sources {
+                union
+            } else {
+                let (made, refused) = stage.stage.output_columns(&stage.params, union.as_deref());
+                errors.extend(refused.into_iter().map(|e| {
+                    let position = e
+                        .key
+                        .as_deref()
+                        .and_then(|key| super::locate::key_position(&self.file.text, &["stages", name, "params", key]));
+                    UserError::new(e.message).in_file(&self.file.path).at(position).hint(e.hint)
+                }));
+                made
+            };
+            outputs.insert(name.as_str(), made);
+        }
+        errors
+    }
+
+    fn first_output(&self, stage: &str) -> Option<&'static str> {
+        self.stages.get(stage).and_then(|s| s.stage.info().outputs.first()).map(|o| o.name)
     }
 
     /// The stages that read `name`'s outputs, directly or not, plus `name` itself.
@@ -113,6 +146,39 @@ impl Plan {
         }
         set
     }
+}
+
+/// One stage of the file, checked: name, type, parameters, inputs.
+fn plan_stage(file: &PipelineFile, name: &str, spec: &super::spec::StageSpec) -> Result<PlannedStage, UserError> {
+    if let Some(problem) = super::paths::component_problem(name) {
+        return Err(file
+            .error_at(&["stages", name], format!("stage name `{name}` cannot name a folder: {problem}"))
+            .hint("each stage writes the folder `<output_dir>/<stage name>`: use letters, digits, `_`, `-`, `.`"));
+    }
+    if name == super::lock::LOCK_FILE {
+        return Err(file
+            .error_at(&["stages", name], format!("stage name `{name}` is the lockfile's name"))
+            .hint("choose another stage name"));
+    }
+    let stage = stages::find(&spec.stage_type).ok_or_else(|| {
+        let suggestion = did_you_mean_hint(&spec.stage_type, stages::names());
+        file.error_at(&["stages", name, "type"], format!("unknown stage type `{}`", spec.stage_type))
+            .hint(format!("{suggestion}known stage types: {} (see `shakeflow stages`)", stages::names().join(", ")))
+    })?;
+    let info = stage.info();
+    let given = spec.params.iter().map(|(k, v)| (k.as_str(), params::yaml_to_json(v)));
+    let located = |e: params::ParamError| {
+        let position = match &e.key {
+            Some(key) => super::locate::key_position(&file.text, &["stages", name, "params", key]),
+            None => super::locate::key_position(&file.text, &["stages", name]),
+        };
+        UserError::new(e.message).in_file(&file.path).at(position).hint(e.hint)
+    };
+    let params = params::normalize(info.params, info.name, given).map_err(located)?;
+    let files = param_files(info.params, &params, &file.base_dir(), info.name).map_err(located)?;
+    stage.check(&params, &file.base_dir()).map_err(located)?;
+    let inputs = resolve_inputs(file, name, &spec.inputs, info.inputs)?;
+    Ok(PlannedStage { name: name.to_string(), stage, params, inputs, select: spec.select.clone(), files })
 }
 
 /// The files `Path` parameters name, resolved against the pipeline's folder; each must exist.
@@ -136,6 +202,29 @@ pub fn param_files(
         files.insert(spec.name.to_string(), path);
     }
     Ok(files)
+}
+
+/// The rows of a source's sensitivity table (`calibration:`), read now: they become part of the
+/// source's spec, and so of its hash.
+fn calibration_table(
+    file: &PipelineFile,
+    name: &str,
+    source: &SourceSpec,
+) -> Result<Vec<crate::io::records::Calibration>, UserError> {
+    let Some(table) = &source.calibration else { return Ok(Vec::new()) };
+    let path = file.base_dir().join(table);
+    if !path.is_file() {
+        return Err(file
+            .error_at(&["inputs", name, "calibration"], format!("source `{name}`: no calibration table `{}`", path.display()))
+            .hint("the path is relative to the pipeline file's folder; the table is CSV `channel,sensitivity,unit,offset`"));
+    }
+    crate::io::records::read_calibration(&path).map_err(|e| UserError {
+        file: Some(e.path),
+        line: e.line,
+        column: e.column,
+        message: e.message,
+        hint: Some(e.hint),
+    })
 }
 
 fn check_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<(), UserError> {
@@ -181,6 +270,23 @@ fn check_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<
             return Err(
                 file.error_at(&["inputs", name, "dt"], format!("`dt` must be a positive number of seconds, not {dt}"))
             );
+        }
+    }
+    let names_line = source.header_lines + usize::from(source.column_names);
+    for (key, row) in [("units_row", source.units_row), ("description_row", source.description_row)] {
+        let Some(row) = row else { continue };
+        if !matches!(source.format, RecordFormat::Delimited | RecordFormat::Csv | RecordFormat::Tsv) {
+            return Err(file
+                .error_at(
+                    &["inputs", name, key],
+                    format!("`{key}` applies to delimited text, not `{}`", source.format.name()),
+                )
+                .hint("the other formats state their units in their headers"));
+        }
+        if row <= names_line {
+            return Err(file
+                .error_at(&["inputs", name, key], format!("`{key}: {row}` is not below the column-name row (line {names_line})"))
+                .hint(format!("`{key}` is the file's line number (1-based); `header_lines` counts the lines before the column names")));
         }
     }
     if let Some(d) = &source.delimiter {

@@ -74,6 +74,8 @@ pub enum RecordFormat {
     Esm,
     /// GeoNet `.V1A` / `.V2A`, three components.
     Geonet,
+    /// LabVIEW Measurement `.lvm` (decimal point or comma, one or more segments).
+    Lvm,
     /// A diagnosis case folder, named by its `equipment.yaml` (`cases/{case}/equipment.yaml`):
     /// equipment, floor record and observations, read whole by `diagnose`.
     Case,
@@ -85,7 +87,7 @@ pub enum RecordFormat {
 
 impl RecordFormat {
     /// Every format, in the order the schema lists them.
-    pub const ALL: [RecordFormat; 15] = [
+    pub const ALL: [RecordFormat; 16] = [
         RecordFormat::Delimited,
         RecordFormat::Csv,
         RecordFormat::Tsv,
@@ -98,6 +100,7 @@ impl RecordFormat {
         RecordFormat::Knet,
         RecordFormat::Esm,
         RecordFormat::Geonet,
+        RecordFormat::Lvm,
         RecordFormat::Frames,
         RecordFormat::ControlPoints,
         RecordFormat::Case,
@@ -165,6 +168,22 @@ pub struct SourceSpec {
     /// Delimited text: one character (`,` `;` `\t`), `whitespace`, or absent to detect it.
     #[serde(default)]
     pub delimiter: Option<String>,
+    /// Delimited text: the line (1-based, below the column names) holding each column's unit
+    /// (NEES convention); the file's units are converted to SI like declared ones.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub units_row: Option<usize>,
+    /// Delimited text: the line (1-based, below the column names) holding each column's
+    /// description, which becomes the column's `description`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub description_row: Option<usize>,
+    /// Raw data (volts, counts): a sensitivity table (CSV `channel,sensitivity,unit,offset`,
+    /// relative to the pipeline file); a channel it names is `(raw − offset) / sensitivity` in `unit`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<String>,
+    /// The rows of `calibration`, read when the pipeline is planned: serialised with the spec,
+    /// so an edited table changes the source's hash and reruns `load`.
+    #[serde(skip_deserializing, default, skip_serializing_if = "Vec::is_empty")]
+    pub calibration_table: Vec<crate::io::records::Calibration>,
     /// Delimited text: the column holding time; without one, `dt` gives the sampling.
     #[serde(default)]
     pub time_column: Option<String>,

@@ -6,7 +6,7 @@ use serde_json::json;
 
 use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::io::records::printable;
-use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
+use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
 use crate::signal::baseline::PolynomialBasis;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
@@ -57,6 +57,14 @@ impl Stage for Baseline {
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
+    }
+
+    /// The records keep their columns; every column named in `columns` must be one of them.
+    fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {
+        let Some(input) = input else { return (None, Vec::new()) };
+        let columns = params.list_of("columns");
+        let errors = columns.iter().filter_map(|c| super::require_column("columns", c, input).err());
+        (Some(input.to_vec()), errors.collect())
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {

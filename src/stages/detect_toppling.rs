@@ -5,7 +5,7 @@
 use rayon::prelude::*;
 
 use super::{split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
+use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
 use crate::signal::toppling::{detect_toppling, detect_toppling_on, DetectOptions, TimeBase};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
@@ -31,6 +31,19 @@ impl Stage for DetectToppling {
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
+    }
+
+    /// Every channel (and floor vertical after `->`) must be a column of the input records.
+    fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {
+        let Some(input) = input else { return (None, Vec::new()) };
+        let mut errors = Vec::new();
+        for channel in params.list_of("channels") {
+            let (top, floor) = split_pair(&channel);
+            errors.extend(
+                std::iter::once(top).chain(floor).filter_map(|c| super::require_column("channels", &c, input).err()),
+            );
+        }
+        (None, errors)
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {

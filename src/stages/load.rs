@@ -1,5 +1,5 @@
 //! `load`: record files (delimited text, PEER AT2, RENADIC V1, SimCenter JSON, COSMOS, CSMIP/DMG,
-//! USGS SMC, K-NET/KiK-net, ESM, GeoNet) → uniform SI
+//! USGS SMC, K-NET/KiK-net, ESM, GeoNet, LabVIEW LVM) → uniform SI
 //! time-series tables, one per file, partitioned as the source's path template says.
 
 use std::collections::{BTreeMap, HashMap};
@@ -87,6 +87,8 @@ struct ParseKey<'a> {
     header_lines: usize,
     column_names: bool,
     delimiter: Option<&'a str>,
+    units_row: Option<usize>,
+    description_row: Option<usize>,
 }
 
 impl<'a> ParseKey<'a> {
@@ -96,6 +98,8 @@ impl<'a> ParseKey<'a> {
             header_lines: spec.header_lines,
             column_names: spec.column_names,
             delimiter: spec.delimiter.as_deref(),
+            units_row: spec.units_row,
+            description_row: spec.description_row,
         }
     }
 }
@@ -122,17 +126,7 @@ fn parse(spec: &SourceSpec, part: &InputPart) -> Result<RawRecord, UserError> {
     }
     let bytes = records::read_bytes(path).map_err(user_error)?;
     records::unchanged(path, &part.hash, &bytes).map_err(user_error)?;
-    let delimited = |delimiter: Option<u8>| DelimitedOptions {
-        delimiter,
-        header_lines: spec.header_lines,
-        has_column_names: spec.column_names,
-    };
-    let delimiter = match spec.delimiter.as_deref() {
-        None => None,
-        Some("whitespace") => Some(b' '),
-        Some("\\t") => Some(b'\t'),
-        Some(d) => d.bytes().next(),
-    };
+    let delimited = delimited_options(spec).unwrap_or_default();
     match spec.format {
         RecordFormat::At2 => records::parse_at2(path, &bytes),
         RecordFormat::RenadicV1 => records::parse_renadic_v1(path, &bytes),
@@ -143,12 +137,36 @@ fn parse(spec: &SourceSpec, part: &InputPart) -> Result<RawRecord, UserError> {
         RecordFormat::Knet => records::parse_knet(path, &bytes),
         RecordFormat::Esm => records::parse_esm(path, &bytes),
         RecordFormat::Geonet => records::parse_geonet(path, &bytes),
-        RecordFormat::Csv => records::parse_delimited(path, &bytes, &delimited(delimiter.or(Some(b',')))),
-        RecordFormat::Tsv => records::parse_delimited(path, &bytes, &delimited(delimiter.or(Some(b'\t')))),
-        RecordFormat::Delimited => records::parse_delimited(path, &bytes, &delimited(delimiter)),
+        RecordFormat::Lvm => records::parse_lvm(path, &bytes),
+        RecordFormat::Csv | RecordFormat::Tsv | RecordFormat::Delimited => {
+            records::parse_delimited(path, &bytes, &delimited)
+        }
         RecordFormat::Frames | RecordFormat::ControlPoints | RecordFormat::Case => unreachable!("refused above"),
     }
     .map_err(user_error)
+}
+
+/// How a delimited source's files parse; None for the other formats.
+pub fn delimited_options(spec: &SourceSpec) -> Option<DelimitedOptions> {
+    let delimiter = match spec.delimiter.as_deref() {
+        None => None,
+        Some("whitespace") => Some(b' '),
+        Some("\\t") => Some(b'\t'),
+        Some(d) => d.bytes().next(),
+    };
+    let delimiter = match spec.format {
+        RecordFormat::Csv => delimiter.or(Some(b',')),
+        RecordFormat::Tsv => delimiter.or(Some(b'\t')),
+        RecordFormat::Delimited => delimiter,
+        _ => return None,
+    };
+    Some(DelimitedOptions {
+        delimiter,
+        header_lines: spec.header_lines,
+        has_column_names: spec.column_names,
+        units_row: spec.units_row,
+        description_row: spec.description_row,
+    })
 }
 
 /// Reads one file as the source spec says; every refusal names the file and, where it can, the line.
@@ -183,7 +201,7 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
             return Err(repeated_column(path, spec, raw, channel, other)
                 .hint("`time_column` cannot tell them apart: rename one in the file"));
         }
-        let factor = spec.time_unit.as_deref().and_then(units::conversion).map_or(1.0, |c| c.factor);
+        let factor = time_factor(path, spec, raw, channel)?;
         let time: Vec<f64> = channel.values.iter().map(|v| v * factor).collect();
         if let Some(i) = overflowed(&channel.values, &time) {
             return Err(err(format!(
@@ -293,20 +311,51 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
             Some(ColumnSpec::Full(d)) => Some(d),
             _ => None,
         };
-        let unit_name = detail
-            .and_then(|d| d.unit.clone())
-            .or_else(|| spec.unit.clone())
-            .or_else(|| (!channel.unit.is_empty()).then(|| channel.unit.clone()));
-        let Some(unit_name) = unit_name else {
-            return Err(err(format!("the unit of column `{}` is not known", channel.name))
-                .hint("set `unit:` on the source (e.g. `unit: g`) or on the column"));
+        let calibration = spec.calibration_table.iter().find(|c| c.channel == channel.name);
+        let declared = detail.and_then(|d| d.unit.clone()).or_else(|| spec.unit.clone());
+        let file_unit = (!channel.unit.is_empty()).then(|| channel.unit.clone());
+        let unit_at = || unit_position(raw, channel);
+        let unit_name = match calibration {
+            Some(c) => {
+                if let Some(physical) = file_unit.as_deref().filter(|u| units::raw_unit(u).is_none()) {
+                    return Err(err(format!(
+                        "column `{}` is calibrated by line {} of `{}`, but the file says it is already in `{physical}`",
+                        channel.name,
+                        c.line,
+                        spec.calibration.as_deref().unwrap_or_default()
+                    ))
+                    .at(unit_at())
+                    .hint("calibrate raw channels only (V, mV, counts): remove its row from the table"));
+                }
+                c.unit.clone()
+            }
+            None => match declared.or(file_unit.clone()) {
+                Some(unit) => unit,
+                None => {
+                    return Err(err(format!("the unit of column `{}` is not known", channel.name))
+                        .hint("set `unit:` on the source (e.g. `unit: g`) or on the column, or `units_row:` where the file has one"))
+                }
+            },
         };
+        if let Some(raw_unit) = units::raw_unit(&unit_name) {
+            let table = match &spec.calibration {
+                Some(table) => format!("the calibration table `{table}` has no row for it"),
+                None => "the source has no `calibration:` table".to_string(),
+            };
+            return Err(err(format!("column `{}` is raw data in {raw_unit}: {table}", channel.name))
+                .at(unit_at())
+                .hint("add a row `channel,sensitivity,unit,offset` for it to the sensitivity table (docs/formats.md, NEES), or leave the column out with `columns:`"));
+        }
         let conversion = units::conversion(&unit_name).ok_or_else(|| {
             err(format!("unknown unit `{unit_name}` for column `{}`", channel.name))
+                .at(unit_at().filter(|_| calibration.is_none()))
                 .hint(format!("known units: {}", units::known_units().join(", ")))
         })?;
         let factor = conversion.factor * spec.scale * detail.and_then(|d| d.scale).unwrap_or(1.0);
-        let mut values: Vec<f64> = channel.values[..n].iter().map(|v| v * factor).collect();
+        let mut values: Vec<f64> = match calibration {
+            Some(c) => channel.values[..n].iter().map(|&v| c.apply(v) * factor).collect(),
+            None => channel.values[..n].iter().map(|v| v * factor).collect(),
+        };
         if let Some(i) = overflowed(&channel.values[..n], &values) {
             return Err(err(format!(
                 "column `{}` overflows in unit conversion: sample {} ({} {unit_name}) times {factor} is not a finite number of {}",
@@ -353,11 +402,24 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
         }
         // True for every record of the dataset (readers of a partitioned dataset show one part's
         // field metadata for all); which file and column it came from is this file's metadata.
-        let description = detail.and_then(|d| d.description.clone()).unwrap_or_else(|| {
-            format!("the record's channel read as `{out_name}` (its file, column and unit: metadata shakeflow.input_file, shakeflow.load)")
-        });
-        conversions
-            .insert(out_name.clone(), json!({"file_column": channel.name, "file_unit": unit_name, "factor": factor}));
+        let description = detail
+            .and_then(|d| d.description.clone())
+            .or_else(|| raw.header.get(&format!("channel.{}.description", channel.name)).cloned())
+            .unwrap_or_else(|| {
+                format!("the record's channel read as `{out_name}` (its file, column and unit: metadata shakeflow.input_file, shakeflow.load)")
+            });
+        let mut conversion_entry = json!({"file_column": channel.name, "file_unit": unit_name, "factor": factor});
+        if let Some(c) = calibration {
+            conversion_entry["calibration"] = json!({
+                "raw_unit": file_unit,
+                "sensitivity": c.sensitivity,
+                "offset": c.offset,
+                "unit": c.unit,
+                "table": spec.calibration,
+                "table_line": c.line,
+            });
+        }
+        conversions.insert(out_name.clone(), conversion_entry);
         columns.push(Column::f64(&out_name, conversion.si_unit, &description, values));
     }
     table.extend(columns);
@@ -379,6 +441,35 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
     metadata.insert("shakeflow.load".to_string(), summary.to_string());
     table.metadata = metadata;
     Ok(table)
+}
+
+/// The factor to seconds of a time column: `time_unit` when given, else the unit its file states
+/// (a units row), else seconds.
+fn time_factor(
+    path: &std::path::Path,
+    spec: &SourceSpec,
+    raw: &RawRecord,
+    channel: &records::RawChannel,
+) -> Result<f64, UserError> {
+    let Some(unit) = spec.time_unit.as_deref().or((!channel.unit.is_empty()).then_some(channel.unit.as_str())) else {
+        return Ok(1.0);
+    };
+    match units::conversion(unit) {
+        Some(c) if c.si_unit == "s" => Ok(c.factor),
+        _ => {
+            Err(UserError::new(format!("the time column `{}` is in `{unit}`, which is not a time unit", channel.name))
+                .in_file(path)
+                .at(unit_position(raw, channel).filter(|_| spec.time_unit.is_none()))
+                .hint("the time column's unit must be s or ms: fix the units row, or set `time_unit:` on the source"))
+        }
+    }
+}
+
+/// Where the file states a channel's unit (line, column of its units row), for errors about it.
+fn unit_position(raw: &RawRecord, channel: &records::RawChannel) -> Option<(usize, usize)> {
+    let at = raw.header.get(&format!("channel.{}.units_at", channel.name))?;
+    let (line, column) = at.split_once(':')?;
+    Some((line.parse().ok()?, column.parse().ok()?))
 }
 
 /// More samples than this many times a record's own would come from a damaged time column.
@@ -542,7 +633,7 @@ pub fn ad_hoc_source(
     for (k, v) in overrides {
         value[k] = v.clone();
     }
-    serde_json::from_value(value.clone()).map_err(|e| {
+    let mut spec: SourceSpec = serde_json::from_value(value.clone()).map_err(|e| {
         // serde names the type it expected, not the key: the key is the one whose removal helps.
         let culprit = overrides.keys().find(|key| {
             let mut without = value.clone();
@@ -555,7 +646,11 @@ pub fn ad_hoc_source(
         };
         anyhow::anyhow!("{what}")
             .context("the --set values do not form a valid source (see `inputs:` in schemas/pipeline.schema.json)")
-    })
+    })?;
+    if let Some(table) = &spec.calibration {
+        spec.calibration_table = records::read_calibration(std::path::Path::new(table)).map_err(user_error)?;
+    }
+    Ok(spec)
 }
 
 /// What a delimited file's column names say about it: a time column (`time_s`, `time`, `t`) and

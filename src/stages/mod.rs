@@ -228,6 +228,30 @@ pub trait Stage: Sync + Send {
     fn check(&self, _params: &Params, _base_dir: &Path) -> Result<(), ParamError> {
         Ok(())
     }
+
+    /// The columns of the stage's first output made from `input`, the columns its inputs' records
+    /// have (None: not known), for `shakeflow validate` to carry column names through a pipeline,
+    /// with an error for each parameter value naming a column the input lacks. None: the output's
+    /// columns are not known, so stages downstream are not checked. The default knows nothing.
+    fn output_columns(&self, _params: &Params, _input: Option<&[String]>) -> ColumnCheck {
+        (None, Vec::new())
+    }
+}
+
+/// A stage's output columns (None: not known) and the parameters naming columns its input lacks.
+pub type ColumnCheck = (Option<Vec<String>>, Vec<ParamError>);
+
+/// Refuses a column parameter (`key`) naming `column` when the input's `columns` lack it.
+pub fn require_column(key: &str, column: &str, columns: &[String]) -> Result<(), ParamError> {
+    if columns.iter().any(|c| c == column) {
+        return Ok(());
+    }
+    let suggestion = crate::error::did_you_mean_hint(column, columns.iter().map(String::as_str));
+    Err(ParamError {
+        key: Some(key.to_string()),
+        message: format!("parameter `{key}` names the column `{column}`, which the input records do not have"),
+        hint: format!("{suggestion}the input's columns: {}", columns.join(", ")),
+    })
 }
 
 pub fn registry() -> &'static [&'static dyn Stage] {

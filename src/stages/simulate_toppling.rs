@@ -10,7 +10,7 @@ use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::equipment;
 use crate::physics::rocking::{self, Anchorage, Block, Excitation, IsolatedBase, Method, Options, Response, Shape};
-use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
+use crate::pipeline::params::{ParamError, ParamKind, ParamSpec, Params, ParamsExt};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct SimulateToppling;
@@ -72,6 +72,11 @@ impl Stage for SimulateToppling {
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
+    }
+
+    /// `horizontal` and `vertical` must be columns of the floor records.
+    fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {
+        (None, floor_column_errors(params, input))
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
@@ -389,4 +394,11 @@ fn figure(title: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
         },
     ];
     render_png(title, &panels, 1200, 800)
+}
+
+/// The floor columns the rocking stages read (`horizontal`, `vertical`) that `input` lacks.
+pub fn floor_column_errors(params: &Params, input: Option<&[String]>) -> Vec<ParamError> {
+    let Some(input) = input else { return Vec::new() };
+    let wanted = [("horizontal", Some(params.str_of("horizontal"))), ("vertical", params.opt_str("vertical"))];
+    wanted.into_iter().filter_map(|(key, column)| super::require_column(key, column?, input).err()).collect()
 }

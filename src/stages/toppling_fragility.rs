@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use super::simulate_toppling::{model_from_params, rocking_params, simulate_record};
 use super::{partition_values, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
+use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
 use crate::stats::fragility::{fit_lognormal, FitOutcome, LognormalFit};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
@@ -34,6 +34,11 @@ static INFO: StageInfo = StageInfo {
 impl Stage for TopplingFragility {
     fn info(&self) -> &'static StageInfo {
         &INFO
+    }
+
+    /// `horizontal` and `vertical` must be columns of the floor records.
+    fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {
+        (None, super::simulate_toppling::floor_column_errors(params, input))
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {

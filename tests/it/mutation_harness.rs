@@ -181,7 +181,8 @@ fn readers() -> Vec<(&'static str, Reader)> {
             for (delimiter, header_lines, has_column_names) in
                 [(None, 0, true), (Some(b','), 2, true), (Some(b' '), 0, false)]
             {
-                let opts = DelimitedOptions { delimiter, header_lines, has_column_names };
+                let opts =
+                    DelimitedOptions { delimiter, header_lines, has_column_names, ..DelimitedOptions::default() };
                 drop(records::parse_delimited(Path::new("m.csv"), b, &opts));
             }
         }),

@@ -1,5 +1,6 @@
-//! Delimited text (CSV, TSV, whitespace columns): optional preamble lines, an
-//! optional column-name row, then numeric rows. Every column is a channel.
+//! Delimited text (CSV, TSV, whitespace columns, NEES `.asc`): optional preamble lines, an
+//! optional column-name row, optional description and units rows (NEES's convention), then
+//! numeric rows. Every column is a channel.
 //!
 //! Built for files of tens of MB: the file is read once and cells are parsed
 //! straight from `&str` slices, with no per-cell allocation.
@@ -18,11 +19,22 @@ pub struct DelimitedOptions {
     pub header_lines: usize,
     /// false: there is no column-name row and columns are named col1..colN.
     pub has_column_names: bool,
+    /// The 1-based line holding each column's unit (NEES: below the names and descriptions);
+    /// it must come after the column-name row. Data start after the last of these rows.
+    pub units_row: Option<usize>,
+    /// The 1-based line holding each column's description, after the column-name row.
+    pub description_row: Option<usize>,
 }
 
 impl Default for DelimitedOptions {
     fn default() -> Self {
-        DelimitedOptions { delimiter: None, header_lines: 0, has_column_names: true }
+        DelimitedOptions {
+            delimiter: None,
+            header_lines: 0,
+            has_column_names: true,
+            units_row: None,
+            description_row: None,
+        }
     }
 }
 
@@ -123,13 +135,6 @@ pub fn parse_delimited(path: &Path, bytes: &[u8], opts: &DelimitedOptions) -> Re
         let n = splitter.cells(reference).count();
         ((1..=n).map(|i| format!("col{i}")).collect(), None)
     };
-    let Some(&(first_data_number, first_data)) = lines.peek() else {
-        return Err(no_data(
-            path,
-            reference_number,
-            format!("only a column-name row (line {reference_number}), no data rows after it"),
-        ));
-    };
     if names.is_empty() {
         return Err(ParseError::new(
             path,
@@ -139,6 +144,79 @@ pub fn parse_delimited(path: &Path, bytes: &[u8], opts: &DelimitedOptions) -> Re
             "set header_lines to the number of lines before the column-name row",
         ));
     }
+    // NEES-style rows under the names: descriptions and units, one cell per column.
+    let last_name_line = names_line.unwrap_or(opts.header_lines);
+    let mut units = vec![String::new(); names.len()];
+    for (row, what) in [(opts.description_row, "description"), (opts.units_row, "units")] {
+        if let Some(row) = row.filter(|&r| r <= last_name_line) {
+            return Err(ParseError::new(
+                path,
+                Some(row),
+                None,
+                format!("the {what} row (line {row}) must come after the column-name row (line {last_name_line})"),
+                "units_row and description_row are line numbers in the file, below the column names",
+            ));
+        }
+    }
+    if let Some(last) = [opts.units_row, opts.description_row].into_iter().flatten().max() {
+        while let Some(&(number, line)) = lines.peek().filter(|(n, _)| *n <= last) {
+            lines.next();
+            let kind = if Some(number) == opts.units_row {
+                "units"
+            } else if Some(number) == opts.description_row {
+                "description"
+            } else {
+                header.insert(format!("header_line_{number}"), line.trim().to_string());
+                continue;
+            };
+            let cells: Vec<&str> = splitter.cells(line).collect();
+            if cells.len() != names.len() {
+                return Err(ParseError::new(
+                    path,
+                    Some(number),
+                    None,
+                    format!(
+                        "the {kind} row (line {number}) has {} cell(s) but the column-name row has {}",
+                        cells.len(),
+                        names.len()
+                    ),
+                    format!("give one {kind} cell per column ({} delimiter), empty where unknown", splitter.describe()),
+                ));
+            }
+            for ((name, cell), unit) in names.iter().zip(&cells).zip(&mut units) {
+                if cell.is_empty() {
+                    continue;
+                }
+                if kind == "description" {
+                    header.insert(format!("channel.{name}.description"), cell.to_string());
+                } else {
+                    *unit = unit_of_cell(cell).to_string();
+                    header.insert(format!("channel.{name}.units"), cell.to_string());
+                    header.insert(
+                        format!("channel.{name}.units_at"),
+                        format!("{number}:{}", char_column(line, offset_in(line, cell))),
+                    );
+                }
+            }
+        }
+        if lines.peek().is_none() {
+            return Err(no_data(
+                path,
+                last_line_number(),
+                format!(
+                    "the file ends at line {} before or at its units/description row (line {last})",
+                    last_line_number()
+                ),
+            ));
+        }
+    }
+    let Some(&(first_data_number, first_data)) = lines.peek() else {
+        return Err(no_data(
+            path,
+            reference_number,
+            format!("only a column-name row (line {reference_number}), no data rows after it"),
+        ));
+    };
 
     let ncols = names.len();
     // Rough row count from the first data row, to allocate once.
@@ -183,12 +261,8 @@ pub fn parse_delimited(path: &Path, bytes: &[u8], opts: &DelimitedOptions) -> Re
     let channels = names
         .into_iter()
         .zip(columns)
-        .map(|(name, values)| RawChannel {
-            name,
-            unit: String::new(),
-            values,
-            first_data_line: Some(first_data_number),
-        })
+        .zip(units)
+        .map(|((name, values), unit)| RawChannel { name, unit, values, first_data_line: Some(first_data_number) })
         .collect();
     Ok(RawRecord { format: "delimited", dt: None, time: None, channels, header })
 }
@@ -291,6 +365,19 @@ fn sign(text: &[u8], i: &mut usize) -> bool {
     }
 }
 
+/// A units cell as DAQ exports write it: `g`, `(g)`, `[in/s^2]`.
+fn unit_of_cell(cell: &str) -> &str {
+    let inner = cell.strip_prefix('(').and_then(|c| c.strip_suffix(')'));
+    let inner = inner.or_else(|| cell.strip_prefix('[').and_then(|c| c.strip_suffix(']')));
+    inner.unwrap_or(cell).trim()
+}
+
+/// Whether a cell names a unit (physical or raw), as a units row's cells do.
+fn is_unit(cell: &str) -> bool {
+    let unit = unit_of_cell(cell);
+    crate::units::conversion(unit).is_some() || crate::units::raw_unit(unit).is_some()
+}
+
 /// A number; NaN for an empty cell, "NaN"/"nan" or "NA" (gaps are the
 /// caller's business); None for anything else, infinities included.
 fn read_cell(cell: &str) -> Option<f64> {
@@ -364,6 +451,8 @@ impl Context<'_> {
         let name = &self.names[index];
         let hint = if number == self.first_data_number && !self.opts.has_column_names {
             "if this line holds column names, set has_column_names = true".to_string()
+        } else if number == self.first_data_number && is_unit(cell) {
+            format!("line {number} looks like a units row (NEES files have one below the column names): set `units_row: {number}`")
         } else if number == self.first_data_number {
             format!(
                 "if line {number} is still part of the file's header, raise header_lines (now {})",

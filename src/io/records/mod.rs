@@ -7,6 +7,7 @@
 //! line and column where that makes sense, and a hint on the likely cause.
 
 mod at2;
+mod calibration;
 mod cosmos;
 mod delimited;
 mod dmg;
@@ -16,6 +17,7 @@ mod fixed;
 mod formats_tests;
 mod geonet;
 mod knet;
+mod lvm;
 mod renadic;
 pub mod roles;
 mod simcenter;
@@ -24,12 +26,14 @@ mod smc;
 mod tests;
 
 pub use at2::{parse_at2, read_at2};
+pub use calibration::{parse_calibration, read_calibration, Calibration};
 pub use cosmos::{parse_cosmos, read_cosmos};
 pub use delimited::{parse_delimited, read_delimited, DelimitedOptions};
 pub use dmg::{parse_dmg, read_dmg};
 pub use esm::{parse_esm, read_esm};
 pub use geonet::{parse_geonet, read_geonet};
 pub use knet::{parse_knet, read_knet};
+pub use lvm::{parse_lvm, read_lvm};
 pub use renadic::{parse_renadic_v1, read_renadic_v1};
 pub use simcenter::{parse_simcenter_json, read_simcenter_json};
 pub use smc::{parse_smc, read_smc};
@@ -145,7 +149,29 @@ pub fn sniff_format(path: &Path) -> Option<&'static str> {
         let _ = file.take(4096).read_to_end(&mut head);
     }
     let head = String::from_utf8_lossy(&head);
-    let head = head.strip_prefix('\u{feff}').unwrap_or(&head);
+    if let Some(format) = sniff_content(&head) {
+        return Some(format);
+    }
+    let ext = path.extension()?.to_str()?.to_ascii_lowercase();
+    match ext.as_str() {
+        "at2" => Some("at2"),
+        "v1" => Some("renadic_v1"),
+        "json" => Some("simcenter_json"),
+        // NEES sensor data: `.asc` (ESM's `.asc` is recognised by its content above).
+        "csv" | "tsv" | "tab" | "txt" | "asc" => Some("delimited"),
+        "v0c" | "v1c" | "v2c" => Some("cosmos"),
+        "smc" => Some("smc"),
+        "lvm" => Some("lvm"),
+        "raw" => Some("dmg"),
+        "v1a" | "v2a" => Some("geonet"),
+        "ew" | "ns" | "ud" | "ew1" | "ns1" | "ud1" | "ew2" | "ns2" | "ud2" => Some("knet"),
+        _ => None,
+    }
+}
+
+/// The format the first bytes of a file (4 KB) show, when they show one.
+fn sniff_content(head: &str) -> Option<&'static str> {
+    let head = head.strip_prefix('\u{feff}').unwrap_or(head);
     let first: Vec<&str> = head.lines().take(4).collect();
     let upper = |i: usize| first.get(i).map(|l| l.to_ascii_uppercase()).unwrap_or_default();
     if let Some(format) = sniff_strong_motion(head, &upper(0), &upper(1)) {
@@ -157,22 +183,52 @@ pub fn sniff_format(path: &Path) -> Option<&'static str> {
     if upper(0).contains("PEER") || (upper(2).contains("UNITS OF") && upper(3).contains("NPTS")) {
         return Some("at2");
     }
+    if upper(0).starts_with("LABVIEW MEASUREMENT") {
+        return Some("lvm");
+    }
     if head.trim_start().starts_with('{') {
         return Some("simcenter_json");
     }
-    let ext = path.extension()?.to_str()?.to_ascii_lowercase();
-    match ext.as_str() {
-        "at2" => Some("at2"),
-        "v1" => Some("renadic_v1"),
-        "json" => Some("simcenter_json"),
-        "csv" | "tsv" | "tab" | "txt" => Some("delimited"),
-        "v0c" | "v1c" | "v2c" => Some("cosmos"),
-        "smc" => Some("smc"),
-        "raw" => Some("dmg"),
-        "v1a" | "v2a" => Some("geonet"),
-        "ew" | "ns" | "ud" | "ew1" | "ns1" | "ud1" | "ew2" | "ns2" | "ud2" => Some("knet"),
-        _ => None,
+    None
+}
+
+/// How much of each record file past a source's first `validate` reads.
+const HEADER_BYTES: u64 = 16 * 1024;
+
+/// `validate`'s quick look at a record file (the first is loaded whole): its first 16 KB are
+/// text and, by their content, not another format than the source declares (`format`, as
+/// pipelines name it); a delimited file's header rows and first data rows parse with `delimited`,
+/// and its channel names are returned. Not a full parse: damage further on is found by `load`.
+pub fn check_header(
+    path: &Path,
+    format: &str,
+    delimited: Option<&DelimitedOptions>,
+) -> Result<Option<Vec<String>>, ParseError> {
+    let mut head = Vec::new();
+    std::fs::File::open(path).and_then(|file| file.take(HEADER_BYTES).read_to_end(&mut head)).map_err(|e| {
+        ParseError::new(path, None, None, format!("cannot read the file: {e}"), "check the path and its permissions")
+    })?;
+    let text = record_text(path, &head, "a record")?;
+    if let Some(found) = sniff_content(&text).filter(|found| *found != format) {
+        if !(delimited.is_some() && found == "delimited") {
+            return Err(ParseError::new(
+                path,
+                Some(1),
+                None,
+                format!("the file starts like a `{found}` record, but the source reads `{format}`"),
+                "a file of another format among the source's files: move it, or narrow the source's path",
+            ));
+        }
     }
+    let Some(opts) = delimited else { return Ok(None) };
+    // A prefix ends at its last complete line.
+    let cut = if head.len() as u64 == HEADER_BYTES {
+        head.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1)
+    } else {
+        head.len()
+    };
+    let record = parse_delimited(path, &head[..cut], opts)?;
+    Ok(Some(record.channels.into_iter().map(|c| c.name).collect()))
 }
 
 /// The strong-motion formats by content (COSMOS, CSMIP/DMG, SMC, K-NET, ESM, GeoNet): their
