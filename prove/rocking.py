@@ -468,8 +468,10 @@ class Kinematics:
         return np.where(self.overturned, -self.side * (self.az + g), reading)
 
 
-def kinematics(resp: Response, floor: Floor, friction: float | None = None) -> Kinematics:
-    """Accelerations of the top-centre sensor point at the floor's samples."""
+def kinematics(resp: Response, floor: Floor, friction: float | None = None,
+               point: tuple[float, float] | None = None) -> Kinematics:
+    """Accelerations of the sensor point at the floor's samples: the top centre, or `point` =
+    (offset d from the centre line toward +x, height h) in the block's frame."""
     sl = slice(None, None, OUT_PER_SAMPLE)
     theta, theta_dot = resp.theta[sl], resp.theta_dot[sl]
     regime, side = resp.regime[sl], resp.side[sl].astype(float)
@@ -484,10 +486,16 @@ def kinematics(resp: Response, floor: Floor, friction: float | None = None) -> K
         phi = side * alpha - theta
         theta_ddot = -k * ((g + az) * np.sin(phi) + ax * np.cos(phi))
         sb, h = side * 0.5 * resp.blocks[0].B, resp.blocks[0].H
+        d = 0.0
+        if point is not None:
+            d, h = point
         sin, cos, w2 = np.sin(theta), np.cos(theta), theta_dot ** 2
-        # Top centre relative to the pivot: x = -sb cos(theta) + h sin(theta), z = sb sin(theta) + h cos(theta).
-        ax_rel = (sb * sin + h * cos) * theta_ddot + (sb * cos - h * sin) * w2
-        az_rel = (sb * cos - h * sin) * theta_ddot - (sb * sin + h * cos) * w2
+        # The point relative to the pivot: x = (d - sb) cos(theta) + h sin(theta),
+        # z = -(d - sb) sin(theta) + h cos(theta); x'' = z theta'' - x w^2, z'' = -x theta'' - z w^2.
+        px = (d - sb) * cos + h * sin
+        pz = -(d - sb) * sin + h * cos
+        ax_rel = pz * theta_ddot - px * w2
+        az_rel = -px * theta_ddot - pz * w2
         sensor_ax = np.where(rocking, ax + ax_rel, sensor_ax)
         sensor_az = np.where(rocking, az + az_rel, sensor_az)
     sliding = regime == SLIDE
