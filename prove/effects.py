@@ -145,9 +145,20 @@ def conceal_obstacle_impact(s: Setting) -> Concealed | None:
         return None
     side = int(sides[rng.integers(len(sides))])
     e_w = rng.uniform(0.1, 0.9)
+    if rng.random() < 0.5:
+        # A neighbouring unit that gives: a compressive spring-dashpot beyond theta_w.
+        compliance = (float(rng.uniform(8.0, 40.0)), float(rng.uniform(0.05, 0.4)))
+        resp = simulate(blk, s.floor, Options(obstacle=Obstacle(side, theta_w, e_w, compliance)))
+        beyond = np.flatnonzero(side * resp.theta > theta_w)
+        if len(beyond) == 0:
+            return None
+        params = {"formulation": "compliant_neighbour", "side": side, "theta_w_rad": theta_w,
+                  "theta_w_over_alpha": ratio, "contact_freq_hz": compliance[0], "contact_damping": compliance[1],
+                  "note": "theta'' -= s*max(0, w_c^2 (s theta - theta_w) + 2 zeta w_c s theta') beyond theta_w"}
+        return Concealed(params, float(resp.t_out[beyond[0]]), "first contact with the neighbour", resp, s.floor)
     resp = simulate(blk, s.floor, Options(obstacle=Obstacle(side, theta_w, e_w)))
     contacts = [e[1] for e in resp.events if e[0] in ("wall_impact", "wall_lean")]
-    params = {"side": side, "theta_w_rad": theta_w, "theta_w_over_alpha": ratio, "e_w": e_w,
+    params = {"formulation": "rigid_wall", "side": side, "theta_w_rad": theta_w, "theta_w_over_alpha": ratio, "e_w": e_w,
               "n_wall_impacts": resp.count("wall_impact"), "n_wall_leans": resp.count("wall_lean"),
               "note": f"side={side:+d}: the obstacle on the {'+' if side > 0 else '-'}x side stops "
                       f"{'theta>0' if side > 0 else 'theta<0'} at {'+' if side > 0 else '-'}theta_w"}

@@ -111,6 +111,10 @@ class Obstacle:
     side: int
     angle_rad: float
     restitution: float
+    # A neighbour that gives: (contact frequency f_c in Hz, damping ratio) of a compressive
+    # spring-dashpot acting on the rotation beyond angle_rad (theta'' += -s (w_c^2 pen + 2 z w_c s th'),
+    # never pulling). None: a rigid wall (the event rule with `restitution`).
+    compliance: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -375,7 +379,12 @@ class _Run:
             a_x = ax[i] + w * (ax[i + 1] - ax[i])
             a_z = az[i] + w * (az[i + 1] - az[i])
             phi = s_alpha - state[0]
-            return [state[1], -k * ((g + a_z) * sin(phi) + a_x * cos(phi))]
+            acc = -k * ((g + a_z) * sin(phi) + a_x * cos(phi))
+            if soft is not None:
+                pen = s * state[0] - soft[0]
+                if pen > 0.0:
+                    acc -= s * max(0.0, soft[1] * pen + soft[2] * s * state[1])
+            return [state[1], acc]
 
         def impact(time, state):
             return s * state[0]
@@ -385,6 +394,11 @@ class _Run:
 
         events = [impact, overturn]
         wall = opts.obstacle if (opts.obstacle and opts.obstacle.side == s) else None
+        soft = None
+        if wall is not None and wall.compliance is not None:
+            w_c = 2 * math.pi * wall.compliance[0]
+            soft = (wall.angle_rad, w_c * w_c, 2 * wall.compliance[1] * w_c)
+            wall = None
         if wall is not None:
             def obstacle(time, state):
                 return wall.angle_rad - s * state[0]
