@@ -507,7 +507,8 @@ mod tests {
         for (i, &e) in stops.iter().enumerate() {
             let sign = if i % 2 == 0 { 1.0 } else { -1.0 };
             let moved = at(e) - before;
-            assert!((moved - sign * slip).abs() < 1e-8, "episode {i}: slipped {moved} m, closed form {}", sign * slip);
+            // The floor linear between samples departs from the sine by up to 1e-6 m/s²: ~1e-7 m here.
+            assert!((moved - sign * slip).abs() < 2e-7, "episode {i}: slipped {moved} m, closed form {}", sign * slip);
             before = at(e);
         }
     }
