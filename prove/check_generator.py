@@ -10,6 +10,9 @@
    checked too (accelerometer 0.02 m/s^2, camera 0.002 rad).
 2. Runs the generator's baseline on the four demo cases (../shared/cases/demo) and compares it with
    their truth/<case>_baseline_theta.csv, with the same tolerances.
+3. Runs the generator's coupled sliding formulation (prove/sliding.py) on the floors of
+   tests/reference/sliding_scipy.py and compares it with that peer's stored values: the same events,
+   theta within 1e-5 rad and the slip within 1e-6 m.
 Exits non-zero if a check fails.
 """
 from __future__ import annotations
@@ -27,7 +30,7 @@ import yaml
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from generate_cases import REPO, shared_dir  # noqa: E402
-from rocking import Block, Floor, kinematics, simulate  # noqa: E402
+from rocking import OUT_PER_SAMPLE, Block, Floor, kinematics, simulate  # noqa: E402
 
 THETA_TOL = 1e-3          # rad, before any overturn, outside solver-sensitive samples
 OVERTURN_TOL = 0.01       # s
@@ -134,6 +137,32 @@ def check_demo(shared: Path) -> bool:
     return ok
 
 
+def check_sliding() -> bool:
+    from sliding import simulate_sliding
+    path = REPO / "tests" / "reference" / "sliding_scipy.py"
+    spec = importlib.util.spec_from_file_location("sliding_scipy", path)
+    peer = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(peer)
+    stored = yaml.safe_load((REPO / "tests" / "reference" / "sliding_scipy.json").read_text())
+    ok = True
+    for case in stored["cases"]:
+        dt, every = stored["dt_s"], stored["every"]
+        ax = peer.floor(case["floor"], case["samples"])
+        floor = Floor(dt, ax, np.zeros_like(ax))
+        block = Block(case["B_m"], case["H_m"], case["f"], 100.0, stored["g_mps2"])
+        resp, _, slip = simulate_sliding(block, floor, case["static_mu"], case["kinetic_mu"])
+        theta = resp.theta[::OUT_PER_SAMPLE][::every]
+        kinds = [e[0] for e in resp.events] == [e["kind"] for e in case["events"]]
+        dt_ev = max((abs(a[1] - b["time_s"]) for a, b in zip(resp.events, case["events"])), default=0.0)
+        dth = float(np.abs(theta - np.array(case["theta_rad"])).max())
+        du = float(np.abs(slip[::every] - np.array(case["slip_m"])).max())
+        good = kinds and dt_ev < 1e-5 and dth < 1e-5 and du < 1e-6
+        ok &= good
+        print(f"  {case['name']:<22} events {'same' if kinds else 'DIFFER'} (max dt {dt_ev:.1e} s), "
+              f"max|dtheta| {dth:.1e} rad, max|dslip| {du:.1e} m   {'ok' if good else 'FAIL'}")
+    return ok
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seed", type=int, default=3)
@@ -145,6 +174,8 @@ def main():
     ok = check_generated(args.seed, shared, ref)
     print("2. the generator's baseline on the demo cases against their truth")
     ok &= check_demo(shared)
+    print("3. the coupled sliding formulation against tests/reference/sliding_scipy.py")
+    ok &= check_sliding()
     print("all checks passed" if ok else "SOME CHECKS FAILED")
     sys.exit(0 if ok else 1)
 

@@ -111,6 +111,10 @@ class Obstacle:
     side: int
     angle_rad: float
     restitution: float
+    # A neighbour that gives: (contact frequency f_c in Hz, damping ratio) of a compressive
+    # spring-dashpot acting on the rotation beyond angle_rad (theta'' += -s (w_c^2 pen + 2 z w_c s th'),
+    # never pulling). None: a rigid wall (the event rule with `restitution`).
+    compliance: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -375,7 +379,12 @@ class _Run:
             a_x = ax[i] + w * (ax[i + 1] - ax[i])
             a_z = az[i] + w * (az[i + 1] - az[i])
             phi = s_alpha - state[0]
-            return [state[1], -k * ((g + a_z) * sin(phi) + a_x * cos(phi))]
+            acc = -k * ((g + a_z) * sin(phi) + a_x * cos(phi))
+            if soft is not None:
+                pen = s * state[0] - soft[0]
+                if pen > 0.0:
+                    acc -= s * max(0.0, soft[1] * pen + soft[2] * s * state[1])
+            return [state[1], acc]
 
         def impact(time, state):
             return s * state[0]
@@ -385,6 +394,11 @@ class _Run:
 
         events = [impact, overturn]
         wall = opts.obstacle if (opts.obstacle and opts.obstacle.side == s) else None
+        soft = None
+        if wall is not None and wall.compliance is not None:
+            w_c = 2 * math.pi * wall.compliance[0]
+            soft = (wall.angle_rad, w_c * w_c, 2 * wall.compliance[1] * w_c)
+            wall = None
         if wall is not None:
             def obstacle(time, state):
                 return wall.angle_rad - s * state[0]
@@ -468,8 +482,10 @@ class Kinematics:
         return np.where(self.overturned, -self.side * (self.az + g), reading)
 
 
-def kinematics(resp: Response, floor: Floor, friction: float | None = None) -> Kinematics:
-    """Accelerations of the top-centre sensor point at the floor's samples."""
+def kinematics(resp: Response, floor: Floor, friction: float | None = None,
+               point: tuple[float, float] | None = None) -> Kinematics:
+    """Accelerations of the sensor point at the floor's samples: the top centre, or `point` =
+    (offset d from the centre line toward +x, height h) in the block's frame."""
     sl = slice(None, None, OUT_PER_SAMPLE)
     theta, theta_dot = resp.theta[sl], resp.theta_dot[sl]
     regime, side = resp.regime[sl], resp.side[sl].astype(float)
@@ -484,10 +500,16 @@ def kinematics(resp: Response, floor: Floor, friction: float | None = None) -> K
         phi = side * alpha - theta
         theta_ddot = -k * ((g + az) * np.sin(phi) + ax * np.cos(phi))
         sb, h = side * 0.5 * resp.blocks[0].B, resp.blocks[0].H
+        d = 0.0
+        if point is not None:
+            d, h = point
         sin, cos, w2 = np.sin(theta), np.cos(theta), theta_dot ** 2
-        # Top centre relative to the pivot: x = -sb cos(theta) + h sin(theta), z = sb sin(theta) + h cos(theta).
-        ax_rel = (sb * sin + h * cos) * theta_ddot + (sb * cos - h * sin) * w2
-        az_rel = (sb * cos - h * sin) * theta_ddot - (sb * sin + h * cos) * w2
+        # The point relative to the pivot: x = (d - sb) cos(theta) + h sin(theta),
+        # z = -(d - sb) sin(theta) + h cos(theta); x'' = z theta'' - x w^2, z'' = -x theta'' - z w^2.
+        px = (d - sb) * cos + h * sin
+        pz = -(d - sb) * sin + h * cos
+        ax_rel = pz * theta_ddot - px * w2
+        az_rel = -px * theta_ddot - pz * w2
         sensor_ax = np.where(rocking, ax + ax_rel, sensor_ax)
         sensor_az = np.where(rocking, az + az_rel, sensor_az)
     sliding = regime == SLIDE

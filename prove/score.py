@@ -83,6 +83,18 @@ def run_case(binary: str, case_dir: Path, out_dir: Path, timeout: float) -> dict
     return {"diagnosis": diagnosis, "seconds": seconds}
 
 
+def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float] | None:
+    """Wilson's score interval (95 %) for k successes in n trials: with the few cases per effect
+    a set holds, a recall is only known to within this, and two sets (or a set and a held-out
+    benchmark) agree when their intervals overlap."""
+    if n == 0:
+        return None
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z / (1 + z * z / n) * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
 def summary(values: list[float]) -> dict | None:
     if not values:
         return None
@@ -114,11 +126,16 @@ def score(cases: list[dict]) -> dict:
     none_cases = [r for r in per_case if r["effect"] == "none"]
     false_alarms = [r for r in none_cases if r["mismatch"] or r["verdict"] != "none"]
     recall = {t: (confusion[t][t] / n if (n := sum(confusion[t].values())) else None) for t in VERDICTS}
+    recall_ci = {t: wilson(confusion[t][t], sum(confusion[t].values())) for t in VERDICTS}
+    correct = sum(r["correct"] for r in per_case)
     times = [c["seconds"] for c in cases]
     return {
         "n_cases": len(cases),
         "accuracy": sum(r["correct"] for r in per_case) / len(per_case) if per_case else None,
+        "accuracy_ci95": wilson(correct, len(per_case)),
         "recall_per_effect": recall,
+        "recall_ci95_per_effect": recall_ci,
+        "correct_per_effect": {t: [confusion[t][t], sum(confusion[t].values())] for t in VERDICTS},
         "false_alarm_rate_none": len(false_alarms) / len(none_cases) if none_cases else None,
         "confusion": confusion,
         "onset_error_s": {**(summary(onset_err) or {"n": 0}),
@@ -150,14 +167,18 @@ def fmt(x, spec=".3f") -> str:
 def report(s: dict, failures: list[tuple[str, str]]):
     short = {v: v[:8] for v in VERDICTS}
     print("\nconfusion matrix (rows: concealed effect, columns: verdict)")
-    print(f"{'':>16}" + "".join(f"{short[v]:>9}" for v in VERDICTS) + f"{'recall':>9}")
+    print(f"{'':>16}" + "".join(f"{short[v]:>9}" for v in VERDICTS) + f"{'recall':>9}  95 % (Wilson)")
     for t in VERDICTS:
         row = s["confusion"][t]
         if sum(row.values()) == 0:
             continue
-        print(f"{t:>16}" + "".join(f"{row[v] or '.':>9}" for v in VERDICTS) + f"{fmt(s['recall_per_effect'][t], '.2f'):>9}")
+        ci = s["recall_ci95_per_effect"][t]
+        print(f"{t:>16}" + "".join(f"{row[v] or '.':>9}" for v in VERDICTS) + f"{fmt(s['recall_per_effect'][t], '.2f'):>9}"
+              + f"  [{ci[0]:.2f}, {ci[1]:.2f}]")
     o, f, tm = s["onset_error_s"], s["fit_improvement"], s["seconds_per_case"]
-    print(f"\naccuracy                 {fmt(s['accuracy'])}  ({s['n_cases']} cases)")
+    ci = s["accuracy_ci95"]
+    print(f"\naccuracy                 {fmt(s['accuracy'])}  ({s['n_cases']} cases)"
+          + (f"  95 % [{ci[0]:.3f}, {ci[1]:.3f}]" if ci else ""))
     print(f"false-alarm rate (none)  {fmt(s['false_alarm_rate_none'])}")
     print(f"onset error, physics verdicts: n {o['n']}, median {fmt(o.get('median'))} s, max {fmt(o.get('max'))} s, "
           f"within {ONSET_OK_S} s {fmt(o['fraction_within_0.5_s'])}"

@@ -113,6 +113,7 @@ pub(super) fn simulate<S: Stepper<4>>(
         sensor_ax_mps2: Vec::with_capacity(n),
         sensor_az_mps2: Vec::with_capacity(n),
         base_ax_mps2: Vec::with_capacity(n),
+        slip_m: Vec::new(),
         events: Vec::new(),
         overturn: None,
         stats: Default::default(),
@@ -246,7 +247,7 @@ pub(super) fn simulate<S: Stepper<4>>(
 
 #[cfg(test)]
 mod tests {
-    use super::super::{simulate, Excitation, IsolatedBase, Method, Options, Shape};
+    use super::super::{simulate, Excitation, Friction, IsolatedBase, Method, Options, Shape};
     use super::*;
     use crate::physics::sdof::Sdof;
 
@@ -371,9 +372,9 @@ mod tests {
         let block = slender();
         let floor = vec![0.0; 10];
         let exc = Excitation { t0_s: 0.0, dt_s: 0.01, horizontal_mps2: &floor, vertical_mps2: None };
-        let with_friction = Options { friction: Some(0.3), ..isolated(Some(1.0)) };
+        let with_friction = Options { friction: Some(Friction::coulomb(0.3)), ..isolated(Some(1.0)) };
         let message = simulate(&block, &exc, &with_friction).unwrap_err();
-        assert!(message.contains("does not combine with sliding"), "{message}");
+        assert!(message.contains("does not combine with an isolated base"), "{message}");
         let message = simulate(&block, &exc, &isolated(Some(-1.0))).unwrap_err();
         assert!(message.contains("mass ratio"), "{message}");
     }

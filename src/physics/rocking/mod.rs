@@ -29,6 +29,7 @@ use crate::physics::ode::{Advance, Dopri5, Rk4, Stats, Stepper};
 use crate::physics::sdof::Sdof;
 
 mod coupled;
+mod sliding;
 
 /// Geometry as the cases' `equipment.yaml` states it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -179,6 +180,22 @@ pub struct IsolatedBase {
     pub mass_ratio: Option<f64>,
 }
 
+/// Coulomb friction between the block's base and the floor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Friction {
+    /// μ_s: the contact slips when the horizontal force it must carry exceeds μ_s times the normal.
+    pub static_mu: f64,
+    /// μ_k ≤ μ_s: the friction of a slipping contact, opposing the slip.
+    pub kinetic_mu: f64,
+}
+
+impl Friction {
+    /// One coefficient for sticking and slipping.
+    pub fn coulomb(mu: f64) -> Self {
+        Friction { static_mu: mu, kinetic_mu: mu }
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Method {
     /// Dormand–Prince 5(4), adaptive, events located on the dense output.
@@ -212,10 +229,9 @@ pub struct Options {
     pub restitution: Option<f64>,
     pub anchorage: Option<Anchorage>,
     pub isolated_base: Option<IsolatedBase>,
-    /// Coulomb friction under a block at rest: it slides on the floor when the floor's
-    /// acceleration exceeds μ(g + a_v), and sticks again when the sliding stops. Rocking starts
-    /// from the floor's acceleration (Eq. 20/21) and its pivot is taken to stick. None: no sliding.
-    pub friction: Option<f64>,
+    /// Coulomb friction between base and floor: the block sticks, slides, rocks or slides while
+    /// rocking (`sliding`). None: the base never slips (the study's model).
+    pub friction: Option<Friction>,
     pub obstacle: Option<Obstacle>,
     pub mass_change: Option<MassChange>,
     /// Height of the top accelerometer above the base; None: the top of the block.
@@ -308,8 +324,11 @@ pub struct Response {
     /// up), without gravity: what a sensor that turns with the body is built from.
     pub sensor_ax_mps2: Vec<f64>,
     pub sensor_az_mps2: Vec<f64>,
-    /// The horizontal acceleration under the block (the floor, or the isolated base).
+    /// The horizontal acceleration under the block (the floor, or the isolated base; a sliding
+    /// block's base).
     pub base_ax_mps2: Vec<f64>,
+    /// The base's slip relative to the floor (m) at every sample; empty without friction.
+    pub slip_m: Vec<f64>,
     pub events: Vec<Event>,
     pub overturn: Option<(f64, i8)>,
     pub stats: Stats,
@@ -470,49 +489,6 @@ fn first_positive(f: impl Fn(f64) -> f64, t: f64, t_end: f64) -> Option<f64> {
     }
 }
 
-/// A block at rest starts sliding when |a_x| > μ(g + a_v): the first such time in [t, t_end]
-/// and the direction of the relative sliding velocity (against the floor's acceleration).
-fn slide_start(block: &Block, mu: f64, seg: &Segment, t: f64, t_end: f64) -> Option<(f64, f64)> {
-    [1.0f64, -1.0]
-        .into_iter()
-        .filter_map(|s| {
-            first_positive(
-                |time| {
-                    let (ax, av) = seg.at(time);
-                    s * ax - mu * (block.g_mps2 + av)
-                },
-                t,
-                t_end,
-            )
-            .map(|ts| (ts, -s))
-        })
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-}
-
-/// Sliding with relative velocity v of sign `dir`: v̇ = −a_x − dir·μ(g + a_v), linear in time
-/// inside the segment, so v is quadratic. Returns v at `t1`, or the first time it reaches 0.
-fn slide(block: &Block, mu: f64, seg: &Segment, dir: f64, t: f64, v: f64, t1: f64) -> Result<f64, f64> {
-    let (ax, av) = seg.at(t);
-    // v(t + τ) = v + c1 τ + c2 τ².
-    let c1 = -ax - dir * mu * (block.g_mps2 + av);
-    let c2 = 0.5 * (-seg.ax_rate - dir * mu * seg.av_rate);
-    let at = |tau: f64| v + c1 * tau + c2 * tau * tau;
-    let end = t1 - t;
-    let v_end = at(end);
-    if v_end * dir > 0.0 {
-        return Ok(v_end);
-    }
-    // The first root of the quadratic in (0, end].
-    let root = if c2.abs() < 1e-300 {
-        -v / c1
-    } else {
-        let disc = (c1 * c1 - 4.0 * c2 * v).max(0.0).sqrt();
-        let (r1, r2) = ((-c1 - disc) / (2.0 * c2), (-c1 + disc) / (2.0 * c2));
-        [r1, r2].into_iter().filter(|r| *r > 0.0 && *r <= end * (1.0 + 1e-12)).fold(end, f64::min)
-    };
-    Err(t + root.clamp(0.0, end))
-}
-
 /// Simulates the block under the floor motion; outputs are on the input time base.
 pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -> Result<Response, String> {
     let n = excitation.horizontal_mps2.len();
@@ -546,10 +522,33 @@ pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -
             return Err(format!("the coefficient of restitution must be within 0..1, got {e}"));
         }
     }
-    if let Some(mu) = options.friction {
-        if !(mu > 0.0 && mu.is_finite()) {
-            return Err(format!("the friction coefficient must be positive, got {mu}"));
+    if let Some(f) = options.friction {
+        if !(f.static_mu.is_finite() && f.kinetic_mu > 0.0 && f.kinetic_mu <= f.static_mu) {
+            return Err(format!(
+                "friction needs 0 < μ_k ≤ μ_s (finite), got μ_s = {}, μ_k = {}",
+                f.static_mu, f.kinetic_mu
+            ));
         }
+        let other = [
+            (options.anchorage.is_some(), "anchorage"),
+            (options.isolated_base.is_some(), "an isolated base"),
+            (options.obstacle.is_some(), "an obstacle"),
+            (options.mass_change.is_some(), "a mass change"),
+        ];
+        if let Some((_, what)) = other.iter().find(|(given, _)| *given) {
+            return Err(format!("the sliding block (friction) does not combine with {what}"));
+        }
+        return match options.method {
+            Method::Adaptive { rtol, atol_rad } => sliding::simulate(
+                block,
+                excitation,
+                options,
+                f,
+                // Slip and slip velocity to the same absolute tolerance (m, m/s).
+                Dopri5::new(rtol, [atol_rad, atol_rad * block.p_radps, atol_rad, atol_rad * block.p_radps], dt),
+            ),
+            Method::Rk4 { dt_s } => sliding::simulate(block, excitation, options, f, Rk4::new(dt_s)),
+        };
     }
     if let Some(o) = options.obstacle {
         if !(o.side.abs() == 1
@@ -574,7 +573,6 @@ pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -
                 }
                 let other = [
                     (options.anchorage.is_some(), "anchorage"),
-                    (options.friction.is_some(), "sliding"),
                     (options.obstacle.is_some(), "an obstacle"),
                     (options.mass_change.is_some(), "a mass change"),
                 ];
@@ -631,10 +629,6 @@ struct Setup<'a> {
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Regime {
     Rest,
-    /// Sliding on the floor with this relative velocity.
-    Sliding {
-        velocity: f64,
-    },
     Rocking {
         side: i8,
     },
@@ -676,6 +670,7 @@ impl Setup<'_> {
             sensor_ax_mps2: Vec::with_capacity(n),
             sensor_az_mps2: Vec::with_capacity(n),
             base_ax_mps2: self.base_ax.to_vec(),
+            slip_m: Vec::new(),
             events: Vec::new(),
             overturn: None,
             stats: Stats::default(),
@@ -708,9 +703,6 @@ impl Setup<'_> {
             let (ax, av) = (self.base_ax[k], vertical(k));
             let (theta_ddot, sensor) = match regime {
                 Regime::Rest | Regime::Leaning { .. } | Regime::Overturned => (0.0, (ax, av)),
-                Regime::Sliding { velocity } => {
-                    (0.0, (-velocity.signum() * options.friction.unwrap_or(0.0) * (block.g_mps2 + av), av))
-                }
                 Regime::Rocking { side } => {
                     let model = self.on_side(block, side, segment(k), anchors);
                     let acc = model.theta_ddot(exc.t0_s + k as f64 * dt, &y);
@@ -760,61 +752,16 @@ impl Setup<'_> {
                 let restitution = options.restitution.unwrap_or(block.restitution_eq24);
                 match regime {
                     Regime::Overturned => t = limit,
-                    Regime::Rest => {
-                        let uplift = uplift_time(&block, &seg, t, limit);
-                        let sliding = options.friction.and_then(|mu| slide_start(&block, mu, &seg, t, limit));
-                        match (uplift, sliding) {
-                            (Some((tu, side)), slide) if slide.is_none_or(|(ts, _)| tu <= ts) => {
-                                regime = Regime::Rocking { side };
-                                y = [0.0, 0.0];
-                                t = tu;
-                                stepper.reset();
-                                push(&mut response, tu, EventKind::Uplift, side, 0.0, 0.0);
-                            }
-                            (_, Some((ts, dir))) => {
-                                // Start with an infinitesimal velocity in the sliding direction.
-                                regime = Regime::Sliding { velocity: dir * f64::MIN_POSITIVE };
-                                t = ts;
-                                push(&mut response, ts, EventKind::SlideStart, dir as i8, 0.0, 0.0);
-                            }
-                            _ => t = limit,
+                    Regime::Rest => match uplift_time(&block, &seg, t, limit) {
+                        Some((tu, side)) => {
+                            regime = Regime::Rocking { side };
+                            y = [0.0, 0.0];
+                            t = tu;
+                            stepper.reset();
+                            push(&mut response, tu, EventKind::Uplift, side, 0.0, 0.0);
                         }
-                    }
-                    Regime::Sliding { velocity } => {
-                        let mu = options.friction.expect("only blocks with friction slide");
-                        if let Some((tu, side)) = uplift_time(&block, &seg, t, limit) {
-                            // Rocking takes over; its pivot sticks.
-                            match slide(&block, mu, &seg, velocity.signum(), t, velocity, tu) {
-                                Ok(_) => {
-                                    regime = Regime::Rocking { side };
-                                    y = [0.0, 0.0];
-                                    t = tu;
-                                    stepper.reset();
-                                    push(&mut response, tu, EventKind::Uplift, side, 0.0, 0.0);
-                                    continue;
-                                }
-                                Err(ts) => {
-                                    regime = Regime::Rest;
-                                    t = ts;
-                                    push(&mut response, ts, EventKind::Stick, 0, 0.0, 0.0);
-                                    continue;
-                                }
-                            }
-                        }
-                        match slide(&block, mu, &seg, velocity.signum(), t, velocity, limit) {
-                            Ok(v) => {
-                                regime = Regime::Sliding { velocity: v };
-                                t = limit;
-                            }
-                            Err(ts) => {
-                                // The slip stops: it sticks unless the floor drags it the other way
-                                // (the rest regime then starts the reverse slide at once).
-                                regime = Regime::Rest;
-                                t = ts.max(t);
-                                push(&mut response, ts, EventKind::Stick, 0, 0.0, 0.0);
-                            }
-                        }
-                    }
+                        None => t = limit,
+                    },
                     Regime::Leaning { side } => {
                         // Held at the obstacle until the equations pull the block away from it:
                         // θ̈ at fixed θ is linear in the floor, so the release is a linear root.
