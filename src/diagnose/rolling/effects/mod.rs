@@ -1,0 +1,50 @@
+//! The rolling physics library: one file per effect the nominal 4WMC cart leaves out, each an
+//! [`Alteration`] of `physics::rolling`'s no-slip model from the moment it begins.
+
+use super::{RollingCase, Track};
+use crate::physics::rolling::Alteration;
+
+mod caster_brake;
+mod lateral_impact;
+mod mass_change;
+mod swivel_jam;
+
+pub use crate::diagnose::effects::{linspace, product};
+
+/// A hypothesis: the nominal cart plus one physical effect with a few parameters.
+pub trait Effect: Sync {
+    /// The verdict this effect stands for.
+    fn name(&self) -> &'static str;
+    fn parameter_names(&self) -> &'static [&'static str];
+    /// Parameters that take a few discrete values (a caster, a side): fitted by the grid only.
+    fn discrete(&self) -> &'static [bool] {
+        &[]
+    }
+    /// Plausible ranges, given the case, the nominal cart and where the mismatch was found.
+    fn bounds(&self, case: &RollingCase, nominal: &Track, window: (f64, f64)) -> Vec<(f64, f64)>;
+    /// Starting points covering the ranges.
+    fn grid(&self, case: &RollingCase, nominal: &Track, window: (f64, f64)) -> Vec<Vec<f64>>;
+    /// The physics, and the time it begins.
+    fn alteration(&self, case: &RollingCase, nominal: &Track, params: &[f64]) -> Result<(Alteration, f64), String>;
+    /// One clause for the explanation, with the fitted values in engineering terms.
+    fn explain(&self, case: &RollingCase, nominal: &Track, params: &[f64]) -> String;
+}
+
+pub fn library() -> &'static [&'static dyn Effect] {
+    &[&lateral_impact::LateralImpact, &mass_change::MassChange, &caster_brake::CasterBrake, &swivel_jam::SwivelJam]
+}
+
+/// Onset times from `window.0 − before` to `window.0 + after` every `step` seconds, inside the record.
+pub fn onsets(case: &RollingCase, window: (f64, f64), before: f64, after: f64, step: f64) -> Vec<f64> {
+    let (lo, hi) = onset_bounds(case, window, before, after);
+    linspace(lo, hi, ((hi - lo) / step).round() as usize + 1)
+}
+
+pub fn onset_bounds(case: &RollingCase, window: (f64, f64), before: f64, after: f64) -> (f64, f64) {
+    ((window.0 - before).max(case.t0_s), (window.0 + after).min(case.end_s() - case.dt_s))
+}
+
+/// Caster numbers as the equipment file counts them (1..4) from a 0-based index parameter.
+pub fn caster(param: f64) -> usize {
+    (param.round().clamp(0.0, 3.0)) as usize
+}
