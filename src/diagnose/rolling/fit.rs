@@ -15,10 +15,11 @@ use super::evidence::{Evidence, Misfit};
 use super::{RollingCase, Track};
 
 /// Grid points a local search starts from.
-const STARTS: usize = 3;
-/// Horizons past the window's start (s) of the successive searches.
-const HORIZONS: [f64; 2] = [1.5, 5.0];
-const MAX_ITERATIONS: u64 = 40;
+const STARTS: usize = 2;
+/// Horizon past the window's start (s) of the grid, then of the successive searches.
+const GRID_HORIZON: f64 = 0.5;
+const HORIZONS: [f64; 1] = [1.5];
+const MAX_ITERATIONS: u64 = 20;
 
 pub struct Fit {
     pub params: Vec<f64>,
@@ -129,7 +130,7 @@ pub fn fit(effect: &dyn Effect, case: &RollingCase, nominal: &Track, evidence: &
     let bounds = effect.bounds(case, nominal, window);
     let discrete = effect.discrete();
     let continuous: Vec<usize> = (0..bounds.len()).filter(|&i| !discrete.get(i).copied().unwrap_or(false)).collect();
-    let first = window.0 + HORIZONS[0];
+    let first = window.0 + GRID_HORIZON;
     let scored: Vec<(f64, Vec<f64>)> =
         effect.grid(case, nominal, window).into_par_iter().map(|p| (objective.chi2(&p, first), p)).collect();
     let mut order: Vec<usize> = (0..scored.len()).collect();
@@ -139,12 +140,10 @@ pub fn fit(effect: &dyn Effect, case: &RollingCase, nominal: &Track, evidence: &
         .into_par_iter()
         .flat_map_iter(|start| {
             let mut params = start;
-            let mut found = vec![params.clone()];
             for h in HORIZONS {
                 params = search(&objective, &bounds, &continuous, &params, window.0 + h);
-                found.push(params.clone());
             }
-            found
+            std::iter::once(params)
         })
         .collect();
     let end = case.end_s();

@@ -9,7 +9,7 @@
 //! 2. The disagreement is located as for rocking: clustered residuals beyond 4σ, first to last.
 //! 3. Predictability first: twins of the nominal cart (initial yaw and caster angles moved by a
 //!    probe in rad, friction coefficients by the same relative amount) show from when the model
-//!    itself cannot say what the records should show. The probe starts at 1e-2 and shrinks tenfold
+//!    itself cannot say what the records should show. The probe starts at 1e-3 and shrinks tenfold
 //!    (to 1e-6) while the records reject the twin before they reject the nominal cart (the data
 //!    then know the cart better than the probe). If even that twin parts from the nominal cart
 //!    before the disagreement begins, the verdict is `unexplained`, "not predictable past t = …".
@@ -76,7 +76,9 @@ pub struct Track {
 }
 
 /// Relative (and, for angles, radian) probes of the twins, largest first.
-const PROBES: [f64; 5] = [1e-2, 1e-3, 1e-4, 1e-5, 1e-6];
+const PROBES: [f64; 4] = [1e-3, 1e-4, 1e-5, 1e-6];
+/// How far past the disagreement's start the twins run (s).
+const TWIN_REACH_S: f64 = 2.0;
 
 impl RollingCase {
     fn excitation(&self) -> Excitation<'_> {
@@ -117,6 +119,14 @@ impl RollingCase {
         })
     }
 
+    /// The nominal cart's initial state only (where a run from the first sample starts).
+    fn nominal_start(&self) -> Result<Track, String> {
+        let mut y = vec![0.0; 10];
+        y[2] = self.options.yaw0_rad;
+        y[3..7].copy_from_slice(&self.options.steer0_rad);
+        Ok(Track { states: vec![y], ..Track::default() })
+    }
+
     /// The cart with `alteration` from `onset_s` on (the nominal cart's state there) until
     /// `until_s`; the nominal cart before.
     pub fn altered(
@@ -143,7 +153,8 @@ impl RollingCase {
             (&mut track.yaw_rad, &nominal.yaw_rad),
             (&mut track.ax_abs_mps2, &nominal.ax_abs_mps2),
         ] {
-            to[..k0.min(end + 1)].copy_from_slice(&from[..k0.min(end + 1)]);
+            let keep = k0.min(end + 1).min(from.len());
+            to[..keep].copy_from_slice(&from[..keep]);
         }
         if end <= k0 {
             return Ok(track);
@@ -209,7 +220,7 @@ pub struct RollingDiagnosis {
     pub explanation: String,
     /// Until when the nominal cart is predictable at the probe the records allow (None: to the end).
     pub predictable_until_s: Option<f64>,
-    /// The twins' probe that decided it.
+    /// The twins' probe that decided it (0: no twins, nothing to explain).
     pub probe: f64,
     pub accel_noise_mps2: f64,
     pub camera_noise_m: f64,
@@ -227,21 +238,25 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
         return Err("the floor record needs at least 3 samples".into());
     }
     let evidence = Evidence::new(case, settings.exceedance_sigma);
-    let mut runs: Vec<Result<Track, String>> = std::iter::once(0.0)
-        .chain(PROBES)
-        .collect::<Vec<f64>>()
-        .into_par_iter()
-        .map(|probe| if probe == 0.0 { case.nominal() } else { case.twin(probe).nominal() })
-        .collect();
-    let twins: Vec<Track> = runs.split_off(1).into_iter().collect::<Result<_, _>>()?;
-    let baseline = runs.pop().expect("the nominal run")?;
+    let baseline = case.nominal()?;
     let window = evidence.window(&baseline);
-    let own = window.map_or(f64::INFINITY, |w| w.0);
-    // The largest probe whose twin the records do not reject before the nominal cart.
-    let chosen =
-        twins.iter().position(|t| evidence.window(t).map_or(f64::INFINITY, |w| w.0) >= own).unwrap_or(twins.len() - 1);
-    let predictable_until_s = evidence.parting(&baseline, &twins[chosen]);
-    let probe = PROBES[chosen];
+    // Twins only where there is something to explain, each run until shortly after the
+    // disagreement begins (what matters is whether they part before it).
+    let (mut predictable_until_s, mut probe) = (None, 0.0);
+    if let Some(w) = window {
+        let until = (w.0 + TWIN_REACH_S).min(case.end_s());
+        let nominal = &baseline;
+        for &p in &PROBES {
+            let twin_case = case.twin(p);
+            let twin = twin_case.altered(&twin_case.nominal_start()?, &Alteration::default(), case.t0_s, until)?;
+            probe = p;
+            predictable_until_s = evidence.parting(nominal, &twin).filter(|t| *t <= until);
+            // The largest probe whose twin the records do not reject before the nominal cart.
+            if evidence.window(&twin).map_or(f64::INFINITY, |tw| tw.0) >= w.0 {
+                break;
+            }
+        }
+    }
     let base_misfit = evidence.misfit(&baseline);
     let baseline_candidate = |window: Option<(f64, f64)>| Candidate {
         effect: "none",

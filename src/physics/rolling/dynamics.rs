@@ -289,6 +289,11 @@ impl NoSlip {
         (roll, if self.alteration.jam == Some(i) { 0.0 } else { torque })
     }
 
+    /// The normal load of each wheel.
+    pub fn wheel_loads(&self) -> [f64; 4] {
+        self.loads
+    }
+
     /// The generalised mass matrix M(q).
     pub fn mass_matrix(&self, y: &[f64; 10]) -> [[f64; 3]; 3] {
         self.assemble(y, [0.0; 2]).0
@@ -426,7 +431,8 @@ impl Dynamics<10> for NoSlip {
         if self.first_moment != [0.0; 2] {
             let (s_th, c_th) = y[2].sin_cos();
             let [sx, sy] = self.first_moment;
-            t += 2.0 * nu[2] * ((s_th * sx + c_th * sy) * nu[1] - (c_th * sx - s_th * sy) * nu[0]);
+            // ω (S_x v_y − S_y v_x), S = R(θ) s the platform's first moment in the floor frame.
+            t += 2.0 * nu[2] * ((c_th * sx - s_th * sy) * nu[1] - (s_th * sx + c_th * sy) * nu[0]);
         }
         for (i, f) in frames(dv, y[2], &y[3..7]).iter().enumerate() {
             let (va, vb) = (dot3(&f.a(), &nu), dot3(&f.b(), &nu));
@@ -439,6 +445,13 @@ impl Dynamics<10> for NoSlip {
         let dv = &self.derived;
         let nu = [y[7], y[8], y[9]];
         let mut p = Power { floor_w: -dv.platform_mass_kg * (floor[0] * nu[0] + floor[1] * nu[1]), friction_w: 0.0 };
+        if self.first_moment != [0.0; 2] {
+            // The offset mass moves at v + ω k×ρ: the floor's load on it also works through ω.
+            let (s_th, c_th) = y[2].sin_cos();
+            let [sx, sy] = self.first_moment;
+            let s = [c_th * sx - s_th * sy, s_th * sx + c_th * sy];
+            p.floor_w -= nu[2] * (-floor[0] * s[1] + floor[1] * s[0]);
+        }
         for (i, f) in frames(dv, y[2], &y[3..7]).iter().enumerate() {
             let (va, vb) = (dot3(&f.a(), &nu), dot3(&f.b(), &nu));
             let delta_dot = vb / dv.trail_m - nu[2];

@@ -2,7 +2,7 @@
 //! resists its slide along the heading with μ N tanh(v/ε) instead of rolling resistance.
 //! Parameters: the caster, t0, μ.
 
-use super::{caster, linspace, onset_bounds, onsets, product, Effect, RollingCase, Track};
+use super::{sharp_onsets, caster, linspace, onset_bounds, product, Effect, RollingCase, Track};
 use crate::physics::rolling::{Alteration, Brake};
 
 pub struct CasterBrake;
@@ -21,11 +21,11 @@ impl Effect for CasterBrake {
     }
 
     fn bounds(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<(f64, f64)> {
-        vec![(0.0, 3.0), onset_bounds(case, window, 1.5, 0.1), (0.02, 1.0)]
+        vec![(0.0, 3.0), onset_bounds(case, window, 1.0, 0.1), (0.02, 1.0)]
     }
 
     fn grid(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<Vec<f64>> {
-        product(&[linspace(0.0, 3.0, 4), onsets(case, window, 1.0, 0.1, 0.1), vec![0.1, 0.3, 0.6]])
+        product(&[linspace(0.0, 3.0, 4), sharp_onsets(case, window), vec![0.2, 0.5]])
     }
 
     fn alteration(&self, _: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {

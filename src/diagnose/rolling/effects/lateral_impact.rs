@@ -5,7 +5,7 @@
 //! it (the farthest the corners have gone toward that side by then): the fit then moves in time,
 //! where the records located the disagreement. Parameters: side, contact time, e.
 
-use super::{linspace, onset_bounds, onsets, product, Effect, RollingCase, Track};
+use super::{onsets_at, linspace, onset_bounds, product, Effect, RollingCase, Track};
 use crate::physics::rolling::{Alteration, Wall};
 
 pub struct LateralImpact;
@@ -57,11 +57,11 @@ impl Effect for LateralImpact {
     }
 
     fn bounds(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<(f64, f64)> {
-        vec![(0.0, 3.0), onset_bounds(case, window, 2.0, 0.2), (0.05, 0.95)]
+        vec![(0.0, 3.0), onset_bounds(case, window, 1.0, 0.2), (0.05, 0.95)]
     }
 
     fn grid(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<Vec<f64>> {
-        product(&[linspace(0.0, 3.0, 4), onsets(case, window, 1.0, 0.1, 0.05), vec![0.2, 0.5, 0.8]])
+        product(&[linspace(0.0, 3.0, 4), onsets_at(case, window, &[-0.06, -0.03, 0.0, 0.02]), vec![0.3, 0.7]])
     }
 
     fn alteration(&self, case: &RollingCase, nominal: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {

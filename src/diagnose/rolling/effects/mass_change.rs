@@ -9,7 +9,7 @@
 //! loads between wheels, which turns the cart. A small centred change is therefore often
 //! indistinguishable from none, and dm trades off against the offset.
 
-use super::{onset_bounds, onsets, product, Effect, RollingCase, Track};
+use super::{onsets_at, onset_bounds, product, Effect, RollingCase, Track};
 use crate::physics::rolling::{Alteration, MassChange as Change};
 
 pub struct MassChange;
@@ -39,7 +39,7 @@ impl Effect for MassChange {
     fn grid(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<Vec<f64>> {
         let (m, a, b) = (case.cart.platform_mass_kg, 0.5 * case.cart.length_m, 0.5 * case.cart.width_m);
         let offsets = [(0.0, 0.0), (0.5, 0.5), (-0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)];
-        product(&[onsets(case, window, 1.0, 0.1, 0.1), vec![-0.4 * m, -0.2 * m, 0.2 * m, 0.5 * m]])
+        product(&[onsets_at(case, window, &[-1.5, -1.0, -0.6, -0.3, -0.1]), vec![-0.35 * m, -0.15 * m, 0.3 * m]])
             .into_iter()
             .flat_map(|p| offsets.iter().map(move |(x, y)| vec![p[0], p[1], x * a, y * b]))
             .collect()

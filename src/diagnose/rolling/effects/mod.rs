@@ -11,6 +11,9 @@ mod swivel_jam;
 
 pub use crate::diagnose::effects::{linspace, product};
 
+/// The accelerometer dates an abrupt change (a brake, a jam, an impact) to within a few samples.
+const SHARP: [f64; 4] = [-0.1, -0.05, -0.02, 0.0];
+
 /// A hypothesis: the nominal cart plus one physical effect with a few parameters.
 pub trait Effect: Sync {
     /// The verdict this effect stands for.
@@ -34,14 +37,18 @@ pub fn library() -> &'static [&'static dyn Effect] {
     &[&lateral_impact::LateralImpact, &mass_change::MassChange, &caster_brake::CasterBrake, &swivel_jam::SwivelJam]
 }
 
-/// Onset times from `window.0 − before` to `window.0 + after` every `step` seconds, inside the record.
-pub fn onsets(case: &RollingCase, window: (f64, f64), before: f64, after: f64, step: f64) -> Vec<f64> {
-    let (lo, hi) = onset_bounds(case, window, before, after);
-    linspace(lo, hi, ((hi - lo) / step).round() as usize + 1)
-}
-
 pub fn onset_bounds(case: &RollingCase, window: (f64, f64), before: f64, after: f64) -> (f64, f64) {
     ((window.0 - before).max(case.t0_s), (window.0 + after).min(case.end_s() - case.dt_s))
+}
+
+/// Onsets of an abrupt change: just before the window's start.
+pub fn sharp_onsets(case: &RollingCase, window: (f64, f64)) -> Vec<f64> {
+    onsets_at(case, window, &SHARP)
+}
+
+/// Onset times at these offsets (s) from the window's start, inside the record.
+pub fn onsets_at(case: &RollingCase, window: (f64, f64), offsets: &[f64]) -> Vec<f64> {
+    offsets.iter().map(|d| (window.0 + d).clamp(case.t0_s, case.end_s() - case.dt_s)).collect()
 }
 
 /// Caster numbers as the equipment file counts them (1..4) from a 0-based index parameter.

@@ -2,7 +2,7 @@
 //! wheel, a constraint on the platform's motion; it stops at once, with the least loss of
 //! kinetic energy (an impulse along the constraint). Parameters: the caster, t0.
 
-use super::{caster, linspace, onset_bounds, onsets, product, Effect, RollingCase, Track};
+use super::{sharp_onsets, caster, linspace, onset_bounds, product, Effect, RollingCase, Track};
 use crate::physics::rolling::Alteration;
 
 pub struct SwivelJam;
@@ -21,11 +21,11 @@ impl Effect for SwivelJam {
     }
 
     fn bounds(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<(f64, f64)> {
-        vec![(0.0, 3.0), onset_bounds(case, window, 1.5, 0.1)]
+        vec![(0.0, 3.0), onset_bounds(case, window, 1.0, 0.1)]
     }
 
     fn grid(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<Vec<f64>> {
-        product(&[linspace(0.0, 3.0, 4), onsets(case, window, 1.0, 0.1, 0.05)])
+        product(&[linspace(0.0, 3.0, 4), sharp_onsets(case, window)])
     }
 
     fn alteration(&self, _: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {
