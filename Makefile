@@ -19,7 +19,7 @@ VENV_PY := $(VENV)/bin/python
 PY_STAMP := $(VENV)/.requirements-$(shell cksum < tests/reference/requirements.txt | cut -d' ' -f1)
 BIN := $(CARGO_TARGET_DIR)/release/shakeflow
 
-.PHONY: all demo test bench prove prove-check release schema fmt lint clean help rolling-findings fuzz
+.PHONY: all demo test bench prove prove-rolling prove-check release schema fmt lint clean help rolling-findings fuzz
 
 help:
 	@echo "make demo    build (release) and run the demo study: runs/demo-archive -> runs/demo"
@@ -27,6 +27,7 @@ help:
 	@echo "make bench   load+baseline and the whole demo study vs numpy/scipy/pyarrow scripts; the rocking and rolling models vs scipy and RK4; CPT matching and 1080p tracking vs OpenCV"
 	@echo "make prove   fresh concealed-effect cases (prove/generate_cases.py) scored against shakeflow diagnose"
 	@echo "             [SEED=n] [PER_EFFECT=5] [PROVE_JOBS=2]; make prove-check re-checks the generator's physics"
+	@echo "make prove-rolling   the same for rolling units (prove/rolling/) [SEED=n] [ROLLING_PER_EFFECT=4]"
 	@echo "make schema  regenerate schemas/pipeline.schema.json from the stage registry"
 	@echo "make rolling-findings  the study's rolling findings on the demo archive, as tables (docs/models/rolling.md)"
 	@echo "make fuzz    coverage-guided fuzzing of every file reader and the pipeline parser (docs/fuzzing.md)"
@@ -82,6 +83,15 @@ prove: release $(PY_STAMP)
 	rm -rf $(PROVE_DIR)
 	$(VENV_PY) prove/generate_cases.py $(PROVE_DIR)/cases --per-effect $(PER_EFFECT) --jobs $(PROVE_JOBS) $(if $(SEED),--seed $(SEED))
 	$(VENV_PY) prove/score.py $(PROVE_DIR)/cases --shakeflow $(BIN) --jobs $(PROVE_JOBS)
+
+# The rolling proof: fresh concealed rolling cases (prove/rolling/generate.py), diagnosed and scored.
+PROVE_ROLLING_DIR ?= runs/prove-rolling
+ROLLING_PER_EFFECT ?= 4
+
+prove-rolling: release $(PY_STAMP)
+	rm -rf $(PROVE_ROLLING_DIR)
+	$(VENV_PY) prove/rolling/generate.py $(PROVE_ROLLING_DIR)/cases --per-effect $(ROLLING_PER_EFFECT) --jobs $(PROVE_JOBS) $(if $(SEED),--seed $(SEED))
+	$(VENV_PY) prove/rolling/score.py $(PROVE_ROLLING_DIR)/cases --shakeflow $(BIN) --jobs $(PROVE_JOBS) --out $(PROVE_ROLLING_DIR)
 
 prove-check: $(PY_STAMP)
 	$(VENV_PY) prove/check_generator.py

@@ -851,19 +851,16 @@ fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Resu
     // when it is new, empty or an earlier diagnosis (its marker). Refused before any work.
     refuse_foreign_output(out, cases, DIAGNOSE, None)?;
     let started = std::time::Instant::now();
-    let results: Vec<(PathBuf, crate::diagnose::Diagnosis, String)> = cases
+    let results: Vec<(PathBuf, stages::diagnose::AnyDiagnosis, String)> = cases
         .par_iter()
         .map(|dir| {
-            let case = crate::io::case::read_case(dir)?;
-            let d =
-                crate::diagnose::diagnose(&case, &settings).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
+            let d = stages::diagnose::diagnose_folder(dir, "", &settings)?;
+            let (before, after) = d.rmse();
             eprintln!(
-                "{}: {} (window {}, rmse {:.2} → {:.2})",
+                "{}: {} (window {}, rmse {before:.2} → {after:.2})",
                 dir.display(),
-                d.verdict,
-                d.window.map_or("none".to_string(), |(a, b)| format!("{a:.2}-{b:.2} s")),
-                d.rmse_before,
-                d.rmse_after
+                d.verdict(),
+                d.window().map_or("none".to_string(), |(a, b)| format!("{a:.2}-{b:.2} s")),
             );
             Ok((dir.clone(), d, hash::hash_dir(dir)?.0))
         })
@@ -878,28 +875,28 @@ fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Resu
         let root = transaction.new_path("");
         let written = (|| -> anyhow::Result<()> {
             for (dir, d, input_hash) in &results {
-                let target = if results.len() == 1 { root.clone() } else { root.join(&d.case) };
+                let target = if results.len() == 1 { root.clone() } else { root.join(d.case()) };
                 std::fs::create_dir_all(&target).with_context(|| format!("cannot create `{}`", target.display()))?;
                 let provenance = BTreeMap::from([
                     ("shakeflow.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
                     ("shakeflow.command".to_string(), "diagnose".to_string()),
-                    ("shakeflow.case".to_string(), d.case.clone()),
+                    ("shakeflow.case".to_string(), d.case().to_string()),
                     ("shakeflow.input_hash".to_string(), input_hash.clone()),
                     ("shakeflow.params".to_string(), serde_json::to_string(&params)?),
-                    ("shakeflow.verdict".to_string(), d.verdict.to_string()),
+                    ("shakeflow.verdict".to_string(), d.verdict().to_string()),
                 ]);
-                let mut accel = stages::diagnose::accel_table(d);
-                let mut camera = stages::diagnose::camera_table(d);
+                let mut accel = d.accel_table();
+                let mut camera = d.camera_table();
                 accel.metadata.extend(provenance.clone());
                 camera.metadata.extend(provenance.clone());
-                let png = stages::diagnose::figure(d).map_err(anyhow::Error::msg)?;
+                let png = d.figure().map_err(anyhow::Error::msg)?;
                 crate::io::parquet::write_table(&target.join("accel.parquet"), &accel)?;
                 crate::io::parquet::write_table(&target.join("camera.parquet"), &camera)?;
                 crate::io::mcap::write_timeseries(
                     &target.join("diagnosis.mcap"),
                     &[
-                        crate::io::mcap::Topic { name: format!("/{}/accel", d.case), table: &accel },
-                        crate::io::mcap::Topic { name: format!("/{}/camera", d.case), table: &camera },
+                        crate::io::mcap::Topic { name: format!("/{}/accel", d.case()), table: &accel },
+                        crate::io::mcap::Topic { name: format!("/{}/camera", d.case()), table: &camera },
                     ],
                     &provenance,
                 )?;
@@ -907,11 +904,11 @@ fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Resu
                     Ok(std::io::Write::write_all(w, &png)?)
                 })?;
                 // The contract file last: its presence means the folder is complete.
-                let json = stages::diagnose::json_bytes(d);
+                let json = d.json_bytes();
                 crate::io::atomic::write_file(&target.join("diagnosis.json"), |w| {
                     Ok(std::io::Write::write_all(w, json.as_bytes())?)
                 })?;
-                let shown = if results.len() == 1 { out.to_path_buf() } else { out.join(&d.case) };
+                let shown = if results.len() == 1 { out.to_path_buf() } else { out.join(d.case()) };
                 eprintln!("{} → {}", dir.display(), shown.join("diagnosis.json").display());
             }
             crate::pipeline::ownership::write_marker(&root, DIAGNOSE, DIAGNOSE)

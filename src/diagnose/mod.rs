@@ -20,6 +20,7 @@
 pub mod effects;
 pub mod evidence;
 pub mod fit;
+pub mod rolling;
 
 use rayon::prelude::*;
 

@@ -60,6 +60,70 @@ pub fn parse_rocking_equipment(path: &Path, text: &str) -> Result<RockingEquipme
     })
 }
 
+/// A rolling unit's equipment file (`model: rolling`): the nominal 4WMC parameters under the keys
+/// of `simulate_rolling`, plus the descriptive `name`, `description`, `sensors`, `conventions`.
+#[derive(Debug, Clone, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RollingEquipment {
+    pub model: String,
+    pub length_m: f64,
+    pub width_m: f64,
+    pub platform_mass_kg: f64,
+    pub wheel_diameter_m: f64,
+    pub wheel_width_m: f64,
+    pub wheel_mass_kg: f64,
+    pub yaw0_deg: f64,
+    pub steer0_deg: [f64; 4],
+    pub mu_s_roll: f64,
+    pub mu_s_swivel: f64,
+    pub mu_k_roll: f64,
+    pub mu_k_swivel: f64,
+    pub beta_spm: f64,
+    pub gamma_n: f64,
+    pub p: Option<f64>,
+    pub trail_m: Option<f64>,
+    pub swivel_arm_m: Option<f64>,
+    pub friction_eps: Option<f64>,
+    pub friction_eps_swivel: Option<f64>,
+    pub g_mps2: Option<f64>,
+    pub name: Option<String>,
+    pub description: Option<String>,
+    pub sensors: Option<serde_yaml::Value>,
+    pub conventions: Option<serde_yaml::Value>,
+}
+
+/// The `model:` an equipment file declares (`rolling`), if any: rocking files have none.
+pub fn declared_model(text: &str) -> Option<String> {
+    let value: serde_yaml::Value = serde_yaml::from_str(text).ok()?;
+    value.get("model")?.as_str().map(str::to_string)
+}
+
+pub fn read_equipment_text(path: &Path) -> Result<String, UserError> {
+    let bytes = read_bytes(path)
+        .map_err(|e| UserError::new(format!("cannot read the equipment file: {}", e.message)).in_file(path))?;
+    decode(path, &bytes).map(|t| t.to_string()).map_err(|e| {
+        UserError::new(format!("not an equipment file: {}", e.message))
+            .in_file(path)
+            .at(e.line.map(|l| (l, 1)))
+            .hint(e.hint)
+    })
+}
+
+/// The rolling unit described by the text of an equipment file; `path` only names it in errors.
+pub fn parse_rolling_equipment(path: &Path, text: &str) -> Result<RollingEquipment, UserError> {
+    serde_yaml::from_str(text).map_err(|e| {
+        let position = e.location().map(|l| (l.line(), l.column()));
+        let (message, hint) = yaml_refusal(
+            &e,
+            "keys: model (rolling), length_m, width_m, platform_mass_kg, wheel_diameter_m, wheel_width_m, \
+             wheel_mass_kg, yaw0_deg, steer0_deg (4 values), mu_s_roll, mu_s_swivel, mu_k_roll, mu_k_swivel, \
+             beta_spm, gamma_n, p, trail_m, swivel_arm_m, friction_eps, friction_eps_swivel, g_mps2 \
+             (plus the descriptive name, description, sensors, conventions)",
+        );
+        UserError::new(format!("not a valid rolling equipment file: {message}")).in_file(path).at(position).hint(hint)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

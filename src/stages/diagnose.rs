@@ -7,6 +7,7 @@ use rayon::prelude::*;
 use serde_json::{json, Value};
 
 use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use crate::diagnose::rolling::RollingDiagnosis;
 use crate::diagnose::{diagnose, Diagnosis, Settings};
 use crate::io::case::read_case_unchanged;
 use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
@@ -18,7 +19,7 @@ pub struct Diagnose;
 static INFO: StageInfo = StageInfo {
     name: "diagnose",
     version: 3,
-    summary: "Where the toppling model and a unit's records disagree, which physics it left out (sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt), fitted, ranked by BIC, or `unexplained`.",
+    summary: "Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt; rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted, ranked by BIC, or `unexplained`.",
     inputs: InputKind::Files(&[RecordFormat::Case]),
     outputs: &[
         OutputInfo { name: "diagnosis", description: "per case: mismatch, verdict, window_start_s, window_end_s, rmse_before, rmse_after, explanation, candidates (JSON)", kind: OutputKind::Table },
@@ -51,21 +52,21 @@ impl Stage for Diagnose {
         let settings = settings(ctx.params);
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
-        let mut rows: Vec<(String, Diagnosis)> = parts
+        let mut rows: Vec<(String, AnyDiagnosis)> = parts
             .par_iter()
             .map(|part| {
-                let case = read_case_unchanged(&part.path, &part.hash)?;
-                let d = diagnose(&case, &settings).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
-                let mut accel = accel_table(&d);
-                let mut camera = camera_table(&d);
+                let d = diagnose_folder(&part.path, &part.hash, &settings)
+                    .map_err(|e| anyhow::anyhow!("{}: {e:#}", part.label))?;
+                let mut accel = d.accel_table();
+                let mut camera = d.camera_table();
                 for t in [&mut accel, &mut camera] {
                     t.metadata.extend(super::record_provenance(part));
                 }
                 ctx.sink.write("accel", &part.partition, accel)?;
                 ctx.sink.write("camera", &part.partition, camera)?;
-                let name = super::figure_stem(&part.partition, &d.case);
-                ctx.sink.write_file("reports", &format!("{name}.json"), json_bytes(&d).as_bytes())?;
-                ctx.sink.write_file("reports", &format!("{name}.png"), &figure(&d).map_err(anyhow::Error::msg)?)?;
+                let name = super::figure_stem(&part.partition, d.case());
+                ctx.sink.write_file("reports", &format!("{name}.json"), d.json_bytes().as_bytes())?;
+                ctx.sink.write_file("reports", &format!("{name}.png"), &d.figure().map_err(anyhow::Error::msg)?)?;
                 Ok((super::partition_values(&part.partition), d))
             })
             .collect::<anyhow::Result<_>>()?;
@@ -159,7 +160,7 @@ pub fn camera_table(d: &Diagnosis) -> Table {
     series_table(&d.evidence.camera_series(&d.baseline), &d.evidence.camera_series(&d.model), "theta_rad", "rad")
 }
 
-fn summary_table(rows: &[(String, Diagnosis)]) -> Table {
+fn summary_table(rows: &[(String, AnyDiagnosis)]) -> Table {
     let text = |name: &str, description: &str, v: Vec<String>| Column {
         name: name.into(),
         unit: String::new(),
@@ -182,36 +183,36 @@ fn summary_table(rows: &[(String, Diagnosis)]) -> Table {
         name: "mismatch".into(),
         unit: String::new(),
         description: "the nominal model disagrees with the records beyond their noise".into(),
-        data: crate::table::ColumnData::Bool(rows.iter().map(|r| r.1.mismatch).collect()),
+        data: crate::table::ColumnData::Bool(rows.iter().map(|r| r.1.mismatch()).collect()),
     });
     t.push(text(
         "verdict",
-        "none | sliding | mass_change | restitution | flexibility | obstacle_impact | sensor_tilt | unexplained",
-        rows.iter().map(|r| r.1.verdict.to_string()).collect(),
+        "none | unexplained; rocking: sliding | mass_change | restitution | flexibility | obstacle_impact | sensor_tilt; rolling: lateral_impact | mass_change | caster_brake | swivel_jam",
+        rows.iter().map(|r| r.1.verdict().to_string()).collect(),
     ));
     t.push(optional(
         "window_start_s",
         "first disagreement (null without one)",
-        rows.iter().map(|r| r.1.window.map(|w| w.0)).collect(),
+        rows.iter().map(|r| r.1.window().map(|w| w.0)).collect(),
     ));
-    t.push(optional("window_end_s", "last disagreement", rows.iter().map(|r| r.1.window.map(|w| w.1)).collect()));
+    t.push(optional("window_end_s", "last disagreement", rows.iter().map(|r| r.1.window().map(|w| w.1)).collect()));
     t.push(Column::f64(
         "rmse_before",
         "",
         "noise-normalised RMS misfit of the nominal model in the window",
-        rows.iter().map(|r| r.1.rmse_before).collect(),
+        rows.iter().map(|r| r.1.rmse().0).collect(),
     ));
     t.push(Column::f64(
         "rmse_after",
         "",
         "the same for the accepted model",
-        rows.iter().map(|r| r.1.rmse_after).collect(),
+        rows.iter().map(|r| r.1.rmse().1).collect(),
     ));
-    t.push(text("explanation", "for a test engineer", rows.iter().map(|r| r.1.explanation.clone()).collect()));
+    t.push(text("explanation", "for a test engineer", rows.iter().map(|r| r.1.explanation().to_string()).collect()));
     t.push(text(
         "candidates",
         "every fitted hypothesis (JSON)",
-        rows.iter().map(|r| diagnosis_json(&r.1)["candidates"].to_string()).collect(),
+        rows.iter().map(|r| r.1.json()["candidates"].to_string()).collect(),
     ));
     t
 }
@@ -275,4 +276,251 @@ pub fn figure(d: &Diagnosis) -> Result<Vec<u8>, String> {
         None => format!("case {}: the model agrees with the records", d.case),
     };
     render_png(&title, &panels, 1400, 1100)
+}
+
+/// A diagnosis of either kind of unit: the rocking block or the rolling cart (`model: rolling`).
+pub enum AnyDiagnosis {
+    Rocking(Diagnosis),
+    Rolling(RollingDiagnosis),
+}
+
+/// Reads and diagnoses the case folder `dir`, rocking or rolling as its equipment file says;
+/// `expected_hash` as for [`read_case_unchanged`].
+pub fn diagnose_folder(
+    dir: &std::path::Path,
+    expected_hash: &str,
+    settings: &Settings,
+) -> anyhow::Result<AnyDiagnosis> {
+    if crate::io::case::case_model(dir)?.as_deref() == Some("rolling") {
+        let case = crate::io::case::read_rolling_case(dir)?;
+        if !expected_hash.is_empty() && crate::io::hash::hash_dir(dir)?.0 != expected_hash {
+            anyhow::bail!("`{}` changed while this run was reading it", dir.display());
+        }
+        let d = crate::diagnose::rolling::diagnose(&case, settings)
+            .map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
+        return Ok(AnyDiagnosis::Rolling(d));
+    }
+    let case = read_case_unchanged(dir, expected_hash)?;
+    Ok(AnyDiagnosis::Rocking(diagnose(&case, settings).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?))
+}
+
+impl AnyDiagnosis {
+    pub fn case(&self) -> &str {
+        match self {
+            AnyDiagnosis::Rocking(d) => &d.case,
+            AnyDiagnosis::Rolling(d) => &d.case,
+        }
+    }
+
+    pub fn verdict(&self) -> &'static str {
+        match self {
+            AnyDiagnosis::Rocking(d) => d.verdict,
+            AnyDiagnosis::Rolling(d) => d.verdict,
+        }
+    }
+
+    pub fn window(&self) -> Option<(f64, f64)> {
+        match self {
+            AnyDiagnosis::Rocking(d) => d.window,
+            AnyDiagnosis::Rolling(d) => d.window,
+        }
+    }
+
+    pub fn rmse(&self) -> (f64, f64) {
+        match self {
+            AnyDiagnosis::Rocking(d) => (d.rmse_before, d.rmse_after),
+            AnyDiagnosis::Rolling(d) => (d.rmse_before, d.rmse_after),
+        }
+    }
+
+    pub fn json_bytes(&self) -> String {
+        match self {
+            AnyDiagnosis::Rocking(d) => json_bytes(d),
+            AnyDiagnosis::Rolling(d) => {
+                serde_json::to_string_pretty(&rolling_json(d)).expect("the diagnosis is JSON") + "\n"
+            }
+        }
+    }
+
+    pub fn accel_table(&self) -> Table {
+        match self {
+            AnyDiagnosis::Rocking(d) => accel_table(d),
+            AnyDiagnosis::Rolling(d) => rolling_accel_table(d),
+        }
+    }
+
+    pub fn camera_table(&self) -> Table {
+        match self {
+            AnyDiagnosis::Rocking(d) => camera_table(d),
+            AnyDiagnosis::Rolling(d) => rolling_camera_table(d),
+        }
+    }
+
+    pub fn figure(&self) -> Result<Vec<u8>, String> {
+        match self {
+            AnyDiagnosis::Rocking(d) => figure(d),
+            AnyDiagnosis::Rolling(d) => rolling_figure(d),
+        }
+    }
+
+    fn json(&self) -> Value {
+        match self {
+            AnyDiagnosis::Rocking(d) => diagnosis_json(d),
+            AnyDiagnosis::Rolling(d) => rolling_json(d),
+        }
+    }
+
+    fn mismatch(&self) -> bool {
+        match self {
+            AnyDiagnosis::Rocking(d) => d.mismatch,
+            AnyDiagnosis::Rolling(d) => d.mismatch,
+        }
+    }
+
+    fn explanation(&self) -> &str {
+        match self {
+            AnyDiagnosis::Rocking(d) => &d.explanation,
+            AnyDiagnosis::Rolling(d) => &d.explanation,
+        }
+    }
+}
+
+/// The `diagnosis.json` contract of a rolling unit.
+pub fn rolling_json(d: &RollingDiagnosis) -> Value {
+    let candidates: Vec<Value> = d
+        .candidates
+        .iter()
+        .map(|c| {
+            let params: serde_json::Map<String, Value> =
+                c.params.iter().map(|(k, v)| (k.to_string(), json!(v))).collect();
+            json!({
+                "effect": c.effect,
+                "params": params,
+                "rmse": c.rmse,
+                "score": c.score,
+                "bic": c.bic,
+                "chi2": c.misfit.chi2,
+                "flagged_samples": c.flagged,
+                "evaluations": c.evaluations,
+                "onset_s": c.track.onset_s,
+                "explanation": c.sentence,
+            })
+        })
+        .collect();
+    json!({
+        "case": d.case,
+        "model": "rolling",
+        "mismatch": d.mismatch,
+        "verdict": d.verdict,
+        "window": d.window.map(|(a, b)| json!({"start_s": a, "end_s": b})),
+        "rmse_before": d.rmse_before,
+        "rmse_after": d.rmse_after,
+        "rmse_definition": "sqrt(mean(((observed - predicted) / noise_sd)^2)) over the camera's x, y, yaw and the accelerometer's samples inside the window (the whole record when there is none); 1 is pure sensor noise",
+        "noise": {"accel_mps2": d.accel_noise_mps2, "camera_m": d.camera_noise_m, "camera_rad": d.camera_noise_rad},
+        "predictable_until_s": d.predictable_until_s,
+        "twin_probe": d.probe,
+        "candidates": candidates,
+        "explanation": d.explanation,
+        "shakeflow_version": env!("CARGO_PKG_VERSION"),
+    })
+}
+
+fn rolling_accel_table(d: &RollingDiagnosis) -> Table {
+    let before = d.evidence.accel_series(&d.baseline);
+    let after = d.evidence.accel_series(&d.model);
+    series_table(&before, &after, "top_ax_mps2", "m/s^2")
+}
+
+fn rolling_camera_table(d: &RollingDiagnosis) -> Table {
+    let before = d.evidence.camera_series(&d.baseline);
+    let after = d.evidence.camera_series(&d.model);
+    let mut t = Table::new();
+    t.push(Column::f64(TIME_COLUMN, "s", "time", before.iter().map(|r| r.0).collect()));
+    for (i, (name, unit)) in [("x_m", "m"), ("y_m", "m"), ("yaw_rad", "rad")].into_iter().enumerate() {
+        t.push(Column::f64(
+            &format!("observed_{name}"),
+            unit,
+            "recorded by the camera (NaN: dropout)",
+            before.iter().map(|r| r.1[i]).collect(),
+        ));
+        t.push(Column::f64(
+            &format!("baseline_{name}"),
+            unit,
+            "the nominal 4WMC cart",
+            before.iter().map(|r| r.2[i]).collect(),
+        ));
+        t.push(Column::f64(
+            &format!("model_{name}"),
+            unit,
+            "the accepted model (the baseline when none is accepted)",
+            after.iter().map(|r| r.2[i]).collect(),
+        ));
+    }
+    t
+}
+
+/// Platform displacement, yaw and the accelerometer, observed and modelled, window shaded.
+fn rolling_figure(d: &RollingDiagnosis) -> Result<Vec<u8>, String> {
+    use crate::plot::{render_png, Panel, Series};
+    let camera = d.evidence.camera_series(&d.baseline);
+    let camera_model = d.evidence.camera_series(&d.model);
+    let accel = d.evidence.accel_series(&d.baseline);
+    let accel_model = d.evidence.accel_series(&d.model);
+    let tc: Vec<f64> = camera.iter().map(|r| r.0).collect();
+    let pick = |rows: &[(f64, [f64; 3], [f64; 3])], observed: bool, i: usize| -> Vec<f64> {
+        rows.iter().map(|r| if observed { r.1[i] } else { r.2[i] }).collect()
+    };
+    let (ox, bx, mx) = (pick(&camera, true, 0), pick(&camera, false, 0), pick(&camera_model, false, 0));
+    let (oy, by, my) = (pick(&camera, true, 1), pick(&camera, false, 1), pick(&camera_model, false, 1));
+    let (ow, bw, mw) = (pick(&camera, true, 2), pick(&camera, false, 2), pick(&camera_model, false, 2));
+    let ta: Vec<f64> = accel.iter().map(|r| r.0).collect();
+    let za: Vec<f64> = accel.iter().map(|r| r.3 / d.accel_noise_mps2).collect();
+    let zm: Vec<f64> = accel_model.iter().map(|r| r.3 / d.accel_noise_mps2).collect();
+    let spans: Vec<(f64, f64)> = d.window.into_iter().collect();
+    let label = format!("model: {}", d.verdict);
+    fn three<'a>(
+        title: &str,
+        unit: &str,
+        t: &'a [f64],
+        [o, b, m]: [&'a [f64]; 3],
+        label: &str,
+        spans: &[(f64, f64)],
+    ) -> Panel<'a> {
+        Panel {
+            title: title.into(),
+            x_label: "time [s]".into(),
+            y_label: unit.into(),
+            series: vec![
+                Series { label: "observed".into(), x: t, y: o },
+                Series { label: "nominal cart".into(), x: t, y: b },
+                Series { label: label.into(), x: t, y: m },
+            ],
+            spans: spans.to_vec(),
+            ..Panel::default()
+        }
+    }
+    let panels = [
+        three("platform x (camera)", "m", &tc, [&ox, &bx, &mx], &label, &spans),
+        three("platform y (camera)", "m", &tc, [&oy, &by, &my], &label, &spans),
+        three("platform yaw (camera)", "rad", &tc, [&ow, &bw, &mw], &label, &spans),
+        Panel {
+            title: format!(
+                "accelerometer residual / noise: RMS in the window {:.1} → {:.1}",
+                d.rmse_before, d.rmse_after
+            ),
+            x_label: "time [s]".into(),
+            y_label: "residual / sigma".into(),
+            series: vec![
+                Series { label: "nominal cart".into(), x: &ta, y: &za },
+                Series { label: "accepted model".into(), x: &ta, y: &zm },
+            ],
+            spans: spans.clone(),
+            ..Panel::default()
+        },
+    ];
+    let title = match d.window {
+        Some((a, b)) => format!("{}: {} (mismatch {a:.2}-{b:.2} s, shaded)", d.case, d.verdict),
+        None => format!("{}: no mismatch", d.case),
+    };
+    render_png(&title, &panels, 1400, 1300)
 }

@@ -31,6 +31,7 @@ mod rocking_demo_cases;
 mod rocking_isolated;
 mod rocking_published;
 mod rocking_pulses;
+mod rolling_diagnosis;
 mod rolling_findings;
 mod rolling_peers;
 mod rolling_stage;

@@ -14,6 +14,43 @@
 
 use super::{Cart, Friction, LateralSlip, PIVOT_SIGNS};
 
+/// What the nominal cart leaves out: the diagnosis's rolling effects, each a physics added to
+/// the no-slip model ([`NoSlip::altered`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Alteration {
+    pub mass: Option<MassChange>,
+    pub brake: Option<Brake>,
+    /// A caster (0-based) whose swivel no longer turns.
+    pub jam: Option<usize>,
+    pub wall: Option<Wall>,
+}
+
+/// A point mass `dm_kg` (negative: lost) at body offset `at_m` from the platform centre.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MassChange {
+    pub dm_kg: f64,
+    pub at_m: [f64; 2],
+}
+
+/// A locked wheel (caster 0-based): it slides along its heading with friction μ N tanh(v/ε).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Brake {
+    pub caster: usize,
+    pub mu: f64,
+}
+
+/// A wall across floor axis `axis` (0 = X, 1 = Y) at `position_m` (the platform-centre
+/// displacement frame: 0 is the centre's start), on side `side` (+1: beyond, −1: before), struck
+/// by the platform's corners: a contact of duration `contact_s` with restitution `restitution`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Wall {
+    pub axis: usize,
+    pub side: f64,
+    pub position_m: f64,
+    pub restitution: f64,
+    pub contact_s: f64,
+}
+
 /// What a model offers the simulation driver.
 pub trait Dynamics<const N: usize> {
     /// dy/dt under the floor acceleration `floor` = (ü_X, ü_Y).
@@ -153,10 +190,17 @@ impl super::Friction {
 pub struct NoSlip {
     pub derived: Derived,
     pub friction: Friction,
-    /// m_w + I_s/r²: the inertia a caster adds along its heading.
-    k_roll: f64,
+    /// Per caster, m_w + I_s/r²: the inertia a caster adds along its heading (m_w alone for a
+    /// locked wheel, which does not spin).
+    k_roll: [f64; 4],
     /// I_z/d²: the caster's yaw inertia seen by the pivot's sideways speed.
     k_yaw: f64,
+    /// What the nominal cart leaves out (nothing for [`NoSlip::new`]).
+    alteration: Alteration,
+    /// Normal load per wheel (all `derived.normal_n` unless a mass change moved the centre of mass).
+    loads: [f64; 4],
+    /// Σ m ρ of the platform about its centre, body frame (zero: the centre of mass is the centre).
+    first_moment: [f64; 2],
 }
 
 impl NoSlip {
@@ -167,14 +211,157 @@ impl NoSlip {
         NoSlip {
             derived,
             friction: *friction,
-            k_roll: derived.wheel_mass_kg + derived.spin_inertia / (r * r),
+            k_roll: [derived.wheel_mass_kg + derived.spin_inertia / (r * r); 4],
             k_yaw: derived.yaw_inertia / (d * d),
+            alteration: Alteration::default(),
+            loads: [derived.normal_n; 4],
+            first_moment: [0.0; 2],
         }
     }
 
+    /// The cart with an [`Alteration`]: a point mass added (or removed) at a body offset, which
+    /// changes the platform's mass, yaw inertia about its centre, centre of mass and the wheel
+    /// loads (a rigid platform on four equal supports: Nᵢ = m_w g + W/4 (1 + c_x sᵢₓ/a + c_y sᵢᵧ/b));
+    /// one wheel locked (it drags with μ Nᵢ and no longer spins); one swivel jammed (δ̇ⱼ ≡ 0, a
+    /// constraint on ν); a wall struck by the platform's corners.
+    pub fn altered(cart: &Cart, friction: &Friction, g_mps2: f64, alteration: &Alteration) -> Result<Self, String> {
+        let mut model = NoSlip::new(cart, friction, g_mps2);
+        model.alteration = *alteration;
+        let dv = &mut model.derived;
+        if let Some(change) = alteration.mass {
+            let m = dv.platform_mass_kg + change.dm_kg;
+            let inertia = dv.platform_inertia + change.dm_kg * (change.at_m[0].powi(2) + change.at_m[1].powi(2));
+            if !(m > 0.0 && inertia > 0.0 && change.at_m.iter().all(|v| v.is_finite())) {
+                return Err(format!(
+                    "a mass change of {} kg at ({}, {}) m leaves no platform",
+                    change.dm_kg, change.at_m[0], change.at_m[1]
+                ));
+            }
+            model.first_moment = change.at_m.map(|v| change.dm_kg * v);
+            let centre = model.first_moment.map(|s| s / m);
+            for (i, (sx, sy)) in super::PIVOT_SIGNS.iter().enumerate() {
+                let share = 0.25 * (1.0 + centre[0] * sx / dv.half_length_m + centre[1] * sy / dv.half_width_m);
+                model.loads[i] = (dv.wheel_mass_kg + m * share) * g_mps2;
+                if model.loads[i] <= 0.0 {
+                    return Err(format!(
+                        "the centre of mass at ({}, {}) m lifts wheel {}",
+                        centre[0],
+                        centre[1],
+                        i + 1
+                    ));
+                }
+            }
+            dv.platform_mass_kg = m;
+            dv.platform_inertia = inertia;
+            dv.total_mass_kg = m + 4.0 * dv.wheel_mass_kg;
+        }
+        if let Some(brake) = alteration.brake {
+            if brake.caster > 3 || !(brake.mu.is_finite() && brake.mu >= 0.0) {
+                return Err(format!("a brake needs a caster 0..3 and μ ≥ 0, got {} and {}", brake.caster, brake.mu));
+            }
+            model.k_roll[brake.caster] = dv.wheel_mass_kg;
+        }
+        if alteration.jam.is_some_and(|j| j > 3) {
+            return Err("a jammed swivel needs a caster 0..3".into());
+        }
+        if let Some(wall) = alteration.wall {
+            if wall.axis > 1 || !(wall.restitution > 0.0 && wall.restitution <= 1.0 && wall.contact_s > 0.0) {
+                return Err(format!(
+                    "a wall needs axis 0 or 1, 0 < e ≤ 1 and a positive contact time, got {}, {}, {}",
+                    wall.axis, wall.restitution, wall.contact_s
+                ));
+            }
+        }
+        Ok(model)
+    }
+
     /// Rolling-friction force and swivel-friction torque opposing the motion of caster i.
-    fn caster_friction(&self, roll_speed: f64, swivel_rate: f64) -> (f64, f64) {
-        self.friction.roll_and_swivel(self.derived.normal_n, self.derived.swivel_arm_m, roll_speed, swivel_rate)
+    fn caster_friction(&self, i: usize, roll_speed: f64, swivel_rate: f64) -> (f64, f64) {
+        let load = self.loads[i];
+        let (roll, torque) = self.friction.roll_and_swivel(load, self.derived.swivel_arm_m, roll_speed, swivel_rate);
+        let roll = match self.alteration.brake {
+            Some(b) if b.caster == i => {
+                friction_force(&super::Stribeck::coulomb(b.mu), load, roll_speed, roll_speed / self.friction.eps_mps)
+            }
+            _ => roll,
+        };
+        // A jammed swivel's torque is the constraint's reaction, not friction.
+        (roll, if self.alteration.jam == Some(i) { 0.0 } else { torque })
+    }
+
+    /// The normal load of each wheel.
+    pub fn wheel_loads(&self) -> [f64; 4] {
+        self.loads
+    }
+
+    /// The generalised mass matrix M(q).
+    pub fn mass_matrix(&self, y: &[f64; 10]) -> [[f64; 3]; 3] {
+        self.assemble(y, [0.0; 2]).0
+    }
+
+    /// The jammed swivel's constraint row c (cᵀν = δ̇ⱼ) and ċᵀν.
+    fn jam_row(&self, y: &[f64; 10]) -> Option<([f64; 3], f64)> {
+        let j = self.alteration.jam?;
+        let d = self.derived.trail_m;
+        let f = frames(&self.derived, y[2], &y[3..7])[j];
+        let nu = [y[7], y[8], y[9]];
+        let (va, vb) = (dot3(&f.a(), &nu), dot3(&f.b(), &nu));
+        let b = f.b();
+        Some(([b[0] / d, b[1] / d, b[2] / d - 1.0], (-va * vb / d - nu[2] * nu[2] * f.r_dot_n) / d))
+    }
+
+    /// The state just after the alteration begins, from the nominal cart's state: a captured
+    /// mass (dm > 0, at rest on the floor) shares the generalised momentum (ν⁺ = M⁺⁻¹ M⁻ ν⁻); a
+    /// lost one leaves with its own velocity (ν unchanged); a jamming swivel stops at once, with
+    /// the least kinetic energy change (ν projected onto cᵀν = 0 in the metric of M).
+    pub fn enter(&self, before: &NoSlip, y: &[f64; 10]) -> [f64; 10] {
+        let mut out = *y;
+        let nu = [y[7], y[8], y[9]];
+        let mut nu1 = nu;
+        if self.alteration.mass.is_some_and(|m| m.dm_kg > 0.0) {
+            let mb = before.mass_matrix(y);
+            let p: [f64; 3] = std::array::from_fn(|i| dot3(&mb[i], &nu));
+            nu1 = solve3(&self.mass_matrix(y), &p);
+        }
+        if let Some((c, _)) = self.jam_row(y) {
+            let minv_c = solve3(&self.mass_matrix(y), &c);
+            let scale = dot3(&c, &nu1) / dot3(&c, &minv_c);
+            nu1 = std::array::from_fn(|i| nu1[i] - scale * minv_c[i]);
+        }
+        out[7..10].copy_from_slice(&nu1);
+        out
+    }
+
+    /// The wall's contact force on each corner that has passed it, as a generalised force: a
+    /// spring and dashpot scaled by the corner's effective mass m_c = 1/(Jᵀ M⁻¹ J), so that a
+    /// contact lasts `contact_s` and rebounds with the restitution e whatever the pose.
+    fn wall_force(&self, y: &[f64; 10], m: &[[f64; 3]; 3]) -> [f64; 3] {
+        let mut q = [0.0; 3];
+        let Some(wall) = self.alteration.wall else { return q };
+        let (s_th, c_th) = y[2].sin_cos();
+        let ln_e = wall.restitution.ln();
+        let zeta = -ln_e / (std::f64::consts::PI.powi(2) + ln_e * ln_e).sqrt();
+        let omega = std::f64::consts::PI / (wall.contact_s * (1.0 - zeta * zeta).sqrt());
+        for [px, py] in self.derived.pivots {
+            let r = [c_th * px - s_th * py, s_th * px + c_th * py];
+            let position = [y[0] + r[0], y[1] + r[1]][wall.axis];
+            let penetration = wall.side * (position - wall.position_m);
+            if penetration <= 0.0 {
+                continue;
+            }
+            // J maps ν to the corner's speed into the wall.
+            let lever = [-r[1], r[0]][wall.axis];
+            let mut jac = [0.0; 3];
+            jac[wall.axis] = wall.side;
+            jac[2] = wall.side * lever;
+            let speed = dot3(&jac, &[y[7], y[8], y[9]]);
+            let mass = 1.0 / dot3(&jac, &solve3(m, &jac));
+            let force = mass * (omega * omega * penetration + 2.0 * zeta * omega * speed);
+            for (qj, jj) in q.iter_mut().zip(jac) {
+                *qj -= force * jj;
+            }
+        }
+        q
     }
 
     /// Mass matrix, the right-hand side Q − Σ Jᵀm J̇ν, and δ̇.
@@ -184,8 +371,13 @@ impl NoSlip {
         let nu = [y[7], y[8], y[9]];
         let w = nu[2];
         let fr = frames(dv, y[2], &y[3..7]);
-        let mut m = [[dv.platform_mass_kg, 0.0, 0.0], [0.0, dv.platform_mass_kg, 0.0], [0.0, 0.0, dv.platform_inertia]];
-        let mut q = [-dv.platform_mass_kg * floor[0], -dv.platform_mass_kg * floor[1], 0.0];
+        let m_p = dv.platform_mass_kg;
+        // The platform's first moment in the floor frame: zero for the nominal cart.
+        let (s_th, c_th) = y[2].sin_cos();
+        let [sx, sy] = self.first_moment;
+        let s = [c_th * sx - s_th * sy, s_th * sx + c_th * sy];
+        let mut m = [[m_p, 0.0, -s[1]], [0.0, m_p, s[0]], [-s[1], s[0], dv.platform_inertia]];
+        let mut q = [-m_p * floor[0] + w * w * s[0], -m_p * floor[1] + w * w * s[1], s[1] * floor[0] - s[0] * floor[1]];
         let mut delta_dot = [0.0; 4];
         for (i, f) in fr.iter().enumerate() {
             let (a, b) = (f.a(), f.b());
@@ -193,17 +385,17 @@ impl NoSlip {
             delta_dot[i] = vb / d - w;
             let a_dot_nu = vb * vb / d - w * w * f.r_dot_e;
             let b_dot_nu = -va * vb / d - w * w * f.r_dot_n;
-            let (roll, torque) = self.caster_friction(va, delta_dot[i]);
+            let (roll, torque) = self.caster_friction(i, va, delta_dot[i]);
             // The wheel's inertial load along its heading; the sideways part goes into the floor.
             let floor_along = f.e[0] * floor[0] + f.e[1] * floor[1];
-            let along_a = -self.k_roll * a_dot_nu - dv.wheel_mass_kg * floor_along - roll;
+            let along_a = -self.k_roll[i] * a_dot_nu - dv.wheel_mass_kg * floor_along - roll;
             // The swivel torque acts on the caster (yaw rate bᵀν/d) and back on the platform (ω).
             let along_b = -self.k_yaw * b_dot_nu - torque / d;
             q[2] += torque;
             for j in 0..3 {
                 q[j] += along_a * a[j] + along_b * b[j];
                 for k in 0..3 {
-                    m[j][k] += self.k_roll * a[j] * a[k] + self.k_yaw * b[j] * b[k];
+                    m[j][k] += self.k_roll[i] * a[j] * a[k] + self.k_yaw * b[j] * b[k];
                 }
             }
         }
@@ -213,8 +405,22 @@ impl NoSlip {
 
 impl Dynamics<10> for NoSlip {
     fn rhs(&self, y: &[f64; 10], floor: [f64; 2]) -> [f64; 10] {
-        let (m, q, delta_dot) = self.assemble(y, floor);
-        let acc = solve3(&m, &q);
+        let (m, mut q, mut delta_dot) = self.assemble(y, floor);
+        if self.alteration.wall.is_some() {
+            let wall = self.wall_force(y, &m);
+            for j in 0..3 {
+                q[j] += wall[j];
+            }
+        }
+        let mut acc = solve3(&m, &q);
+        if let Some((c, c_dot_nu)) = self.jam_row(y) {
+            // M ν̇ = Q + c λ with cᵀν̇ + ċᵀν = 0.
+            let minv_c = solve3(&m, &c);
+            let lambda = -(dot3(&c, &acc) + c_dot_nu) / dot3(&c, &minv_c);
+            acc = std::array::from_fn(|i| acc[i] + lambda * minv_c[i]);
+            // The jammed caster turns with the platform only.
+            delta_dot[self.alteration.jam.expect("a jam row")] = 0.0;
+        }
         [y[7], y[8], y[9], delta_dot[0], delta_dot[1], delta_dot[2], delta_dot[3], acc[0], acc[1], acc[2]]
     }
 
@@ -222,9 +428,15 @@ impl Dynamics<10> for NoSlip {
         let dv = &self.derived;
         let nu = [y[7], y[8], y[9]];
         let mut t = dv.platform_mass_kg * (nu[0] * nu[0] + nu[1] * nu[1]) + dv.platform_inertia * nu[2] * nu[2];
-        for f in &frames(dv, y[2], &y[3..7]) {
+        if self.first_moment != [0.0; 2] {
+            let (s_th, c_th) = y[2].sin_cos();
+            let [sx, sy] = self.first_moment;
+            // ω (S_x v_y − S_y v_x), S = R(θ) s the platform's first moment in the floor frame.
+            t += 2.0 * nu[2] * ((c_th * sx - s_th * sy) * nu[1] - (s_th * sx + c_th * sy) * nu[0]);
+        }
+        for (i, f) in frames(dv, y[2], &y[3..7]).iter().enumerate() {
             let (va, vb) = (dot3(&f.a(), &nu), dot3(&f.b(), &nu));
-            t += self.k_roll * va * va + self.k_yaw * vb * vb;
+            t += self.k_roll[i] * va * va + self.k_yaw * vb * vb;
         }
         0.5 * t
     }
@@ -233,11 +445,18 @@ impl Dynamics<10> for NoSlip {
         let dv = &self.derived;
         let nu = [y[7], y[8], y[9]];
         let mut p = Power { floor_w: -dv.platform_mass_kg * (floor[0] * nu[0] + floor[1] * nu[1]), friction_w: 0.0 };
-        for f in &frames(dv, y[2], &y[3..7]) {
+        if self.first_moment != [0.0; 2] {
+            // The offset mass moves at v + ω k×ρ: the floor's load on it also works through ω.
+            let (s_th, c_th) = y[2].sin_cos();
+            let [sx, sy] = self.first_moment;
+            let s = [c_th * sx - s_th * sy, s_th * sx + c_th * sy];
+            p.floor_w -= nu[2] * (-floor[0] * s[1] + floor[1] * s[0]);
+        }
+        for (i, f) in frames(dv, y[2], &y[3..7]).iter().enumerate() {
             let (va, vb) = (dot3(&f.a(), &nu), dot3(&f.b(), &nu));
             let delta_dot = vb / dv.trail_m - nu[2];
             p.floor_w -= dv.wheel_mass_kg * va * (f.e[0] * floor[0] + f.e[1] * floor[1]);
-            let (roll, torque) = self.caster_friction(va, delta_dot);
+            let (roll, torque) = self.caster_friction(i, va, delta_dot);
             p.friction_w -= roll * va + torque * delta_dot;
         }
         p
@@ -253,9 +472,9 @@ impl Dynamics<10> for NoSlip {
         let (m_p, m_w, d) = (dv.platform_mass_kg, dv.wheel_mass_kg, dv.trail_m);
         let mut load = [[-m_p, 0.0], [0.0, -m_p], [0.0, 0.0]];
         let mut generators = [[0.0; 3]; 8];
-        let roll_capacity = self.friction.roll.mu_s * dv.normal_n;
-        let swivel_capacity = self.friction.swivel.mu_s * dv.normal_n * dv.swivel_arm_m;
         for (i, f) in frames(dv, y[2], &y[3..7]).iter().enumerate() {
+            let roll_capacity = self.friction.roll.mu_s * self.loads[i];
+            let swivel_capacity = self.friction.swivel.mu_s * self.loads[i] * dv.swivel_arm_m;
             let (a, b) = (f.a(), f.b());
             for j in 0..3 {
                 load[j][0] -= m_w * a[j] * f.e[0];

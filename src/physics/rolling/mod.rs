@@ -31,8 +31,8 @@ mod simulate;
 #[cfg(test)]
 mod tests;
 
-pub use dynamics::{Dynamics, NoSlip, Power, Slip};
-pub use simulate::{simulate, Event, EventKind, Excitation, Response};
+pub use dynamics::{Alteration, Brake, Dynamics, MassChange, NoSlip, Power, Slip, Wall};
+pub use simulate::{simulate, simulate_altered, Event, EventKind, Excitation, Response};
 
 /// Body-frame signs of the caster pivots (±a, ±b), in wheel order 1..4.
 pub const PIVOT_SIGNS: [(f64, f64); 4] = [(1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (1.0, -1.0)];

@@ -5,7 +5,7 @@
 
 use std::f64::consts::PI;
 
-use super::dynamics::{Dynamics, NoSlip, Slip};
+use super::dynamics::{Alteration, Dynamics, NoSlip, Slip};
 use super::holding::HoldingSet;
 use super::{Cart, Friction, FrictionLaw, Method, Options};
 use crate::physics::ode::{Advance, Dopri5, Rk4, Stats, Stepper};
@@ -71,6 +71,9 @@ pub struct Response {
     pub resting: Vec<bool>,
     pub events: Vec<Event>,
     pub stats: Stats,
+    /// The full state at every sample, when asked for ([`simulate_altered`]): where a later
+    /// run may start from.
+    pub states: Vec<Vec<f64>>,
 }
 
 impl Response {
@@ -156,6 +159,61 @@ pub fn simulate(
     }
 }
 
+/// The no-slip cart with an [`Alteration`] from sample `start` to sample `end` (inclusive), its
+/// states kept: from the cart's initial pose at rest when `start` is None (the alteration acts
+/// from the first sample), else from `start = (k, y)`, the nominal cart's state `y` at sample k,
+/// which the alteration changes as it begins ([`NoSlip::enter`]). Outputs cover samples k..=end.
+/// Regularised friction only (an alteration has no exact stick).
+pub fn simulate_altered(
+    cart: &Cart,
+    friction: &Friction,
+    excitation: &Excitation<'_>,
+    options: &Options,
+    alteration: &Alteration,
+    start: Option<(usize, &[f64])>,
+    end: usize,
+) -> Result<Response, String> {
+    let n = excitation.ax_mps2.len();
+    if friction.law != FrictionLaw::Regularised || options.lateral_slip.is_some() {
+        return Err("an altered cart runs the no-slip model with regularised friction only".into());
+    }
+    let k0 = start.map_or(0, |s| s.0);
+    if !(k0 < end && end < n) || excitation.ay_mps2.len() != n {
+        return Err(format!("cannot simulate samples {k0}..={end} of a {n}-sample floor record"));
+    }
+    cart.check(false)?;
+    friction.check()?;
+    let model = NoSlip::altered(cart, friction, options.g_mps2, alteration)?;
+    let y = match start {
+        None => {
+            let mut y = [0.0; 10];
+            y[2] = options.yaw0_rad;
+            y[3..7].copy_from_slice(&options.steer0_rad);
+            y
+        }
+        Some((_, state)) => {
+            let state: [f64; 10] =
+                state.try_into().map_err(|_| format!("a cart state has 10 values, got {}", state.len()))?;
+            model.enter(&NoSlip::new(cart, friction, options.g_mps2), &state)
+        }
+    };
+    let part = Excitation {
+        t0_s: excitation.t0_s + k0 as f64 * excitation.dt_s,
+        dt_s: excitation.dt_s,
+        ax_mps2: &excitation.ax_mps2[k0..=end],
+        ay_mps2: &excitation.ay_mps2[k0..=end],
+    };
+    let mut run = Run::new(&model, &part, friction.law, friction.eps_mps);
+    run.keep_states = true;
+    match options.method {
+        Method::Adaptive { rtol, atol } => {
+            let tolerances: [f64; 10] = std::array::from_fn(|i| if i < 7 { atol } else { 10.0 * atol });
+            run.run(Dopri5::new(rtol, tolerances, excitation.dt_s), y)
+        }
+        Method::Rk4 { dt_s } => run.run(Rk4::new(dt_s), y),
+    }
+}
+
 fn dispatch<const N: usize, D: Dynamics<N>>(
     model: &D,
     y0: [f64; N],
@@ -194,6 +252,8 @@ struct Run<'a, const N: usize, D: Dynamics<N>> {
     /// motion of a regularised cart, and the speed (2ε) below which a stick-slip cart may stick.
     energy_moving: f64,
     energy_rest: f64,
+    /// Keep the full state of every sample in the response.
+    keep_states: bool,
 }
 
 /// The floor inside one sample interval: linear in time.
@@ -227,6 +287,7 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
             stick: law == FrictionLaw::StickSlip,
             energy_moving: 0.5 * mass * MOVING_SPEED_MPS * MOVING_SPEED_MPS,
             energy_rest: 0.5 * mass * rest_speed * rest_speed,
+            keep_states: false,
         }
     }
 
@@ -437,5 +498,8 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
         response.ay_abs_mps2.push(floor[1] + acc[1]);
         response.kinetic_energy_j.push(self.model.kinetic_energy(y));
         response.resting.push(regime == Regime::Rest);
+        if self.keep_states {
+            response.states.push(y.to_vec());
+        }
     }
 }

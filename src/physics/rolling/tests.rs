@@ -468,3 +468,124 @@ fn lateral_slip_converges_to_the_no_slip_model_and_covers_zero_trail() {
     let x = *r.x_m.last().unwrap();
     assert!((x - expected).abs() < 0.01 * expected.abs(), "skid {x} m vs {expected} m");
 }
+
+/// The alterations the rolling diagnosis adds to the no-slip cart: each with a conservation law
+/// or a closed form.
+mod alterations {
+    use super::*;
+    use crate::physics::rolling::{Alteration, Brake, MassChange, Wall};
+
+    fn altered(alteration: Alteration, friction: &Friction) -> NoSlip {
+        let mut cart = prototype();
+        cart.trail_m = 0.04;
+        NoSlip::altered(&cart, friction, G_MPS2, &alteration).unwrap()
+    }
+
+    #[test]
+    fn energy_balance_holds_with_an_offset_mass_a_locked_wheel_and_a_jammed_swivel() {
+        // Check 2 of the notes with all three alterations at once: the offset mass adds first-
+        // moment terms to M, the velocity terms and the floor's load; the locked wheel drags; the
+        // jammed swivel is a workless constraint. T(t) − T(0) = floor work − friction losses to the
+        // integration tolerance (1e-10 J at rtol 1e-11, as for the nominal cart).
+        let alteration = Alteration {
+            mass: Some(MassChange { dm_kg: -15.0, at_m: [0.3, -0.1] }),
+            brake: Some(Brake { caster: 1, mu: 0.3 }),
+            jam: Some(2),
+            wall: None,
+        };
+        let friction = table4_friction("MC2");
+        let model = altered(alteration, &friction);
+        let y0 = model.enter(&altered(Alteration::default(), &friction), &[0.0, 0.0, 0.2, 0.4, -0.5, 1.0, 2.0, 0.3, -0.2, 0.4]);
+        let (error, dissipated) = energy_balance_error::<10, 12, _>(&model, y0);
+        eprintln!("altered cart: energy balance error {error:.1e} J of {dissipated:.2} J dissipated");
+        assert!(dissipated > 1.0, "friction must do real work here: {dissipated} J");
+        assert!(error < 1e-10, "energy balance off by {error} J");
+        // The jammed caster turns with the platform only.
+        let y = integrate(|_, y| model.rhs(y, [0.5, -0.3]), y0, 2.0, 1e-11);
+        assert!((y[5] - y0[5]).abs() < 1e-12, "jammed δ₃ moved: {} → {}", y0[5], y[5]);
+        assert!((y[3] - y0[3]).abs() > 1e-3, "a free caster should turn: {} → {}", y0[3], y[3]);
+    }
+
+    #[test]
+    fn frictionless_unforced_cart_with_an_offset_mass_keeps_its_kinetic_energy() {
+        // The first-moment terms alone (a sign error in M's coupling or in ω²S breaks this).
+        let alteration = Alteration { mass: Some(MassChange { dm_kg: 25.0, at_m: [-0.35, 0.2] }), ..Alteration::default() };
+        let model = altered(alteration, &frictionless());
+        let y0 = [0.0, 0.0, 0.1, 0.3, -1.0, 2.0, 0.5, 0.4, 0.2, 1.5];
+        let y = integrate(|_, y| model.rhs(y, [0.0, 0.0]), y0, 3.0, 1e-11);
+        let (t0, t1) = (model.kinetic_energy(&y0), model.kinetic_energy(&y));
+        assert!(((t1 - t0) / t0).abs() < 1e-10, "T {t0} → {t1}");
+    }
+
+    #[test]
+    fn an_offset_mass_shares_the_wheel_loads_by_the_lever_rule_and_a_captured_one_the_momentum() {
+        let (dm, at) = (20.0, [0.3, -0.2]);
+        let alteration = Alteration { mass: Some(MassChange { dm_kg: dm, at_m: at }), ..Alteration::default() };
+        let model = altered(alteration, &frictionless());
+        let cart = prototype();
+        let loads = model.wheel_loads();
+        let weight = (cart.platform_mass_kg + dm + 4.0 * cart.wheel_mass_kg) * G_MPS2;
+        assert!((loads.iter().sum::<f64>() - weight).abs() < 1e-9 * weight);
+        // Moments about the centre: the loads carry the point mass's moment (dm g at).
+        let (a, b) = (0.5 * cart.length_m, 0.5 * cart.width_m);
+        let mx: f64 = loads.iter().zip(PIVOT_SIGNS).map(|(n, (sx, _))| n * sx * a).sum();
+        let my: f64 = loads.iter().zip(PIVOT_SIGNS).map(|(n, (_, sy))| n * sy * b).sum();
+        assert!((mx - dm * G_MPS2 * at[0]).abs() < 1e-9 && (my - dm * G_MPS2 * at[1]).abs() < 1e-9, "{mx} {my}");
+        // Captured at rest on the floor: the generalised momentum M ν is the same before and after.
+        let before = altered(Alteration::default(), &frictionless());
+        let y = [0.1, 0.0, 0.3, 0.2, -0.4, 2.0, 0.5, 0.4, -0.3, 0.6];
+        let after = model.enter(&before, &y);
+        let p = |m: &NoSlip, s: &[f64; 10]| {
+            let mm = m.mass_matrix(s);
+            [0, 1, 2].map(|i| mm[i][0] * s[7] + mm[i][1] * s[8] + mm[i][2] * s[9])
+        };
+        let (p0, p1) = (p(&before, &y), p(&model, &after));
+        for i in 0..3 {
+            assert!((p0[i] - p1[i]).abs() < 1e-12 * p0[i].abs().max(1.0), "{p0:?} vs {p1:?}");
+        }
+        assert!(after[7] < y[7], "a captured mass slows the cart: {} → {}", y[7], after[7]);
+    }
+
+    #[test]
+    fn a_locked_wheel_drags_with_mu_times_its_load() {
+        // Once it slides (|v| ≫ ε), the locked wheel dissipates μ N |v|; the other wheels roll freely.
+        let mu = 0.35;
+        let model = altered(Alteration { brake: Some(Brake { caster: 0, mu }), ..Alteration::default() }, &frictionless());
+        let y = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0];
+        let p = model.power(&y, [0.0, 0.0]);
+        let expected = -mu * model.wheel_loads()[0] * 0.5;
+        assert!((p.friction_w - expected).abs() < 1e-9 * expected.abs(), "{} vs {expected}", p.friction_w);
+    }
+
+    #[test]
+    fn a_wall_returns_the_striking_corner_at_e_times_its_speed() {
+        // Frictionless, unforced, the casters aligned with the motion (+X), yawed so that corner 4
+        // (+a, −b) strikes alone: its speed into the wall after the contact is −e times the speed
+        // before, within the few per cent the cart's rotation during the 20 ms contact changes its
+        // effective mass (measured below).
+        let cart = prototype();
+        let yaw = 0.3;
+        let e = 0.6;
+        let (a, b) = (0.5 * cart.length_m, 0.5 * cart.width_m);
+        let corner_x = |x: f64, th: f64| x + th.cos() * a + th.sin() * b;
+        let wall = Wall { axis: 0, side: 1.0, position_m: corner_x(0.0, yaw) + 0.02, restitution: e, contact_s: 0.02 };
+        let alteration = Alteration { wall: Some(wall), ..Alteration::default() };
+        let n = 201;
+        let zeros = vec![0.0; n];
+        let excitation = Excitation { t0_s: 0.0, dt_s: 0.005, ax_mps2: &zeros, ay_mps2: &zeros };
+        let options = Options { yaw0_rad: yaw, steer0_rad: [-yaw; 4], ..Options::default() };
+        let y0 = [0.0, 0.0, yaw, -yaw, -yaw, -yaw, -yaw, 0.5, 0.0, 0.0];
+        let r = simulate_altered(&cart, &frictionless(), &excitation, &options, &alteration, Some((0, &y0)), n - 1).unwrap();
+        let speed = |k: usize| {
+            let s = &r.states[k];
+            // v_corner,x = ẋ − ω r_y of corner 4, r_y = a sin θ − b cos θ.
+            s[7] - s[9] * (s[2].sin() * a - s[2].cos() * b)
+        };
+        let before = speed(0);
+        let after = speed(n - 1);
+        let ratio = -after / before;
+        eprintln!("wall: corner speed {before:.4} → {after:.4} m/s, ratio {ratio:.4} (e = {e})");
+        assert!((before - 0.5).abs() < 1e-9);
+        assert!((ratio - e).abs() < 0.03 * e, "rebound ratio {ratio} vs e = {e}");
+    }
+}

@@ -1,0 +1,65 @@
+//! `mass_change`: at t0 a point mass dm is lost (dm < 0: it leaves with its own velocity) or
+//! gained (dm > 0: captured at rest on the floor, sharing momentum) at a body offset (dx, dy)
+//! from the platform centre: the platform's mass, yaw inertia, centre of mass and wheel loads
+//! change. Parameters: t0, dm, dx, dy.
+//!
+//! What the records can tell apart: friction scales with the loads, so a change at the centre
+//! alters the motion only through the wheels' and casters' own inertia, which stay the same
+//! (a few per cent of the platform's) and through the yaw inertia; an offset change shifts the
+//! loads between wheels, which turns the cart. A small centred change is therefore often
+//! indistinguishable from none, and dm trades off against the offset.
+
+use super::{onsets_at, onset_bounds, product, Effect, RollingCase, Track};
+use crate::physics::rolling::{Alteration, MassChange as Change};
+
+pub struct MassChange;
+
+/// Largest offset as a fraction of the half-length and half-width.
+const REACH: f64 = 0.9;
+
+impl Effect for MassChange {
+    fn name(&self) -> &'static str {
+        "mass_change"
+    }
+
+    fn parameter_names(&self) -> &'static [&'static str] {
+        &["t0_s", "dm_kg", "dx_m", "dy_m"]
+    }
+
+    fn bounds(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<(f64, f64)> {
+        let (m, a, b) = (case.cart.platform_mass_kg, 0.5 * case.cart.length_m, 0.5 * case.cart.width_m);
+        vec![
+            onset_bounds(case, window, 2.0, 0.1),
+            (-0.6 * m, 1.0 * m),
+            (-REACH * a, REACH * a),
+            (-REACH * b, REACH * b),
+        ]
+    }
+
+    fn grid(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<Vec<f64>> {
+        let (m, a, b) = (case.cart.platform_mass_kg, 0.5 * case.cart.length_m, 0.5 * case.cart.width_m);
+        let offsets = [(0.0, 0.0), (0.5, 0.5), (-0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)];
+        product(&[onsets_at(case, window, &[-1.5, -1.0, -0.6, -0.3, -0.1]), vec![-0.35 * m, -0.15 * m, 0.3 * m]])
+            .into_iter()
+            .flat_map(|p| offsets.iter().map(move |(x, y)| vec![p[0], p[1], x * a, y * b]))
+            .collect()
+    }
+
+    fn alteration(&self, _: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {
+        Ok((Alteration { mass: Some(Change { dm_kg: p[1], at_m: [p[2], p[3]] }), ..Alteration::default() }, p[0]))
+    }
+
+    fn explain(&self, case: &RollingCase, _: &Track, p: &[f64]) -> String {
+        format!(
+            "at {:.2} s {:.1} kg ({:.0} % of the platform) is {} at ({:+.2} m, {:+.2} m) from the platform centre (body axes), moving the centre of mass to ({:+.3} m, {:+.3} m)",
+            p[0],
+            p[1].abs(),
+            100.0 * p[1].abs() / case.cart.platform_mass_kg,
+            if p[1] < 0.0 { "lost" } else { "added" },
+            p[2],
+            p[3],
+            p[1] * p[2] / (case.cart.platform_mass_kg + p[1]),
+            p[1] * p[3] / (case.cart.platform_mass_kg + p[1]),
+        )
+    }
+}

@@ -1,0 +1,176 @@
+//! Fitting a rolling effect's few parameters: the strategy of the rocking fit ([`crate::diagnose::fit`])
+//! for a cart whose runs start where the effect begins: a grid judged over a short horizon past
+//! the window's start, Nelder–Mead (argmin) from the best grid points over growing horizons, in
+//! coordinates scaled to the ranges with the discrete parameters (a caster, a side) held, and
+//! every optimum judged on the whole record.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use argmin::core::{CostFunction, Error, Executor, State};
+use argmin::solver::neldermead::NelderMead;
+use rayon::prelude::*;
+
+use super::effects::Effect;
+use super::evidence::{Evidence, Misfit};
+use super::{RollingCase, Track};
+
+/// Grid points a local search starts from.
+const STARTS: usize = 2;
+/// Horizon past the window's start (s) of the grid, then of the successive searches.
+const GRID_HORIZON: f64 = 0.5;
+const HORIZONS: [f64; 1] = [1.5];
+const MAX_ITERATIONS: u64 = 20;
+
+pub struct Fit {
+    pub params: Vec<f64>,
+    pub misfit: Misfit,
+    pub track: Track,
+    pub evaluations: usize,
+}
+
+struct Objective<'a> {
+    effect: &'a dyn Effect,
+    case: &'a RollingCase,
+    nominal: &'a Track,
+    evidence: &'a Evidence,
+    evaluations: &'a AtomicUsize,
+}
+
+impl Objective<'_> {
+    fn track(&self, params: &[f64], until: f64) -> Option<Track> {
+        self.evaluations.fetch_add(1, Ordering::Relaxed);
+        let (alteration, onset) = self.effect.alteration(self.case, self.nominal, params).ok()?;
+        self.case.altered(self.nominal, &alteration, onset, until).ok()
+    }
+
+    fn chi2(&self, params: &[f64], until: f64) -> f64 {
+        self.track(params, until)
+            .map_or(f64::INFINITY, |t| self.evidence.misfit_between(&t, f64::NEG_INFINITY, until).chi2)
+    }
+}
+
+/// Nelder–Mead's view: the continuous parameters in [0, 1] coordinates of their bounds.
+struct Scaled<'a> {
+    objective: &'a Objective<'a>,
+    bounds: &'a [(f64, f64)],
+    continuous: &'a [usize],
+    template: &'a [f64],
+    until: f64,
+}
+
+impl Scaled<'_> {
+    fn params(&self, u: &[f64]) -> Vec<f64> {
+        let mut p = self.template.to_vec();
+        for (&i, &ui) in self.continuous.iter().zip(u) {
+            let (lo, hi) = self.bounds[i];
+            p[i] = lo + ui.clamp(0.0, 1.0) * (hi - lo);
+        }
+        p
+    }
+}
+
+impl CostFunction for Scaled<'_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+
+    fn cost(&self, u: &Vec<f64>) -> Result<f64, Error> {
+        let outside: f64 = u.iter().map(|v| (v - v.clamp(0.0, 1.0)).abs()).sum();
+        Ok(self.objective.chi2(&self.params(u), self.until) * (1.0 + outside))
+    }
+}
+
+fn search(
+    objective: &Objective<'_>,
+    bounds: &[(f64, f64)],
+    continuous: &[usize],
+    start: &[f64],
+    until: f64,
+) -> Vec<f64> {
+    if continuous.is_empty() {
+        return start.to_vec();
+    }
+    let problem = Scaled { objective, bounds, continuous, template: start, until };
+    let u0: Vec<f64> = continuous
+        .iter()
+        .map(|&i| {
+            let (lo, hi) = bounds[i];
+            if hi > lo {
+                (start[i] - lo) / (hi - lo)
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let mut simplex = vec![u0.clone()];
+    for d in 0..u0.len() {
+        let mut v = u0.clone();
+        v[d] += if v[d] > 0.5 { -0.05 } else { 0.05 };
+        simplex.push(v);
+    }
+    let start_cost = objective.chi2(start, until);
+    let Ok(solver) = NelderMead::new(simplex).with_sd_tolerance(1e-6 * start_cost.max(1.0)) else {
+        return start.to_vec();
+    };
+    let found = Executor::new(problem, solver)
+        .configure(|s| s.max_iters(MAX_ITERATIONS))
+        .run()
+        .ok()
+        .and_then(|r| Some((r.state().get_best_cost(), r.state().get_best_param()?.clone())));
+    match found {
+        Some((cost, u)) if cost < start_cost => {
+            Scaled { objective, bounds, continuous, template: start, until }.params(&u)
+        }
+        _ => start.to_vec(),
+    }
+}
+
+pub fn fit(effect: &dyn Effect, case: &RollingCase, nominal: &Track, evidence: &Evidence, window: (f64, f64)) -> Fit {
+    let evaluations = AtomicUsize::new(0);
+    let objective = Objective { effect, case, nominal, evidence, evaluations: &evaluations };
+    let bounds = effect.bounds(case, nominal, window);
+    let discrete = effect.discrete();
+    let continuous: Vec<usize> = (0..bounds.len()).filter(|&i| !discrete.get(i).copied().unwrap_or(false)).collect();
+    let first = window.0 + GRID_HORIZON;
+    let scored: Vec<(f64, Vec<f64>)> =
+        effect.grid(case, nominal, window).into_par_iter().map(|p| (objective.chi2(&p, first), p)).collect();
+    let mut order: Vec<usize> = (0..scored.len()).collect();
+    order.sort_by(|&a, &b| scored[a].0.total_cmp(&scored[b].0).then(a.cmp(&b)));
+    let starts: Vec<Vec<f64>> = order.iter().take(STARTS).map(|&i| scored[i].1.clone()).collect();
+    let optima: Vec<Vec<f64>> = starts
+        .into_par_iter()
+        .flat_map_iter(|start| {
+            let mut params = start;
+            for h in HORIZONS {
+                params = search(&objective, &bounds, &continuous, &params, window.0 + h);
+            }
+            std::iter::once(params)
+        })
+        .collect();
+    let end = case.end_s();
+    let judged: Vec<(f64, Vec<f64>, Track)> = optima
+        .into_par_iter()
+        .filter_map(|params| {
+            let track = objective.track(&params, end)?;
+            Some((evidence.misfit(&track).chi2, params, track))
+        })
+        .collect();
+    let (_, params, track) = judged.into_iter().reduce(|a, b| if b.0 < a.0 { b } else { a }).unwrap_or_else(|| {
+        let params = order.first().map_or_else(|| vec![0.0; bounds.len()], |&i| scored[i].1.clone());
+        (f64::INFINITY, params, failed(case))
+    });
+    let misfit = evidence.misfit(&track);
+    Fit { params, misfit, track, evaluations: evaluations.into_inner() }
+}
+
+/// What a model that cannot run predicts: nothing (every residual is NaN, never accepted).
+fn failed(case: &RollingCase) -> Track {
+    let n = case.samples();
+    Track {
+        x_m: vec![f64::NAN; n],
+        y_m: vec![f64::NAN; n],
+        yaw_rad: vec![f64::NAN; n],
+        ax_abs_mps2: vec![f64::NAN; n],
+        states: Vec::new(),
+        onset_s: None,
+    }
+}
