@@ -16,6 +16,7 @@ mod crash_safety;
 mod demo_archive;
 mod demo_study;
 mod diagnose_cases;
+mod example_pipelines;
 mod fragility_scipy;
 mod hostile_input;
 mod interop;
