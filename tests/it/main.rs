@@ -17,6 +17,7 @@ mod demo_archive;
 mod demo_study;
 mod diagnose_cases;
 mod export;
+mod example_pipelines;
 mod fragility_scipy;
 mod hostile_input;
 mod interop;
