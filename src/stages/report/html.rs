@@ -338,7 +338,7 @@ fn unit_section(h: &mut String, page: &Page, unit: &Unit) {
         }
     }
     if let Some(src) = &unit.figure {
-        figure(h, src, &format!("{}: floor and top acceleration, and the transfer functions", unit.name));
+        figure(h, src, &format!("{}: floor and top acceleration, transfer functions and coherence", unit.name));
     }
     for rocking in &unit.rocking {
         let overturned = rocking.runs.iter().filter(|r| r.overturned).count();
