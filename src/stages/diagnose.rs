@@ -491,9 +491,9 @@ fn rolling_figure(d: &RollingDiagnosis) -> Result<Vec<u8>, String> {
             x_label: "time [s]".into(),
             y_label: unit.into(),
             series: vec![
-                Series { label: "observed".into(), x: t, y: o },
-                Series { label: "nominal cart".into(), x: t, y: b },
-                Series { label: label.into(), x: t, y: m },
+                Series::new("observed", t, o).observed(),
+                Series::new("nominal cart", t, b).model(),
+                Series::new(label, t, m).model(),
             ],
             spans: spans.to_vec(),
             ..Panel::default()
@@ -510,10 +510,7 @@ fn rolling_figure(d: &RollingDiagnosis) -> Result<Vec<u8>, String> {
             ),
             x_label: "time [s]".into(),
             y_label: "residual / sigma".into(),
-            series: vec![
-                Series { label: "nominal cart".into(), x: &ta, y: &za },
-                Series { label: "accepted model".into(), x: &ta, y: &zm },
-            ],
+            series: vec![Series::new("nominal cart", &ta, &za).model(), Series::new("accepted model", &ta, &zm)],
             spans: spans.clone(),
             ..Panel::default()
         },

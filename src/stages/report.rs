@@ -15,8 +15,8 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::{
-    partition_values, figure_stem, partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext,
-    StageInfo, StageInput,
+    figure_stem, partition_values, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo,
+    StageInput,
 };
 use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
 use crate::table::{Column, ColumnData, Table};

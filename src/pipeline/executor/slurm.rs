@@ -291,7 +291,7 @@ fn submit_arrays(
         return Ok(None);
     }
     let commit = ArrayJob {
-        name: id.clone(),
+        name: id.to_string(),
         command: format!("{} slurm-commit {}", quote(shakeflow), quote(run_dir)),
         n_tasks: 1,
         only: None,

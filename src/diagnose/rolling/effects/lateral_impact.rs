@@ -5,7 +5,7 @@
 //! it (the farthest the corners have gone toward that side by then): the fit then moves in time,
 //! where the records located the disagreement. Parameters: side, contact time, e.
 
-use super::{onsets_at, linspace, onset_bounds, product, Effect, RollingCase, Track};
+use super::{linspace, onset_bounds, onsets_at, product, Effect, RollingCase, Track};
 use crate::physics::rolling::{Alteration, Wall};
 
 pub struct LateralImpact;
