@@ -17,7 +17,7 @@ pub struct Diagnose;
 
 static INFO: StageInfo = StageInfo {
     name: "diagnose",
-    version: 2,
+    version: 3,
     summary: "Where the toppling model and a unit's records disagree, which physics it left out (sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt), fitted, ranked by BIC, or `unexplained`.",
     inputs: InputKind::Files(&[RecordFormat::Case]),
     outputs: &[
