@@ -67,7 +67,8 @@ fn a_rolling_equipment_file_with_a_misspelt_key_is_refused_with_its_line() {
     let text = std::fs::read_to_string(from.join("equipment.yaml")).unwrap().replace("mu_s_roll:", "mu_s_rol:");
     std::fs::write(case.join("equipment.yaml"), &text).unwrap();
     let line = text.lines().position(|l| l.starts_with("mu_s_rol:")).unwrap() + 1;
-    let run = shakeflow(&["diagnose", case.to_str().unwrap(), "--out", dir.path().join("out").to_str().unwrap()], dir.path());
+    let run =
+        shakeflow(&["diagnose", case.to_str().unwrap(), "--out", dir.path().join("out").to_str().unwrap()], dir.path());
     assert!(!run.status.success());
     let err = stderr(&run);
     assert!(err.contains("mu_s_rol") && err.contains(&format!(":{line}")), "{err}");

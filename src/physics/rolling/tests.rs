@@ -495,7 +495,8 @@ mod alterations {
         };
         let friction = table4_friction("MC2");
         let model = altered(alteration, &friction);
-        let y0 = model.enter(&altered(Alteration::default(), &friction), &[0.0, 0.0, 0.2, 0.4, -0.5, 1.0, 2.0, 0.3, -0.2, 0.4]);
+        let y0 = model
+            .enter(&altered(Alteration::default(), &friction), &[0.0, 0.0, 0.2, 0.4, -0.5, 1.0, 2.0, 0.3, -0.2, 0.4]);
         let (error, dissipated) = energy_balance_error::<10, 12, _>(&model, y0);
         eprintln!("altered cart: energy balance error {error:.1e} J of {dissipated:.2} J dissipated");
         assert!(dissipated > 1.0, "friction must do real work here: {dissipated} J");
@@ -509,7 +510,8 @@ mod alterations {
     #[test]
     fn frictionless_unforced_cart_with_an_offset_mass_keeps_its_kinetic_energy() {
         // The first-moment terms alone (a sign error in M's coupling or in ω²S breaks this).
-        let alteration = Alteration { mass: Some(MassChange { dm_kg: 25.0, at_m: [-0.35, 0.2] }), ..Alteration::default() };
+        let alteration =
+            Alteration { mass: Some(MassChange { dm_kg: 25.0, at_m: [-0.35, 0.2] }), ..Alteration::default() };
         let model = altered(alteration, &frictionless());
         let y0 = [0.0, 0.0, 0.1, 0.3, -1.0, 2.0, 0.5, 0.4, 0.2, 1.5];
         let y = integrate(|_, y| model.rhs(y, [0.0, 0.0]), y0, 3.0, 1e-11);
@@ -550,7 +552,8 @@ mod alterations {
     fn a_locked_wheel_drags_with_mu_times_its_load() {
         // Once it slides (|v| ≫ ε), the locked wheel dissipates μ N |v|; the other wheels roll freely.
         let mu = 0.35;
-        let model = altered(Alteration { brake: Some(Brake { caster: 0, mu }), ..Alteration::default() }, &frictionless());
+        let model =
+            altered(Alteration { brake: Some(Brake { caster: 0, mu }), ..Alteration::default() }, &frictionless());
         let y = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0];
         let p = model.power(&y, [0.0, 0.0]);
         let expected = -mu * model.wheel_loads()[0] * 0.5;
@@ -577,7 +580,8 @@ mod alterations {
         let excitation = Excitation { t0_s: 0.0, dt_s: 0.005, ax_mps2: &zeros, ay_mps2: &zeros };
         let options = Options { yaw0_rad: yaw, steer0_rad: [-yaw; 4], ..Options::default() };
         let y0 = [0.0, 0.0, yaw, -yaw, -yaw, -yaw, -yaw, 0.5, 0.0, 0.0];
-        let r = simulate_altered(&cart, &frictionless(), &excitation, &options, &alteration, Some((0, &y0)), n - 1).unwrap();
+        let r = simulate_altered(&cart, &frictionless(), &excitation, &options, &alteration, Some((0, &y0)), n - 1)
+            .unwrap();
         let speed = |k: usize| {
             let s = &r.states[k];
             // v_corner,x = ẋ − ω r_y of corner 4, r_y = a sin θ − b cos θ.

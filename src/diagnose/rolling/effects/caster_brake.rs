@@ -2,7 +2,7 @@
 //! resists its slide along the heading with μ N tanh(v/ε) instead of rolling resistance.
 //! Parameters: the caster, t0, μ.
 
-use super::{sharp_onsets, caster, linspace, onset_bounds, product, Effect, RollingCase, Track};
+use super::{caster, linspace, onset_bounds, product, sharp_onsets, Effect, RollingCase, Track};
 use crate::physics::rolling::{Alteration, Brake};
 
 pub struct CasterBrake;

@@ -5,7 +5,7 @@
 //! it (the farthest the corners have gone toward that side by then): the fit then moves in time,
 //! where the records located the disagreement. Parameters: side, contact time, e.
 
-use super::{onsets_at, linspace, onset_bounds, product, Effect, RollingCase, Track};
+use super::{linspace, onset_bounds, onsets_at, product, Effect, RollingCase, Track};
 use crate::physics::rolling::{Alteration, Wall};
 
 pub struct LateralImpact;
@@ -61,7 +61,12 @@ impl Effect for LateralImpact {
     }
 
     fn grid(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<Vec<f64>> {
-        product(&[linspace(0.0, 3.0, 4), onsets_at(case, window, &[-0.06, -0.03, 0.0, 0.02]), vec![0.3, 0.7]])
+        // A soft impact (low e, low speed) may show only some tenths of a second after the contact.
+        product(&[
+            linspace(0.0, 3.0, 4),
+            onsets_at(case, window, &[-0.6, -0.4, -0.25, -0.12, -0.05, 0.0]),
+            vec![0.2, 0.5, 0.8],
+        ])
     }
 
     fn alteration(&self, case: &RollingCase, nominal: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {

@@ -9,7 +9,7 @@
 //! loads between wheels, which turns the cart. A small centred change is therefore often
 //! indistinguishable from none, and dm trades off against the offset.
 
-use super::{onsets_at, onset_bounds, product, Effect, RollingCase, Track};
+use super::{onset_bounds, onsets_at, product, Effect, RollingCase, Track};
 use crate::physics::rolling::{Alteration, MassChange as Change};
 
 pub struct MassChange;

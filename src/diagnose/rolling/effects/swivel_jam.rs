@@ -2,7 +2,7 @@
 //! wheel, a constraint on the platform's motion; it stops at once, with the least loss of
 //! kinetic energy (an impulse along the constraint). Parameters: the caster, t0.
 
-use super::{sharp_onsets, caster, linspace, onset_bounds, product, Effect, RollingCase, Track};
+use super::{caster, linspace, onset_bounds, product, sharp_onsets, Effect, RollingCase, Track};
 use crate::physics::rolling::Alteration;
 
 pub struct SwivelJam;
