@@ -200,7 +200,7 @@ pub fn read_rolling_case(dir: &Path) -> Result<RollingCase, UserError> {
     };
     friction.check().map_err(|m| refuse(format!("invalid friction: {m}")))?;
     let g = e.g_mps2.unwrap_or(crate::units::G0);
-    if !(g.is_finite() && g > 0.0) || !(e.yaw0_deg.is_finite() && e.steer0_deg.iter().all(|v| v.is_finite())) {
+    if !(g.is_finite() && g > 0.0 && e.yaw0_deg.is_finite() && e.steer0_deg.iter().all(|v| v.is_finite())) {
         return Err(refuse("g_mps2 must be positive and the initial angles finite".into()));
     }
     let options = Options {

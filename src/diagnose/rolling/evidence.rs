@@ -166,6 +166,11 @@ impl Evidence {
         self.flagged_times(p).len()
     }
 
+    /// Flagged samples from `from` to `until` (s).
+    pub fn flagged_between(&self, p: &Track, from: f64, until: f64) -> usize {
+        self.flagged_times(p).into_iter().filter(|t| *t >= from && *t <= until).count()
+    }
+
     /// From the first to the last flagged sample.
     pub fn window(&self, p: &Track) -> Option<(f64, f64)> {
         let times = self.flagged_times(p);
@@ -174,23 +179,23 @@ impl Evidence {
         (first <= last).then_some((first, last))
     }
 
-    /// The first time two predictions differ by more than one noise standard deviation in the
-    /// camera's quantities at `needed` camera samples within 0.1 s, or beyond 4σ at 5 accelerometer
-    /// samples within 0.1 s: where the records could tell them apart.
+    /// The first time two predictions differ as much as a disagreement with the records would
+    /// be flagged (beyond the exceedance threshold at 2 camera samples or 5 accelerometer samples
+    /// within 0.1 s), at the samples the records have: where the records could tell them apart.
     pub fn parting(&self, a: &Track, b: &Track) -> Option<f64> {
         let camera: Vec<f64> = self
             .camera
             .iter()
             .filter(|s| {
                 let (za, zb) = (self.camera_z(a, s), self.camera_z(b, s));
-                !(0..3).all(|i| (za[i] - zb[i]).abs() <= 1.0)
+                s.valid && !(0..3).all(|i| (za[i] - zb[i]).abs() <= self.exceedance_sigma)
             })
             .map(|s| s.t)
             .collect();
         let accel: Vec<f64> = self
             .accel
             .iter()
-            .filter(|s| !((self.accel_z(a, s) - self.accel_z(b, s)).abs() <= self.exceedance_sigma))
+            .filter(|s| s.valid && !((self.accel_z(a, s) - self.accel_z(b, s)).abs() <= self.exceedance_sigma))
             .map(|s| s.t)
             .collect();
         let first_cluster = |times: &[f64], needed: usize| {

@@ -17,9 +17,9 @@ use super::{RollingCase, Track};
 /// Grid points a local search starts from.
 const STARTS: usize = 2;
 /// Horizon past the window's start (s) of the grid, then of the successive searches.
-const GRID_HORIZON: f64 = 0.5;
-const HORIZONS: [f64; 1] = [1.5];
-const MAX_ITERATIONS: u64 = 20;
+const GRID_HORIZON: f64 = 1.0;
+const HORIZONS: [f64; 2] = [1.5, 4.0];
+const MAX_ITERATIONS: u64 = 30;
 
 pub struct Fit {
     pub params: Vec<f64>,

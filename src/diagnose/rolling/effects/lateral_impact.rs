@@ -61,7 +61,12 @@ impl Effect for LateralImpact {
     }
 
     fn grid(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<Vec<f64>> {
-        product(&[linspace(0.0, 3.0, 4), onsets_at(case, window, &[-0.06, -0.03, 0.0, 0.02]), vec![0.3, 0.7]])
+        // A soft impact (low e, low speed) may show only some tenths of a second after the contact.
+        product(&[
+            linspace(0.0, 3.0, 4),
+            onsets_at(case, window, &[-0.6, -0.4, -0.25, -0.12, -0.05, 0.0]),
+            vec![0.2, 0.5, 0.8],
+        ])
     }
 
     fn alteration(&self, case: &RollingCase, nominal: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {
