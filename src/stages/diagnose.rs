@@ -64,7 +64,11 @@ impl Stage for Diagnose {
                 }
                 ctx.sink.write("accel", &part.partition, accel)?;
                 ctx.sink.write("camera", &part.partition, camera)?;
-                let name = super::figure_stem(&part.partition, d.case());
+                // `reports/<case>.json`: named by the case's partition values, as the `case` column names it.
+                let name = match super::partition_values(&part.partition).replace('/', "_") {
+                    n if n.is_empty() => d.case().to_string(),
+                    n => n,
+                };
                 ctx.sink.write_file("reports", &format!("{name}.json"), d.json_bytes().as_bytes())?;
                 ctx.sink.write_file("reports", &format!("{name}.png"), &d.figure().map_err(anyhow::Error::msg)?)?;
                 Ok((super::partition_values(&part.partition), d))

@@ -101,14 +101,14 @@ fn the_diagnose_stage_in_a_pipeline() {
     let table = shakeflow::io::parquet::read_table(&root.join("out/diagnosis/diagnosis/data.parquet")).unwrap();
     let shakeflow::table::ColumnData::Str(verdicts) = &table.column("verdict").unwrap().data else { panic!() };
     assert_eq!(verdicts, &["sensor_tilt", "mass_change"]);
-    assert!(root.join("out/diagnosis/reports/case=demo_02.json").is_file());
+    assert!(root.join("out/diagnosis/reports/demo_02.json").is_file());
     assert!(root.join("out/diagnosis/accel/case=demo_02/data.parquet").is_file());
     // An edited observation reruns the diagnosis.
     let observed = root.join("cases/demo_01/observed_cpt.csv");
     let text = std::fs::read_to_string(&observed).unwrap().replacen("0.001274", "0.001275", 1);
     std::fs::write(&observed, text).unwrap();
     let status = stdout(&shakeflow(&["status", "pipeline.yaml"], root));
-    assert!(status.contains("input `cases` changed"), "{status}");
+    assert!(status.contains("diagnosis          stale: input `cases/demo_01` changed"), "{status}");
 }
 
 #[test]

@@ -212,7 +212,7 @@ fn a_baseline_that_overflows_fails_the_run() {
     // The failed unit writes nothing; the record that succeeded is committed.
     assert!(!root.join("out/baseline/records/motion=FB-1").exists(), "a failed unit commits nothing");
     assert!(root.join("out/baseline/records/motion=FB-2/data.parquet").is_file(), "{message}");
-    assert!(message.contains("baseline record motion=FB-1 failed"), "{message}");
+    assert!(message.contains("stage `baseline` record motion=FB-1 failed"), "{message}");
 }
 
 /// A pipeline saved as UTF-16 is named as such; the terminal gets no NUL bytes.

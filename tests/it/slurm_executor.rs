@@ -70,7 +70,7 @@ fn a_failing_record_fails_its_unit_only_on_slurm() {
     let out = slurm_run(root, &["--wait"]);
     let log = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{log}");
-    assert!(log.contains("load record motion=FB-2 failed"), "{log}");
+    assert!(log.contains("stage `load` record motion=FB-2 failed"), "{log}");
     assert!(root.join("out/load/records/motion=FB-1/data.parquet").is_file(), "{log}");
     assert!(!root.join("out/load/records/motion=FB-2").exists());
     let status = status_text(root);
@@ -87,7 +87,7 @@ fn a_cancelled_task_is_the_only_shard_a_rerun_submits_and_status_follows_the_run
     assert!(out.status.success(), "{log}");
     let status = status_text(root);
     assert!(status.contains("Slurm run `shakeflow-pipeline-") && status.contains("task(s) not finished"), "{status}");
-    assert!(status.contains("load ") && status.contains("PENDING"), "{status}");
+    assert!(status.contains("load ") && status.contains("Pending"), "{status}");
     // The load array's job id, from `load submitted: 2 of 2 shard(s), … (<job id>)`.
     let line = log.lines().find(|l| l.starts_with("load ")).unwrap();
     let job = line.rsplit('(').next().unwrap().trim_end_matches(')');

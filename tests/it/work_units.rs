@@ -59,7 +59,7 @@ fn a_failed_record_fails_its_unit_only_and_the_rest_is_committed() {
     let out = run(root, &[]);
     let log = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{log}");
-    assert!(log.contains("error: load record motion=FB-2 failed: archive/FB-2/daq.csv:"), "{log}");
+    assert!(log.contains("error: stage `load` record motion=FB-2 failed: archive/FB-2/daq.csv:"), "{log}");
     assert!(log.contains("baseline           not run: the run stopped at a failed unit"), "{log}");
     assert!(root.join("out/load/records/motion=FB-1/data.parquet").is_file(), "the finished record is committed");
     assert!(!root.join("out/load/records/motion=FB-2").exists());

@@ -958,6 +958,12 @@ fn fold(
                     let file =
                         old.inputs.keys().find(|k| !k.starts_with("source ") && !k.starts_with("params.")).cloned();
                     flagged_rows.push((record.id.clone(), file.unwrap_or_default(), why.clone()));
+                    // Still skipped: the run says so, cached or not.
+                    folded.flagged.push(UnitProblem {
+                        stage: name.into(),
+                        unit: record.id.clone(),
+                        reason: why.clone(),
+                    });
                 }
                 new_entry.units.insert(record.id, old.clone());
             }

@@ -467,7 +467,7 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize) -> anyhow::Result<bo
     let failed = records.iter().filter(|r| matches!(r.outcome, UnitOutcome::Failed { .. })).count();
     for record in &records {
         if let UnitOutcome::Failed { reason } = &record.outcome {
-            eprintln!("error: {stage_name} {} failed: {reason}", crate::pipeline::units::describe(&record.id));
+            eprintln!("error: stage `{stage_name}` {} failed: {reason}", crate::pipeline::units::describe(&record.id));
         }
     }
     let manifest = Manifest { records, vanished: assessed.vanished.clone(), upstream_tainted };
@@ -568,7 +568,7 @@ pub fn commit(run_dir: &Path) -> anyhow::Result<()> {
         let _ = std::fs::remove_dir_all(run_dir.join(folder));
     }
     for (stage, unit, reason) in &summary.failed {
-        eprintln!("error: {stage} {} failed: {reason}", crate::pipeline::units::describe(unit));
+        eprintln!("error: stage `{stage}` {} failed: {reason}", crate::pipeline::units::describe(unit));
     }
     drop(lease);
     if summary.failed.is_empty() {
