@@ -947,7 +947,7 @@ enum ExecutorKind {
 fn exit_status(summary: &executor::RunSummary) -> ExitCode {
     for flagged in &summary.flagged {
         eprintln!(
-            "skipped record: {} {}: {}",
+            "skipped record: stage `{}` {}: {}",
             flagged.stage,
             crate::pipeline::units::describe(&flagged.unit),
             flagged.reason
@@ -956,7 +956,7 @@ fn exit_status(summary: &executor::RunSummary) -> ExitCode {
     if !summary.failed.is_empty() {
         for failed in &summary.failed {
             eprintln!(
-                "error: {} {} failed: {}",
+                "error: stage `{}` {} failed: {}",
                 failed.stage,
                 crate::pipeline::units::describe(&failed.unit),
                 failed.reason

@@ -374,14 +374,14 @@ fn upstream_produced(
                 }
             }
             Some(shards) => {
-                for shard in 0..shards.len() {
+                for (shard, ids) in shards.iter().enumerate() {
                     let path = run_dir.join("manifests").join(name).join(format!("{shard}.json"));
                     let Ok(bytes) = std::fs::read(&path) else {
                         // Not submitted (all cached) or not finished: what is committed stands.
                         let submitted = run.arrays[name].tasks().any(|t| t as usize == shard);
                         tainted |= submitted;
-                        for id in &shards[shard] {
-                            if !submitted {
+                        if !submitted {
+                            for id in ids {
                                 files.extend(committed(id));
                             }
                         }
