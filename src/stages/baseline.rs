@@ -74,8 +74,8 @@ impl Stage for Baseline {
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
             let table = ctx.read_table(part)?;
-            let mut corrected = correct(&table, order, &wanted)
-                .map_err(|e| anyhow::anyhow!("{}: {}", part.label, printable(&e)))?;
+            let mut corrected =
+                correct(&table, order, &wanted).map_err(|e| anyhow::anyhow!("{}: {}", part.label, printable(&e)))?;
             corrected.metadata.extend(super::record_provenance(part));
             ctx.sink.write("records", &part.partition, corrected)
         })
