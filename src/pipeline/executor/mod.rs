@@ -563,11 +563,16 @@ fn assess_stage(
 /// `shakeflow run --dry-run`: the units that would run, and why.
 pub fn dry_run(plan: &Plan, options: &RunOptions) -> Result<Vec<StatusLine>, UserError> {
     let selected = selected_stages(plan, options)?;
-    let forced: BTreeSet<String> = options.force.iter().flat_map(|n| plan.with_dependents(n)).collect();
+    let forced = forced_stages(plan, &options.force);
     let forced: Vec<&str> = forced.iter().map(String::as_str).collect();
     let lock = LockFile::read(&lock_path(plan))?;
     let lines = predict(plan, &lock, &resolve_sources(plan)?, &param_file_hashes(plan)?, &forced)?;
     Ok(lines.into_iter().filter(|l| selected.contains(&l.name)).collect())
+}
+
+/// The stages `--force` reruns: the named ones and everything downstream of them.
+fn forced_stages(plan: &Plan, force: &[String]) -> BTreeSet<String> {
+    force.iter().flat_map(|n| plan.with_dependents(n)).collect()
 }
 
 /// The stages a run covers: the named ones and what they need, or all.
@@ -600,7 +605,7 @@ fn selected_stages(plan: &Plan, options: &RunOptions) -> Result<BTreeSet<String>
 
 pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Result<RunSummary> {
     let selected = selected_stages(plan, options)?;
-    let forced: BTreeSet<String> = options.force.iter().flat_map(|n| plan.with_dependents(n)).collect();
+    let forced = forced_stages(plan, &options.force);
     let output_dir = plan.file.output_dir();
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;

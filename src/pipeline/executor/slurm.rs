@@ -29,8 +29,8 @@ use anyhow::{anyhow, bail, Context};
 use serde::{Deserialize, Serialize};
 
 use super::{
-    assess_stage, execute, fold, param_file_hashes, predict, resolve_sources, selected_stages, upstream_stages,
-    Produced, ProducedFile, RunOptions, RunSummary, UnitOutcome, UnitProblem, UnitRecord,
+    assess_stage, execute, fold, forced_stages, param_file_hashes, predict, resolve_sources, selected_stages,
+    upstream_stages, Produced, ProducedFile, RunOptions, RunSummary, UnitOutcome, UnitProblem, UnitRecord,
 };
 use crate::error::UserError;
 use crate::pipeline::lease::{Lease, STATE_DIR};
@@ -135,7 +135,7 @@ pub fn submit(
 ) -> anyhow::Result<RunSummary> {
     slurm.executor.check().map_err(|e| e.error)?;
     let selected = selected_stages(plan, options)?;
-    let forced: BTreeSet<String> = options.force.iter().flat_map(|n| plan.with_dependents(n)).collect();
+    let forced = forced_stages(plan, &options.force);
     let forced: Vec<&str> = forced.iter().map(String::as_str).collect();
     let output_dir = plan.file.output_dir();
     let sources = resolve_sources(plan)?;
@@ -424,7 +424,7 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize) -> anyhow::Result<bo
     let sources = resolve_sources(&plan)?;
     let files = param_file_hashes(&plan)?;
     let (produced, upstream_tainted) = upstream_produced(run_dir, &run, &plan, &lock, stage_name)?;
-    let forced: BTreeSet<String> = run.force.iter().flat_map(|n| plan.with_dependents(n)).collect();
+    let forced = forced_stages(&plan, &run.force);
     let forced: Vec<&str> = forced.iter().map(String::as_str).collect();
     let assessed = assess_stage(&plan, stage, &sources, &produced, &files, &lock, &output_dir, &forced)?;
     // A unit nobody predicted (a partition no earlier output had) goes to the last shard.
