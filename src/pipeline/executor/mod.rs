@@ -609,31 +609,7 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
     let output_dir = plan.file.output_dir();
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;
-    ownership::check_output_dir(&plan.file, &input_paths(plan, &sources))?;
-    std::fs::create_dir_all(&output_dir).map_err(|e| {
-        plan.file
-            .error_at(&["output_dir"], format!("cannot create the output directory `{}`: {e}", output_dir.display()))
-            .hint("choose a writable `output_dir` (relative to the pipeline file)")
-    })?;
-    let lease = Lease::acquire(&output_dir)?;
-    if let Some(holder) = &lease.took_over {
-        reporter.line(&format!(
-            "took over the lease of an earlier run that is gone (pid {} on `{}`, started {})",
-            holder.pid,
-            holder.host,
-            super::lease::format_utc(holder.started)
-        ));
-    }
-    let recovery = txn::recover(&lease)?;
-    if recovery != Recovery::default() {
-        reporter.line(&format!(
-            "an interrupted run: {} commit(s) completed, {} unfinished attempt(s) removed",
-            recovery.completed, recovery.discarded
-        ));
-    }
-    let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
-    ownership::check_pipeline(&plan.file, &lock)?;
-    ownership::check_stage_folders(&plan.file, &output_dir, plan.stages.keys().map(String::as_str), &lock)?;
+    let (lease, lock) = take_output_folder(plan, &sources, reporter)?;
     let transaction = Transaction::begin(&lease)?;
     let env = RunEnv {
         plan,
@@ -672,6 +648,42 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
     commit(transaction, &state, plan, &lock)?;
     let reports = plan.stages.keys().filter_map(|n| state.reports.get(n).cloned()).collect();
     Ok(RunSummary { reports, failed: state.failed, flagged: state.flagged })
+}
+
+/// Before a run writes anything: the output folder checked and created, its lease taken, an
+/// interrupted commit finished, and its lockfile read and checked against the pipeline.
+fn take_output_folder(
+    plan: &Plan,
+    sources: &BTreeMap<String, ResolvedSource>,
+    reporter: &Reporter,
+) -> anyhow::Result<(Lease, LockFile)> {
+    let output_dir = plan.file.output_dir();
+    ownership::check_output_dir(&plan.file, &input_paths(plan, sources))?;
+    std::fs::create_dir_all(&output_dir).map_err(|e| {
+        plan.file
+            .error_at(&["output_dir"], format!("cannot create the output directory `{}`: {e}", output_dir.display()))
+            .hint("choose a writable `output_dir` (relative to the pipeline file)")
+    })?;
+    let lease = Lease::acquire(&output_dir)?;
+    if let Some(holder) = &lease.took_over {
+        reporter.line(&format!(
+            "took over the lease of an earlier run that is gone (pid {} on `{}`, started {})",
+            holder.pid,
+            holder.host,
+            super::lease::format_utc(holder.started)
+        ));
+    }
+    let recovery = txn::recover(&lease)?;
+    if recovery != Recovery::default() {
+        reporter.line(&format!(
+            "an interrupted run: {} commit(s) completed, {} unfinished attempt(s) removed",
+            recovery.completed, recovery.discarded
+        ));
+    }
+    let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
+    ownership::check_pipeline(&plan.file, &lock)?;
+    ownership::check_stage_folders(&plan.file, &output_dir, plan.stages.keys().map(String::as_str), &lock)?;
+    Ok((lease, lock))
 }
 
 fn commit(transaction: Transaction, state: &RunState, plan: &Plan, lock: &LockFile) -> anyhow::Result<()> {

@@ -41,7 +41,7 @@ use crate::pipeline::plan::Plan;
 use crate::pipeline::progress::Reporter;
 use crate::pipeline::slurm::{ArrayJob, DepKind, Dependency, ExecutorOptions, Slurm, SubmittedArray};
 use crate::pipeline::spec::PipelineFile;
-use crate::pipeline::txn::{self, Transaction};
+use crate::pipeline::txn::Transaction;
 use crate::stages::WorkUnits;
 
 /// Where Slurm runs keep their folders, under the output folder's `.shakeflow`.
@@ -140,13 +140,7 @@ pub fn submit(
     let output_dir = plan.file.output_dir();
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;
-    ownership::check_output_dir(&plan.file, &super::input_paths(plan, &sources))?;
-    std::fs::create_dir_all(&output_dir).with_context(|| format!("creating `{}`", output_dir.display()))?;
-    let lease = Lease::acquire(&output_dir)?;
-    txn::recover(&lease)?;
-    let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
-    ownership::check_pipeline(&plan.file, &lock)?;
-    ownership::check_stage_folders(&plan.file, &output_dir, plan.stages.keys().map(String::as_str), &lock)?;
+    let (lease, lock) = super::take_output_folder(plan, &sources, reporter)?;
     let lines = predict(plan, &lock, &sources, &files, &forced)?;
 
     let stem = plan.file.path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
