@@ -52,6 +52,8 @@ $(PY_STAMP): tests/reference/requirements.txt
 	$(VENV_PY) -m pip install --quiet --disable-pip-version-check -r tests/reference/requirements.txt
 	touch $@
 
+# The tests build with the release profile, the one `make demo` builds: the dependencies compile
+# once for both commands, not once per profile (docs/benchmarks.md, cold start).
 # The Slurm tests run against a single-node Slurm started here and stopped after (by pid, also when
 # tests fail; left running if it already ran). Without root it cannot start: those tests then fail, saying so.
 test: $(PY_STAMP)
@@ -59,7 +61,7 @@ test: $(PY_STAMP)
 	sh tests/system/chromium.sh
 	@was_running=$$(tests/system/slurm.sh status >/dev/null 2>&1 && echo yes); \
 	tests/system/slurm.sh start || echo "make test: the test Slurm did not start; the Slurm tests will fail"; \
-	SHAKEFLOW_PYTHON=$(VENV_PY) $(CARGO) test --locked --no-fail-fast; status=$$?; \
+	SHAKEFLOW_PYTHON=$(VENV_PY) $(CARGO) test --release --locked --no-fail-fast; status=$$?; \
 	[ -n "$$was_running" ] || tests/system/slurm.sh stop; exit $$status
 
 bench: release $(PY_STAMP)
@@ -100,7 +102,7 @@ schema:
 	$(CARGO) run --quiet --locked -- schema > schemas/pipeline.schema.json
 
 rolling-findings:
-	$(CARGO) test --release --locked --test rolling_findings -- --nocapture
+	$(CARGO) test --release --locked --test it rolling_findings -- --nocapture
 
 fmt:
 	$(CARGO) fmt
