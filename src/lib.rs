@@ -21,5 +21,7 @@ pub mod stages;
 pub mod stats;
 pub mod summary;
 pub mod table;
+#[cfg(test)]
+mod tempdir;
 pub mod units;
 pub mod vision;

@@ -182,7 +182,7 @@ mod tests {
 
     #[test]
     fn detections_name_the_records_and_channels_that_toppled() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         part(dir.path(), "events", "motion=FB-4", vec![text("channel", &["a", "b"]), flag("toppled", &[true, false])]);
         part(dir.path(), "events", "motion=FB-5", vec![text("channel", &["a", "b"]), flag("toppled", &[false, true])]);
         assert_eq!(
@@ -193,7 +193,7 @@ mod tests {
 
     #[test]
     fn toppling_counts_the_summary_rows_only() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let kinds = ["uplift", "impact", "overturn", "summary"];
         part(dir.path(), "events", "record=A", vec![text("event", &kinds), flag("overturned", &[true; 4])]);
         part(dir.path(), "events", "record=B", vec![text("event", &["summary"]), flag("overturned", &[false])]);
@@ -202,7 +202,7 @@ mod tests {
 
     #[test]
     fn verdicts_are_counted_and_rolling_peaks_named() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         part(dir.path(), "diagnosis", "", vec![text("verdict", &["sliding", "none", "sliding"])]);
         assert_eq!(stage_line(dir.path(), "diagnose").unwrap(), "3 cases: none 1, sliding 2");
         let events =

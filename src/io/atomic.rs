@@ -74,7 +74,7 @@ mod tests {
 
     #[test]
     fn failed_write_leaves_nothing_behind() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let target = dir.path().join("out.txt");
         let err = write_file(&target, |w| {
             w.write_all(b"half")?;

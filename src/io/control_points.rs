@@ -103,7 +103,7 @@ mod tests {
 
     #[test]
     fn reads_named_points_and_points_at_bad_cells() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let path = dir.path().join("cp.csv");
         std::fs::write(&path, "# surveyed\npoint,X_mm,Y_mm,Z_mm,u_px,v_px\nA,0,0,0,10.5,20\nB,100,0,0,110,21\n")
             .unwrap();

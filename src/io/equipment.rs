@@ -130,7 +130,7 @@ mod tests {
 
     #[test]
     fn reads_a_case_file_and_names_a_misspelt_key_with_its_line() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let good = dir.path().join("good.yaml");
         std::fs::write(&good, "name: PS2\nshape: rectangular\nB_m: 0.349\nH_m: 1.082\nf: 0.085\nmass_kg: 150\nsensors:\n  accelerometer: {rate_hz: 200}\n").unwrap();
         let e = read_rocking_equipment(&good).unwrap();

@@ -403,7 +403,7 @@ mod tests {
 
     #[test]
     fn png_frames_decode_to_gray() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let path = dir.path().join("f.png");
         let mut out = Vec::new();
         {

@@ -121,8 +121,8 @@ mod tests {
 
     #[test]
     fn dir_hash_depends_on_names_and_contents_only() {
-        let a = tempfile::tempdir().unwrap();
-        let b = tempfile::tempdir().unwrap();
+        let a = crate::tempdir::tempdir().unwrap();
+        let b = crate::tempdir::tempdir().unwrap();
         for d in [a.path(), b.path()] {
             std::fs::create_dir_all(d.join("x=1")).unwrap();
             std::fs::write(d.join("x=1/data.parquet"), "abc").unwrap();
@@ -135,7 +135,7 @@ mod tests {
     #[test]
     fn hashing_while_writing_equals_hashing_the_file() {
         use std::io::Write;
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let path = dir.path().join("f.bin");
         let mut writer = HashingWriter::new(std::fs::File::create(&path).unwrap());
         for chunk in [&b"front"[..], &[0u8; 70_000], b"back"] {

@@ -266,7 +266,7 @@ mod tests {
 
     #[test]
     fn written_file_summarizes_back() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let path = dir.path().join("t.mcap");
         let mut t = Table::new();
         t.push(Column::f64("time_s", "s", "time", vec![0.0, 0.01, 0.02]));

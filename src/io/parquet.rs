@@ -293,7 +293,7 @@ mod tests {
 
     #[test]
     fn round_trip_is_the_identity() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let path = dir.path().join("t.parquet");
         let mut t = Table::new();
         t.push(Column::f64("time_s", "s", "time", vec![0.0, 0.5]));
@@ -387,7 +387,7 @@ mod tests {
         let text = |i: usize| Some(format!("a label long enough to fill pages sooner, number {i}"));
         uniform.push(column("labels", ColumnData::OptStr((0..rows).map(text).collect())));
         uniform.push(column("no_labels", ColumnData::OptStr(vec![None; rows])));
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         for (name, table) in [("mixed", &mixed), ("empty", &empty), ("long", &long), ("uniform", &uniform)] {
             let path = dir.path().join(format!("{name}.parquet"));
             write_table(&path, table).unwrap();
@@ -405,7 +405,7 @@ mod tests {
 
     #[test]
     fn identical_tables_give_identical_bytes() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let mut t = Table::new();
         t.push(Column::f64("a", "m", "d", (0..1000).map(|i| (i as f64).sin()).collect()));
         let before = format!("{t:?}");

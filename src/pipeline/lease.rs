@@ -419,7 +419,7 @@ mod tests {
 
     #[test]
     fn a_second_lease_is_refused_naming_the_holder_and_released_on_drop() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let first = Lease::acquire(dir.path()).unwrap();
         let err = Lease::acquire(dir.path()).err().expect("a second lease while the first is held");
         assert!(err.message.contains(&format!("pid {}", std::process::id())), "{err}");
@@ -450,7 +450,7 @@ mod tests {
 
     #[test]
     fn a_dead_local_holder_is_taken_over() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let mut child = std::process::Command::new("true").spawn().unwrap();
         let pid = child.id();
         child.wait().unwrap();
@@ -461,7 +461,7 @@ mod tests {
 
     #[test]
     fn a_reused_pid_does_not_keep_a_lease_alive() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         // Our own pid, but recorded with another start time: the holder was an earlier process.
         let mut old = holder(&hostname(), std::process::id());
         old.process_start = process_start(std::process::id()).map(|t| t + 1);
@@ -471,7 +471,7 @@ mod tests {
 
     #[test]
     fn another_hosts_lease_holds_until_its_heartbeat_is_old() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let path = write_lease(dir.path(), &holder("node-that-is-not-here", 1));
         let err = Lease::acquire(dir.path()).err().expect("a fresh lease of another host holds");
         assert!(err.message.contains("node-that-is-not-here"), "{err}");

@@ -207,7 +207,7 @@ mod tests {
 
     #[test]
     fn resolved_paths_follow_existing_folders_and_keep_the_rest() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let real = dir.path().canonicalize().unwrap();
         assert_eq!(resolved(&dir.path().join("a/../b/c")), real.join("b/c"));
     }

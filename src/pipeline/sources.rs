@@ -117,7 +117,7 @@ mod tests {
 
     #[test]
     fn template_keys_become_partitions() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         for test in ["FB-4", "BI-1"] {
             std::fs::create_dir_all(dir.path().join(test)).unwrap();
             std::fs::write(dir.path().join(test).join("DAQ1_floors.csv"), "x").unwrap();
@@ -131,7 +131,7 @@ mod tests {
     #[test]
     fn an_absolute_template_below_the_pipeline_folder_matches() {
         // The pipeline's folder is `dir`, the archive `dir/arch`, named by its absolute path.
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         std::fs::create_dir_all(dir.path().join("arch/FB-4")).unwrap();
         std::fs::write(dir.path().join("arch/FB-4/DAQ2_equipment.csv"), "x").unwrap();
         let pattern = format!("{}/arch/{{motion}}/DAQ2_equipment.csv", dir.path().display());
@@ -152,7 +152,7 @@ mod tests {
 
     #[test]
     fn no_match_is_a_clear_error() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let err = resolve(dir.path(), "nothing/*.AT2", &BTreeMap::new(), false).unwrap_err();
         assert!(err.message.contains("no file matches `nothing/*.AT2`"), "{err}");
     }

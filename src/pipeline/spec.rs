@@ -410,7 +410,7 @@ mod tests {
 
     #[test]
     fn binary_and_utf16_pipelines_are_named_as_such() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let path = dir.path().join("p.yaml");
         let text = "version: 1\noutput_dir: out\nstages: {}\n";
         let utf16: Vec<u8> = text.encode_utf16().flat_map(u16::to_le_bytes).collect();

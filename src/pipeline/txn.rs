@@ -259,7 +259,7 @@ mod tests {
 
     #[test]
     fn a_commit_replaces_installs_and_removes_at_once() {
-        let root = tempfile::tempdir().unwrap();
+        let root = crate::tempdir::tempdir().unwrap();
         for (entry, file) in [("a", "old"), ("gone", "x"), ("keep", "k")] {
             fs::create_dir_all(root.path().join(entry)).unwrap();
             fs::write(root.path().join(entry).join(file), file).unwrap();
@@ -277,7 +277,7 @@ mod tests {
 
     #[test]
     fn an_unjournaled_transaction_is_discarded_and_a_journaled_one_completed() {
-        let root = tempfile::tempdir().unwrap();
+        let root = crate::tempdir::tempdir().unwrap();
         fs::create_dir_all(root.path().join("a")).unwrap();
         fs::write(root.path().join("a/old"), "1").unwrap();
         let lease = Lease::acquire(root.path()).unwrap();

@@ -736,7 +736,7 @@ mod tests {
 
     #[test]
     fn layers_resolve_preset_then_file_then_stage_values() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         std::fs::write(dir.path().join("mc2.yaml"), "# heavier\nplatform_mass_kg: 200\ntrail_m: 0.05\n").unwrap();
         let setup =
             Setup::resolve(&params(json!({"preset": "MC2", "equipment": "mc2.yaml", "trail_m": 0.04})), dir.path())
@@ -753,7 +753,7 @@ mod tests {
 
     #[test]
     fn missing_values_and_bad_files_are_named() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let err = Setup::resolve(&params(json!({})), dir.path()).err().unwrap();
         assert!(err.message.contains("needs `wheel_diameter_m`") && err.hint.contains("preset"), "{err:?}");
         std::fs::write(dir.path().join("bad.yaml"), "length_m: 1.0\nlenght_m: 2.0\n").unwrap();

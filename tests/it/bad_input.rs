@@ -11,7 +11,7 @@ fn fails_cleanly(break_it: impl FnOnce(&Path), expected: &[&str]) -> String {
 }
 
 /// The same for any project folder holding a `pipeline.yaml` that runs.
-fn fails_cleanly_in(project: tempfile::TempDir, break_it: impl FnOnce(&Path), expected: &[&str]) -> String {
+fn fails_cleanly_in(project: crate::tempdir::TempDir, break_it: impl FnOnce(&Path), expected: &[&str]) -> String {
     let root = project.path();
     let ok = shakeflow(&["run", "pipeline.yaml"], root);
     assert!(ok.status.success(), "{}", stderr(&ok));
@@ -93,7 +93,7 @@ fn ragged_row() {
 
 #[test]
 fn wrong_npts_in_an_at2_record() {
-    let project = tempfile::tempdir().unwrap();
+    let project = crate::tempdir::tempdir().unwrap();
     let root = project.path();
     let original = std::fs::read_to_string(ground_motion("Rinaldi228.AT2")).unwrap();
     std::fs::write(root.join("rec.AT2"), &original).unwrap();
@@ -415,7 +415,7 @@ fn synchronize_inputs(root: &Path) {
 
 #[test]
 fn a_record_the_reference_lacks_is_named() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     synchronize_inputs(dir.path());
     let sync = |extra: &[&str]| {
         let mut args = vec!["stage", "synchronize", "--input", "floors", "--input", "daq2", "--output", "out"];

@@ -4,7 +4,7 @@
 
 use crate::common::{cpt_project, shakeflow, stderr};
 
-fn project_with_inputs(inputs: &str) -> (tempfile::TempDir, std::process::Output) {
+fn project_with_inputs(inputs: &str) -> (crate::tempdir::TempDir, std::process::Output) {
     let project = cpt_project();
     let path = project.path().join("pipeline.yaml");
     let text = std::fs::read_to_string(&path).unwrap();

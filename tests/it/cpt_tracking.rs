@@ -152,7 +152,7 @@ fn sub_pixel_tracking_without_drift_flags_and_reacquires_lost_points() {
 fn side_by_side_with_opencv() {
     let scene = SpeckleScene::with_textures(W, H, 3, 77);
     let n = 300;
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let mut truth_rows = Vec::new();
     let mut frames = Vec::new();
     for k in 0..n {

@@ -11,7 +11,7 @@ use shakeflow::table::ColumnData;
 #[test]
 fn video_frames_and_presentation_times() {
     let ffmpeg = common::run_python(&common::reference_script("ffmpeg_exe.py"), &[]).trim().to_string();
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let root = dir.path();
     common::write_cpt_frames(&root.join("frames"), 20);
     // 25 fps, and every frame from the 10th on 3 frame periods (0.12 s) later.

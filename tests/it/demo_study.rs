@@ -33,7 +33,7 @@ fn opt_column<'a>(table: &'a shakeflow::table::Table, name: &str) -> &'a [Option
 #[test]
 fn demo_pipeline_recovers_the_archive_truth() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let work = tempfile::tempdir().unwrap();
+    let work = crate::tempdir::tempdir().unwrap();
     let archive = work.path().join("runs/demo-archive");
     shakeflow::demo::archive::write_demo_archive(&archive).unwrap();
     std::fs::create_dir(work.path().join("pipelines")).unwrap();

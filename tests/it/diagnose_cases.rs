@@ -14,7 +14,7 @@ fn truth(id: &str) -> serde_yaml::Value {
 
 #[test]
 fn demo_cases_get_their_concealed_verdicts() {
-    let out = tempfile::tempdir().unwrap();
+    let out = crate::tempdir::tempdir().unwrap();
     let ids = ["demo_01", "demo_02", "demo_03", "demo_04"];
     let dirs: Vec<String> =
         ids.iter().map(|id| shared_dir().join("cases/demo").join(id).display().to_string()).collect();
@@ -90,7 +90,7 @@ stages:
 
 #[test]
 fn the_diagnose_stage_in_a_pipeline() {
-    let project = tempfile::tempdir().unwrap();
+    let project = crate::tempdir::tempdir().unwrap();
     let root = project.path();
     for id in ["demo_01", "demo_02"] {
         copy_case(&shared_dir().join("cases/demo").join(id), &root.join("cases").join(id));
@@ -113,7 +113,7 @@ fn the_diagnose_stage_in_a_pipeline() {
 
 #[test]
 fn a_broken_case_folder_fails_with_the_file_named_and_writes_nothing() {
-    let project = tempfile::tempdir().unwrap();
+    let project = crate::tempdir::tempdir().unwrap();
     let root = project.path();
     let case = root.join("case");
     copy_case(&shared_dir().join("cases/demo/demo_02"), &case);

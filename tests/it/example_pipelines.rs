@@ -51,7 +51,7 @@ fn every_example_pipeline_validates_and_runs() {
     let found: Vec<String> = names.iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
     assert_eq!(found, ["nees.yaml", "suite.yaml"], "new examples: give them a check below");
     for pipeline in &names {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let copy = relocated(pipeline, dir.path());
         let copy = copy.to_str().unwrap();
         for command in ["validate", "run"] {

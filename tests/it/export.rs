@@ -37,8 +37,8 @@ stages:
     inputs: [daq, extra]
 ";
 
-fn project() -> tempfile::TempDir {
-    let dir = tempfile::tempdir().unwrap();
+fn project() -> crate::tempdir::TempDir {
+    let dir = crate::tempdir::tempdir().unwrap();
     std::fs::write(dir.path().join("pipeline.yaml"), PIPELINE).unwrap();
     write_daq_csv(&dir.path().join("archive/FB-1/daq.csv"), 300, 200.0, 0.0);
     write_daq_csv(&dir.path().join("archive/090 (CUE)/daq.csv"), 200, 200.0, 1.0);
@@ -202,7 +202,7 @@ fn bad_arguments_are_refused_with_what_to_do() {
 
 #[test]
 fn descriptions_that_differ_by_partition_are_given_per_partition() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let root = dir.path();
     fake_part(&root.join("d/k=a/data.parquet"), "s", "k=a", "m", "height of a");
     fake_part(&root.join("d/k=b/data.parquet"), "s", "k=b", "m", "height of b");
@@ -219,7 +219,7 @@ fn descriptions_that_differ_by_partition_are_given_per_partition() {
 
 #[test]
 fn outputs_of_several_stages_are_told_apart_by_a_stage_column() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let root = dir.path();
     fake_part(&root.join("one/k=a/data.parquet"), "first", "k=a", "m", "v");
     fake_part(&root.join("two/k=a/data.parquet"), "second", "k=a", "m", "v");

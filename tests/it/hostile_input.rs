@@ -28,7 +28,7 @@ fn load_error(spec: serde_json::Value, path: &Path) -> String {
 /// Repeated column names used to panic in `Table::push` ("duplicate column").
 #[test]
 fn repeated_csv_column_names_are_refused_with_the_line() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let path = dir.path().join("dup.csv");
     std::fs::write(&path, "# export\ntime,a,b,a\n0,1,2,3\n0.01,1,2,3\n").unwrap();
     let message = load_error(
@@ -49,7 +49,7 @@ fn repeated_csv_column_names_are_refused_with_the_line() {
 
 #[test]
 fn a_source_column_named_time_s_is_refused() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let path = dir.path().join("t.csv");
     std::fs::write(&path, "time_s,a\n0,1\n0.01,2\n").unwrap();
     let message = load_error(json!({"format": "csv", "path": "t.csv", "dt": 0.01, "unit": "g"}), &path);
@@ -60,7 +60,7 @@ fn a_source_column_named_time_s_is_refused() {
 /// (With `component_as: label`: by default an AT2 component is named by its axis, `ax_mps2`.)
 #[test]
 fn an_at2_component_labelled_time_s_is_refused() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let path = dir.path().join("t.AT2");
     let text = std::fs::read_to_string(ground_motion("Rinaldi228.AT2")).unwrap();
     let mut lines: Vec<&str> = text.split('\n').collect();
@@ -73,7 +73,7 @@ fn an_at2_component_labelled_time_s_is_refused() {
 /// Used to panic at table.rs ("column `y` has 3 rows but the table has 4").
 #[test]
 fn simcenter_components_of_different_lengths_are_a_user_error() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let path = dir.path().join("r.json");
     std::fs::write(&path, r#"{"dT": 0.01, "data_x": [0.1, 0.2, 0.3, 0.4], "data_y": [0.1, 0.2, 0.3]}"#).unwrap();
     let message = load_error(json!({"format": "simcenter_json", "path": "r.json"}), &path);
@@ -84,7 +84,7 @@ fn simcenter_components_of_different_lengths_are_a_user_error() {
 /// `gaps: interpolate` silently replaced.
 #[test]
 fn overflow_in_unit_conversion_is_named_not_filled() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let path = dir.path().join("big.csv");
     std::fs::write(&path, "time,a\n0,0.1\n0.01,1e308\n0.02,0.3\n0.03,0.2\n").unwrap();
     for gaps in ["error", "interpolate"] {
@@ -101,7 +101,7 @@ fn overflow_in_unit_conversion_is_named_not_filled() {
 /// A column of gaps only used to be "filled" into an all-NaN column and written.
 #[test]
 fn a_column_of_gaps_only_is_refused() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let path = dir.path().join("fill.csv");
     std::fs::write(&path, "time,a,b\n0,,1\n0.01,NaN,2\n0.02,,3\n").unwrap();
     let spec =
@@ -114,7 +114,7 @@ fn a_column_of_gaps_only_is_refused() {
 /// panic in the sample count).
 #[test]
 fn resampling_a_damaged_time_column_is_bounded() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let path = dir.path().join("t.csv");
     std::fs::write(&path, "time,a\n0,1\n0.01,2\n0.02,3\n1e300,4\n").unwrap();
     let spec = json!({"format": "csv", "path": "t.csv", "time_column": "time", "unit": "g", "non_uniform": "resample"});
@@ -129,7 +129,7 @@ fn resampling_a_damaged_time_column_is_bounded() {
 /// hashes as it did when the run was planned is refused, not loaded.
 #[test]
 fn a_record_replaced_while_the_run_reads_it_is_refused() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let path = dir.path().join("rec.csv");
     let planned = "time,a\n0,1\n0.01,2\n0.02,3\n";
     let spec = json!({"format": "csv", "path": "rec.csv", "time_column": "time", "unit": "g"});
@@ -145,7 +145,7 @@ fn a_record_replaced_while_the_run_reads_it_is_refused() {
 
 #[test]
 fn control_points_replaced_while_the_run_reads_them_are_refused() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let path = dir.path().join("cp.csv");
     let planned = "X_mm,Y_mm,Z_mm,u_px,v_px\n0,0,0,1,2\n";
     std::fs::write(&path, planned).unwrap();
@@ -160,7 +160,7 @@ fn control_points_replaced_while_the_run_reads_them_are_refused() {
 /// one: minutes of a quadratic check). No timing here: it finishes, with every column.
 #[test]
 fn a_csv_a_million_columns_wide_loads() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let path = dir.path().join("wide.csv");
     let width = 1_000_000;
     let mut text = String::from("time");
@@ -234,7 +234,7 @@ fn a_utf16_pipeline_is_named_as_such() {
 
 #[test]
 fn a_case_folder_changed_while_the_run_reads_it_is_refused() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let case = dir.path().join("demo_01");
     std::fs::create_dir(&case).unwrap();
     let shared = shared_dir().join("cases/demo/demo_01");

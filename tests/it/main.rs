@@ -2,7 +2,10 @@
 //! linked 24 test binaries). Each file is a module named for what it checks.
 
 mod common;
+// The library's std-only temporary folders (no `tempfile` dev-dependency: src/tempdir.rs says why).
 mod rolling_common;
+#[path = "../../src/tempdir.rs"]
+mod tempdir;
 mod toppling_common;
 
 mod bad_input;

@@ -237,7 +237,7 @@ fn own_format(reader: &str, seed: &str) -> bool {
 #[test]
 fn every_reader_survives_thousands_of_mutations() {
     let seeds = seeds();
-    let scratch_dir = tempfile::tempdir().unwrap();
+    let scratch_dir = crate::tempdir::tempdir().unwrap();
     let scratch = scratch_dir.path().join("mutated");
     let mut failures = Vec::new();
     for (index, (name, reader)) in readers().into_iter().enumerate() {

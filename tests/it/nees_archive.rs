@@ -85,8 +85,8 @@ fn nees_text(rows: &[[String; 4]], units: &str) -> String {
 
 const LVM: &str = "LabVIEW Measurement\t\nWriter_Version\t2\nReader_Version\t2\nSeparator\tTab\nDecimal_Separator\t,\nMulti_Headings\tYes\nX_Columns\tOne\nTime_Pref\tRelative\nOperator\tnees\n***End_of_Header***\t\n\t\nChannels\t2\t\nSamples\t3\t3\t\nY_Unit_Label\tVolts\tg\t\nX0\t0,0000000000000000E+0\t0,0000000000000000E+0\t\nDelta_X\t0,005000\t0,005000\t\n***End_of_Header***\t\t\t\nX_Value\tA1X\tA2X\tComment\n0,000000\t0,125\t-1,5E-3\n0,005000\t0,250\t2,0E-3\n0,010000\t-0,375\t2,5E-3\n\nChannels\t2\t\nSamples\t2\t2\t\nY_Unit_Label\tVolts\tg\t\nX0\t1,5000000000000000E-2\t1,5000000000000000E-2\t\nDelta_X\t0,005000\t0,005000\t\n***End_of_Header***\t\t\t\nX_Value\tA1X\tA2X\tComment\n0,015000\t0,5\t1\n0,020000\t0,625\t-1\n";
 
-fn project() -> tempfile::TempDir {
-    let dir = tempfile::tempdir().unwrap();
+fn project() -> crate::tempdir::TempDir {
+    let dir = crate::tempdir::tempdir().unwrap();
     let root = dir.path();
     std::fs::write(root.join("pipeline.yaml"), PIPELINE).unwrap();
     std::fs::write(root.join("sensitivity.csv"), SENSITIVITY).unwrap();

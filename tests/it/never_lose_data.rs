@@ -203,7 +203,7 @@ fn stage_output_over_another_stage_types_output_is_refused() {
 
 #[test]
 fn diagnose_out_never_replaces_a_folder_it_did_not_write() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let root = dir.path();
     write(root, "report/thesis.tex", "years of work");
     let case = shared_dir().join("cases/demo/demo_01");

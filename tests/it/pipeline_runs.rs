@@ -111,7 +111,7 @@ fn same_inputs_give_bit_identical_artifacts() {
 
 #[test]
 fn single_stage_runs_on_files_without_a_pipeline() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let record = ground_motion("RSN6_IMPVALL.I_I-ELC180.AT2");
     let out = shakeflow(&["stage", "load", "--input", record.to_str().unwrap(), "--output", "loaded"], dir.path());
     assert!(out.status.success(), "{}", stderr(&out));
@@ -157,7 +157,7 @@ fn inspect_describes_mcap_files_and_datasets() {
 #[test]
 fn signal_stages_run_alone_on_files() {
     // synchronize two copies of one record, the second 0.25 s late: the lag comes back.
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let root = dir.path();
     let mut reference = String::from("t,a\n");
     let mut target = String::from("t,a\n");

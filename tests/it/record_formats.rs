@@ -196,7 +196,7 @@ fn channels_of_different_lengths_are_cut_to_the_shortest_and_say_so() {
 /// their components `E-W`, `4`, `180`, `BH1`, yet every table has the column.
 #[test]
 fn one_glob_source_feeds_a_suite_of_records_downstream() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let gm = dir.path().join("gm");
     std::fs::create_dir_all(&gm).unwrap();
     let files = [
@@ -255,7 +255,7 @@ stages:
 
 #[test]
 fn stage_load_detects_the_format_from_content() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     // A CSMIP Vol.2 saved as .txt: content decides.
     std::fs::copy(record("dmg/CE89146.V2"), dir.path().join("willow.txt")).unwrap();
     let out = shakeflow(&["stage", "load", "--input", "willow.txt", "--output", "loaded"], dir.path());
@@ -269,7 +269,7 @@ fn stage_load_detects_the_format_from_content() {
 
 #[test]
 fn a_damaged_record_names_file_line_and_column() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let text = std::fs::read_to_string(record("smc/0111a.smc")).unwrap();
     std::fs::write(dir.path().join("bad.smc"), text.replacen("-2.2223E+0", "-2.2x23E+0", 1)).unwrap();
     let out = shakeflow(&["stage", "load", "--input", "bad.smc", "--output", "loaded"], dir.path());

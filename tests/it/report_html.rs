@@ -58,7 +58,7 @@ pub fn check_in_chromium(index: &Path) -> Rendered {
     let base = format!("<base href=\"file://{}/\">", folder.display());
     let probed =
         html.replacen("<head>", &format!("<head>{base}"), 1).replacen("</body>", &format!("{PROBE}</body>"), 1);
-    let work = tempfile::tempdir().unwrap();
+    let work = crate::tempdir::tempdir().unwrap();
     let probe = work.path().join("probe.html");
     std::fs::write(&probe, probed).unwrap();
     let out = Command::new(chromium())
@@ -118,7 +118,7 @@ const REPORT_STAGES: &str = r#"  rocking:
       title: a small study <with> "quotes"
 "#;
 
-fn project_with_report() -> tempfile::TempDir {
+fn project_with_report() -> crate::tempdir::TempDir {
     let project = common::small_project();
     let pipeline = format!("{}{REPORT_STAGES}", common::PIPELINE);
     std::fs::write(project.path().join("pipeline.yaml"), pipeline).unwrap();

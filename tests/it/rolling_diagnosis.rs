@@ -12,7 +12,7 @@ fn truth(id: &str) -> serde_yaml::Value {
 
 #[test]
 fn rolling_demo_cases_get_their_concealed_verdicts() {
-    let out = tempfile::tempdir().unwrap();
+    let out = crate::tempdir::tempdir().unwrap();
     let ids = ["demo_01", "demo_02", "demo_03", "demo_04"];
     let dirs: Vec<String> =
         ids.iter().map(|id| shared_dir().join("cases/rolling_demo").join(id).display().to_string()).collect();
@@ -57,7 +57,7 @@ fn rolling_demo_cases_get_their_concealed_verdicts() {
 
 #[test]
 fn a_rolling_equipment_file_with_a_misspelt_key_is_refused_with_its_line() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let case = dir.path().join("case");
     std::fs::create_dir_all(&case).unwrap();
     let from = shared_dir().join("cases/rolling_demo/demo_01");

@@ -84,7 +84,7 @@ fn rear_swivels(r: &Response) -> (usize, usize) {
 
 #[test]
 fn the_studys_rolling_findings_hold_on_the_demo_archive() {
-    let work = tempfile::tempdir().unwrap();
+    let work = crate::tempdir::tempdir().unwrap();
     shakeflow::demo::archive::write_demo_archive(work.path()).unwrap();
     let floors = floors(work.path());
     let jobs: Vec<(&str, u8, &str)> =

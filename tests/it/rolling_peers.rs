@@ -80,7 +80,7 @@ fn differences(ours: &Response, peer: &Value, dt: f64, until_s: f64) -> (f64, f6
 fn kane_peer_regenerated_on_the_first_seconds() {
     // MC2 breaks away at ~1.8 s and rolls 0.13 m by 2.7 s. The peer derives its equations (6 s)
     // and integrates 3 s here; both at rtol 1e-10: agreement to 1e-8 m / 1e-8 rad.
-    let out = tempfile::tempdir().unwrap();
+    let out = crate::tempdir::tempdir().unwrap();
     let json = out.path().join("kane.json");
     let floor_path = reference("rolling_floor_rinaldi.csv");
     run_python(
@@ -155,7 +155,7 @@ fn mujoco_peer_stored_runs_agree_within_the_contact_models_tolerance() {
 fn mujoco_peer_regenerated_on_the_first_seconds() {
     // MC2 over 3 s: MuJoCo's soft contacts let the wheels creep (~1 mm) before breakaway; the
     // paths agree within 5 mm and the peak displacement within 5 %.
-    let out = tempfile::tempdir().unwrap();
+    let out = crate::tempdir::tempdir().unwrap();
     let json = out.path().join("mujoco.json");
     let floor_path = reference("rolling_floor_rinaldi.csv");
     run_python(

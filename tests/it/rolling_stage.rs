@@ -8,7 +8,7 @@ use std::path::Path;
 
 /// The small project (load → baseline on two 2 s records at 0.1 g) plus a rolling stage whose
 /// params block ends with `extra` (line 27 onwards).
-fn rolling_project(extra: &str) -> tempfile::TempDir {
+fn rolling_project(extra: &str) -> crate::tempdir::TempDir {
     let project = small_project();
     let text = format!(
         "{PIPELINE}  rolling:\n    type: simulate_rolling\n    inputs: [baseline]\n    params:\n      preset: PB2\n{extra}"
@@ -18,7 +18,7 @@ fn rolling_project(extra: &str) -> tempfile::TempDir {
 }
 
 /// `validate` and `run` both refuse, naming the place; nothing is written.
-fn refused(project: &tempfile::TempDir, expected: &[&str]) -> String {
+fn refused(project: &crate::tempdir::TempDir, expected: &[&str]) -> String {
     let root = project.path();
     for command in ["validate", "run"] {
         let out = shakeflow(&[command, "pipeline.yaml"], root);
@@ -103,7 +103,7 @@ fn a_missing_channel_fails_the_run_and_changes_nothing() {
 #[test]
 fn non_uniform_time_through_the_stage_command() {
     use shakeflow::table::{Column, Table};
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let mut table = Table::new();
     let time: Vec<f64> = (0..100).map(|k| k as f64 * 0.01 + if k > 50 { 0.003 } else { 0.0 }).collect();
     table.push(Column::f64("time_s", "s", "time", time));
@@ -189,7 +189,7 @@ fn editing_the_equipment_file_reruns_the_stage_and_artifacts_are_reproducible() 
     assert_ne!(artifacts, snapshot(&root.join("out/rolling")));
 }
 
-fn edit(project: &tempfile::TempDir, f: impl FnOnce(String) -> String) {
+fn edit(project: &crate::tempdir::TempDir, f: impl FnOnce(String) -> String) {
     let path = project.path().join("pipeline.yaml");
     std::fs::write(&path, f(std::fs::read_to_string(&path).unwrap())).unwrap();
 }

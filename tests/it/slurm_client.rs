@@ -53,7 +53,7 @@ fn the_limits_come_from_the_running_controller() {
 fn an_array_of_true_tasks_with_a_throttle_of_one_never_overlaps() {
     let slurm = test_slurm();
     let limits = slurm.limits().unwrap();
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let d = dir.path().display();
     // Each task notes how many tasks run beside it (itself included), then leaves.
     let command = format!(
@@ -77,7 +77,7 @@ fn an_array_of_true_tasks_with_a_throttle_of_one_never_overlaps() {
 fn a_failing_task_is_failed_and_its_siblings_complete() {
     let slurm = test_slurm();
     let limits = slurm.limits().unwrap();
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let submitted =
         slurm.submit(&job("sf-fail", dir.path(), 3, "[ $SLURM_ARRAY_TASK_ID != 1 ]".into()), &limits).unwrap();
     let got = wait(&slurm, &limits, std::slice::from_ref(&submitted));
@@ -88,7 +88,7 @@ fn a_failing_task_is_failed_and_its_siblings_complete() {
 fn an_aftercorr_chain_runs_task_i_after_task_i_and_cancels_after_a_failure() {
     let slurm = test_slurm();
     let limits = slurm.limits().unwrap();
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let d = dir.path().display();
     // Task 2 of the first array fails; the second array's task i checks that the first's task i wrote its file.
     let first = job(
@@ -129,7 +129,7 @@ fn an_aftercorr_chain_runs_task_i_after_task_i_and_cancels_after_a_failure() {
 fn scancel_of_one_task_is_seen_as_cancelled() {
     let slurm = test_slurm();
     let limits = slurm.limits().unwrap();
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let d = dir.path().display();
     let command = format!("if [ $SLURM_ARRAY_TASK_ID = 1 ]; then touch {d}/started; sleep 600; fi");
     let submitted = slurm.submit(&job("sf-cancel", dir.path(), 3, command), &limits).unwrap();
@@ -154,7 +154,7 @@ fn scancel_of_one_task_is_seen_as_cancelled() {
 fn an_array_split_beyond_max_array_size_runs_every_task_once_with_its_global_index() {
     let slurm = test_slurm();
     let real = slurm.limits().unwrap();
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let d = dir.path().display();
     // A lowered MaxArraySize (as on a cluster that sets it small): 7 tasks in parts of 3.
     let limits = ClusterLimits { max_array_size: 3, ..real.clone() };
@@ -200,7 +200,7 @@ fn an_array_split_beyond_max_array_size_runs_every_task_once_with_its_global_ind
 fn sbatch_refusing_a_job_is_a_user_error_naming_the_command() {
     let slurm = test_slurm();
     let limits = slurm.limits().unwrap();
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let mut j = job("sf-refused", dir.path(), 2, "true".into());
     j.options.partition = Some("nosuchpartition".into());
     let e = slurm.submit(&j, &limits).unwrap_err();
@@ -212,7 +212,7 @@ fn sbatch_refusing_a_job_is_a_user_error_naming_the_command() {
 fn tasks_the_queue_no_longer_shows_are_read_from_the_job_completion_file() {
     let slurm = test_slurm();
     let limits = slurm.limits().unwrap();
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let submitted =
         slurm.submit(&job("sf-jobcomp", dir.path(), 2, "[ $SLURM_ARRAY_TASK_ID = 0 ]".into()), &limits).unwrap();
     let done = wait(&slurm, &limits, std::slice::from_ref(&submitted));

@@ -17,7 +17,7 @@ fn read(path: &Path) -> shakeflow::table::Table {
 
 #[test]
 fn a_demo_case_through_the_stage_command() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let root = dir.path();
     let floor = case_dir("demo_02").join("floor.csv");
     let equipment = case_dir("demo_02").join("equipment.yaml");
@@ -92,8 +92,8 @@ stages:
       scales: [0.2, 0.4, 0.6, 0.8, 1.0, 1.2]
 ";
 
-fn project() -> tempfile::TempDir {
-    let dir = tempfile::tempdir().unwrap();
+fn project() -> crate::tempdir::TempDir {
+    let dir = crate::tempdir::tempdir().unwrap();
     std::fs::copy(case_dir("demo_03").join("floor.csv"), dir.path().join("floor.csv")).unwrap();
     std::fs::copy(case_dir("demo_03").join("equipment.yaml"), dir.path().join("unit.yaml")).unwrap();
     std::fs::write(dir.path().join("pipeline.yaml"), PIPELINE).unwrap();
@@ -184,7 +184,7 @@ fn an_unknown_preset_is_caught_by_validate_with_its_line() {
 /// `run` ends with the fragility in one line.
 #[test]
 fn fragility_runs_group_by_level_and_name_records_as_other_tables_do() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let root = dir.path();
     std::fs::create_dir(root.join("gm")).unwrap();
     let records = ["NIS090", "Rinaldi228", "Rinaldi318"];

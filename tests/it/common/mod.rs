@@ -99,8 +99,8 @@ stages:
 ";
 
 /// A project folder with the pipeline above and two motions of 400 samples each.
-pub fn small_project() -> tempfile::TempDir {
-    let dir = tempfile::tempdir().unwrap();
+pub fn small_project() -> crate::tempdir::TempDir {
+    let dir = crate::tempdir::tempdir().unwrap();
     std::fs::write(dir.path().join("pipeline.yaml"), PIPELINE).unwrap();
     write_daq_csv(&dir.path().join("archive/FB-1/daq.csv"), 400, 200.0, 0.0);
     write_daq_csv(&dir.path().join("archive/FB-2/daq.csv"), 400, 200.0, 1.0);
@@ -192,8 +192,8 @@ pub fn write_cpt_frames(dir: &Path, n: usize) {
 }
 
 /// A CPT project: 12 control points seen by `cpt_test_camera`, 6 frames, the pipeline above.
-pub fn cpt_project() -> tempfile::TempDir {
-    let dir = tempfile::tempdir().unwrap();
+pub fn cpt_project() -> crate::tempdir::TempDir {
+    let dir = crate::tempdir::tempdir().unwrap();
     let camera = cpt_test_camera();
     let mut text = String::from("point,X_mm,Y_mm,Z_mm,u_px,v_px\n");
     let world = [
