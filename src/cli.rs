@@ -251,7 +251,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
             if let Some(jobs) = jobs {
                 rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build_global().context("setting --jobs")?;
             }
-            let plan = Plan::new(PipelineFile::read(&pipeline)?)?;
+            let plan = Plan::new(PipelineFile::read(&pipeline)?, stages::registry())?;
             let options = RunOptions { force, only: stages, keep_going };
             if dry_run {
                 let lines = executor::dry_run(&plan, &options)?;
@@ -317,15 +317,15 @@ pub fn main() -> anyhow::Result<ExitCode> {
                 .ok()
                 .and_then(|v| v.parse().ok())
                 .context("`slurm-task` runs inside a Slurm array task ($SLURM_ARRAY_TASK_ID)")?;
-            let ok = executor::slurm::task(&run_dir, &stage, shard)?;
+            let ok = executor::slurm::task(&run_dir, &stage, shard, stages::registry())?;
             Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
         }
         Command::SlurmCommit { run_dir } => {
-            executor::slurm::commit(&run_dir)?;
+            executor::slurm::commit(&run_dir, stages::registry())?;
             Ok(ExitCode::SUCCESS)
         }
         Command::Status { pipeline } => {
-            let plan = Plan::new(PipelineFile::read(&pipeline)?)?;
+            let plan = Plan::new(PipelineFile::read(&pipeline)?, stages::registry())?;
             let mut notes = Vec::new();
             let lines = executor::status(&plan, &mut notes)?;
             for note in &notes {
@@ -354,7 +354,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Gc { pipeline, dry_run } => {
-            let plan = Plan::new(PipelineFile::read(&pipeline)?)?;
+            let plan = Plan::new(PipelineFile::read(&pipeline)?, stages::registry())?;
             let removed = executor::gc(&plan, dry_run)?;
             let verb = if dry_run { "would remove" } else { "removed" };
             for (stage, bytes) in &removed {
@@ -372,7 +372,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
                 }
                 anyhow::anyhow!("{}: {} error(s)", pipeline.display(), errors.len())
             };
-            let plan = Plan::checked(PipelineFile::read(&pipeline)?).map_err(refused)?;
+            let plan = Plan::checked(PipelineFile::read(&pipeline)?, stages::registry()).map_err(refused)?;
             let mut input_files: Vec<PathBuf> = plan.stages.values().flat_map(|s| s.files.values().cloned()).collect();
             let mut errors = Vec::new();
             if !skip_inputs {
@@ -504,11 +504,11 @@ fn describe_stages(only: Option<&str>) -> anyhow::Result<String> {
     use std::fmt::Write as _;
     let mut out = String::new();
     if let Some(name) = only {
-        if stages::find(name).is_none() {
-            bail!("unknown stage type `{name}`; known: {}", stages::names().join(", "));
+        if stages::registry().find(name).is_none() {
+            bail!("unknown stage type `{name}`; known: {}", stages::registry().names().join(", "));
         }
     }
-    for stage in stages::registry().iter().filter(|s| only.is_none_or(|n| s.info().name == n)) {
+    for stage in stages::registry().0.iter().filter(|s| only.is_none_or(|n| s.info().name == n)) {
         let info = stage.info();
         writeln!(out, "{} (version {})\n  {}", info.name, info.version, info.summary)?;
         let reads = match info.inputs {
@@ -540,9 +540,9 @@ fn describe_stages(only: Option<&str>) -> anyhow::Result<String> {
 /// Gathers inputs for a stage run outside a pipeline: raw files for `load` and the stages that
 /// read files themselves (frames, control points), Parquet parts otherwise.
 fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String]) -> anyhow::Result<()> {
-    let stage = stages::find(name).ok_or_else(|| {
+    let stage = stages::registry().find(name).ok_or_else(|| {
         crate::error::UserError::new(format!("unknown stage type `{name}`"))
-            .hint(format!("known stage types: {}", stages::names().join(", ")))
+            .hint(format!("known stage types: {}", stages::registry().names().join(", ")))
     })?;
     let info = stage.info();
     // Before any input is read: a refusal costs nothing.

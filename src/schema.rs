@@ -49,9 +49,9 @@ fn param_schema(p: &ParamSpec) -> Value {
 }
 
 pub fn pipeline_schema() -> Value {
-    let names = stages::names();
+    let names = stages::registry().names();
     let mut conditionals = Vec::new();
-    for stage in stages::registry() {
+    for stage in stages::registry().0 {
         let info = stage.info();
         let properties: Map<String, Value> =
             info.params.iter().map(|p| (p.name.to_string(), param_schema(p))).collect();

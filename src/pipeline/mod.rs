@@ -15,5 +15,6 @@ pub mod sink;
 pub mod slurm;
 pub mod sources;
 pub mod spec;
+pub mod stage;
 pub mod txn;
 pub mod units;

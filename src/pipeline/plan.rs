@@ -8,8 +8,8 @@ use indexmap::IndexMap;
 
 use super::params::{self, Params};
 use super::spec::{ColumnSpec, PipelineFile, RecordFormat, SourceSpec};
+use super::stage::{InputKind, OutputKind, Partition, Registry, Stage};
 use crate::error::{did_you_mean_hint, UserError};
-use crate::stages::{self, InputKind, Stage};
 
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
 pub enum InputRef {
@@ -38,7 +38,7 @@ pub struct PlannedStage {
 }
 
 impl PlannedStage {
-    pub fn selects(&self, partition: &crate::stages::Partition) -> bool {
+    pub fn selects(&self, partition: &Partition) -> bool {
         self.select.iter().all(|(key, values)| partition.iter().any(|(k, v)| k == key && values.contains(v)))
     }
 }
@@ -47,15 +47,17 @@ pub struct Plan {
     pub file: PipelineFile,
     /// Stages in dependency order (ties keep the file's order).
     pub stages: IndexMap<String, PlannedStage>,
+    /// The stage types the plan was checked against.
+    pub registry: Registry,
 }
 
 impl Plan {
-    pub fn new(file: PipelineFile) -> Result<Plan, UserError> {
-        Plan::checked(file).map_err(|mut errors| errors.swap_remove(0))
+    pub fn new(file: PipelineFile, registry: Registry) -> Result<Plan, UserError> {
+        Plan::checked(file, registry).map_err(|mut errors| errors.swap_remove(0))
     }
 
     /// [`Plan::new`] reporting every source and stage it refuses, not only the first (`validate`).
-    pub fn checked(mut file: PipelineFile) -> Result<Plan, Vec<UserError>> {
+    pub fn checked(mut file: PipelineFile, registry: Registry) -> Result<Plan, Vec<UserError>> {
         let mut errors = Vec::new();
         for (name, source) in &file.spec.inputs {
             errors.extend(check_source(&file, name, source).err());
@@ -70,7 +72,7 @@ impl Plan {
         }
         let mut planned = IndexMap::new();
         for (name, spec) in &file.spec.stages {
-            match plan_stage(&file, name, spec) {
+            match plan_stage(&file, registry, name, spec) {
                 Ok(stage) => {
                     planned.insert(name.clone(), stage);
                 }
@@ -86,7 +88,7 @@ impl Plan {
             let stage = planned.swap_remove(&name).expect("order lists planned stages");
             sorted.insert(name, stage);
         }
-        Ok(Plan { file, stages: sorted })
+        Ok(Plan { file, stages: sorted, registry })
     }
 
     /// Column names carried through the stages for `validate`: `sources` gives the columns of
@@ -149,7 +151,12 @@ impl Plan {
 }
 
 /// One stage of the file, checked: name, type, parameters, inputs.
-fn plan_stage(file: &PipelineFile, name: &str, spec: &super::spec::StageSpec) -> Result<PlannedStage, UserError> {
+fn plan_stage(
+    file: &PipelineFile,
+    registry: Registry,
+    name: &str,
+    spec: &super::spec::StageSpec,
+) -> Result<PlannedStage, UserError> {
     if let Some(problem) = super::paths::component_problem(name) {
         return Err(file
             .error_at(&["stages", name], format!("stage name `{name}` cannot name a folder: {problem}"))
@@ -160,10 +167,10 @@ fn plan_stage(file: &PipelineFile, name: &str, spec: &super::spec::StageSpec) ->
             .error_at(&["stages", name], format!("stage name `{name}` is the lockfile's name"))
             .hint("choose another stage name"));
     }
-    let stage = stages::find(&spec.stage_type).ok_or_else(|| {
-        let suggestion = did_you_mean_hint(&spec.stage_type, stages::names());
+    let stage = registry.find(&spec.stage_type).ok_or_else(|| {
+        let suggestion = did_you_mean_hint(&spec.stage_type, registry.names());
         file.error_at(&["stages", name, "type"], format!("unknown stage type `{}`", spec.stage_type))
-            .hint(format!("{suggestion}known stage types: {} (see `shakeflow stages`)", stages::names().join(", ")))
+            .hint(format!("{suggestion}known stage types: {} (see `shakeflow stages`)", registry.names().join(", ")))
     })?;
     let info = stage.info();
     let given = spec.params.iter().map(|(k, v)| (k.as_str(), params::yaml_to_json(v)));
@@ -177,7 +184,7 @@ fn plan_stage(file: &PipelineFile, name: &str, spec: &super::spec::StageSpec) ->
     let params = params::normalize(info.params, info.name, given).map_err(located)?;
     let files = param_files(info.params, &params, &file.base_dir(), info.name).map_err(located)?;
     stage.check(&params, &file.base_dir()).map_err(located)?;
-    let inputs = resolve_inputs(file, name, &spec.inputs, info.inputs)?;
+    let inputs = resolve_inputs(file, registry, name, &spec.inputs, info.inputs)?;
     Ok(PlannedStage { name: name.to_string(), stage, params, inputs, select: spec.select.clone(), files })
 }
 
@@ -301,6 +308,7 @@ fn check_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<
 
 fn resolve_inputs(
     file: &PipelineFile,
+    registry: Registry,
     stage_name: &str,
     names: &[String],
     kind: InputKind,
@@ -356,12 +364,12 @@ fn resolve_inputs(
                     )
                     .hint("name a source declared under `inputs:`"));
             }
-            let outputs = stages::find(&upstream.stage_type).map(|s| s.info().outputs).unwrap_or(&[]);
+            let outputs = registry.find(&upstream.stage_type).map(|s| s.info().outputs).unwrap_or(&[]);
             let found = match output {
                 None => outputs.first(),
                 Some(wanted) => outputs.iter().find(|o| o.name == wanted),
             };
-            if let Some(page) = found.filter(|o| o.kind == stages::OutputKind::Page) {
+            if let Some(page) = found.filter(|o| o.kind == OutputKind::Page) {
                 return Err(file
                     .error_at_value(
                         &key_path,
@@ -455,7 +463,7 @@ mod tests {
     use std::path::Path;
 
     fn plan(text: &str) -> Result<Plan, UserError> {
-        Plan::new(PipelineFile::parse(Path::new("p.yaml"), text.to_string())?)
+        Plan::new(PipelineFile::parse(Path::new("p.yaml"), text.to_string())?, crate::stages::registry())
     }
 
     fn plan_err(text: &str) -> UserError {

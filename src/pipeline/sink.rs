@@ -8,10 +8,10 @@ use std::sync::{Arc, Mutex};
 
 use anyhow::{anyhow, bail};
 
+use super::stage::{partition_path, OutputInfo, OutputKind, Partition, StageInfo};
 use crate::io::hash::{self, KnownHashes};
 use crate::io::{mcap, parquet};
 use crate::pipeline::memo::TableMemo;
-use crate::stages::{partition_path, OutputInfo, OutputKind, Partition, StageInfo};
 use crate::table::Table;
 
 pub const DATA_FILE: &str = "data.parquet";

@@ -2,8 +2,8 @@
 
 use std::path::{Path, PathBuf};
 
+use super::stage::Partition;
 use crate::error::UserError;
-use crate::stages::Partition;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct MatchedFile {
@@ -124,7 +124,7 @@ mod tests {
         }
         let constant = BTreeMap::from([("floor".to_string(), "5".to_string())]);
         let files = resolve(dir.path(), "{motion}/DAQ1_floors.csv", &constant, false).unwrap();
-        let partitions: Vec<_> = files.iter().map(|f| crate::stages::partition_path(&f.partition)).collect();
+        let partitions: Vec<_> = files.iter().map(|f| crate::pipeline::stage::partition_path(&f.partition)).collect();
         assert_eq!(partitions, ["motion=BI-1/floor=5", "motion=FB-4/floor=5"]);
     }
 
@@ -137,7 +137,7 @@ mod tests {
         let pattern = format!("{}/arch/{{motion}}/DAQ2_equipment.csv", dir.path().display());
         let files = resolve(dir.path(), &pattern, &BTreeMap::new(), false).unwrap();
         assert_eq!(files.len(), 1);
-        assert_eq!(crate::stages::partition_path(&files[0].partition), "motion=FB-4");
+        assert_eq!(crate::pipeline::stage::partition_path(&files[0].partition), "motion=FB-4");
     }
 
     #[test]

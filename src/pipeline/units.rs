@@ -6,8 +6,8 @@ use std::collections::BTreeMap;
 use serde_json::json;
 
 use super::plan::PlannedStage;
+use super::stage::{partition_path, InputPart, StageInput, WorkUnits};
 use crate::io::hash;
-use crate::stages::{partition_path, InputPart, StageInput, WorkUnits};
 
 /// The id of a gathering stage's one unit.
 pub const GATHER: &str = "*";

@@ -200,7 +200,7 @@ fn readers() -> Vec<(&'static str, Reader)> {
             let Ok(text) = std::str::from_utf8(b) else { return };
             let path = Path::new("/nonexistent-shakeflow-harness/pipeline.yaml");
             if let Ok(file) = shakeflow::pipeline::spec::PipelineFile::parse(path, text.to_string()) {
-                drop(shakeflow::pipeline::plan::Plan::new(file));
+                drop(shakeflow::pipeline::plan::Plan::new(file, shakeflow::stages::registry()));
             }
         }),
         ("load", |b, scratch| {

@@ -28,11 +28,11 @@ use super::progress::Reporter;
 use super::sink::{OutputSink, DATA_FILE};
 use super::sources;
 use super::spec::{OnError, RecordFormat};
+use super::stage::{InputPart, OutputKind, Partition, StageContext, StageInfo, StageInput, WorkUnits};
 use super::txn::{self, Recovery, Transaction};
 use super::units::{self, Unit, GATHER};
 use crate::error::UserError;
 use crate::io::hash::{self, KnownHashes};
-use crate::stages::{InputPart, OutputKind, StageContext, StageInput};
 
 /// The `load` output the engine writes for records skipped under `on_error: skip`.
 pub const FLAGGED: &str = "flagged";
@@ -295,7 +295,7 @@ fn dataset_of(produced: &Produced, output: &str, label: &str) -> Vec<InputPart> 
         .collect()
 }
 
-fn partition_of(relative: &str) -> crate::stages::Partition {
+fn partition_of(relative: &str) -> Partition {
     relative
         .split('/')
         .filter_map(|segment| segment.split_once('='))
@@ -1068,7 +1068,7 @@ fn skip_reason(env: &RunEnv<'_>, stage: &PlannedStage, upstream_tainted: bool) -
         Some(None)
     } else if state.stop {
         Some(Some("the run stopped at a failed unit (`--keep-going` runs what does not depend on it)"))
-    } else if upstream_tainted && stage.stage.work_units() == crate::stages::WorkUnits::Gather {
+    } else if upstream_tainted && stage.stage.work_units() == WorkUnits::Gather {
         Some(Some("an upstream unit failed"))
     } else {
         None
@@ -1192,7 +1192,7 @@ fn why_running(stale: &[&(Unit, String, Vec<String>)], units: usize) -> String {
 fn flagged_table(
     new_dir: &Path,
     stage: &str,
-    info: &'static crate::stages::StageInfo,
+    info: &'static StageInfo,
     params: &super::params::Params,
     rows: &[(String, String, String)],
 ) -> anyhow::Result<(String, String)> {

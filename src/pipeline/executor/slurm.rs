@@ -41,8 +41,8 @@ use crate::pipeline::plan::Plan;
 use crate::pipeline::progress::Reporter;
 use crate::pipeline::slurm::{ArrayJob, DepKind, Dependency, ExecutorOptions, Slurm, SubmittedArray};
 use crate::pipeline::spec::PipelineFile;
+use crate::pipeline::stage::{Registry, WorkUnits};
 use crate::pipeline::txn::Transaction;
-use crate::stages::WorkUnits;
 
 /// Where Slurm runs keep their folders, under the output folder's `.shakeflow`.
 pub const RUNS_DIR: &str = "slurm";
@@ -114,7 +114,7 @@ fn task_tag() -> String {
     format!("{host}-{job}")
 }
 
-fn pipeline_plan(run: &RunFile) -> anyhow::Result<Plan> {
+fn pipeline_plan(run: &RunFile, registry: Registry) -> anyhow::Result<Plan> {
     let file = PipelineFile::read(&run.pipeline)?;
     if crate::io::hash::hash_bytes(file.text.as_bytes()) != run.pipeline_hash {
         bail!(
@@ -123,7 +123,7 @@ fn pipeline_plan(run: &RunFile) -> anyhow::Result<Plan> {
             run.id
         );
     }
-    Ok(Plan::new(file)?)
+    Ok(Plan::new(file, registry)?)
 }
 
 /// Submits the run and returns at once (or, with `wait`, when it is committed).
@@ -404,9 +404,9 @@ fn upstream_produced(
 }
 
 /// `shakeflow slurm-task RUN_DIR STAGE`: one array task, its shard from `$SLURM_ARRAY_TASK_ID`.
-pub fn task(run_dir: &Path, stage_name: &str, shard: usize) -> anyhow::Result<bool> {
+pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) -> anyhow::Result<bool> {
     let run = read_run(run_dir)?;
-    let plan = pipeline_plan(&run)?;
+    let plan = pipeline_plan(&run, registry)?;
     let stage = plan.stages.get(stage_name).ok_or_else(|| anyhow!("the pipeline has no stage `{stage_name}`"))?;
     let shards = run.shards.get(stage_name).ok_or_else(|| anyhow!("stage `{stage_name}` has no array in this run"))?;
     let mine: BTreeSet<&str> =
@@ -473,9 +473,9 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize) -> anyhow::Result<bo
 }
 
 /// `shakeflow slurm-commit RUN_DIR`: folds every task's manifest and commits, under the lease.
-pub fn commit(run_dir: &Path) -> anyhow::Result<()> {
+pub fn commit(run_dir: &Path, registry: Registry) -> anyhow::Result<()> {
     let run = read_run(run_dir)?;
-    let plan = pipeline_plan(&run)?;
+    let plan = pipeline_plan(&run, registry)?;
     let output_dir = plan.file.output_dir();
     let lease = Lease::take_handed(&output_dir, &run.id)?;
     let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;

@@ -1,0 +1,223 @@
+//! The stage contract: what the engine asks of a stage type and what it hands one.
+//!
+//! A stage type (an implementation in the `stages` module, nushell's command split) declares what it
+//! reads, writes and takes as parameters ([`StageInfo`]), how it splits into work units
+//! ([`WorkUnits`]) and runs one unit ([`Stage::run`]) on the inputs and sink the engine gives it
+//! ([`StageContext`]). The engine knows stage types only through the [`Registry`] it is handed,
+//! so it never imports their implementations.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use super::memo::TableMemo;
+use super::params::{ParamError, ParamSpec, Params};
+use super::sink::OutputSink;
+use super::spec::{RecordFormat, SourceSpec};
+use crate::table::Table;
+
+/// The stage types a program offers, by the name pipelines use (the binary hands the engine the
+/// stages module's `registry()`).
+#[derive(Clone, Copy)]
+pub struct Registry(pub &'static [&'static dyn Stage]);
+
+impl Registry {
+    pub fn find(&self, name: &str) -> Option<&'static dyn Stage> {
+        self.0.iter().copied().find(|s| s.info().name == name)
+    }
+
+    pub fn names(&self) -> Vec<&'static str> {
+        self.0.iter().map(|s| s.info().name).collect()
+    }
+}
+
+/// What a stage type consumes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InputKind {
+    /// Record sources declared under `inputs:` (raw files).
+    Sources,
+    /// Datasets written by other stages.
+    Datasets,
+    /// Sources of these non-record formats (an image sequence, control points), whose files
+    /// the stage reads itself; a `frames` source may name folders.
+    Files(&'static [RecordFormat]),
+}
+
+#[derive(Debug, Clone, Copy)]
+pub struct OutputInfo {
+    pub name: &'static str,
+    pub description: &'static str,
+    pub kind: OutputKind,
+}
+
+/// What an output holds, which decides how the sink writes it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutputKind {
+    /// Parquet tables, one per record.
+    Table,
+    /// Parquet tables with a `time_s` column, also written as MCAP for Foxglove.
+    TimeSeries,
+    /// Files written as they are (figures, reports).
+    Files,
+    /// One file written as it is, at the root of the stage's folder and named by the output
+    /// (`report`'s `index.html`, opened by a person rather than read by another stage).
+    Page,
+}
+
+impl OutputKind {
+    /// How `shakeflow stages` names the files of an output.
+    pub fn describe(self) -> &'static str {
+        match self {
+            OutputKind::Table => "Parquet",
+            OutputKind::TimeSeries => "Parquet + MCAP",
+            OutputKind::Files => "files",
+            OutputKind::Page => "one file",
+        }
+    }
+}
+
+#[derive(Debug)]
+pub struct StageInfo {
+    pub name: &'static str,
+    /// Bumped whenever the stage's results change for the same inputs; part of the cache key.
+    pub version: u32,
+    pub summary: &'static str,
+    pub inputs: InputKind,
+    pub outputs: &'static [OutputInfo],
+    pub params: &'static [ParamSpec],
+}
+
+/// Partition keys of a record (`motion=FB-4/floor=5`), in order.
+pub type Partition = Vec<(String, String)>;
+
+/// The dataset folder of a record: `key=value` segments, each value percent-encoded where it is
+/// not a plain name (`090 (CUE)` → `090%20%28CUE%29`), so no value can leave its folder.
+pub fn partition_path(partition: &Partition) -> String {
+    use super::paths::encode_component;
+    partition
+        .iter()
+        .map(|(k, v)| format!("{}={}", encode_component(k), encode_component(v)))
+        .collect::<Vec<_>>()
+        .join("/")
+}
+
+/// How a record's partition is named inside tables (a `record` or `case` column): its values
+/// joined by `/`, as other tables' key columns hold them (`CIGO360`, not `record=CIGO360`).
+pub fn partition_values(partition: &Partition) -> String {
+    partition.iter().map(|(_, v)| v.as_str()).collect::<Vec<_>>().join("/")
+}
+
+/// One file a stage reads: a raw record file or one part of an upstream dataset.
+#[derive(Debug, Clone)]
+pub struct InputPart {
+    pub partition: Partition,
+    pub path: PathBuf,
+    /// How provenance names the file: relative to the pipeline, or `stage.output/partition`,
+    /// never a machine- or run-specific path, so artifacts stay bit-identical across machines.
+    pub label: String,
+    /// Content hash (blake3, hex): provenance written into every artifact made from it.
+    pub hash: String,
+}
+
+// A handful exist per run: boxing the source spec would buy nothing.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone)]
+pub enum StageInput {
+    Source { name: String, spec: SourceSpec, base_dir: PathBuf, files: Vec<InputPart> },
+    Dataset { name: String, parts: Vec<InputPart> },
+}
+
+impl StageInput {
+    pub fn name(&self) -> &str {
+        match self {
+            StageInput::Source { name, .. } | StageInput::Dataset { name, .. } => name,
+        }
+    }
+
+    pub fn parts(&self) -> &[InputPart] {
+        match self {
+            StageInput::Source { files, .. } => files,
+            StageInput::Dataset { parts, .. } => parts,
+        }
+    }
+}
+
+pub struct StageContext<'a> {
+    pub stage_name: &'a str,
+    pub params: &'a Params,
+    pub inputs: &'a [StageInput],
+    pub sink: &'a OutputSink,
+    /// What relative `Path` parameters are relative to: the pipeline file's folder (the current
+    /// folder for `shakeflow stage`).
+    pub base_dir: &'a Path,
+    /// Tables upstream stages of this run wrote and kept in memory (none for `shakeflow stage`).
+    pub memo: Option<&'a TableMemo>,
+}
+
+impl StageContext<'_> {
+    /// The table of a Parquet input part: kept in memory by the stage that wrote it this run,
+    /// or else read from its file (the same table either way).
+    pub fn read_table(&self, part: &InputPart) -> anyhow::Result<Arc<Table>> {
+        match self.memo.and_then(|memo| memo.take(&part.path)) {
+            Some(table) => Ok(table),
+            None => Ok(Arc::new(crate::io::parquet::read_table(&part.path)?)),
+        }
+    }
+
+    /// A `Path` parameter resolved against the base directory; None when it is null.
+    pub fn file_param(&self, key: &str) -> Option<PathBuf> {
+        self.params.get(key).and_then(|v| v.as_str()).map(|p| self.base_dir.join(p))
+    }
+}
+
+/// How the engine splits a stage into work units, each with its own cache key and lockfile entry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WorkUnits {
+    /// One unit per record of any of its inputs (a file of a source, a part of a dataset); the
+    /// unit writes that record's partition only.
+    EachRecord,
+    /// One unit per part of input number `primary`, with the parts of its other inputs that
+    /// [`Stage::companions`] pairs with it; the unit writes that part's partition only.
+    PerRecordOf { primary: usize },
+    /// One unit over all its inputs (a fragility fit, a report, a diagnosis over cases).
+    Gather,
+}
+
+pub trait Stage: Sync + Send {
+    fn info(&self) -> &'static StageInfo;
+    /// Runs on the records `ctx.inputs` holds: all of them for a gathering stage, one record
+    /// (and its companions) per call for a per-record stage.
+    fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()>;
+
+    fn work_units(&self) -> WorkUnits {
+        WorkUnits::Gather
+    }
+
+    /// For a per-record stage, the parts of the secondary input `other` that the unit of
+    /// record `primary` reads: by default the part with the same partition, else the input's only
+    /// part, else all of them.
+    fn companions(&self, _params: &Params, primary: &InputPart, other: &StageInput) -> Vec<InputPart> {
+        let same: Vec<InputPart> = other.parts().iter().filter(|p| p.partition == primary.partition).cloned().collect();
+        if same.is_empty() {
+            other.parts().to_vec()
+        } else {
+            same
+        }
+    }
+
+    /// Checks that need several parameters at once, or the files they name, before anything
+    /// runs (so `shakeflow validate` reports them at the parameter's line).
+    fn check(&self, _params: &Params, _base_dir: &Path) -> Result<(), ParamError> {
+        Ok(())
+    }
+
+    /// The columns of the stage's first output made from `input`, the columns its inputs' records
+    /// have (None: not known), for `shakeflow validate` to carry column names through a pipeline,
+    /// with an error for each parameter value naming a column the input lacks. None: the output's
+    /// columns are not known, so stages downstream are not checked. The default knows nothing.
+    fn output_columns(&self, _params: &Params, _input: Option<&[String]>) -> ColumnCheck {
+        (None, Vec::new())
+    }
+}
+
+/// A stage's output columns (None: not known) and the parameters naming columns its input lacks.
+pub type ColumnCheck = (Option<Vec<String>>, Vec<ParamError>);
