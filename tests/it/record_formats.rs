@@ -279,3 +279,42 @@ fn a_damaged_record_names_file_line_and_column() {
     assert!(err.contains("expected acceleration value 2 of 6001"), "{err}");
     assert!(!dir.path().join("loaded").exists());
 }
+
+/// LabVIEW `.lvm` files read as lvm_read (an independent reader, tests/reference/records_lvm.py)
+/// reads them: channel names, units, every value and the X values or X0 + k·Delta_X times, over
+/// decimal commas, two segments, a Comment column, a comma separator and no X column. The
+/// numbers are the file's decimal text both ways: equal to the last bit.
+#[test]
+fn lvm_files_read_as_lvm_read_reads_them() {
+    let reference = reference("records_lvm.json");
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/reference/lvm");
+    for (file, expected) in reference["files"].as_object().unwrap() {
+        let record = shakeflow::io::records::read_lvm(&dir.join(file)).unwrap();
+        let segments = expected["segments"].as_array().unwrap();
+        let first = &segments[0];
+        let names: Vec<&str> = record.channels.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(
+            names,
+            first["channels"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect::<Vec<_>>()
+        );
+        let units: Vec<&str> = record.channels.iter().map(|c| c.unit.as_str()).collect();
+        assert_eq!(units, first["units"].as_array().unwrap().iter().map(|v| v.as_str().unwrap()).collect::<Vec<_>>());
+        assert_eq!(record.header["segments"], segments.len().to_string(), "{file}");
+        let floats = |v: &Value| v.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect::<Vec<f64>>();
+        for (c, channel) in record.channels.iter().enumerate() {
+            let want: Vec<f64> = segments.iter().flat_map(|s| floats(&s["values"][c])).collect();
+            assert_eq!(channel.values, want, "{file} {}", channel.name);
+        }
+        let want_time: Vec<f64> = segments
+            .iter()
+            .flat_map(|s| match s["x"].as_array() {
+                Some(_) => floats(&s["x"]),
+                None => {
+                    let (x0, dx) = (s["x0"].as_f64().unwrap(), s["delta_x"].as_f64().unwrap());
+                    (0..s["values"][0].as_array().unwrap().len()).map(|k| x0 + k as f64 * dx).collect()
+                }
+            })
+            .collect();
+        assert_eq!(record.time.as_deref().unwrap(), want_time, "{file}: times");
+    }
+}

@@ -138,7 +138,10 @@ pub fn parse_lvm(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
             ));
         };
         let cells = split(names_text, separator);
-        let expected = usize::from(has_x) + n;
+        // Without X columns LabVIEW still heads the rows `X_Value` (and leaves that cell of each
+        // row empty), as lvm_read expects; a file without the heading starts with the channels.
+        let lead = usize::from(has_x || cells.first() == Some(&"X_Value"));
+        let expected = lead + n;
         if cells.len() < expected {
             return Err(error(
                 names_line,
@@ -151,7 +154,7 @@ pub fn parse_lvm(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
                 "the Channels count of the segment header and the columns disagree: the file is damaged",
             ));
         }
-        let segment_names: Vec<String> = cells[usize::from(has_x)..expected].iter().map(|c| c.to_string()).collect();
+        let segment_names: Vec<String> = cells[lead..expected].iter().map(|c| c.to_string()).collect();
         let comment = cells.get(expected).is_some_and(|c| c.eq_ignore_ascii_case("Comment"));
         if segments == 1 {
             names = segment_names;
@@ -217,6 +220,9 @@ pub fn parse_lvm(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
             }
             first_data_line.get_or_insert(number_of_line);
             for (i, cell) in cells[..expected].iter().enumerate() {
+                if !has_x && i < lead && cell.trim().is_empty() {
+                    continue;
+                }
                 let v = number(cell.trim()).ok_or_else(|| {
                     error(
                         number_of_line,
@@ -229,10 +235,17 @@ pub fn parse_lvm(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
                         },
                     )
                 })?;
-                match (has_x, i) {
-                    (true, 0) => time.push(v),
-                    (true, _) => values[i - 1].push(v),
-                    (false, _) => values[i].push(v),
+                match (has_x, i < lead) {
+                    (true, true) => time.push(v),
+                    (false, true) => {
+                        return Err(error(
+                            number_of_line,
+                            Some(char_column(line, offset_in(line, cell))),
+                            format!("a value '{}' under X_Value, but the file declares X_Columns No", cell.trim()),
+                            "export the file again, or set X_Columns to One in its header",
+                        ))
+                    }
+                    (_, false) => values[i - lead].push(v),
                 }
             }
             if let (Some(dt), Some(x0)) = (dt, x0) {
@@ -330,6 +343,24 @@ mod tests {
         assert_eq!(time.len(), 5);
         assert!(time.iter().zip([0.0, 0.005, 0.01, 0.015, 0.02]).all(|(t, e)| (t - e).abs() < 1e-15), "{time:?}");
         assert_eq!(rec.channels[0].values, [0.125, 0.25, -0.375, 0.5, 0.625]);
+    }
+
+    #[test]
+    fn without_x_columns_an_x_value_heading_leads_empty_cells() {
+        let text = TWO_SEGMENTS
+            .replace("X_Columns\tOne", "X_Columns\tNo")
+            .replace("0,000000\t", "\t")
+            .replace("0,005000\t0,250", "\t0,250")
+            .replace("0,010000\t", "\t")
+            .replace("0,015000\t", "\t")
+            .replace("0,020000\t", "\t");
+        let rec = parse(&text).unwrap();
+        assert_eq!(rec.channels.iter().map(|c| c.name.as_str()).collect::<Vec<_>>(), ["A1", "A2"]);
+        assert_eq!(rec.channels[0].values, [0.125, 0.25, -0.375, 0.5, 0.625]);
+        // A value where X_Columns No says there is none is refused at its cell.
+        let err = parse(&text.replacen("\n\t0,125", "\n0,5\t0,125", 1)).unwrap_err();
+        assert_eq!((err.line, err.column), (Some(24), Some(1)), "{err}");
+        assert!(err.message.contains("X_Columns No"), "{err}");
     }
 
     #[test]
