@@ -52,7 +52,8 @@ pub struct OutputInfo {
 pub enum OutputKind {
     /// Parquet tables, one per record.
     Table,
-    /// Parquet tables with a `time_s` column, also written as MCAP for Foxglove.
+    /// Parquet tables with a `time_s` column, also written as MCAP for Foxglove when the stage's
+    /// `mcap` parameter ([`MCAP_PARAM`]) asks for it.
     TimeSeries,
     /// Files written as they are (figures, reports).
     Files,
@@ -66,7 +67,7 @@ impl OutputKind {
     pub fn describe(self) -> &'static str {
         match self {
             OutputKind::Table => "Parquet",
-            OutputKind::TimeSeries => "Parquet + MCAP",
+            OutputKind::TimeSeries => "Parquet (+ MCAP with `mcap: true`)",
             OutputKind::Files => "files",
             OutputKind::Page => "one file",
         }
@@ -83,6 +84,20 @@ pub struct StageInfo {
     pub outputs: &'static [OutputInfo],
     pub params: &'static [ParamSpec],
 }
+
+/// The `mcap` parameter of every stage with a time-series output. Off by default: a twin repeats
+/// its Parquet table at about twice the size (lz4 chunks of 9-byte protobuf values against
+/// byte-stream-split floats), which made MCAP half the demo study's disk (docs/benchmarks.md,
+/// footprint).
+pub const MCAP_PARAM: ParamSpec = ParamSpec {
+    name: "mcap",
+    kind: crate::pipeline::params::ParamKind::Bool,
+    default: Some("false"),
+    unit: "",
+    description:
+        "also write the time series as MCAP (lz4 chunks, protobuf) for Foxglove; opt-in: about twice the Parquet's size",
+    range: None,
+};
 
 /// Partition keys of a record (`motion=FB-4/floor=5`), in order.
 pub type Partition = Vec<(String, String)>;
@@ -294,5 +309,23 @@ pub fn split_pair(text: &str) -> (String, Option<String>) {
     match text.split_once("->") {
         Some((a, b)) => (a.trim().to_string(), Some(b.trim().to_string())),
         None => (text.trim().to_string(), None),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_stage_with_time_series_has_the_opt_in_mcap_parameter() {
+        for stage in registry() {
+            let info = stage.info();
+            let series = info.outputs.iter().any(|o| o.kind == OutputKind::TimeSeries);
+            let mcap = info.params.iter().find(|p| p.name == "mcap");
+            assert_eq!(mcap.is_some(), series, "{}: `mcap` exactly where there are time series", info.name);
+            if let Some(p) = mcap {
+                assert_eq!(p.default, Some("false"), "{}: MCAP twins are opt-in", info.name);
+            }
+        }
     }
 }

@@ -5,7 +5,7 @@ use common::*;
 
 #[test]
 fn second_run_is_fully_cached_and_says_so() {
-    let project = small_project();
+    let project = small_project_with_twins();
     let first = shakeflow(&["run", "pipeline.yaml"], project.path());
     assert!(first.status.success(), "{}", stderr(&first));
     assert!(stderr(&first).contains("load               running (never run"), "{}", stderr(&first));
@@ -18,6 +18,19 @@ fn second_run_is_fully_cached_and_says_so() {
     assert!(second.status.success(), "{log}");
     assert!(log.contains("load               cached") && log.contains("baseline           cached"), "{log}");
     assert!(log.contains("2 stage(s): 0 ran, 2 cached"), "{log}");
+}
+
+#[test]
+fn time_series_get_an_mcap_twin_only_when_asked() {
+    let project = small_project();
+    let out = shakeflow(&["run", "pipeline.yaml"], project.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(project.path().join("out/baseline/records/motion=FB-1/data.parquet").is_file());
+    assert!(!project.path().join("out/baseline/mcap").exists(), "a twin nobody asked for");
+    std::fs::write(project.path().join("pipeline.yaml"), pipeline_with_twins()).unwrap();
+    let out = shakeflow(&["run", "pipeline.yaml"], project.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(project.path().join("out/baseline/mcap/records/motion=FB-1/data.mcap").is_file());
 }
 
 #[test]
@@ -139,7 +152,7 @@ fn stages_lists_parameters_with_defaults() {
 
 #[test]
 fn inspect_describes_mcap_files_and_datasets() {
-    let project = small_project();
+    let project = small_project_with_twins();
     assert!(shakeflow(&["run", "pipeline.yaml"], project.path()).status.success());
     let mcap = stdout(&shakeflow(&["inspect", "out/baseline/mcap/records/motion=FB-2/data.mcap"], project.path()));
     assert!(mcap.contains("MCAP, 400 messages from 0.000 s to 1.995 s"), "{mcap}");
