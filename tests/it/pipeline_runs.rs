@@ -31,6 +31,14 @@ fn time_series_get_an_mcap_twin_only_when_asked() {
     let out = shakeflow(&["run", "pipeline.yaml"], project.path());
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(project.path().join("out/baseline/mcap/records/motion=FB-1/data.mcap").is_file());
+    // Turned off again (as an output folder from before twins were opt-in meets the new
+    // default): the stage reruns and its twins go.
+    std::fs::write(project.path().join("pipeline.yaml"), PIPELINE).unwrap();
+    let status = stdout(&shakeflow(&["status", "pipeline.yaml"], project.path()));
+    assert!(status.contains("params changed: mcap true → false"), "{status}");
+    assert!(shakeflow(&["run", "pipeline.yaml"], project.path()).status.success());
+    assert!(!project.path().join("out/baseline/mcap").exists(), "twins left behind");
+    assert!(project.path().join("out/baseline/records/motion=FB-1/data.parquet").is_file());
 }
 
 #[test]
