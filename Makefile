@@ -24,7 +24,7 @@ BIN := $(CARGO_TARGET_DIR)/release/shakeflow
 help:
 	@echo "make demo    build (release) and run the demo study: runs/demo-archive -> runs/demo"
 	@echo "make test    build and run the whole test suite (installs the Python references it needs)"
-	@echo "make bench   load+baseline and the whole demo study vs numpy/scipy/pyarrow scripts; the rocking and rolling models vs scipy and RK4; CPT matching and 1080p tracking vs OpenCV"
+	@echo "make bench   the demo study's artifact footprint vs its raw archive; load+baseline and the whole demo study vs numpy/scipy/pyarrow scripts; the rocking and rolling models vs scipy and RK4; CPT matching and 1080p tracking vs OpenCV"
 	@echo "make prove   fresh concealed-effect cases (prove/generate_cases.py) scored against shakeflow diagnose"
 	@echo "             [SEED=n] [PER_EFFECT=5] [PROVE_JOBS=2]; make prove-check re-checks the generator's physics"
 	@echo "make prove-rolling   the same for rolling units (prove/rolling/) [SEED=n] [ROLLING_PER_EFFECT=4]"
@@ -66,6 +66,7 @@ test: $(PY_STAMP)
 
 bench: release $(PY_STAMP)
 	$(BIN) demo-archive runs/demo-archive
+	$(VENV_PY) bench/footprint.py --shakeflow $(BIN) --archive runs/demo-archive
 	$(VENV_PY) bench/parquet_encodings.py --archive runs/demo-archive
 	$(VENV_PY) bench/load_baseline.py --shakeflow $(BIN) --archive runs/demo-archive
 	$(VENV_PY) bench/demo_study.py --shakeflow $(BIN) --archive runs/demo-archive

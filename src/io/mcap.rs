@@ -7,7 +7,8 @@
 //! is 9 bytes per column instead of ~40 characters and needs no float formatting, so the twin
 //! costs a fraction of what JSON through zstd did (40 % of the demo study). A gap is NaN, as in
 //! the Parquet table. Units and descriptions, which a descriptor has no place for, are channel
-//! metadata (`unit.<column>`, `description.<column>`).
+//! metadata (`unit.<column>`, `description.<column>`). Chunks are lz4-compressed. Twins are
+//! opt-in (each stage's `mcap` parameter): they repeat the Parquet table, at twice its size.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -46,9 +47,9 @@ pub fn write_timeseries(
     let mut content_hash = String::new();
     atomic::write_file(path, |w| {
         let mut writer = mcap::WriteOptions::new()
-            // Uncompressed chunks: sensor doubles gain ~15 % from zstd, which cost more CPU than
-            // the rest of the write; the Parquet table is the compact copy.
-            .compression(None)
+            // lz4 chunks: a fifth smaller (message headers repeat, sensor doubles hardly do) at
+            // about 1 GB/s; Foxglove and the `mcap` readers (Python: the `lz4` package) open them.
+            .compression(Some(mcap::Compression::Lz4))
             // Each chunk is assembled in memory and written once, front to back: the file is
             // hashed on the way out instead of read back, and the buffered file is not flushed
             // by a seek back to each chunk's header.
@@ -279,6 +280,30 @@ mod tests {
         assert_eq!(s.channels[0].0, "/a/motion=FB-4");
         assert!((s.end_s - 0.02).abs() < 1e-12);
         assert_eq!(s.metadata["shakeflow.stage"], "demo");
+    }
+
+    #[test]
+    fn chunks_are_lz4_and_read_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.mcap");
+        let mut t = Table::new();
+        let time: Vec<f64> = (0..2000).map(|i| i as f64 * 0.005).collect();
+        t.push(Column::f64("ax_mps2", "m/s^2", "accel", time.iter().map(|s| (7.0 * s).sin()).collect()));
+        t.push(Column::f64("time_s", "s", "time", time));
+        write_timeseries(&path, &[Topic { name: "/a".into(), table: &t }], &BTreeMap::new()).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        assert!(!summary.chunk_indexes.is_empty());
+        for chunk in &summary.chunk_indexes {
+            assert_eq!(chunk.compression, "lz4");
+            assert!(chunk.compressed_size < chunk.uncompressed_size, "{chunk:?}");
+        }
+        let messages: Vec<_> = mcap::MessageStream::new(&bytes).unwrap().map(Result::unwrap).collect();
+        assert_eq!(messages.len(), 2000);
+        let columns: Vec<&[f64]> = t.columns.iter().filter_map(Column::as_f64).collect();
+        let expected = SampleMessage::new(2).encode(&columns, 1999).to_vec();
+        assert_eq!(&messages[1999].data[..], &expected[..]);
+        assert_eq!(messages[1999].log_time, 9_995_000_000);
     }
 
     #[test]

@@ -26,7 +26,7 @@ pub struct OutputSink {
     provenance: BTreeMap<String, String>,
     written: Mutex<BTreeSet<String>>,
     progress: indicatif::ProgressBar,
-    /// Whether time-series outputs also get MCAP twins (the `mcap` parameter, default on).
+    /// Whether time-series outputs also get MCAP twins (the `mcap` parameter, off by default).
     mcap: bool,
     /// Hashes of the files written so far, taken from their bytes on the way out.
     hashes: Mutex<KnownHashes>,
@@ -60,7 +60,7 @@ impl OutputSink {
             provenance,
             written: Mutex::new(BTreeSet::new()),
             progress,
-            mcap: params.get("mcap").and_then(|v| v.as_bool()).unwrap_or(true),
+            mcap: params.get("mcap").and_then(|v| v.as_bool()).unwrap_or(false),
             hashes: Mutex::new(KnownHashes::new()),
             memo: None,
         }

@@ -54,7 +54,8 @@ pub struct OutputInfo {
 pub enum OutputKind {
     /// Parquet tables, one per record.
     Table,
-    /// Parquet tables with a `time_s` column, also written as MCAP for Foxglove.
+    /// Parquet tables with a `time_s` column, also written as MCAP for Foxglove when the stage's
+    /// `mcap` parameter (`stages::MCAP_PARAM`) asks for it.
     TimeSeries,
     /// Files written as they are (figures, reports).
     Files,
@@ -68,7 +69,7 @@ impl OutputKind {
     pub fn describe(self) -> &'static str {
         match self {
             OutputKind::Table => "Parquet",
-            OutputKind::TimeSeries => "Parquet + MCAP",
+            OutputKind::TimeSeries => "Parquet (+ MCAP with `mcap: true`)",
             OutputKind::Files => "files",
             OutputKind::Page => "one file",
         }

@@ -39,14 +39,7 @@ static INFO: StageInfo = StageInfo {
             description: "channels to correct; empty: every float column except time_s",
             range: None,
         },
-        ParamSpec {
-            name: "mcap",
-            kind: ParamKind::Bool,
-            default: Some("true"),
-            unit: "",
-            description: "also write the corrected series as MCAP for Foxglove",
-            range: None,
-        },
+        super::MCAP_PARAM,
     ],
 };
 

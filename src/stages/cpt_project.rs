@@ -35,6 +35,7 @@ static INFO: StageInfo = StageInfo {
         ParamSpec { name: "unit_motion", kind: ParamKind::Choice(&["none", "rolling", "rocking"]), default: Some("\"none\""), unit: "", description: "rolling: midpoint translation and yaw about the plane normal; rocking: θ about the plane normal (top toward +X positive for a +Y normal) and midpoint translation", range: None },
         ParamSpec { name: "theta_zero", kind: ParamKind::Choice(&["first_frame", "upright"]), default: Some("\"first_frame\""), unit: "", description: "rocking: θ from the first frame's pose, or from upright (the two points one above the other, the first lower)", range: None },
         ParamSpec { name: "min_ray_angle_deg", kind: ParamKind::Float, default: Some("2.0"), unit: "deg", description: "refuse pixels whose camera ray meets the plane at a smaller angle", range: Some((0.0, 90.0)) },
+        super::MCAP_PARAM,
     ],
 };
 

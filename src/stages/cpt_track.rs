@@ -40,6 +40,7 @@ static INFO: StageInfo = StageInfo {
         ParamSpec { name: "max_jump_px", kind: ParamKind::Float, default: Some("15.0"), unit: "px", description: "a match farther than this from the predicted position counts as lost", range: Some((0.0, 1e6)) },
         ParamSpec { name: "occluded_above", kind: ParamKind::Float, default: Some("0.7"), unit: "", description: "a point counts as lost (occluded) when the match's residual energy around it (the central half of the window) exceeds this multiple of the template's signal energy there", range: Some((0.0, 1e6)) },
         ParamSpec { name: "min_contrast", kind: ParamKind::Float, default: Some("8.0"), unit: "grey levels", description: "warn when a template's standard deviation is below this", range: Some((0.0, 255.0)) },
+        super::MCAP_PARAM,
     ],
 };
 

@@ -31,7 +31,7 @@ static INFO: StageInfo = StageInfo {
         ParamSpec { name: "exceedance_sigma", kind: ParamKind::Float, default: Some("4.0"), unit: "", description: "a residual beyond this many noise standard deviations counts as a disagreement (5 within 0.1 s flag a mismatch)", range: Some((2.0, 20.0)) },
         ParamSpec { name: "min_improvement", kind: ParamKind::Float, default: Some("3.0"), unit: "", description: "a physics is accepted only if it cuts the window's noise-normalised RMS misfit at least this many times", range: Some((1.0, 1e3)) },
         ParamSpec { name: "max_remaining_flagged", kind: ParamKind::Float, default: Some("0.12"), unit: "", description: "... and leaves at most this fraction of the flagged samples flagged", range: Some((0.0, 1.0)) },
-        ParamSpec { name: "mcap", kind: ParamKind::Bool, default: Some("true"), unit: "", description: "also write the series as MCAP for Foxglove", range: None },
+        super::MCAP_PARAM,
     ],
 };
 

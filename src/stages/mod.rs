@@ -5,7 +5,7 @@
 
 use std::collections::BTreeMap;
 
-use crate::pipeline::params::ParamError;
+use crate::pipeline::params::{ParamError, ParamSpec};
 // The contract lives in the engine (`pipeline::stage`); stage files name it from here.
 pub use crate::pipeline::stage::{
     partition_path, partition_values, ColumnCheck, InputKind, InputPart, OutputInfo, OutputKind, Partition, Registry,
@@ -26,6 +26,20 @@ pub mod simulate_toppling;
 pub mod synchronize;
 pub mod toppling_fragility;
 pub mod transfer_function;
+
+/// The `mcap` parameter of every stage with a time-series output. Off by default: a twin repeats
+/// its Parquet table at about twice the size (lz4 chunks of 9-byte protobuf values against
+/// byte-stream-split floats), which made MCAP half the demo study's disk (docs/benchmarks.md,
+/// footprint).
+pub const MCAP_PARAM: ParamSpec = ParamSpec {
+    name: "mcap",
+    kind: crate::pipeline::params::ParamKind::Bool,
+    default: Some("false"),
+    unit: "",
+    description:
+        "also write the time series as MCAP (lz4 chunks, protobuf) for Foxglove; opt-in: about twice the Parquet's size",
+    range: None,
+};
 
 /// The file stem of a per-record figure: the partition path with `/` as `_` (`motion=FB-4`), or
 /// `fallback` for a record without partition keys. Stages name their figures with it and `report`
@@ -94,5 +108,23 @@ pub fn split_pair(text: &str) -> (String, Option<String>) {
     match text.split_once("->") {
         Some((a, b)) => (a.trim().to_string(), Some(b.trim().to_string())),
         None => (text.trim().to_string(), None),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_stage_with_time_series_has_the_opt_in_mcap_parameter() {
+        for stage in registry() {
+            let info = stage.info();
+            let series = info.outputs.iter().any(|o| o.kind == OutputKind::TimeSeries);
+            let mcap = info.params.iter().find(|p| p.name == "mcap");
+            assert_eq!(mcap.is_some(), series, "{}: `mcap` exactly where there are time series", info.name);
+            if let Some(p) = mcap {
+                assert_eq!(p.default, Some("false"), "{}: MCAP twins are opt-in", info.name);
+            }
+        }
     }
 }

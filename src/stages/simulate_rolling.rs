@@ -171,14 +171,7 @@ static PARAMS: [ParamSpec; MODEL_KEYS + 15] = [
         description: "draw a PNG per record like the study's Figure 11",
         range: None,
     },
-    ParamSpec {
-        name: "mcap",
-        kind: ParamKind::Bool,
-        default: Some("true"),
-        unit: "",
-        description: "also write the trajectory as MCAP for Foxglove",
-        range: None,
-    },
+    super::MCAP_PARAM,
 ];
 
 static INFO: StageInfo = StageInfo {

@@ -61,7 +61,7 @@ static INFO: StageInfo = StageInfo {
     ],
     params: rocking_params![
         ParamSpec { name: "initial_theta_rad", kind: ParamKind::Float, default: Some("0.0"), unit: "rad", description: "initial rotation (free-rocking tests); 0: at rest", range: Some((-1.5, 1.5)) },
-        ParamSpec { name: "mcap", kind: ParamKind::Bool, default: Some("true"), unit: "", description: "also write the response as MCAP for Foxglove", range: None },
+        super::MCAP_PARAM,
     ],
 };
 

@@ -38,7 +38,7 @@ static INFO: StageInfo = StageInfo {
         ParamSpec { name: "join", kind: ParamKind::Str, default: Some("\"motion\""), unit: "", description: "partition key that pairs target and reference records", range: None },
         ParamSpec { name: "known_lag_s", kind: ParamKind::Float, default: Some("null"), unit: "s", description: "use this lag instead of estimating it (positive: target lags reference)", range: Some((-3600.0, 3600.0)) },
         ParamSpec { name: "max_lag_s", kind: ParamKind::Float, default: Some("5.0"), unit: "s", description: "largest lag searched, either sign", range: Some((0.0, 3600.0)) },
-        ParamSpec { name: "mcap", kind: ParamKind::Bool, default: Some("true"), unit: "", description: "also write the aligned records as MCAP for Foxglove", range: None },
+        super::MCAP_PARAM,
     ],
 };
 

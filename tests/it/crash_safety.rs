@@ -34,9 +34,10 @@ fn names(tree: &[(String, Option<Vec<u8>>)]) -> Vec<&str> {
 /// The second version of the pipeline: a source option and a stage parameter changed, so every
 /// unit of both stages reruns and the commit replaces their six files and the lockfile.
 fn second_version(root: &Path) {
+    let first = pipeline_with_twins();
     let text =
-        PIPELINE.replace("      order: 3", "      order: 2").replace("    unit: g\n", "    unit: g\n    scale: 2.0\n");
-    assert_ne!(text, PIPELINE);
+        first.replace("      order: 3", "      order: 2").replace("    unit: g\n", "    unit: g\n    scale: 2.0\n");
+    assert_ne!(text, first);
     std::fs::write(root.join("pipeline.yaml"), text).unwrap();
 }
 
@@ -54,7 +55,7 @@ fn status_lines(root: &Path) -> Vec<String> {
 
 /// The failpoints a run from the first to the second version passes, in order.
 fn commit_points() -> Vec<String> {
-    let project = small_project();
+    let project = small_project_with_twins();
     run_ok(project.path());
     second_version(project.path());
     let out = shakeflow_env(&["run", "pipeline.yaml"], project.path(), &[("SHAKEFLOW_FAILPOINT", "trace")]);
@@ -65,7 +66,7 @@ fn commit_points() -> Vec<String> {
 #[test]
 fn a_run_killed_at_any_step_of_its_commit_ends_as_a_clean_run_does() {
     // What a clean run of the second version leaves.
-    let clean = small_project();
+    let clean = small_project_with_twins();
     second_version(clean.path());
     run_ok(clean.path());
     let expected = tree(&clean.path().join("out"));
@@ -81,7 +82,7 @@ fn a_run_killed_at_any_step_of_its_commit_ends_as_a_clean_run_does() {
     }
     let commit_point = points.iter().position(|p| p == "commit.committed").unwrap();
     for (i, point) in points.iter().enumerate() {
-        let project = small_project();
+        let project = small_project_with_twins();
         let root = project.path();
         run_ok(root);
         let before = tree(&root.join("out"));

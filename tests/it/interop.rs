@@ -6,7 +6,7 @@ use std::path::Path;
 
 #[test]
 fn parquet_and_mcap_artifacts_open_in_pyarrow_duckdb_and_mcap() {
-    let project = small_project();
+    let project = small_project_with_twins();
     let out = shakeflow(&["run", "pipeline.yaml"], project.path());
     assert!(out.status.success(), "{}", stderr(&out));
     let dir = project.path().join("out");

@@ -5,7 +5,7 @@ use common::*;
 
 #[test]
 fn second_run_is_fully_cached_and_says_so() {
-    let project = small_project();
+    let project = small_project_with_twins();
     let first = shakeflow(&["run", "pipeline.yaml"], project.path());
     assert!(first.status.success(), "{}", stderr(&first));
     assert!(stderr(&first).contains("load               running (never run"), "{}", stderr(&first));
@@ -18,6 +18,27 @@ fn second_run_is_fully_cached_and_says_so() {
     assert!(second.status.success(), "{log}");
     assert!(log.contains("load               cached") && log.contains("baseline           cached"), "{log}");
     assert!(log.contains("2 stage(s): 0 ran, 2 cached"), "{log}");
+}
+
+#[test]
+fn time_series_get_an_mcap_twin_only_when_asked() {
+    let project = small_project();
+    let out = shakeflow(&["run", "pipeline.yaml"], project.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(project.path().join("out/baseline/records/motion=FB-1/data.parquet").is_file());
+    assert!(!project.path().join("out/baseline/mcap").exists(), "a twin nobody asked for");
+    std::fs::write(project.path().join("pipeline.yaml"), pipeline_with_twins()).unwrap();
+    let out = shakeflow(&["run", "pipeline.yaml"], project.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(project.path().join("out/baseline/mcap/records/motion=FB-1/data.mcap").is_file());
+    // Turned off again (as an output folder from before twins were opt-in meets the new
+    // default): the stage reruns and its twins go.
+    std::fs::write(project.path().join("pipeline.yaml"), PIPELINE).unwrap();
+    let status = stdout(&shakeflow(&["status", "pipeline.yaml"], project.path()));
+    assert!(status.contains("params changed: mcap true → false"), "{status}");
+    assert!(shakeflow(&["run", "pipeline.yaml"], project.path()).status.success());
+    assert!(!project.path().join("out/baseline/mcap").exists(), "twins left behind");
+    assert!(project.path().join("out/baseline/records/motion=FB-1/data.parquet").is_file());
 }
 
 #[test]
@@ -92,8 +113,9 @@ fn force_reruns_the_stage_and_its_dependents() {
 
 #[test]
 fn same_inputs_give_bit_identical_artifacts() {
-    let a = small_project();
-    let b = small_project();
+    // With twins: their lz4 chunks are bit-identical too.
+    let a = small_project_with_twins();
+    let b = small_project_with_twins();
     assert!(shakeflow(&["run", "pipeline.yaml", "--jobs", "1"], a.path()).status.success());
     assert!(shakeflow(&["run", "pipeline.yaml", "--jobs", "2"], b.path()).status.success());
     let strip = |dir: &std::path::Path| -> Vec<(String, Vec<u8>)> {
@@ -139,7 +161,7 @@ fn stages_lists_parameters_with_defaults() {
 
 #[test]
 fn inspect_describes_mcap_files_and_datasets() {
-    let project = small_project();
+    let project = small_project_with_twins();
     assert!(shakeflow(&["run", "pipeline.yaml"], project.path()).status.success());
     let mcap = stdout(&shakeflow(&["inspect", "out/baseline/mcap/records/motion=FB-2/data.mcap"], project.path()));
     assert!(mcap.contains("MCAP, 400 messages from 0.000 s to 1.995 s"), "{mcap}");

@@ -136,7 +136,8 @@ fn the_stage_command_takes_lists_and_presets() {
         }
         shakeflow(&args, root)
     };
-    let out = run(&["preset=PS1", "steer0_deg=[80,0,0,80]", "yaw0_deg=6", "friction_law=stick_slip"], "ps1");
+    let out =
+        run(&["preset=PS1", "steer0_deg=[80,0,0,80]", "yaw0_deg=6", "friction_law=stick_slip", "mcap=true"], "ps1");
     assert!(out.status.success(), "{}", stderr(&out));
     let trajectory = shakeflow::io::parquet::read_table(&root.join("ps1/trajectory/data.parquet")).unwrap();
     let facts: serde_json::Value = serde_json::from_str(&trajectory.metadata["shakeflow.rolling"]).unwrap();

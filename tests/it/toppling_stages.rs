@@ -35,6 +35,8 @@ fn a_demo_case_through_the_stage_command() {
             &format!("equipment={}", equipment.display()),
             "--set",
             "vertical=az_mps2",
+            "--set",
+            "mcap=true",
         ],
         root,
     );

@@ -137,9 +137,10 @@ fn named_stages_run_with_what_they_need_and_dry_run_runs_nothing() {
 
 #[test]
 fn a_record_gone_from_the_archive_takes_its_outputs_with_it() {
-    let project = small_project();
+    let project = small_project_with_twins();
     let root = project.path();
     assert!(run(root, &[]).status.success());
+    assert!(root.join("out/baseline/mcap/records/motion=FB-2").exists());
     std::fs::remove_dir_all(root.join("archive/FB-2")).unwrap();
     let status = stdout(&shakeflow(&["status", "pipeline.yaml"], root));
     assert!(status.contains("1 record(s) gone from its inputs: motion=FB-2"), "{status}");

@@ -45,6 +45,9 @@ def main(out_dir, stage):
             summary = reader.get_summary()
             schemas = {s.encoding for s in summary.schemas.values()}
             assert schemas == {"protobuf"}, schemas
+            # Compressed chunks (lz4), which this reader decompresses as Foxglove does.
+            compressions = {c.compression for c in summary.chunk_indexes}
+            assert compressions == {"lz4"}, compressions
             messages = [(ch.topic, ch.metadata, decoded, msg.log_time) for _, ch, msg, decoded in reader.iter_decoded_messages()]
         assert len(messages) == table.num_rows, (len(messages), table.num_rows)
         floats = [field for field in table.schema if field.type == "double"]

@@ -107,6 +107,20 @@ pub fn small_project() -> crate::tempdir::TempDir {
     dir
 }
 
+/// [`PIPELINE`] with `baseline`'s opt-in MCAP twins on.
+pub fn pipeline_with_twins() -> String {
+    let text = PIPELINE.replace("      order: 3\n", "      order: 3\n      mcap: true\n");
+    assert_ne!(text, PIPELINE);
+    text
+}
+
+/// [`small_project`] whose `baseline` also writes MCAP twins.
+pub fn small_project_with_twins() -> tempfile::TempDir {
+    let dir = small_project();
+    std::fs::write(dir.path().join("pipeline.yaml"), pipeline_with_twins()).unwrap();
+    dir
+}
+
 /// Every file below `dir` with its bytes, for before/after comparisons.
 pub fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     fn walk(dir: &Path, out: &mut Vec<(PathBuf, Vec<u8>)>) {
