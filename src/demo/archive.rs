@@ -1,12 +1,17 @@
-//! Deterministic SYNTHETIC archive shaped like the NEES-2009-0722 UCSD BNCS test data.
+//! Deterministic SYNTHETIC archive shaped like the NEES-2009-0722 UCSD BNCS test data, in
+//! NEES's layout and text conventions (as NEEShub and DesignSafe keep them).
 //!
-//! Layout (a contract for the pipeline):
+//! Layout (a contract for the pipeline; `<E>/<T>`: the test's experiment and trial):
 //! ```text
 //! DIR/README.txt
 //! DIR/manifest.json
-//! DIR/<test>/DAQ1_floors.csv      200 Hz, g: Time,A4_EW,A4_NS,A4_UD,A5_EW,A5_NS,A5_UD
-//! DIR/<test>/DAQ2_equipment.csv   256 Hz, g: Time,A5_EW_SYNC,UI3_TOP_EW,...,WSU1_TOP_EW
+//! DIR/NEES-2009-0722.groups/Documentation/DAQ2_sensitivities.csv   channel,sensitivity,unit,offset
+//! DIR/NEES-2009-0722.groups/Experiment-<E>/Trial-<T>/Rep-1/
+//!     Converted_Data/<test>_DAQ1.txt    200 Hz: Time,A4_EW,A4_NS,A4_UD,A5_EW,A5_NS,A5_UD (in/sec^2, g)
+//!     Unprocessed_Data/<test>_DAQ2.asc  256 Hz: Time,A5_EW_SYNC,UI3_TOP_EW,...,WSU1_TOP_EW (V)
 //! ```
+//! Each DAQ file is tab-delimited: a 4-line preamble, the channel-name row, a description row
+//! and a units row (lines 5, 6, 7), then data.
 //! Physics runs on a 1 kHz grid in DAQ1 time; each DAQ samples it by cubic interpolation
 //! (all signals are band-limited below 30 Hz). DAQ2 time τ is DAQ1 time τ + clock_offset_s.
 //!
@@ -31,11 +36,17 @@ use std::path::{Path, PathBuf};
 
 pub const GENERATOR_NAME: &str = "shakeflow demo-archive";
 /// Bump whenever the bytes written change, so `is_current` rejects older archives.
-pub const GENERATOR_VERSION: &str = "1.4.0";
+pub const GENERATOR_VERSION: &str = "2.0.0";
 pub const README_FILE: &str = "README.txt";
 pub const MANIFEST_FILE: &str = "manifest.json";
-pub const DAQ1_FILE: &str = "DAQ1_floors.csv";
-pub const DAQ2_FILE: &str = "DAQ2_equipment.csv";
+/// The NEES project folder, as DesignSafe's `nees.public` names it.
+pub const GROUPS_DIR: &str = "NEES-2009-0722.groups";
+/// DAQ2's raw volts → g (a calibration table for `load`'s `calibration:`).
+pub const SENSITIVITY_FILE: &str = "NEES-2009-0722.groups/Documentation/DAQ2_sensitivities.csv";
+/// Lines before the channel-name row of a DAQ file; the description and units rows follow it.
+pub const PREAMBLE_LINES: usize = 4;
+pub const DESCRIPTION_ROW: usize = 6;
+pub const UNITS_ROW: usize = 7;
 /// The camera projection technique's inputs: a calibrated camera's video of a rocking and a
 /// rolling unit (see `demo::camera`).
 pub const CPT_CONTROL_POINTS_FILE: &str = "cpt/control_points.csv";
@@ -46,6 +57,32 @@ pub const STUDY_TESTS: usize = 14;
 pub const DAQ1_RATE_HZ: u32 = 200;
 pub const DAQ2_RATE_HZ: u32 = 256;
 pub const DAQ1_COLUMNS: [&str; 7] = ["Time", "A4_EW", "A4_NS", "A4_UD", "A5_EW", "A5_NS", "A5_UD"];
+/// DAQ1's units row: horizontal channels in in/sec^2, vertical in g.
+pub const DAQ1_UNITS: [&str; 7] = ["sec", "in/sec^2", "in/sec^2", "g", "in/sec^2", "in/sec^2", "g"];
+const DAQ1_DESCRIPTIONS: [&str; 7] = [
+    "time, DAQ1 clock",
+    "floor 4 acceleration, E-W (X, shaking direction)",
+    "floor 4 acceleration, N-S (Y)",
+    "floor 4 acceleration, vertical (Z)",
+    "floor 5 acceleration, E-W (X, shaking direction)",
+    "floor 5 acceleration, N-S (Y)",
+    "floor 5 acceleration, vertical (Z)",
+];
+/// Decimals DAQ1 writes per column (in/sec^2 to 0.1 mil/s², g to 0.1 µg).
+const DAQ1_DECIMALS: [usize; 7] = [6, 4, 4, 7, 4, 4, 7];
+/// DAQ2 writes volts (6 decimals), its time in seconds.
+pub const DAQ2_UNITS: [&str; 9] = ["sec", "V", "V", "V", "V", "V", "V", "V", "V"];
+const DAQ2_DESCRIPTIONS: [&str; 9] = [
+    "time, DAQ2 clock (not synchronised with DAQ1)",
+    "DAQ2's own copy of floor 5 E-W acceleration, recorded for clock synchronisation",
+    "ultrasound imager UI3 (floor 4, unlocked), top, E-W",
+    "metal cart MC2 (floor 4, unlocked), top, E-W",
+    "patient bed PB1 (floor 4, locked), top, E-W",
+    "patient bed PB2 (floor 4, unlocked), top, E-W",
+    "stretcher PS1 (floor 5, unlocked), top, E-W",
+    "stretcher PS2 (floor 5, locked), top, E-W",
+    "wire shelving WSU1 (floor 5, free-standing), top, E-W",
+];
 pub const DAQ2_COLUMNS: [&str; 9] = [
     "Time",
     "A5_EW_SYNC",
@@ -58,12 +95,8 @@ pub const DAQ2_COLUMNS: [&str; 9] = [
     "WSU1_TOP_EW",
 ];
 
-const HEADER_LINE_1: &str =
-    "# NEES-2009-0722 UCSD BNCS - SYNTHETIC demo archive written by shakeflow demo-archive (not real data)";
-const DAQ1_LINE_3: &str = "# daq: DAQ1 floor accelerometers (floor averages), sample_rate_hz: 200, units: g";
-const DAQ1_LINE_4: &str = "# channels: A4_* = floor 4, A5_* = floor 5; EW = X (shaking direction), NS = Y, UD = Z (vertical); Time = DAQ1 time (s); sensor offsets not removed";
-const DAQ2_LINE_3: &str = "# daq: DAQ2 equipment top accelerometers (E-W), sample_rate_hz: 256, units: g";
-const DAQ2_LINE_4: &str = "# note: DAQ2 clock is NOT synchronised with DAQ1 (Time = DAQ2 time); A5_EW_SYNC = DAQ2's copy of floor-5 E-W for synchronisation; each <unit>_TOP_EW sensor carries a constant offset, slow drift and noise";
+const DAQ1_LINE_3: &str = "DAQ1: floor accelerometers (floor averages), sampling rate: 200 Hz; A4_* = floor 4, A5_* = floor 5; EW = X (shaking direction), NS = Y, UD = Z (vertical); sensor offsets not removed";
+const DAQ2_LINE_3: &str = "DAQ2: equipment top accelerometers (E-W), sampling rate: 256 Hz, raw volts (sensitivities: Documentation/DAQ2_sensitivities.csv); clock NOT synchronised with DAQ1; A5_EW_SYNC = DAQ2's copy of floor-5 E-W; each <unit>_TOP_EW sensor carries a constant offset, slow drift and noise";
 
 /// Physics grid (Hz): fine enough for accurate cubic interpolation to 200 and 256 Hz.
 const SIM_RATE_HZ: f64 = 1000.0;
@@ -97,6 +130,9 @@ pub struct Manifest {
     pub units: String,
     pub daq1: DaqInfo,
     pub daq2: DaqInfo,
+    /// DAQ2's sensitivity table (the archive's `SENSITIVITY_FILE`): volts = offset_v +
+    /// sensitivity_v_per_g × (acceleration in g).
+    pub daq2_sensitivities: Vec<Sensitivity>,
     /// How DAQ2 values relate to the physical signal (formula, in words).
     pub daq2_sensor_model: String,
     pub tests: Vec<TestEntry>,
@@ -135,14 +171,30 @@ pub struct GeneratorInfo {
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DaqInfo {
+    /// Where each test's file is: a template over `{experiment}`, `{trial}` and `{test}`.
     pub file: String,
     pub sample_rate_hz: u32,
     pub columns: Vec<String>,
+    /// The file's units row.
+    pub units: Vec<String>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Sensitivity {
+    pub channel: String,
+    pub sensitivity_v_per_g: f64,
+    pub offset_v: f64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TestEntry {
     pub id: String,
+    /// NEES experiment (1: base-isolated, 2: fixed-base, 3: the extra tests) and trial in it.
+    pub experiment: u32,
+    pub trial: u32,
+    /// The test's DAQ files, relative to the archive.
+    pub daq1_file: String,
+    pub daq2_file: String,
     /// "earthquake" or "white_noise".
     pub kind: String,
     pub input: String,
@@ -292,11 +344,11 @@ pub fn is_current_tests(dir: &Path, tests: usize) -> bool {
     if manifest.generator.name != GENERATOR_NAME || manifest.generator.version != GENERATOR_VERSION {
         return false;
     }
-    let ids: Vec<String> = plans(tests).into_iter().map(|p| p.id).collect();
-    if manifest.tests.iter().map(|t| &t.id).ne(ids.iter()) {
+    let plans = plans(tests);
+    if manifest.tests.iter().map(|t| &t.id).ne(plans.iter().map(|p| &p.id)) {
         return false;
     }
-    if manifest.files.iter().map(|f| f.path.clone()).ne(expected_files(&ids)) {
+    if manifest.files.iter().map(|f| f.path.clone()).ne(expected_files(&plans)) {
         return false;
     }
     manifest
@@ -305,11 +357,11 @@ pub fn is_current_tests(dir: &Path, tests: usize) -> bool {
         .all(|f| fs::metadata(dir.join(&f.path)).map(|m| m.is_file() && m.len() == f.bytes).unwrap_or(false))
 }
 
-fn expected_files(ids: &[String]) -> Vec<String> {
-    let mut out = vec![README_FILE.to_string()];
-    for id in ids {
-        out.push(format!("{id}/{DAQ1_FILE}"));
-        out.push(format!("{id}/{DAQ2_FILE}"));
+fn expected_files(plans: &[TestPlan]) -> Vec<String> {
+    let mut out = vec![README_FILE.to_string(), SENSITIVITY_FILE.to_string()];
+    for plan in plans {
+        out.push(plan.daq1_file());
+        out.push(plan.daq2_file());
     }
     out.push(CPT_CONTROL_POINTS_FILE.to_string());
     out.push(CPT_TRUTH_FILE.to_string());
@@ -404,6 +456,25 @@ struct TestPlan {
     base: Base,
     frequency_set: FrequencySet,
     variation: Option<Variation>,
+    /// Its NEES experiment (1: base-isolated, 2: fixed-base, 3: extra tests) and trial in it.
+    experiment: u32,
+    trial: u32,
+}
+
+impl TestPlan {
+    fn folder(&self) -> String {
+        format!("{GROUPS_DIR}/Experiment-{}/Trial-{}/Rep-1", self.experiment, self.trial)
+    }
+
+    /// DAQ1's export, converted to engineering units by the facility.
+    fn daq1_file(&self) -> String {
+        format!("{}/Converted_Data/{}_DAQ1.txt", self.folder(), self.id)
+    }
+
+    /// DAQ2's raw volts.
+    fn daq2_file(&self) -> String {
+        format!("{}/Unprocessed_Data/{}_DAQ2.asc", self.folder(), self.id)
+    }
 }
 
 /// An extra test: a study motion at another scale, with its own ground-motion seed.
@@ -416,7 +487,8 @@ struct Variation {
 }
 
 /// The study's tests in chronological order (BI-1..BI-6, WN-1, FB-1..FB-5, WN-6, FB-6), then
-/// `tests - 14` variations `V-0001`, … of Table 1's motions in turn.
+/// `tests - 14` variations `V-0001`, … of Table 1's motions in turn; each with its experiment
+/// and trial.
 fn plans(tests: usize) -> Vec<TestPlan> {
     let mut out = study_plans();
     for number in 1..=tests.saturating_sub(out.len()) {
@@ -430,7 +502,21 @@ fn plans(tests: usize) -> Vec<TestPlan> {
             base: m.base,
             frequency_set,
             variation: Some(Variation { number, scale }),
+            experiment: 0,
+            trial: 0,
         });
+    }
+    // Trials are numbered in test order within each experiment.
+    let mut trials = [0; 3];
+    for plan in &mut out {
+        plan.experiment = match (plan.variation, plan.base) {
+            (Some(_), _) => 3,
+            (None, Base::Isolated) => 1,
+            (None, Base::Fixed) => 2,
+        };
+        let trial = &mut trials[plan.experiment as usize - 1];
+        *trial += 1;
+        plan.trial = *trial;
     }
     out
 }
@@ -445,6 +531,8 @@ fn study_plans() -> Vec<TestPlan> {
                 base: Base::Fixed,
                 frequency_set: FrequencySet::BeforeFb1,
                 variation: None,
+                experiment: 0,
+                trial: 0,
             });
         }
         if m.id == "FB-6" {
@@ -454,11 +542,21 @@ fn study_plans() -> Vec<TestPlan> {
                 base: Base::Fixed,
                 frequency_set: FrequencySet::BeforeFb6,
                 variation: None,
+                experiment: 0,
+                trial: 0,
             });
         }
         let late = matches!(m.id, "FB-4" | "FB-5" | "FB-6");
         let frequency_set = if late { FrequencySet::BeforeFb6 } else { FrequencySet::BeforeFb1 };
-        out.push(TestPlan { id: m.id.into(), kind: Kind::Earthquake(m), base: m.base, frequency_set, variation: None });
+        out.push(TestPlan {
+            id: m.id.into(),
+            kind: Kind::Earthquake(m),
+            base: m.base,
+            frequency_set,
+            variation: None,
+            experiment: 0,
+            trial: 0,
+        });
     }
     out
 }
@@ -561,14 +659,14 @@ fn clock_offset_us(rng: &mut SplitMix64) -> u64 {
 
 struct GeneratedTest {
     entry: TestEntry,
-    daq1_csv: String,
-    daq2_csv: String,
+    daq1_text: String,
+    daq2_text: String,
     /// The physical floor motion at DAQ1's rate in m/s² (no sensor offset or noise): floors 4
     /// and 5, each (E-W, vertical), for the diagnosis cases.
     floors_mps2: [[Vec<f64>; 2]; 2],
 }
 
-fn generate_test(plan: &TestPlan) -> GeneratedTest {
+fn generate_test(plan: &TestPlan, sensitivities: &[Sensitivity]) -> GeneratedTest {
     let id = plan.id.as_str();
     let sh = shape(plan.kind);
     let dt = 1.0 / SIM_RATE_HZ;
@@ -692,12 +790,31 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
             None,
         ),
     };
-    let line2 = format!("# test: {id}, input: {input}, event: {event}, base: {}", plan.base.code());
-    let daq1_csv = csv(&[HEADER_LINE_1, &line2, DAQ1_LINE_3, DAQ1_LINE_4], &DAQ1_COLUMNS, DAQ1_RATE_HZ, &daq1_cols);
-    let daq2_csv = csv(&[HEADER_LINE_1, &line2, DAQ2_LINE_3, DAQ2_LINE_4], &DAQ2_COLUMNS, DAQ2_RATE_HZ, &daq2_cols);
+    let line1 = format!("NEES-2009-0722\tExperiment-{}\tTrial-{}\tRep-1", plan.experiment, plan.trial);
+    let line2 = format!("Test: {id}, input: {input}, event: {event}, base: {}", plan.base.code());
+    let line4 = format!("SYNTHETIC demo archive written by {GENERATOR_NAME} {GENERATOR_VERSION} (not real data)");
+    // DAQ1 as the facility converted it: in/sec^2 horizontally, g vertically.
+    for (col, unit) in daq1_cols.iter_mut().zip(&DAQ1_UNITS[1..]) {
+        if *unit == "in/sec^2" {
+            col.iter_mut().for_each(|v| *v *= crate::units::G0 / crate::units::INCH);
+        }
+    }
+    // DAQ2 as its sensors gave it: volts.
+    for (col, s) in daq2_cols.iter_mut().zip(sensitivities) {
+        col.iter_mut().for_each(|v| *v = s.offset_v + s.sensitivity_v_per_g * *v);
+    }
+    let daq1 =
+        Daq { names: &DAQ1_COLUMNS, descriptions: &DAQ1_DESCRIPTIONS, units: &DAQ1_UNITS, decimals: &DAQ1_DECIMALS };
+    let daq2 = Daq { names: &DAQ2_COLUMNS, descriptions: &DAQ2_DESCRIPTIONS, units: &DAQ2_UNITS, decimals: &[6; 9] };
+    let daq1_text = daq1.text(&[&line1, &line2, DAQ1_LINE_3, &line4], DAQ1_RATE_HZ, &daq1_cols);
+    let daq2_text = daq2.text(&[&line1, &line2, DAQ2_LINE_3, &line4], DAQ2_RATE_HZ, &daq2_cols);
 
     let entry = TestEntry {
         id: id.into(),
+        experiment: plan.experiment,
+        trial: plan.trial,
+        daq1_file: plan.daq1_file(),
+        daq2_file: plan.daq2_file(),
         kind: kind.into(),
         input,
         event: motion.map_or_else(|| event.clone(), |m| m.event_site.to_string()),
@@ -726,7 +843,7 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
         resample(&floors[fi][ci], dt, 0.0, f64::from(DAQ1_RATE_HZ), n1).iter().map(|g| g * crate::units::G0).collect()
     };
     let floors_mps2 = [[physical(0, 0), physical(0, 2)], [physical(1, 0), physical(1, 2)]];
-    GeneratedTest { entry, daq1_csv, daq2_csv, floors_mps2 }
+    GeneratedTest { entry, daq1_text, daq2_text, floors_mps2 }
 }
 
 fn channel_name(eq: &Equipment) -> String {
@@ -744,22 +861,60 @@ fn apply_topple(top: &mut [f64], floor_ud: &[f64], dt: f64, t0: f64, side: &str)
     }
 }
 
-/// CSV text: comment lines, column row, then rows of time (6 decimals) and values ({:.6e}).
-fn csv(comments: &[&str], columns: &[&str], rate_hz: u32, cols: &[Vec<f64>]) -> String {
-    let rows = cols.first().map_or(0, Vec::len);
-    let mut s = String::with_capacity(rows * (12 + 14 * cols.len()) + 1024);
-    for c in comments {
-        s.push_str(c);
-        s.push('\n');
-    }
-    s.push_str(&columns.join(","));
-    s.push('\n');
-    for k in 0..rows {
-        let _ = write!(s, "{:.6}", k as f64 / f64::from(rate_hz));
-        for col in cols {
-            let _ = write!(s, ",{:.6e}", col[k]);
+/// A DAQ file's rows above the data and how it prints values.
+struct Daq<'a> {
+    names: &'a [&'a str],
+    descriptions: &'a [&'a str],
+    units: &'a [&'a str],
+    /// Decimals per column, time first.
+    decimals: &'a [usize],
+}
+
+impl Daq<'_> {
+    /// Tab-delimited NEES text: the preamble, the name, description and units rows, then rows of
+    /// time (k / rate) and values, each column with its decimals.
+    fn text(&self, preamble: &[&str], rate_hz: u32, cols: &[Vec<f64>]) -> String {
+        let rows = cols.first().map_or(0, Vec::len);
+        let mut s = String::with_capacity(rows * (10 + 11 * cols.len()) + 2048);
+        for line in preamble.iter().chain(&[&*self.names.join("\t"), &*self.descriptions.join("\t")]) {
+            s.push_str(line);
+            s.push('\n');
         }
+        s.push_str(&self.units.join("\t"));
         s.push('\n');
+        for k in 0..rows {
+            let _ = write!(s, "{:.*}", self.decimals[0], k as f64 / f64::from(rate_hz));
+            for (col, &decimals) in cols.iter().zip(&self.decimals[1..]) {
+                let _ = write!(s, "\t{:.*}", decimals, col[k]);
+            }
+            s.push('\n');
+        }
+        s
+    }
+}
+
+/// DAQ2's sensors: a sensitivity near 1 V/g and a zero offset of a few mV each (4 decimals, so
+/// the table states exactly what was applied); the same sensors in every test.
+fn sensitivities() -> Vec<Sensitivity> {
+    let mut rng = SplitMix64::new(seed_from_label("daq2-sensitivities"));
+    DAQ2_COLUMNS[1..]
+        .iter()
+        .map(|channel| Sensitivity {
+            channel: channel.to_string(),
+            sensitivity_v_per_g: quantize(rng.uniform(0.95, 1.05), 4),
+            offset_v: quantize(rng.uniform(-0.02, 0.02), 4),
+        })
+        .collect()
+}
+
+/// The calibration table `load` reads (`calibration:`): raw volts per g and the zero in volts.
+fn sensitivity_table(sensitivities: &[Sensitivity]) -> String {
+    let mut s = String::from(
+        "# NEES-2009-0722 DAQ2 accelerometer sensitivities (SYNTHETIC demo archive): V per g, zero offset in V\n\
+         channel,sensitivity,unit,offset\n",
+    );
+    for x in sensitivities {
+        let _ = writeln!(s, "{},{},g,{}", x.channel, x.sensitivity_v_per_g, x.offset_v);
     }
     s
 }
@@ -775,21 +930,39 @@ end. Motions are Kanai-Tajimi/Clough-Penzien filtered noise scaled to Table 1's 
 acceleration; floors come from a linear 5-storey shear building (T1 = 1.0 s fixed-base, 2.8 s
 isolated); equipment tops are linear oscillators at Table 3's frequencies.
 
-Layout
-  README.txt                 this file
-  manifest.json              generator, and per test the TRUE values: clock offset, sensor offsets
-                             and drifts, equipment frequencies and damping, toppling events
-  <test>/DAQ1_floors.csv     floor accelerometers, 200 Hz, g
-                             Time,A4_EW,A4_NS,A4_UD,A5_EW,A5_NS,A5_UD
-  <test>/DAQ2_equipment.csv  equipment top accelerometers (E-W), 256 Hz, g
-                             Time,A5_EW_SYNC,UI3_TOP_EW,MC2_TOP_EW,PB1_TOP_EW,PB2_TOP_EW,PS1_TOP_EW,PS2_TOP_EW,WSU1_TOP_EW
-                             (A5_EW_SYNC: DAQ2's own copy of floor-5 E-W, for clock synchronisation)
+Layout (NEES's, as NEEShub and DesignSafe's nees.public/NEES-XXXX-XXXX.groups/ keep it)
+  README.txt            this file
+  manifest.json         generator, and per test the TRUE values: clock offset, sensor offsets
+                        and drifts, equipment frequencies and damping, toppling events; each
+                        test's experiment, trial and files
+  NEES-2009-0722.groups/
+    Documentation/DAQ2_sensitivities.csv
+                        DAQ2's sensors: channel,sensitivity,unit,offset (V per g, zero in V)
+    Experiment-1/       the base-isolated building: Trial-1..Trial-6 = BI-1..BI-6
+    Experiment-2/       the fixed-base building: Trial-1 = WN-1, Trial-2..Trial-6 = FB-1..FB-5,
+                        Trial-7 = WN-6, Trial-8 = FB-6
+    Experiment-3/       extra tests (demo-archive --tests N): Trial-k = V-000k
+    Experiment-N/Trial-N/Rep-1/
+      Converted_Data/<test>_DAQ1.txt
+                        floor accelerometers, 200 Hz, converted to engineering units:
+                        Time,A4_EW,A4_NS,A4_UD,A5_EW,A5_NS,A5_UD in sec, in/sec^2 (EW, NS), g (UD)
+      Unprocessed_Data/<test>_DAQ2.asc
+                        equipment top accelerometers (E-W), 256 Hz, raw volts:
+                        Time,A5_EW_SYNC,UI3_TOP_EW,MC2_TOP_EW,PB1_TOP_EW,PB2_TOP_EW,PS1_TOP_EW,PS2_TOP_EW,WSU1_TOP_EW
+                        (A5_EW_SYNC: DAQ2's own copy of floor-5 E-W, for clock synchronisation)
 
-Each CSV has 4 comment lines starting with '# ', a column row, then data rows; Time in seconds
-(6 decimals) from 0, values in g as {:.6e}. EW = X (shaking direction), NS = Y, UD = Z (vertical).
+Each DAQ file is tab-delimited text as NEES asked sensor data to be: a 4-line preamble (project,
+experiment, trial, rep; the test; the DAQ; this notice), the channel-name row (line 5), a
+description row (line 6) and a units row (line 7), then data rows: Time in seconds (6 decimals)
+from 0, in/sec^2 to 4 decimals, g to 7, volts to 6. Read them with numpy as
+np.loadtxt(path, skiprows=7), or with shakeflow as a delimited source with header_lines: 4,
+description_row: 6, units_row: 7 (and, for DAQ2, calibration: the sensitivity table).
+EW = X (shaking direction), NS = Y, UD = Z (vertical); g is standard gravity (9.80665 m/s^2 =
+386.0886 in/sec^2). DAQ2's volts are offset + sensitivity * (acceleration in g) per channel.
 Floor channels carry small constant offsets. Equipment channels carry offsets, a slow drift
-(linear + quadratic in time) and noise: value(tau) = signal(tau + clock_offset_s) + offset_g
-+ drift_linear_g*(tau/duration_s) + drift_quadratic_g*(tau/duration_s)^2 + noise.
+(linear + quadratic in time) and noise, in g before the sensor's volts: value(tau) =
+signal(tau + clock_offset_s) + offset_g + drift_linear_g*(tau/duration_s)
++ drift_quadratic_g*(tau/duration_s)^2 + noise.
 
 Clocks: DAQ2 is not synchronised with DAQ1. DAQ2 time 0 is DAQ1 time clock_offset_s (0.4-2.5 s,
 per test, in manifest.json). A toppled unit shows an impact spike, then about 1/10 amplitude
@@ -809,9 +982,19 @@ Tests (chronological)
 ",
     );
     for t in tests {
-        let _ = writeln!(s, "  {:<5} {:<7} {} {:>4} s  {}", t.id, t.input, t.base, t.duration_s, t.event);
+        let place = format!("Experiment-{}/Trial-{}", t.experiment, t.trial);
+        let _ = writeln!(s, "  {:<6} {place:<21} {:<7} {} {:>4} s  {}", t.id, t.input, t.base, t.duration_s, t.event);
     }
     s
+}
+
+/// Writes `bytes` to `path` below `dir`, creating its folders.
+fn write_new(dir: &Path, path: &str, bytes: &[u8]) -> io::Result<()> {
+    let full = dir.join(path);
+    if let Some(parent) = full.parent() {
+        fs::create_dir_all(parent)?;
+    }
+    fs::write(full, bytes)
 }
 
 /// Writes all files into `dir` (which exists and is empty); returns them with sizes,
@@ -821,16 +1004,15 @@ fn write_contents(dir: &Path, tests: usize) -> io::Result<Vec<FileEntry>> {
     // Tests are generated and written in parallel, each as soon as it is made (an archive of
     // hundreds of tests is not held in memory); the floors the cases need are kept.
     type Written = (TestEntry, Vec<FileEntry>, Option<[[Vec<f64>; 2]; 2]>);
+    let sensitivities = sensitivities();
     let written: Vec<Written> = plans(tests)
         .par_iter()
         .map(|plan| {
-            let g = generate_test(plan);
-            let id = &plan.id;
-            fs::create_dir(dir.join(id))?;
+            let g = generate_test(plan, &sensitivities);
             let mut entries = Vec::new();
-            for (name, text) in [(DAQ1_FILE, g.daq1_csv), (DAQ2_FILE, g.daq2_csv)] {
-                fs::write(dir.join(id).join(name), &text)?;
-                entries.push(FileEntry { path: format!("{id}/{name}"), bytes: text.len() as u64 });
+            for (path, text) in [(plan.daq1_file(), g.daq1_text), (plan.daq2_file(), g.daq2_text)] {
+                write_new(dir, &path, text.as_bytes())?;
+                entries.push(FileEntry { path, bytes: text.len() as u64 });
             }
             Ok((g.entry, entries, plan.variation.is_none().then_some(g.floors_mps2)))
         })
@@ -847,7 +1029,12 @@ fn write_contents(dir: &Path, tests: usize) -> io::Result<Vec<FileEntry>> {
     }
     let readme_text = readme(&tests);
     fs::write(dir.join(README_FILE), &readme_text)?;
-    let mut files = vec![FileEntry { path: README_FILE.into(), bytes: readme_text.len() as u64 }];
+    let table = sensitivity_table(&sensitivities);
+    write_new(dir, SENSITIVITY_FILE, table.as_bytes())?;
+    let mut files = vec![
+        FileEntry { path: README_FILE.into(), bytes: readme_text.len() as u64 },
+        FileEntry { path: SENSITIVITY_FILE.into(), bytes: table.len() as u64 },
+    ];
     files.extend(test_files);
     let (cpt_files, cpt) = cpt_contents()?;
     fs::create_dir_all(dir.join(CPT_FRAMES_DIR))?;
@@ -871,10 +1058,21 @@ fn write_contents(dir: &Path, tests: usize) -> io::Result<Vec<FileEntry>> {
         generator: GeneratorInfo { name: GENERATOR_NAME.into(), version: GENERATOR_VERSION.into() },
         project: "NEES-2009-0722 UCSD BNCS".into(),
         synthetic: true,
-        units: "g".into(),
-        daq1: DaqInfo { file: DAQ1_FILE.into(), sample_rate_hz: DAQ1_RATE_HZ, columns: DAQ1_COLUMNS.map(String::from).to_vec() },
-        daq2: DaqInfo { file: DAQ2_FILE.into(), sample_rate_hz: DAQ2_RATE_HZ, columns: DAQ2_COLUMNS.map(String::from).to_vec() },
-        daq2_sensor_model: "value(tau) = signal(tau + clock_offset_s) + offset_g + drift_linear_g*(tau/duration_s) + drift_quadratic_g*(tau/duration_s)^2 + noise(noise_rms_g); tau = DAQ2 time, signal in DAQ1 time".into(),
+        units: "as each file's units row states: DAQ1 in sec, in/sec^2 (E-W, N-S) and g (vertical); DAQ2 in sec and V (daq2_sensitivities); the offsets, drifts and noise below in g".into(),
+        daq1: DaqInfo {
+            file: format!("{GROUPS_DIR}/Experiment-{{experiment}}/Trial-{{trial}}/Rep-1/Converted_Data/{{test}}_DAQ1.txt"),
+            sample_rate_hz: DAQ1_RATE_HZ,
+            columns: DAQ1_COLUMNS.map(String::from).to_vec(),
+            units: DAQ1_UNITS.map(String::from).to_vec(),
+        },
+        daq2: DaqInfo {
+            file: format!("{GROUPS_DIR}/Experiment-{{experiment}}/Trial-{{trial}}/Rep-1/Unprocessed_Data/{{test}}_DAQ2.asc"),
+            sample_rate_hz: DAQ2_RATE_HZ,
+            columns: DAQ2_COLUMNS.map(String::from).to_vec(),
+            units: DAQ2_UNITS.map(String::from).to_vec(),
+        },
+        daq2_sensitivities: sensitivities,
+        daq2_sensor_model: "volts(tau) = offset_v + sensitivity_v_per_g * value(tau); value(tau) = signal(tau + clock_offset_s) + offset_g + drift_linear_g*(tau/duration_s) + drift_quadratic_g*(tau/duration_s)^2 + noise(noise_rms_g); tau = DAQ2 time, signal in DAQ1 time".into(),
         tests,
         cpt,
         files: files.clone(),
