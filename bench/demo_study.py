@@ -2,7 +2,8 @@
 
 shakeflow runs pipelines/demo.yaml from scratch (load, baseline, synchronize, transfer_function,
 detect_toppling, report with figures, MCAP twins). The Python side does the same numerical steps
-with the usual scientific stack and writes Parquet: pyarrow CSV reading, numpy.polyfit baselines,
+with the usual scientific stack and writes Parquet: pyarrow CSV reading of the NEES text files
+(units from their units row, DAQ2's volts through the sensitivity table), numpy.polyfit baselines,
 scipy.signal.resample_poly (256 -> 200 Hz) and FFT cross-correlation with parabolic refinement,
 np.interp shifting, scipy.signal.csd/welch transfer functions with MATLAB tfestimate defaults for
 the white-noise tests, and a simplified STA/LTA + RMS-drop toppling check per unit channel (a port
@@ -28,16 +29,31 @@ archive, out = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])
 # "records": also write the SI and the corrected records, as the pipeline's load and baseline do.
 WRITE_RECORDS = sys.argv[3:] == ["records"]
 UNITS = {"UI3": 4, "MC2": 4, "PB1": 4, "PB2": 4, "PS1": 5, "PS2": 5, "WSU1": 5}
-def read(path):
-    t = pcsv.read_csv(path, read_options=pcsv.ReadOptions(skip_rows=4))
+groups_dir = archive / "NEES-2009-0722.groups"
+SENSITIVITY = {}
+for line in (groups_dir / "Documentation/DAQ2_sensitivities.csv").read_text().splitlines()[2:]:
+    channel, sensitivity, unit, offset = line.split(",")
+    SENSITIVITY[channel] = (float(sensitivity), float(offset))
+FACTOR = {"g": G, "in/sec^2": 0.0254}
+def to_si(name, unit, raw):
+    if unit == "V":
+        sensitivity, offset = SENSITIVITY[name]
+        return (raw - offset) / sensitivity * G
+    return raw * FACTOR[unit]
+def read(path, test):
+    with open(path) as f:
+        head = [next(f).rstrip("\n").split("\t") for _ in range(7)]
+    names, units = head[4], dict(zip(head[4], head[6]))
+    t = pcsv.read_csv(path, read_options=pcsv.ReadOptions(skip_rows=7, column_names=names),
+                      parse_options=pcsv.ParseOptions(delimiter="\t"))
     time = t.column("Time").to_numpy()
-    cols = {n: t.column(n).to_numpy() * G for n in t.column_names if n != "Time"}
+    cols = {n: to_si(n, units[n], t.column(n).to_numpy()) for n in t.column_names if n != "Time"}
     if WRITE_RECORDS:
-        write(out / "si" / path.parent.name / path.stem / "data.parquet", {"time_s": time, **cols})
+        write(out / "si" / test / path.stem / "data.parquet", {"time_s": time, **cols})
     for n, a in cols.items():
         cols[n] = a - np.polyval(np.polyfit(time, a, 3), time)
     if WRITE_RECORDS:
-        write(out / "corrected" / path.parent.name / path.stem / "data.parquet", {"time_s": time, **cols})
+        write(out / "corrected" / test / path.stem / "data.parquet", {"time_s": time, **cols})
     return time, cols
 def write(path, cols):
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -55,24 +71,25 @@ def toppled(t, a):
     k = int(np.argmax(np.sqrt(sta / np.maximum(lta, 1e-12))))
     pre = a[max(0, k - int(2 * fs)):k]; post = a[k + int(0.4 * fs):k + int(2.4 * fs)]
     return len(post) > fs and np.std(post) < 0.35 * np.std(pre), t[k]
-for test in sorted(p for p in archive.iterdir() if (p / "DAQ1_floors.csv").is_file()):
-    t1, floors = read(test / "DAQ1_floors.csv"); t2, eq = read(test / "DAQ2_equipment.csv")
+for daq1 in sorted(groups_dir.glob("Experiment-*/Trial-*/Rep-1/Converted_Data/*_DAQ1.txt")):
+    name = daq1.name.removesuffix("_DAQ1.txt")
+    t1, floors = read(daq1, name); t2, eq = read(daq1.parent.parent / "Unprocessed_Data" / f"{name}_DAQ2.asc", name)
     ref = floors["A5_EW"]; sync = ss.resample_poly(eq["A5_EW_SYNC"], 25, 32)
     n = min(len(ref), len(sync)); c = ss.correlate(sync[:n], ref[:n], method="fft"); k = int(np.argmax(np.abs(c)))
     y0, y1, y2 = c[k - 1], c[k], c[k + 1]; frac = 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
     lag = (k - (n - 1) + frac) / 200.0
     aligned = {n_: np.interp(t1 - lag, t2, v) for n_, v in eq.items()}
-    write(out / "sync" / f"motion={test.name}" / "data.parquet", {"time_s": t1, **{f"f{k_}": v for k_, v in floors.items()}, **aligned})
+    write(out / "sync" / f"motion={name}" / "data.parquet", {"time_s": t1, **{f"f{k_}": v for k_, v in floors.items()}, **aligned})
     events = []
     for unit, floor in UNITS.items():
         hit, when = toppled(t1, aligned[f"{unit}_TOP_EW"]); events.append((unit, bool(hit), float(when)))
-    write(out / "toppling" / f"motion={test.name}" / "data.parquet", {"unit": [e[0] for e in events], "toppled": [e[1] for e in events], "time": [e[2] for e in events]})
-    if test.name.startswith("WN"):
+    write(out / "toppling" / f"motion={name}" / "data.parquet", {"unit": [e[0] for e in events], "toppled": [e[1] for e in events], "time": [e[2] for e in events]})
+    if name.startswith("WN"):
         rows = []
         for unit, floor in UNITS.items():
             f, h1, coh = tfestimate(floors[f"A{floor}_EW"], aligned[f"{unit}_TOP_EW"], 200.0)
             band = (f >= 1.5) & (f <= 8.0); i = np.argmax(np.abs(h1) * band); rows.append((unit, f[i], coh[i]))
-        write(out / "tf" / f"motion={test.name}" / "data.parquet", {"unit": [r[0] for r in rows], "frequency_hz": [r[1] for r in rows], "coherence": [r[2] for r in rows]})
+        write(out / "tf" / f"motion={name}" / "data.parquet", {"unit": [r[0] for r in rows], "frequency_hz": [r[1] for r in rows], "coherence": [r[2] for r in rows]})
 '''
 
 

@@ -1,7 +1,8 @@
 """`make bench`: load + baseline on the demo archive, shakeflow vs an equivalent Python script.
 
-Both sides read every DAQ1/DAQ2 CSV of the archive, check the time column is uniform, convert g to
-m/s^2, subtract a least-squares cubic from every channel and write one Parquet file per record
+Both sides read every DAQ1/DAQ2 file of the archive (NEES text: preamble, names, descriptions,
+units row), check the time column is uniform, convert the units the units row states (in/sec^2, g;
+DAQ2's volts through the sensitivity table) to m/s^2, subtract a least-squares cubic from every channel and write one Parquet file per record
 (floors split into floor 4 and 5, as the demo pipeline does) in shakeflow's float encoding: no
 dictionary, byte-stream split, lz4. shakeflow also hashes every input and output for its cache
 and writes provenance. It runs twice: as the demo pipeline runs these stages and with
@@ -30,15 +31,32 @@ PARQUET = dict(compression="lz4", use_dictionary=False, use_byte_stream_split=Tr
 archive, out = pathlib.Path(sys.argv[1]), pathlib.Path(sys.argv[2])
 # "si": also write the SI records before the baseline, as shakeflow's `load` stage does.
 WRITE_SI = sys.argv[3:] == ["si"]
+groups_dir = archive / "NEES-2009-0722.groups"
+# DAQ2's sensitivity table: channel -> (V per g, zero offset V).
+SENSITIVITY = {}
+for line in (groups_dir / "Documentation/DAQ2_sensitivities.csv").read_text().splitlines()[2:]:
+    channel, sensitivity, unit, offset = line.split(",")
+    assert unit == "g", line
+    SENSITIVITY[channel] = (float(sensitivity), float(offset))
+FACTOR = {"g": G, "in/sec^2": 0.0254}
+def to_si(name, unit, raw):
+    if unit == "V":
+        sensitivity, offset = SENSITIVITY[name]
+        return (raw - offset) / sensitivity * G
+    return raw * FACTOR[unit]
 def process(path, groups, dest):
-    table = pcsv.read_csv(path, read_options=pcsv.ReadOptions(skip_rows=4))
+    with open(path) as f:
+        head = [next(f).rstrip("\n").split("\t") for _ in range(7)]
+    names, units = head[4], dict(zip(head[4], head[6]))
+    table = pcsv.read_csv(path, read_options=pcsv.ReadOptions(skip_rows=7, column_names=names),
+                          parse_options=pcsv.ParseOptions(delimiter="\t"))
     t = table.column("Time").to_numpy()
     dt = (t[-1] - t[0]) / (len(t) - 1)
     if np.max(np.abs(np.diff(t) - dt)) > 1e-3 * dt + 2e-6:
         raise SystemExit(f"{path}: non-uniform time")
     for key, columns in groups.items():
         time = t[0] + dt * np.arange(len(t))
-        si = {name: table.column(name).to_numpy() * G for name in columns}
+        si = {name: to_si(name, units[name], table.column(name).to_numpy()) for name in columns}
         if WRITE_SI:
             d = out / "si" / dest.relative_to(out) / key
             d.mkdir(parents=True, exist_ok=True)
@@ -49,9 +67,11 @@ def process(path, groups, dest):
         d = dest / key
         d.mkdir(parents=True, exist_ok=True)
         pq.write_table(pa.table(arrays), d / "data.parquet", **PARQUET)
-for test in sorted(p for p in archive.iterdir() if (p / "DAQ1_floors.csv").is_file()):
-    process(test / "DAQ1_floors.csv", {f"floor={f}": [f"A{f}_EW", f"A{f}_NS", f"A{f}_UD"] for f in (4, 5)}, out / "floors" / f"motion={test.name}")
-    process(test / "DAQ2_equipment.csv", {"": ["A5_EW_SYNC", "UI3_TOP_EW", "MC2_TOP_EW", "PB1_TOP_EW", "PB2_TOP_EW", "PS1_TOP_EW", "PS2_TOP_EW", "WSU1_TOP_EW"]}, out / "equipment" / f"motion={test.name}")
+for daq1 in sorted(groups_dir.glob("Experiment-*/Trial-*/Rep-1/Converted_Data/*_DAQ1.txt")):
+    test = daq1.name.removesuffix("_DAQ1.txt")
+    daq2 = daq1.parent.parent / "Unprocessed_Data" / f"{test}_DAQ2.asc"
+    process(daq1, {f"floor={f}": [f"A{f}_EW", f"A{f}_NS", f"A{f}_UD"] for f in (4, 5)}, out / "floors" / f"motion={test}")
+    process(daq2, {"": ["A5_EW_SYNC", "UI3_TOP_EW", "MC2_TOP_EW", "PB1_TOP_EW", "PB2_TOP_EW", "PS1_TOP_EW", "PS2_TOP_EW", "WSU1_TOP_EW"]}, out / "equipment" / f"motion={test}")
 '''
 
 
@@ -132,7 +152,7 @@ def print_table(title, results, python_sides):
 
 def main():
     args = parse_args(__doc__)
-    size = sum(p.stat().st_size for p in args.archive.rglob("*.csv"))
+    size = sum(p.stat().st_size for pattern in ("*_DAQ1.txt", "*_DAQ2.asc") for p in args.archive.rglob(pattern))
     sides = ["shakeflow (demo pipeline)", "shakeflow (+MCAP twins)"]
     scripts = {"numpy/pyarrow, corrected records": [], "numpy/pyarrow, SI + corrected records": ["si"]}
     # Only the load and baseline stages: cut the pipeline before `synchronize`.
@@ -140,7 +160,7 @@ def main():
     assert text.count("mcap: false") == 2, "the demo's baseline stages no longer say `mcap: false`"
     twins = text.replace("mcap: false", "mcap: true")
     results = time_pipelines(args, {sides[0]: text, sides[1]: twins}, scripts, PYTHON_SIDE)
-    print_table(f"load + baseline on {args.archive} ({size / 1e6:.1f} MB of CSV, {os.cpu_count()} cores), median of {args.repeat}", results, list(scripts))
+    print_table(f"load + baseline on {args.archive} ({size / 1e6:.1f} MB of DAQ text, {os.cpu_count()} cores), median of {args.repeat}", results, list(scripts))
 
 
 if __name__ == "__main__":

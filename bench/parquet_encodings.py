@@ -24,8 +24,13 @@ def main():
     ap.add_argument("--archive", required=True)
     args = ap.parse_args()
     tables = []
-    for path in sorted(pathlib.Path(args.archive).glob("*/DAQ*.csv")):
-        t = pcsv.read_csv(path, read_options=pcsv.ReadOptions(skip_rows=4))
+    groups = pathlib.Path(args.archive) / "NEES-2009-0722.groups"
+    for path in sorted(groups.glob("Experiment-*/Trial-*/Rep-1/*_Data/*_DAQ*.*")):
+        # NEES text: 4 preamble lines, names, descriptions and units rows; the values as SI-sized
+        # doubles (their encoding is what is measured, not the calibration).
+        names = path.read_text().split("\n", 5)[4].split("\t")
+        t = pcsv.read_csv(path, read_options=pcsv.ReadOptions(skip_rows=7, column_names=names),
+                          parse_options=pcsv.ParseOptions(delimiter="\t"))
         tables.append(pa.table({n: pc.multiply(t.column(n), G) for n in t.column_names}))
     raw = sum(t.nbytes for t in tables)
     print(f"Parquet encodings of {len(tables)} demo records ({raw / 1e6:.1f} MB of float64), pyarrow {pa.__version__}")

@@ -1,12 +1,17 @@
-//! Deterministic SYNTHETIC archive shaped like the NEES-2009-0722 UCSD BNCS test data.
+//! Deterministic SYNTHETIC archive shaped like the NEES-2009-0722 UCSD BNCS test data, in
+//! NEES's layout and text conventions (as NEEShub and DesignSafe keep them).
 //!
-//! Layout (a contract for the pipeline):
+//! Layout (a contract for the pipeline; `<E>/<T>`: the test's experiment and trial):
 //! ```text
 //! DIR/README.txt
 //! DIR/manifest.json
-//! DIR/<test>/DAQ1_floors.csv      200 Hz, g: Time,A4_EW,A4_NS,A4_UD,A5_EW,A5_NS,A5_UD
-//! DIR/<test>/DAQ2_equipment.csv   256 Hz, g: Time,A5_EW_SYNC,UI3_TOP_EW,...,WSU1_TOP_EW
+//! DIR/NEES-2009-0722.groups/Documentation/DAQ2_sensitivities.csv   channel,sensitivity,unit,offset
+//! DIR/NEES-2009-0722.groups/Experiment-<E>/Trial-<T>/Rep-1/
+//!     Converted_Data/<test>_DAQ1.txt    200 Hz: Time,A4_EW,A4_NS,A4_UD,A5_EW,A5_NS,A5_UD (in/sec^2, g)
+//!     Unprocessed_Data/<test>_DAQ2.asc  256 Hz: Time,A5_EW_SYNC,UI3_TOP_EW,...,WSU1_TOP_EW (V)
 //! ```
+//! Each DAQ file is tab-delimited: a 4-line preamble, the channel-name row, a description row
+//! and a units row (lines 5, 6, 7), then data.
 //! Physics runs on a 1 kHz grid in DAQ1 time; each DAQ samples it by cubic interpolation
 //! (all signals are band-limited below 30 Hz). DAQ2 time τ is DAQ1 time τ + clock_offset_s.
 //!
@@ -31,19 +36,53 @@ use std::path::{Path, PathBuf};
 
 pub const GENERATOR_NAME: &str = "shakeflow demo-archive";
 /// Bump whenever the bytes written change, so `is_current` rejects older archives.
-pub const GENERATOR_VERSION: &str = "1.4.0";
+pub const GENERATOR_VERSION: &str = "2.0.0";
 pub const README_FILE: &str = "README.txt";
 pub const MANIFEST_FILE: &str = "manifest.json";
-pub const DAQ1_FILE: &str = "DAQ1_floors.csv";
-pub const DAQ2_FILE: &str = "DAQ2_equipment.csv";
+/// The NEES project folder, as DesignSafe's `nees.public` names it.
+pub const GROUPS_DIR: &str = "NEES-2009-0722.groups";
+/// DAQ2's raw volts → g (a calibration table for `load`'s `calibration:`).
+pub const SENSITIVITY_FILE: &str = "NEES-2009-0722.groups/Documentation/DAQ2_sensitivities.csv";
+/// Lines before the channel-name row of a DAQ file; the description and units rows follow it.
+pub const PREAMBLE_LINES: usize = 4;
+pub const DESCRIPTION_ROW: usize = 6;
+pub const UNITS_ROW: usize = 7;
 /// The camera projection technique's inputs: a calibrated camera's video of a rocking and a
 /// rolling unit (see `demo::camera`).
 pub const CPT_CONTROL_POINTS_FILE: &str = "cpt/control_points.csv";
 pub const CPT_TRUTH_FILE: &str = "cpt/truth.csv";
 pub const CPT_FRAMES_DIR: &str = "cpt/frames";
+/// The study's tests (Table 1's twelve motions and two white-noise tests): the archive's default.
+pub const STUDY_TESTS: usize = 14;
 pub const DAQ1_RATE_HZ: u32 = 200;
 pub const DAQ2_RATE_HZ: u32 = 256;
 pub const DAQ1_COLUMNS: [&str; 7] = ["Time", "A4_EW", "A4_NS", "A4_UD", "A5_EW", "A5_NS", "A5_UD"];
+/// DAQ1's units row: horizontal channels in in/sec^2, vertical in g.
+pub const DAQ1_UNITS: [&str; 7] = ["sec", "in/sec^2", "in/sec^2", "g", "in/sec^2", "in/sec^2", "g"];
+const DAQ1_DESCRIPTIONS: [&str; 7] = [
+    "time, DAQ1 clock",
+    "floor 4 acceleration, E-W (X, shaking direction)",
+    "floor 4 acceleration, N-S (Y)",
+    "floor 4 acceleration, vertical (Z)",
+    "floor 5 acceleration, E-W (X, shaking direction)",
+    "floor 5 acceleration, N-S (Y)",
+    "floor 5 acceleration, vertical (Z)",
+];
+/// Decimals DAQ1 writes per column (in/sec^2 to 0.1 mil/s², g to 0.1 µg).
+const DAQ1_DECIMALS: [usize; 7] = [6, 4, 4, 7, 4, 4, 7];
+/// DAQ2 writes volts (6 decimals), its time in seconds.
+pub const DAQ2_UNITS: [&str; 9] = ["sec", "V", "V", "V", "V", "V", "V", "V", "V"];
+const DAQ2_DESCRIPTIONS: [&str; 9] = [
+    "time, DAQ2 clock (not synchronised with DAQ1)",
+    "DAQ2's own copy of floor 5 E-W acceleration, recorded for clock synchronisation",
+    "ultrasound imager UI3 (floor 4, unlocked), top, E-W",
+    "metal cart MC2 (floor 4, unlocked), top, E-W",
+    "patient bed PB1 (floor 4, locked), top, E-W",
+    "patient bed PB2 (floor 4, unlocked), top, E-W",
+    "stretcher PS1 (floor 5, unlocked), top, E-W",
+    "stretcher PS2 (floor 5, locked), top, E-W",
+    "wire shelving WSU1 (floor 5, free-standing), top, E-W",
+];
 pub const DAQ2_COLUMNS: [&str; 9] = [
     "Time",
     "A5_EW_SYNC",
@@ -56,12 +95,8 @@ pub const DAQ2_COLUMNS: [&str; 9] = [
     "WSU1_TOP_EW",
 ];
 
-const HEADER_LINE_1: &str =
-    "# NEES-2009-0722 UCSD BNCS - SYNTHETIC demo archive written by shakeflow demo-archive (not real data)";
-const DAQ1_LINE_3: &str = "# daq: DAQ1 floor accelerometers (floor averages), sample_rate_hz: 200, units: g";
-const DAQ1_LINE_4: &str = "# channels: A4_* = floor 4, A5_* = floor 5; EW = X (shaking direction), NS = Y, UD = Z (vertical); Time = DAQ1 time (s); sensor offsets not removed";
-const DAQ2_LINE_3: &str = "# daq: DAQ2 equipment top accelerometers (E-W), sample_rate_hz: 256, units: g";
-const DAQ2_LINE_4: &str = "# note: DAQ2 clock is NOT synchronised with DAQ1 (Time = DAQ2 time); A5_EW_SYNC = DAQ2's copy of floor-5 E-W for synchronisation; each <unit>_TOP_EW sensor carries a constant offset, slow drift and noise";
+const DAQ1_LINE_3: &str = "DAQ1: floor accelerometers (floor averages), sampling rate: 200 Hz; A4_* = floor 4, A5_* = floor 5; EW = X (shaking direction), NS = Y, UD = Z (vertical); sensor offsets not removed";
+const DAQ2_LINE_3: &str = "DAQ2: equipment top accelerometers (E-W), sampling rate: 256 Hz, raw volts (sensitivities: Documentation/DAQ2_sensitivities.csv); clock NOT synchronised with DAQ1; A5_EW_SYNC = DAQ2's copy of floor-5 E-W; each <unit>_TOP_EW sensor carries a constant offset, slow drift and noise";
 
 /// Physics grid (Hz): fine enough for accurate cubic interpolation to 200 and 256 Hz.
 const SIM_RATE_HZ: f64 = 1000.0;
@@ -95,6 +130,9 @@ pub struct Manifest {
     pub units: String,
     pub daq1: DaqInfo,
     pub daq2: DaqInfo,
+    /// DAQ2's sensitivity table (the archive's `SENSITIVITY_FILE`): volts = offset_v +
+    /// sensitivity_v_per_g × (acceleration in g).
+    pub daq2_sensitivities: Vec<Sensitivity>,
     /// How DAQ2 values relate to the physical signal (formula, in words).
     pub daq2_sensor_model: String,
     pub tests: Vec<TestEntry>,
@@ -133,14 +171,30 @@ pub struct GeneratorInfo {
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct DaqInfo {
+    /// Where each test's file is: a template over `{experiment}`, `{trial}` and `{test}`.
     pub file: String,
     pub sample_rate_hz: u32,
     pub columns: Vec<String>,
+    /// The file's units row.
+    pub units: Vec<String>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Sensitivity {
+    pub channel: String,
+    pub sensitivity_v_per_g: f64,
+    pub offset_v: f64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TestEntry {
     pub id: String,
+    /// NEES experiment (1: base-isolated, 2: fixed-base, 3: the extra tests) and trial in it.
+    pub experiment: u32,
+    pub trial: u32,
+    /// The test's DAQ files, relative to the archive.
+    pub daq1_file: String,
+    pub daq2_file: String,
     /// "earthquake" or "white_noise".
     pub kind: String,
     pub input: String,
@@ -163,6 +217,12 @@ pub struct TestEntry {
     pub clock_offset_s: f64,
     /// "before FB-1" or "before FB-6" (Table 3 column used).
     pub frequency_set: String,
+    /// Extra tests (`--tests N` above 14): the study motion this test varies and the factor on
+    /// its peak input acceleration (its ground motion has its own seed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub variation_of: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub variation_scale: Option<f64>,
     pub floor_channels: Vec<FloorChannel>,
     pub equipment: Vec<EquipmentChannel>,
     pub toppling: Vec<Toppling>,
@@ -213,9 +273,21 @@ pub struct DemoArchiveReport {
     pub files: Vec<FileEntry>,
 }
 
-/// Writes the archive atomically: into `<dir>.tmp-<pid>`, then renamed into place (an older
-/// archive at `dir` is moved aside and removed). The temp directory is removed on error.
+/// Writes the study's archive (its 14 tests) atomically; see [`write_demo_archive_tests`].
 pub fn write_demo_archive(dir: &Path) -> io::Result<DemoArchiveReport> {
+    write_demo_archive_tests(dir, STUDY_TESTS)
+}
+
+/// Writes an archive of `tests` tests (at least [`STUDY_TESTS`]: the study's, then variations of
+/// its motions) atomically: into `<dir>.tmp-<pid>`, then renamed into place (an older archive at
+/// `dir` is moved aside and removed). The temp directory is removed on error.
+pub fn write_demo_archive_tests(dir: &Path, tests: usize) -> io::Result<DemoArchiveReport> {
+    if tests < STUDY_TESTS {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!("{tests} tests: the archive holds at least the study's {STUDY_TESTS}"),
+        ));
+    }
     let name = dir
         .file_name()
         .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "archive path has no final component"))?
@@ -229,7 +301,7 @@ pub fn write_demo_archive(dir: &Path) -> io::Result<DemoArchiveReport> {
         fs::remove_dir_all(&tmp)?;
     }
     fs::create_dir(&tmp)?;
-    let files = match write_contents(&tmp) {
+    let files = match write_contents(&tmp, tests) {
         Ok(files) => files,
         Err(e) => {
             let _ = fs::remove_dir_all(&tmp);
@@ -251,17 +323,18 @@ pub fn write_demo_archive(dir: &Path) -> io::Result<DemoArchiveReport> {
     if old.exists() {
         fs::remove_dir_all(&old)?;
     }
-    Ok(DemoArchiveReport {
-        dir: dir.to_path_buf(),
-        test_ids: plans().iter().map(|p| p.id.to_string()).collect(),
-        files,
-    })
+    Ok(DemoArchiveReport { dir: dir.to_path_buf(), test_ids: plans(tests).into_iter().map(|p| p.id).collect(), files })
 }
 
-/// True when `dir` holds a complete archive written by this generator version: the manifest
-/// parses, names this generator and version, lists exactly the expected tests and files, and
-/// every listed file exists with the recorded size.
+/// [`is_current_tests`] for the study's archive (its 14 tests).
 pub fn is_current(dir: &Path) -> bool {
+    is_current_tests(dir, STUDY_TESTS)
+}
+
+/// True when `dir` holds a complete archive of `tests` tests written by this generator version:
+/// the manifest parses, names this generator and version, lists exactly the expected tests and
+/// files, and every listed file exists with the recorded size.
+pub fn is_current_tests(dir: &Path, tests: usize) -> bool {
     let Ok(text) = fs::read_to_string(dir.join(MANIFEST_FILE)) else {
         return false;
     };
@@ -271,11 +344,11 @@ pub fn is_current(dir: &Path) -> bool {
     if manifest.generator.name != GENERATOR_NAME || manifest.generator.version != GENERATOR_VERSION {
         return false;
     }
-    let ids: Vec<&str> = plans().iter().map(|p| p.id).collect();
-    if manifest.tests.iter().map(|t| t.id.as_str()).ne(ids.iter().copied()) {
+    let plans = plans(tests);
+    if manifest.tests.iter().map(|t| &t.id).ne(plans.iter().map(|p| &p.id)) {
         return false;
     }
-    if manifest.files.iter().map(|f| f.path.clone()).ne(expected_files(&ids)) {
+    if manifest.files.iter().map(|f| f.path.clone()).ne(expected_files(&plans)) {
         return false;
     }
     manifest
@@ -284,11 +357,11 @@ pub fn is_current(dir: &Path) -> bool {
         .all(|f| fs::metadata(dir.join(&f.path)).map(|m| m.is_file() && m.len() == f.bytes).unwrap_or(false))
 }
 
-fn expected_files(ids: &[&str]) -> Vec<String> {
-    let mut out = vec![README_FILE.to_string()];
-    for id in ids {
-        out.push(format!("{id}/{DAQ1_FILE}"));
-        out.push(format!("{id}/{DAQ2_FILE}"));
+fn expected_files(plans: &[TestPlan]) -> Vec<String> {
+    let mut out = vec![README_FILE.to_string(), SENSITIVITY_FILE.to_string()];
+    for plan in plans {
+        out.push(plan.daq1_file());
+        out.push(plan.daq2_file());
     }
     out.push(CPT_CONTROL_POINTS_FILE.to_string());
     out.push(CPT_TRUTH_FILE.to_string());
@@ -376,37 +449,114 @@ enum Kind {
     WhiteNoise,
 }
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 struct TestPlan {
-    id: &'static str,
+    id: String,
     kind: Kind,
     base: Base,
     frequency_set: FrequencySet,
+    variation: Option<Variation>,
+    /// Its NEES experiment (1: base-isolated, 2: fixed-base, 3: extra tests) and trial in it.
+    experiment: u32,
+    trial: u32,
 }
 
-/// All tests in chronological order: BI-1..BI-6, WN-1, FB-1..FB-5, WN-6, FB-6.
-fn plans() -> Vec<TestPlan> {
+impl TestPlan {
+    fn folder(&self) -> String {
+        format!("{GROUPS_DIR}/Experiment-{}/Trial-{}/Rep-1", self.experiment, self.trial)
+    }
+
+    /// DAQ1's export, converted to engineering units by the facility.
+    fn daq1_file(&self) -> String {
+        format!("{}/Converted_Data/{}_DAQ1.txt", self.folder(), self.id)
+    }
+
+    /// DAQ2's raw volts.
+    fn daq2_file(&self) -> String {
+        format!("{}/Unprocessed_Data/{}_DAQ2.asc", self.folder(), self.id)
+    }
+}
+
+/// An extra test: a study motion at another scale, with its own ground-motion seed.
+#[derive(Clone, Copy, Debug)]
+struct Variation {
+    /// 1, 2, …: the extra test's number (`V-0001`, …).
+    number: usize,
+    /// Factor on the motion's peak input acceleration, in [0.5, 1.5] (3 decimals).
+    scale: f64,
+}
+
+/// The study's tests in chronological order (BI-1..BI-6, WN-1, FB-1..FB-5, WN-6, FB-6), then
+/// `tests - 14` variations `V-0001`, … of Table 1's motions in turn; each with its experiment
+/// and trial.
+fn plans(tests: usize) -> Vec<TestPlan> {
+    let mut out = study_plans();
+    for number in 1..=tests.saturating_sub(out.len()) {
+        let m = &MOTIONS[(number - 1) % MOTIONS.len()];
+        let late = matches!(m.id, "FB-4" | "FB-5" | "FB-6");
+        let frequency_set = if late { FrequencySet::BeforeFb6 } else { FrequencySet::BeforeFb1 };
+        let scale = quantize(SplitMix64::new(seed_from_label(&format!("variation:{number}"))).uniform(0.5, 1.5), 3);
+        out.push(TestPlan {
+            id: format!("V-{number:04}"),
+            kind: Kind::Earthquake(m),
+            base: m.base,
+            frequency_set,
+            variation: Some(Variation { number, scale }),
+            experiment: 0,
+            trial: 0,
+        });
+    }
+    // Trials are numbered in test order within each experiment.
+    let mut trials = [0; 3];
+    for plan in &mut out {
+        plan.experiment = match (plan.variation, plan.base) {
+            (Some(_), _) => 3,
+            (None, Base::Isolated) => 1,
+            (None, Base::Fixed) => 2,
+        };
+        let trial = &mut trials[plan.experiment as usize - 1];
+        *trial += 1;
+        plan.trial = *trial;
+    }
+    out
+}
+
+fn study_plans() -> Vec<TestPlan> {
     let mut out = Vec::new();
     for m in &MOTIONS {
         if m.id == "FB-1" {
             out.push(TestPlan {
-                id: "WN-1",
+                id: "WN-1".into(),
                 kind: Kind::WhiteNoise,
                 base: Base::Fixed,
                 frequency_set: FrequencySet::BeforeFb1,
+                variation: None,
+                experiment: 0,
+                trial: 0,
             });
         }
         if m.id == "FB-6" {
             out.push(TestPlan {
-                id: "WN-6",
+                id: "WN-6".into(),
                 kind: Kind::WhiteNoise,
                 base: Base::Fixed,
                 frequency_set: FrequencySet::BeforeFb6,
+                variation: None,
+                experiment: 0,
+                trial: 0,
             });
         }
         let late = matches!(m.id, "FB-4" | "FB-5" | "FB-6");
         let frequency_set = if late { FrequencySet::BeforeFb6 } else { FrequencySet::BeforeFb1 };
-        out.push(TestPlan { id: m.id, kind: Kind::Earthquake(m), base: m.base, frequency_set });
+        out.push(TestPlan {
+            id: m.id.into(),
+            kind: Kind::Earthquake(m),
+            base: m.base,
+            frequency_set,
+            variation: None,
+            experiment: 0,
+            trial: 0,
+        });
     }
     out
 }
@@ -509,15 +659,15 @@ fn clock_offset_us(rng: &mut SplitMix64) -> u64 {
 
 struct GeneratedTest {
     entry: TestEntry,
-    daq1_csv: String,
-    daq2_csv: String,
+    daq1_text: String,
+    daq2_text: String,
     /// The physical floor motion at DAQ1's rate in m/s² (no sensor offset or noise): floors 4
     /// and 5, each (E-W, vertical), for the diagnosis cases.
     floors_mps2: [[Vec<f64>; 2]; 2],
 }
 
-fn generate_test(plan: &TestPlan) -> GeneratedTest {
-    let id = plan.id;
+fn generate_test(plan: &TestPlan, sensitivities: &[Sensitivity]) -> GeneratedTest {
+    let id = plan.id.as_str();
     let sh = shape(plan.kind);
     let dt = 1.0 / SIM_RATE_HZ;
     let n_sim = (sh.duration_s + SIM_MARGIN_S) as usize * SIM_RATE_HZ as usize;
@@ -529,16 +679,15 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
     };
 
     // Ground motion: earthquake shape seeded by record name, so e.g. ICA50/100/140 are the same
-    // record at different scales, as on the real table.
+    // record at different scales, as on the real table; a variation has its own seed and scale.
     let ground = match (plan.kind, &sh.filter) {
-        (Kind::Earthquake(m), Some(f)) => synthetic_ground_motion(
-            seed_from_label(&format!("record:{}", m.record)),
-            n_sim,
-            dt,
-            f,
-            &sh.envelope,
-            m.pia_g,
-        ),
+        (Kind::Earthquake(m), Some(f)) => {
+            let (label, pia_g) = match plan.variation {
+                None => (format!("record:{}", m.record), m.pia_g),
+                Some(v) => (format!("record:{}:variation:{}", m.record, v.number), m.pia_g * v.scale),
+            };
+            synthetic_ground_motion(seed_from_label(&label), n_sim, dt, f, &sh.envelope, pia_g)
+        }
         _ => band_limited_white_noise(stream("ground"), n_sim, dt, 0.5, 25.0, &sh.envelope, WHITE_NOISE_PEAK_G),
     };
     let model = building(plan.base);
@@ -629,9 +778,10 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
         });
     }
 
+    let scale_percent = |m: &Motion| plan.variation.map_or(m.scale_percent, |v| quantize(m.scale_percent * v.scale, 3));
     let (kind, input, event, motion) = match plan.kind {
         Kind::Earthquake(m) => {
-            ("earthquake", m.input.to_string(), format!("{} ({} %)", m.event_site, m.scale_percent), Some(m))
+            ("earthquake", m.input.to_string(), format!("{} ({} %)", m.event_site, scale_percent(m)), Some(m))
         }
         Kind::WhiteNoise => (
             "white_noise",
@@ -640,20 +790,40 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
             None,
         ),
     };
-    let line2 = format!("# test: {id}, input: {input}, event: {event}, base: {}", plan.base.code());
-    let daq1_csv = csv(&[HEADER_LINE_1, &line2, DAQ1_LINE_3, DAQ1_LINE_4], &DAQ1_COLUMNS, DAQ1_RATE_HZ, &daq1_cols);
-    let daq2_csv = csv(&[HEADER_LINE_1, &line2, DAQ2_LINE_3, DAQ2_LINE_4], &DAQ2_COLUMNS, DAQ2_RATE_HZ, &daq2_cols);
+    let line1 = format!("NEES-2009-0722\tExperiment-{}\tTrial-{}\tRep-1", plan.experiment, plan.trial);
+    let line2 = format!("Test: {id}, input: {input}, event: {event}, base: {}", plan.base.code());
+    let line4 = format!("SYNTHETIC demo archive written by {GENERATOR_NAME} {GENERATOR_VERSION} (not real data)");
+    // DAQ1 as the facility converted it: in/sec^2 horizontally, g vertically.
+    for (col, unit) in daq1_cols.iter_mut().zip(&DAQ1_UNITS[1..]) {
+        if *unit == "in/sec^2" {
+            col.iter_mut().for_each(|v| *v *= crate::units::G0 / crate::units::INCH);
+        }
+    }
+    // DAQ2 as its sensors gave it: volts.
+    for (col, s) in daq2_cols.iter_mut().zip(sensitivities) {
+        col.iter_mut().for_each(|v| *v = s.offset_v + s.sensitivity_v_per_g * *v);
+    }
+    let daq1 =
+        Daq { names: &DAQ1_COLUMNS, descriptions: &DAQ1_DESCRIPTIONS, units: &DAQ1_UNITS, decimals: &DAQ1_DECIMALS };
+    let daq2 = Daq { names: &DAQ2_COLUMNS, descriptions: &DAQ2_DESCRIPTIONS, units: &DAQ2_UNITS, decimals: &[6; 9] };
+    let daq1_text = daq1.text(&[&line1, &line2, DAQ1_LINE_3, &line4], DAQ1_RATE_HZ, &daq1_cols);
+    let daq2_text = daq2.text(&[&line1, &line2, DAQ2_LINE_3, &line4], DAQ2_RATE_HZ, &daq2_cols);
 
     let entry = TestEntry {
         id: id.into(),
+        experiment: plan.experiment,
+        trial: plan.trial,
+        daq1_file: plan.daq1_file(),
+        daq2_file: plan.daq2_file(),
         kind: kind.into(),
         input,
         event: motion.map_or_else(|| event.clone(), |m| m.event_site.to_string()),
         base: plan.base.code().into(),
-        scale_percent: motion.map(|m| m.scale_percent),
-        table1_pia_g: motion.map(|m| m.pia_g),
-        table1_piv_cm_s: motion.map(|m| m.piv_cm_s),
-        table1_pid_cm: motion.map(|m| m.pid_cm),
+        scale_percent: motion.map(scale_percent),
+        // Table 1 states the study's tests only.
+        table1_pia_g: motion.filter(|_| plan.variation.is_none()).map(|m| m.pia_g),
+        table1_piv_cm_s: motion.filter(|_| plan.variation.is_none()).map(|m| m.piv_cm_s),
+        table1_pid_cm: motion.filter(|_| plan.variation.is_none()).map(|m| m.pid_cm),
         duration_s: duration,
         daq1_sample_rate_hz: DAQ1_RATE_HZ,
         daq2_sample_rate_hz: DAQ2_RATE_HZ,
@@ -663,6 +833,8 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
         building_period_s: quantize(model.fundamental_period(), 6),
         clock_offset_s: clock_offset,
         frequency_set: plan.frequency_set.label().into(),
+        variation_of: plan.variation.and(motion).map(|m| m.id.to_string()),
+        variation_scale: plan.variation.map(|v| v.scale),
         floor_channels,
         equipment,
         toppling: topples,
@@ -671,7 +843,7 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
         resample(&floors[fi][ci], dt, 0.0, f64::from(DAQ1_RATE_HZ), n1).iter().map(|g| g * crate::units::G0).collect()
     };
     let floors_mps2 = [[physical(0, 0), physical(0, 2)], [physical(1, 0), physical(1, 2)]];
-    GeneratedTest { entry, daq1_csv, daq2_csv, floors_mps2 }
+    GeneratedTest { entry, daq1_text, daq2_text, floors_mps2 }
 }
 
 fn channel_name(eq: &Equipment) -> String {
@@ -689,22 +861,60 @@ fn apply_topple(top: &mut [f64], floor_ud: &[f64], dt: f64, t0: f64, side: &str)
     }
 }
 
-/// CSV text: comment lines, column row, then rows of time (6 decimals) and values ({:.6e}).
-fn csv(comments: &[&str], columns: &[&str], rate_hz: u32, cols: &[Vec<f64>]) -> String {
-    let rows = cols.first().map_or(0, Vec::len);
-    let mut s = String::with_capacity(rows * (12 + 14 * cols.len()) + 1024);
-    for c in comments {
-        s.push_str(c);
-        s.push('\n');
-    }
-    s.push_str(&columns.join(","));
-    s.push('\n');
-    for k in 0..rows {
-        let _ = write!(s, "{:.6}", k as f64 / f64::from(rate_hz));
-        for col in cols {
-            let _ = write!(s, ",{:.6e}", col[k]);
+/// A DAQ file's rows above the data and how it prints values.
+struct Daq<'a> {
+    names: &'a [&'a str],
+    descriptions: &'a [&'a str],
+    units: &'a [&'a str],
+    /// Decimals per column, time first.
+    decimals: &'a [usize],
+}
+
+impl Daq<'_> {
+    /// Tab-delimited NEES text: the preamble, the name, description and units rows, then rows of
+    /// time (k / rate) and values, each column with its decimals.
+    fn text(&self, preamble: &[&str], rate_hz: u32, cols: &[Vec<f64>]) -> String {
+        let rows = cols.first().map_or(0, Vec::len);
+        let mut s = String::with_capacity(rows * (10 + 11 * cols.len()) + 2048);
+        for line in preamble.iter().chain(&[&*self.names.join("\t"), &*self.descriptions.join("\t")]) {
+            s.push_str(line);
+            s.push('\n');
         }
+        s.push_str(&self.units.join("\t"));
         s.push('\n');
+        for k in 0..rows {
+            let _ = write!(s, "{:.*}", self.decimals[0], k as f64 / f64::from(rate_hz));
+            for (col, &decimals) in cols.iter().zip(&self.decimals[1..]) {
+                let _ = write!(s, "\t{:.*}", decimals, col[k]);
+            }
+            s.push('\n');
+        }
+        s
+    }
+}
+
+/// DAQ2's sensors: a sensitivity near 1 V/g and a zero offset of a few mV each (4 decimals, so
+/// the table states exactly what was applied); the same sensors in every test.
+fn sensitivities() -> Vec<Sensitivity> {
+    let mut rng = SplitMix64::new(seed_from_label("daq2-sensitivities"));
+    DAQ2_COLUMNS[1..]
+        .iter()
+        .map(|channel| Sensitivity {
+            channel: channel.to_string(),
+            sensitivity_v_per_g: quantize(rng.uniform(0.95, 1.05), 4),
+            offset_v: quantize(rng.uniform(-0.02, 0.02), 4),
+        })
+        .collect()
+}
+
+/// The calibration table `load` reads (`calibration:`): raw volts per g and the zero in volts.
+fn sensitivity_table(sensitivities: &[Sensitivity]) -> String {
+    let mut s = String::from(
+        "# NEES-2009-0722 DAQ2 accelerometer sensitivities (SYNTHETIC demo archive): V per g, zero offset in V\n\
+         channel,sensitivity,unit,offset\n",
+    );
+    for x in sensitivities {
+        let _ = writeln!(s, "{},{},g,{}", x.channel, x.sensitivity_v_per_g, x.offset_v);
     }
     s
 }
@@ -720,21 +930,39 @@ end. Motions are Kanai-Tajimi/Clough-Penzien filtered noise scaled to Table 1's 
 acceleration; floors come from a linear 5-storey shear building (T1 = 1.0 s fixed-base, 2.8 s
 isolated); equipment tops are linear oscillators at Table 3's frequencies.
 
-Layout
-  README.txt                 this file
-  manifest.json              generator, and per test the TRUE values: clock offset, sensor offsets
-                             and drifts, equipment frequencies and damping, toppling events
-  <test>/DAQ1_floors.csv     floor accelerometers, 200 Hz, g
-                             Time,A4_EW,A4_NS,A4_UD,A5_EW,A5_NS,A5_UD
-  <test>/DAQ2_equipment.csv  equipment top accelerometers (E-W), 256 Hz, g
-                             Time,A5_EW_SYNC,UI3_TOP_EW,MC2_TOP_EW,PB1_TOP_EW,PB2_TOP_EW,PS1_TOP_EW,PS2_TOP_EW,WSU1_TOP_EW
-                             (A5_EW_SYNC: DAQ2's own copy of floor-5 E-W, for clock synchronisation)
+Layout (NEES's, as NEEShub and DesignSafe's nees.public/NEES-XXXX-XXXX.groups/ keep it)
+  README.txt            this file
+  manifest.json         generator, and per test the TRUE values: clock offset, sensor offsets
+                        and drifts, equipment frequencies and damping, toppling events; each
+                        test's experiment, trial and files
+  NEES-2009-0722.groups/
+    Documentation/DAQ2_sensitivities.csv
+                        DAQ2's sensors: channel,sensitivity,unit,offset (V per g, zero in V)
+    Experiment-1/       the base-isolated building: Trial-1..Trial-6 = BI-1..BI-6
+    Experiment-2/       the fixed-base building: Trial-1 = WN-1, Trial-2..Trial-6 = FB-1..FB-5,
+                        Trial-7 = WN-6, Trial-8 = FB-6
+    Experiment-3/       extra tests (demo-archive --tests N): Trial-k = V-000k
+    Experiment-N/Trial-N/Rep-1/
+      Converted_Data/<test>_DAQ1.txt
+                        floor accelerometers, 200 Hz, converted to engineering units:
+                        Time,A4_EW,A4_NS,A4_UD,A5_EW,A5_NS,A5_UD in sec, in/sec^2 (EW, NS), g (UD)
+      Unprocessed_Data/<test>_DAQ2.asc
+                        equipment top accelerometers (E-W), 256 Hz, raw volts:
+                        Time,A5_EW_SYNC,UI3_TOP_EW,MC2_TOP_EW,PB1_TOP_EW,PB2_TOP_EW,PS1_TOP_EW,PS2_TOP_EW,WSU1_TOP_EW
+                        (A5_EW_SYNC: DAQ2's own copy of floor-5 E-W, for clock synchronisation)
 
-Each CSV has 4 comment lines starting with '# ', a column row, then data rows; Time in seconds
-(6 decimals) from 0, values in g as {:.6e}. EW = X (shaking direction), NS = Y, UD = Z (vertical).
+Each DAQ file is tab-delimited text as NEES asked sensor data to be: a 4-line preamble (project,
+experiment, trial, rep; the test; the DAQ; this notice), the channel-name row (line 5), a
+description row (line 6) and a units row (line 7), then data rows: Time in seconds (6 decimals)
+from 0, in/sec^2 to 4 decimals, g to 7, volts to 6. Read them with numpy as
+np.loadtxt(path, skiprows=7), or with shakeflow as a delimited source with header_lines: 4,
+description_row: 6, units_row: 7 (and, for DAQ2, calibration: the sensitivity table).
+EW = X (shaking direction), NS = Y, UD = Z (vertical); g is standard gravity (9.80665 m/s^2 =
+386.0886 in/sec^2). DAQ2's volts are offset + sensitivity * (acceleration in g) per channel.
 Floor channels carry small constant offsets. Equipment channels carry offsets, a slow drift
-(linear + quadratic in time) and noise: value(tau) = signal(tau + clock_offset_s) + offset_g
-+ drift_linear_g*(tau/duration_s) + drift_quadratic_g*(tau/duration_s)^2 + noise.
+(linear + quadratic in time) and noise, in g before the sensor's volts: value(tau) =
+signal(tau + clock_offset_s) + offset_g + drift_linear_g*(tau/duration_s)
++ drift_quadratic_g*(tau/duration_s)^2 + noise.
 
 Clocks: DAQ2 is not synchronised with DAQ1. DAQ2 time 0 is DAQ1 time clock_offset_s (0.4-2.5 s,
 per test, in manifest.json). A toppled unit shows an impact spike, then about 1/10 amplitude
@@ -754,34 +982,60 @@ Tests (chronological)
 ",
     );
     for t in tests {
-        let _ = writeln!(s, "  {:<5} {:<7} {} {:>4} s  {}", t.id, t.input, t.base, t.duration_s, t.event);
+        let place = format!("Experiment-{}/Trial-{}", t.experiment, t.trial);
+        let _ = writeln!(s, "  {:<6} {place:<21} {:<7} {} {:>4} s  {}", t.id, t.input, t.base, t.duration_s, t.event);
     }
     s
 }
 
+/// Writes `bytes` to `path` below `dir`, creating its folders.
+fn write_new(dir: &Path, path: &str, bytes: &[u8]) -> io::Result<()> {
+    let full = dir.join(path);
+    if let Some(parent) = full.parent() {
+        fs::create_dir_all(parent)?;
+    }
+    fs::write(full, bytes)
+}
+
 /// Writes all files into `dir` (which exists and is empty); returns them with sizes,
 /// manifest.json last.
-fn write_contents(dir: &Path) -> io::Result<Vec<FileEntry>> {
-    let mut files = Vec::new();
+fn write_contents(dir: &Path, tests: usize) -> io::Result<Vec<FileEntry>> {
+    use rayon::prelude::*;
+    // Tests are generated and written in parallel, each as soon as it is made (an archive of
+    // hundreds of tests is not held in memory); the floors the cases need are kept.
+    type Written = (TestEntry, Vec<FileEntry>, Option<[[Vec<f64>; 2]; 2]>);
+    let sensitivities = sensitivities();
+    let written: Vec<Written> = plans(tests)
+        .par_iter()
+        .map(|plan| {
+            let g = generate_test(plan, &sensitivities);
+            let mut entries = Vec::new();
+            for (path, text) in [(plan.daq1_file(), g.daq1_text), (plan.daq2_file(), g.daq2_text)] {
+                write_new(dir, &path, text.as_bytes())?;
+                entries.push(FileEntry { path, bytes: text.len() as u64 });
+            }
+            Ok((g.entry, entries, plan.variation.is_none().then_some(g.floors_mps2)))
+        })
+        .collect::<io::Result<_>>()?;
     let mut tests = Vec::new();
-    let mut csvs = Vec::new();
+    let mut test_files = Vec::new();
     let mut floors = std::collections::BTreeMap::new();
-    for plan in plans() {
-        let g = generate_test(&plan);
-        tests.push(g.entry);
-        csvs.push((plan.id, g.daq1_csv, g.daq2_csv));
-        floors.insert(plan.id, g.floors_mps2);
+    for (entry, entries, floors_mps2) in written {
+        if let Some(f) = floors_mps2 {
+            floors.insert(entry.id.clone(), f);
+        }
+        tests.push(entry);
+        test_files.extend(entries);
     }
     let readme_text = readme(&tests);
     fs::write(dir.join(README_FILE), &readme_text)?;
-    files.push(FileEntry { path: README_FILE.into(), bytes: readme_text.len() as u64 });
-    for (id, daq1, daq2) in csvs {
-        fs::create_dir(dir.join(id))?;
-        for (name, text) in [(DAQ1_FILE, daq1), (DAQ2_FILE, daq2)] {
-            fs::write(dir.join(id).join(name), &text)?;
-            files.push(FileEntry { path: format!("{id}/{name}"), bytes: text.len() as u64 });
-        }
-    }
+    let table = sensitivity_table(&sensitivities);
+    write_new(dir, SENSITIVITY_FILE, table.as_bytes())?;
+    let mut files = vec![
+        FileEntry { path: README_FILE.into(), bytes: readme_text.len() as u64 },
+        FileEntry { path: SENSITIVITY_FILE.into(), bytes: table.len() as u64 },
+    ];
+    files.extend(test_files);
     let (cpt_files, cpt) = cpt_contents()?;
     fs::create_dir_all(dir.join(CPT_FRAMES_DIR))?;
     for (path, bytes) in cpt_files {
@@ -804,10 +1058,21 @@ fn write_contents(dir: &Path) -> io::Result<Vec<FileEntry>> {
         generator: GeneratorInfo { name: GENERATOR_NAME.into(), version: GENERATOR_VERSION.into() },
         project: "NEES-2009-0722 UCSD BNCS".into(),
         synthetic: true,
-        units: "g".into(),
-        daq1: DaqInfo { file: DAQ1_FILE.into(), sample_rate_hz: DAQ1_RATE_HZ, columns: DAQ1_COLUMNS.map(String::from).to_vec() },
-        daq2: DaqInfo { file: DAQ2_FILE.into(), sample_rate_hz: DAQ2_RATE_HZ, columns: DAQ2_COLUMNS.map(String::from).to_vec() },
-        daq2_sensor_model: "value(tau) = signal(tau + clock_offset_s) + offset_g + drift_linear_g*(tau/duration_s) + drift_quadratic_g*(tau/duration_s)^2 + noise(noise_rms_g); tau = DAQ2 time, signal in DAQ1 time".into(),
+        units: "as each file's units row states: DAQ1 in sec, in/sec^2 (E-W, N-S) and g (vertical); DAQ2 in sec and V (daq2_sensitivities); the offsets, drifts and noise below in g".into(),
+        daq1: DaqInfo {
+            file: format!("{GROUPS_DIR}/Experiment-{{experiment}}/Trial-{{trial}}/Rep-1/Converted_Data/{{test}}_DAQ1.txt"),
+            sample_rate_hz: DAQ1_RATE_HZ,
+            columns: DAQ1_COLUMNS.map(String::from).to_vec(),
+            units: DAQ1_UNITS.map(String::from).to_vec(),
+        },
+        daq2: DaqInfo {
+            file: format!("{GROUPS_DIR}/Experiment-{{experiment}}/Trial-{{trial}}/Rep-1/Unprocessed_Data/{{test}}_DAQ2.asc"),
+            sample_rate_hz: DAQ2_RATE_HZ,
+            columns: DAQ2_COLUMNS.map(String::from).to_vec(),
+            units: DAQ2_UNITS.map(String::from).to_vec(),
+        },
+        daq2_sensitivities: sensitivities,
+        daq2_sensor_model: "volts(tau) = offset_v + sensitivity_v_per_g * value(tau); value(tau) = signal(tau + clock_offset_s) + offset_g + drift_linear_g*(tau/duration_s) + drift_quadratic_g*(tau/duration_s)^2 + noise(noise_rms_g); tau = DAQ2 time, signal in DAQ1 time".into(),
         tests,
         cpt,
         files: files.clone(),
@@ -825,8 +1090,8 @@ mod tests {
 
     #[test]
     fn plan_order_and_frequency_sets() {
-        let p = plans();
-        let ids: Vec<&str> = p.iter().map(|t| t.id).collect();
+        let p = plans(STUDY_TESTS);
+        let ids: Vec<&str> = p.iter().map(|t| t.id.as_str()).collect();
         assert_eq!(
             ids,
             [
@@ -835,15 +1100,37 @@ mod tests {
             ]
         );
         for t in &p {
-            let late = matches!(t.id, "FB-4" | "FB-5" | "FB-6" | "WN-6");
+            let late = matches!(t.id.as_str(), "FB-4" | "FB-5" | "FB-6" | "WN-6");
             assert_eq!(t.frequency_set == FrequencySet::BeforeFb6, late, "{}", t.id);
         }
     }
 
     #[test]
+    fn extra_tests_vary_the_study_motions_in_turn() {
+        let p = plans(STUDY_TESTS + 30);
+        let study: Vec<String> = plans(STUDY_TESTS).into_iter().map(|t| t.id).collect();
+        assert_eq!(p[..STUDY_TESTS].iter().map(|t| &t.id).collect::<Vec<_>>(), study.iter().collect::<Vec<_>>());
+        assert!(p[..STUDY_TESTS].iter().all(|t| t.variation.is_none()));
+        let mut scales = Vec::new();
+        for (k, t) in p[STUDY_TESTS..].iter().enumerate() {
+            let v = t.variation.expect("an extra test is a variation");
+            assert_eq!((t.id.as_str(), v.number), (format!("V-{:04}", k + 1).as_str(), k + 1));
+            let Kind::Earthquake(m) = t.kind else { panic!("{} is not an earthquake", t.id) };
+            assert_eq!(m.id, MOTIONS[k % MOTIONS.len()].id, "{}", t.id);
+            assert_eq!(t.base, m.base);
+            assert!((0.5..=1.5).contains(&v.scale) && v.scale == quantize(v.scale, 3), "{}", v.scale);
+            scales.push(v.scale);
+        }
+        // Seeded per number: not one scale repeated.
+        scales.dedup();
+        assert!(scales.len() > 20, "{scales:?}");
+        assert_eq!(plans(STUDY_TESTS + 30)[STUDY_TESTS + 7].variation.unwrap().scale, scales[7]);
+    }
+
+    #[test]
     fn clock_offsets_are_in_range_and_off_grid() {
-        for p in plans() {
-            let us = clock_offset_us(&mut SplitMix64::new(seed_from_label(p.id)));
+        for p in plans(40) {
+            let us = clock_offset_us(&mut SplitMix64::new(seed_from_label(&p.id)));
             assert!((400_000..2_500_000).contains(&us));
             assert_ne!((us * 200) % 1_000_000, 0);
             assert_ne!((us * 256) % 1_000_000, 0);

@@ -15,15 +15,28 @@ pub struct MatchedFile {
 enum Piece {
     Literal(String),
     Key(String),
+    /// `*` beside keys: any characters within one path segment, no partition key
+    /// (`Experiment-*/Trial-*/Rep-1/Converted_Data/{motion}_DAQ1.txt`).
+    Wild,
+}
+
+/// Literal text, its `*`s as [`Piece::Wild`].
+fn push_literal(pieces: &mut Vec<Piece>, text: &str) {
+    for (k, part) in text.split('*').enumerate() {
+        if k > 0 {
+            pieces.push(Piece::Wild);
+        }
+        if !part.is_empty() {
+            pieces.push(Piece::Literal(part.to_string()));
+        }
+    }
 }
 
 fn parse_template(template: &str) -> Result<Vec<Piece>, String> {
     let mut pieces = Vec::new();
     let mut rest = template;
     while let Some(open) = rest.find('{') {
-        if open > 0 {
-            pieces.push(Piece::Literal(rest[..open].to_string()));
-        }
+        push_literal(&mut pieces, &rest[..open]);
         let close = rest[open..].find('}').ok_or_else(|| format!("unclosed `{{` in `{template}`"))? + open;
         let key = &rest[open + 1..close];
         if key.is_empty() || !key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
@@ -32,9 +45,7 @@ fn parse_template(template: &str) -> Result<Vec<Piece>, String> {
         pieces.push(Piece::Key(key.to_string()));
         rest = &rest[close + 1..];
     }
-    if !rest.is_empty() {
-        pieces.push(Piece::Literal(rest.to_string()));
-    }
+    push_literal(&mut pieces, rest);
     Ok(pieces)
 }
 
@@ -50,6 +61,10 @@ fn match_pieces(text: &str, pieces: &[Piece]) -> Option<Partition> {
                 found.insert(0, (key.clone(), text[..n].to_string()));
                 Some(found)
             })
+        }
+        Some((Piece::Wild, rest)) => {
+            let segment_end = text.find('/').unwrap_or(text.len());
+            (0..=segment_end).filter(|&n| text.is_char_boundary(n)).find_map(|n| match_pieces(&text[n..], rest))
         }
     }
 }
@@ -69,7 +84,7 @@ pub fn resolve(
         .iter()
         .map(|p| match p {
             Piece::Literal(l) => l.clone(),
-            Piece::Key(_) => "*".to_string(),
+            Piece::Key(_) | Piece::Wild => "*".to_string(),
         })
         .collect();
     let is_glob = glob_pattern.contains(['*', '?', '[']);
@@ -148,6 +163,25 @@ mod tests {
             vec![("a".into(), "x".into()), ("b".into(), "y_z".into())]
         );
         assert!(match_pieces("d/x_y.csv", &parse_template("{a}.csv").unwrap()).is_none());
+    }
+
+    #[test]
+    fn wildcards_beside_keys_match_one_segment_and_name_no_partition() {
+        let dir = tempfile::tempdir().unwrap();
+        for (experiment, trial, test) in [(1, 2, "BI-2"), (2, 5, "FB-4"), (2, 10, "WN-6")] {
+            let folder = dir.path().join(format!("Experiment-{experiment}/Trial-{trial}/Rep-1/Converted_Data"));
+            std::fs::create_dir_all(&folder).unwrap();
+            std::fs::write(folder.join(format!("{test}_DAQ1.txt")), "x").unwrap();
+        }
+        let template = "Experiment-*/Trial-*/Rep-1/Converted_Data/{motion}_DAQ1.txt";
+        let files = resolve(dir.path(), template, &BTreeMap::new(), false).unwrap();
+        let partitions: Vec<_> = files.iter().map(|f| crate::stages::partition_path(&f.partition)).collect();
+        // In path order (Trial-10 before Trial-5).
+        assert_eq!(partitions, ["motion=BI-2", "motion=WN-6", "motion=FB-4"]);
+        // A `*` takes no `/`, and may take nothing.
+        let pieces = parse_template("a*/{k}.txt").unwrap();
+        assert_eq!(match_pieces("a/x.txt", &pieces).unwrap(), vec![("k".into(), "x".into())]);
+        assert!(match_pieces("ab/c/x.txt", &pieces).is_none());
     }
 
     #[test]

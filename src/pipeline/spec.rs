@@ -152,7 +152,9 @@ pub enum NonUniformPolicy {
 pub struct SourceSpec {
     pub format: RecordFormat,
     /// A file, a glob (`*`, `?`, `**`) or a template whose `{key}` parts match one path segment
-    /// each and become partition keys (`archive/{motion}/DAQ1_floors.csv`). Relative to the pipeline file.
+    /// each and become partition keys (`archive/{motion}/DAQ1_floors.csv`); a `*` beside keys
+    /// matches within one segment and names no key (`Trial-*/Rep-1/{motion}_DAQ1.txt`). Relative
+    /// to the pipeline file.
     pub path: String,
     #[serde(default)]
     pub description: Option<String>,

@@ -117,7 +117,7 @@ mod tests {
 
     #[test]
     fn every_stage_with_time_series_has_the_opt_in_mcap_parameter() {
-        for stage in registry() {
+        for stage in registry().0 {
             let info = stage.info();
             let series = info.outputs.iter().any(|o| o.kind == OutputKind::TimeSeries);
             let mcap = info.params.iter().find(|p| p.name == "mcap");

@@ -1,8 +1,9 @@
 //! End-to-end checks of the synthetic archive (written under CARGO_TARGET_TMPDIR).
 
+use crate::common::DemoDaq;
 use shakeflow::demo::archive::{
-    is_current, write_demo_archive, Manifest, DAQ1_COLUMNS, DAQ1_FILE, DAQ2_COLUMNS, DAQ2_FILE, MANIFEST_FILE,
-    README_FILE,
+    is_current, is_current_tests, write_demo_archive, write_demo_archive_tests, Manifest, DAQ1_COLUMNS, DAQ1_UNITS,
+    DAQ2_COLUMNS, DAQ2_UNITS, GROUPS_DIR, MANIFEST_FILE, README_FILE, SENSITIVITY_FILE, STUDY_TESTS,
 };
 use shakeflow::demo::study::{equipment_by_id, motion_by_id};
 use std::fs;
@@ -85,7 +86,7 @@ fn generation_is_deterministic_and_replaces_atomically() {
     }
     assert!(is_current(&b));
     // A changed size, a missing file or another version make it stale.
-    let victim = b.join("FB-4").join(DAQ2_FILE);
+    let victim = b.join(&manifest(&b).tests.iter().find(|t| t.id == "FB-4").unwrap().daq2_file);
     let mut bytes = fs::read(&victim).unwrap();
     bytes.pop();
     fs::write(&victim, &bytes).unwrap();
@@ -98,26 +99,11 @@ fn generation_is_deterministic_and_replaces_atomically() {
     assert!(!is_current(&scratch("does-not-exist")));
 }
 
-/// Parses a CSV: returns (comment lines, header, rows).
-fn read_csv(path: &Path) -> (Vec<String>, String, Vec<Vec<f64>>, Vec<String>) {
-    let text = fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let comments: Vec<String> = (0..4).map(|_| lines.next().unwrap().to_string()).collect();
-    let header = lines.next().unwrap().to_string();
-    let mut rows = Vec::new();
-    let mut times = Vec::new();
-    for l in lines {
-        let fields: Vec<&str> = l.split(',').collect();
-        times.push(fields[0].to_string());
-        rows.push(fields.iter().map(|f| f.parse::<f64>().unwrap()).collect());
-    }
-    (comments, header, rows, times)
-}
-
-fn column_peak(rows: &[Vec<f64>], col: usize, from: usize, to: usize) -> f64 {
-    let to = to.min(rows.len());
-    let mean = rows[from..to].iter().map(|r| r[col]).sum::<f64>() / (to - from) as f64;
-    rows[from..to].iter().fold(0.0_f64, |m, r| m.max((r[col] - mean).abs()))
+/// The largest deviation from the mean of `values[from..to]`.
+fn peak_about_mean(values: &[f64], from: usize, to: usize) -> f64 {
+    let part = &values[from..to.min(values.len())];
+    let mean = part.iter().sum::<f64>() / part.len() as f64;
+    part.iter().fold(0.0_f64, |m, v| m.max((v - mean).abs()))
 }
 
 #[test]
@@ -133,7 +119,7 @@ fn layout_headers_rows_and_manifest() {
             "FB-6"
         ]
     );
-    let mut expected_top: Vec<String> = ids.iter().map(|s| s.to_string()).collect();
+    let mut expected_top: Vec<String> = vec![GROUPS_DIR.into()];
     expected_top.push(README_FILE.into());
     expected_top.push(MANIFEST_FILE.into());
     expected_top.push("cpt".into());
@@ -170,9 +156,43 @@ fn layout_headers_rows_and_manifest() {
     assert_eq!(truth.lines().count(), m.cpt.frames + 1);
     assert!(truth.starts_with("time_s,theta_rad,x_mm,y_mm,yaw_rad\n"));
 
+    // NEES's layout: base-isolated tests in Experiment-1, fixed-base in Experiment-2, in order.
+    let places: Vec<(&str, u32, u32)> = m.tests.iter().map(|t| (t.id.as_str(), t.experiment, t.trial)).collect();
+    assert_eq!(
+        places,
+        [
+            ("BI-1", 1, 1),
+            ("BI-2", 1, 2),
+            ("BI-3", 1, 3),
+            ("BI-4", 1, 4),
+            ("BI-5", 1, 5),
+            ("BI-6", 1, 6),
+            ("WN-1", 2, 1),
+            ("FB-1", 2, 2),
+            ("FB-2", 2, 3),
+            ("FB-3", 2, 4),
+            ("FB-4", 2, 5),
+            ("FB-5", 2, 6),
+            ("WN-6", 2, 7),
+            ("FB-6", 2, 8)
+        ]
+    );
+    assert_eq!(listing(&dir.join(GROUPS_DIR)), ["Documentation", "Experiment-1", "Experiment-2"]);
+    assert_eq!(listing(&dir.join(GROUPS_DIR).join("Experiment-2")).len(), 8);
+    // The sensitivity table states what the manifest says was applied.
+    let table = fs::read_to_string(dir.join(SENSITIVITY_FILE)).unwrap();
+    let rows: Vec<&str> = table.lines().filter(|l| !l.starts_with('#')).collect();
+    assert_eq!(rows[0], "channel,sensitivity,unit,offset");
+    assert_eq!(rows.len(), 1 + DAQ2_COLUMNS.len() - 1);
+    for (row, s) in rows[1..].iter().zip(&m.daq2_sensitivities) {
+        assert_eq!(*row, format!("{},{},g,{}", s.channel, s.sensitivity_v_per_g, s.offset_v));
+        assert!((0.95..=1.05).contains(&s.sensitivity_v_per_g) && s.offset_v.abs() <= 0.02, "{row}");
+    }
     for t in &m.tests {
-        let tdir = dir.join(&t.id);
-        assert_eq!(listing(&tdir), [DAQ1_FILE, DAQ2_FILE]);
+        let folder = format!("{GROUPS_DIR}/Experiment-{}/Trial-{}/Rep-1", t.experiment, t.trial);
+        assert_eq!(t.daq1_file, format!("{folder}/Converted_Data/{}_DAQ1.txt", t.id));
+        assert_eq!(t.daq2_file, format!("{folder}/Unprocessed_Data/{}_DAQ2.asc", t.id));
+        assert_eq!(listing(&dir.join(&folder)), ["Converted_Data", "Unprocessed_Data"]);
         assert!((0.4..2.5).contains(&t.clock_offset_s), "{} offset {}", t.id, t.clock_offset_s);
         for rate in [200.0, 256.0] {
             let samples = t.clock_offset_s * rate;
@@ -205,41 +225,82 @@ fn layout_headers_rows_and_manifest() {
             assert!(c.offset_g.abs() <= 0.002);
         }
 
-        let (c1, h1, rows1, times1) = read_csv(&tdir.join(DAQ1_FILE));
-        assert_eq!(
-            c1[0],
-            "# NEES-2009-0722 UCSD BNCS - SYNTHETIC demo archive written by shakeflow demo-archive (not real data)"
+        let daq1 = DemoDaq::read(dir, &t.daq1_file);
+        assert_eq!(daq1.preamble[0], format!("NEES-2009-0722\tExperiment-{}\tTrial-{}\tRep-1", t.experiment, t.trial));
+        assert!(daq1.preamble[1].starts_with(&format!("Test: {}, input: {}, event: ", t.id, t.input)));
+        assert!(daq1.preamble[1].ends_with(&format!("base: {}", t.base)));
+        assert!(daq1.preamble[2].starts_with("DAQ1: floor accelerometers (floor averages), sampling rate: 200 Hz"));
+        assert!(
+            daq1.preamble[3].starts_with("SYNTHETIC demo archive") && daq1.preamble[3].ends_with("(not real data)")
         );
-        assert!(c1[1].starts_with(&format!("# test: {}, input: {}, event: ", t.id, t.input)));
-        assert!(c1[1].ends_with(&format!("base: {}", t.base)));
-        assert_eq!(c1[2], "# daq: DAQ1 floor accelerometers (floor averages), sample_rate_hz: 200, units: g");
-        assert!(c1[3].starts_with("# "));
-        assert_eq!(h1, DAQ1_COLUMNS.join(","));
-        assert_eq!(h1, "Time,A4_EW,A4_NS,A4_UD,A5_EW,A5_NS,A5_UD");
-        assert_eq!(rows1.len(), (t.duration_s * 200.0) as usize);
-        assert_eq!(rows1.len(), t.daq1_rows);
-        assert!(rows1.iter().all(|r| r.len() == 7));
-        assert_eq!(times1[0], "0.000000");
-        assert_eq!(times1[1], "0.005000");
+        assert_eq!(daq1.names, DAQ1_COLUMNS);
+        assert_eq!(daq1.names, ["Time", "A4_EW", "A4_NS", "A4_UD", "A5_EW", "A5_NS", "A5_UD"]);
+        assert_eq!(daq1.units, DAQ1_UNITS);
+        assert_eq!(daq1.units, ["sec", "in/sec^2", "in/sec^2", "g", "in/sec^2", "in/sec^2", "g"]);
+        assert_eq!(daq1.descriptions[1], "floor 4 acceleration, E-W (X, shaking direction)");
+        assert_eq!(daq1.rows.len(), (t.duration_s * 200.0) as usize);
+        assert_eq!(daq1.rows.len(), t.daq1_rows);
+        assert_eq!(daq1.times[0], "0.000000");
+        assert_eq!(daq1.times[1], "0.005000");
+        // In g, each channel's first second (before the motion) is its sensor offset: the units
+        // row's in/sec^2 and g give back what the manifest says was applied.
+        for c in &t.floor_channels {
+            let quiet = &daq1.g(&c.channel, dir)[..200];
+            let mean = quiet.iter().sum::<f64>() / 200.0;
+            assert!(
+                (mean - c.offset_g).abs() < 1e-4,
+                "{} {}: {mean} g at rest vs offset {} g",
+                t.id,
+                c.channel,
+                c.offset_g
+            );
+        }
 
-        let (c2, h2, rows2, times2) = read_csv(&tdir.join(DAQ2_FILE));
-        assert_eq!(c2[0], c1[0]);
-        assert_eq!(c2[1], c1[1]);
-        assert_eq!(c2[2], "# daq: DAQ2 equipment top accelerometers (E-W), sample_rate_hz: 256, units: g");
-        assert!(c2[3].starts_with("# ") && c2[3].contains("NOT synchronised"));
-        assert_eq!(h2, DAQ2_COLUMNS.join(","));
-        assert_eq!(h2, "Time,A5_EW_SYNC,UI3_TOP_EW,MC2_TOP_EW,PB1_TOP_EW,PB2_TOP_EW,PS1_TOP_EW,PS2_TOP_EW,WSU1_TOP_EW");
-        assert_eq!(rows2.len(), (t.duration_s * 256.0) as usize);
-        assert_eq!(rows2.len(), t.daq2_rows);
-        assert!(rows2.iter().all(|r| r.len() == DAQ2_COLUMNS.len()));
-        assert_eq!(times2[0], "0.000000");
-        assert_eq!(times2[1], "0.003906");
+        let daq2 = DemoDaq::read(dir, &t.daq2_file);
+        assert_eq!(daq2.preamble[..2], daq1.preamble[..2]);
+        assert!(
+            daq2.preamble[2].starts_with("DAQ2: equipment top accelerometers (E-W), sampling rate: 256 Hz, raw volts")
+        );
+        assert!(daq2.preamble[2].contains("NOT synchronised"));
+        assert_eq!(daq2.names, DAQ2_COLUMNS);
+        assert_eq!(
+            daq2.names,
+            [
+                "Time",
+                "A5_EW_SYNC",
+                "UI3_TOP_EW",
+                "MC2_TOP_EW",
+                "PB1_TOP_EW",
+                "PB2_TOP_EW",
+                "PS1_TOP_EW",
+                "PS2_TOP_EW",
+                "WSU1_TOP_EW"
+            ]
+        );
+        assert_eq!(daq2.units, DAQ2_UNITS);
+        assert_eq!(daq2.descriptions[7], "stretcher PS2 (floor 5, locked), top, E-W");
+        assert_eq!(daq2.rows.len(), (t.duration_s * 256.0) as usize);
+        assert_eq!(daq2.rows.len(), t.daq2_rows);
+        assert_eq!(daq2.times[0], "0.000000");
+        assert_eq!(daq2.times[1], "0.003906");
+        // Volts through the sensitivity table: each unit's sensor offset at rest (an earthquake
+        // starts at 3 s of DAQ1 time, after DAQ2's first 0.5 s), in g.
+        for e in t.equipment.iter().filter(|_| t.kind == "earthquake") {
+            let quiet = &daq2.g(&e.channel, dir)[..128];
+            let mean = quiet.iter().sum::<f64>() / 128.0;
+            assert!(
+                (mean - e.offset_g).abs() < 3e-4,
+                "{} {}: {mean} g at rest vs offset {} g",
+                t.id,
+                e.channel,
+                e.offset_g
+            );
+        }
 
         // Physical plausibility (floor 4 channels, strong part of the record).
-        let n = rows1.len();
-        let ew = column_peak(&rows1, 1, 0, n);
-        let ns = column_peak(&rows1, 2, 0, n);
-        let ud = column_peak(&rows1, 3, 0, n);
+        let ew = peak_about_mean(&daq1.g("A4_EW", dir), 0, usize::MAX);
+        let ns = peak_about_mean(&daq1.g("A4_NS", dir), 0, usize::MAX);
+        let ud = peak_about_mean(&daq1.g("A4_UD", dir), 0, usize::MAX);
         println!(
             "{}: pga {:.3} g, A4_EW {:.3} g ({:.2}x), NS/EW {:.3}, UD/EW {:.3}, clock offset {:.6} s",
             t.id,
@@ -254,11 +315,11 @@ fn layout_headers_rows_and_manifest() {
         assert!((0.07..0.15).contains(&(ud / ew)), "{} UD/EW {}", t.id, ud / ew);
 
         for tp in &t.toppling {
-            let col = DAQ2_COLUMNS.iter().position(|c| *c == tp.channel).unwrap();
+            let top = daq2.g(&tp.channel, dir);
             let k = ((tp.time_s - t.clock_offset_s) * 256.0).round() as usize;
-            let spike = column_peak(&rows2, col, k.saturating_sub(256), k + 26);
-            let before = column_peak(&rows2, col, k.saturating_sub(1280), k.saturating_sub(10));
-            let after = column_peak(&rows2, col, k + 40, k + 40 + 1280);
+            let spike = peak_about_mean(&top, k.saturating_sub(256), k + 26);
+            let before = peak_about_mean(&top, k.saturating_sub(1280), k.saturating_sub(10));
+            let after = peak_about_mean(&top, k + 40, k + 40 + 1280);
             println!(
                 "  topple {} at {:.2} s: spike {:.2} g, 5 s before {:.3} g, 5 s after {:.3} g",
                 tp.unit, tp.time_s, spike, before, after
@@ -275,4 +336,41 @@ fn layout_headers_rows_and_manifest() {
     );
     assert!(m.tests.iter().find(|t| t.id == "FB-5").unwrap().toppling.iter().any(|p| p.unit == "PS2"));
     assert!(m.tests.iter().find(|t| t.id == "FB-6").unwrap().toppling.iter().any(|p| p.unit == "WSU1"));
+}
+
+/// `demo-archive --tests N`: the study's 14 tests byte for byte as in the default archive, then
+/// variations of its motions in turn (scale and seed), named in the manifest.
+#[test]
+fn extra_tests_vary_the_motions_and_keep_the_study_bytes() {
+    let study = primary();
+    let dir = scratch("extra");
+    let report = write_demo_archive_tests(&dir, STUDY_TESTS + 2).unwrap();
+    assert_eq!(report.test_ids[STUDY_TESTS..], ["V-0001", "V-0002"]);
+    assert!(is_current_tests(&dir, STUDY_TESTS + 2));
+    assert!(!is_current(&dir), "a 16-test archive is not the study's");
+    assert!(!is_current_tests(study, STUDY_TESTS + 2));
+    assert!(write_demo_archive_tests(&scratch("too-few"), STUDY_TESTS - 1).is_err());
+    let extra: std::collections::BTreeMap<String, Vec<u8>> = all_files(&dir).into_iter().collect();
+    for (path, bytes) in all_files(study) {
+        if path == README_FILE || path == MANIFEST_FILE {
+            continue;
+        }
+        assert!(extra.get(&path) == Some(&bytes), "{path} differs from the study archive's");
+    }
+    let m = manifest(&dir);
+    assert_eq!(m.tests[..STUDY_TESTS], manifest(study).tests[..]);
+    for (t, of) in m.tests[STUDY_TESTS..].iter().zip(["BI-1", "BI-2"]) {
+        let mo = motion_by_id(of).unwrap();
+        let scale = t.variation_scale.unwrap();
+        assert_eq!((t.variation_of.as_deref(), t.base.as_str(), t.kind.as_str()), (Some(of), "BI", "earthquake"));
+        assert!((0.5..=1.5).contains(&scale));
+        assert_eq!(t.table1_pia_g, None);
+        assert!((t.ground_pga_g - mo.pia_g * scale).abs() <= 1e-6 * mo.pia_g, "{} pga {}", t.id, t.ground_pga_g);
+        assert_eq!((t.experiment, t.trial), (3, t.id[2..].parse().unwrap()));
+        let rows = DemoDaq::read(&dir, &t.daq1_file).rows;
+        assert_eq!(rows.len(), t.daq1_rows);
+        let study_file = &m.tests.iter().find(|s| s.id == of).unwrap().daq1_file;
+        let study_rows = DemoDaq::read(study, study_file).rows;
+        assert!(rows.iter().zip(&study_rows).any(|(a, b)| a[1] != b[1]), "{} is a copy of {of}", t.id);
+    }
 }

@@ -29,21 +29,18 @@ struct Floor {
     y: Vec<f64>,
 }
 
-/// Floors 4 and 5 of each motion from the archive's DAQ1 export: g → m/s², cubic baseline removed.
+/// Floors 4 and 5 of each motion from the archive's DAQ1 export (NEES converted data): its
+/// units → m/s², cubic baseline removed.
 fn floors(archive: &std::path::Path) -> BTreeMap<(String, u8), Floor> {
+    let manifest: shakeflow::demo::archive::Manifest =
+        serde_json::from_str(&std::fs::read_to_string(archive.join("manifest.json")).unwrap()).unwrap();
     let mut out = BTreeMap::new();
     for motion in MOTIONS {
-        let text = std::fs::read_to_string(archive.join(motion).join("DAQ1_floors.csv")).unwrap();
-        let mut lines = text.lines().skip(4);
-        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-        let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
-        let column = |name: &str| {
-            let k = header.iter().position(|h| *h == name).unwrap();
-            rows.iter().map(|r| r[k]).collect::<Vec<f64>>()
-        };
-        let time = column("Time");
+        let test = manifest.tests.iter().find(|t| t.id == motion).unwrap();
+        let daq1 = crate::common::DemoDaq::read(archive, &test.daq1_file);
+        let time = daq1.column("Time");
         let corrected = |name: &str| {
-            let si: Vec<f64> = column(name).iter().map(|v| v * G).collect();
+            let si: Vec<f64> = daq1.g(name, archive).iter().map(|v| v * G).collect();
             shakeflow::signal::baseline::remove_polynomial(&time, &si, 3).0
         };
         let dt = (time[time.len() - 1] - time[0]) / (time.len() - 1) as f64;

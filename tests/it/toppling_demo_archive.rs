@@ -1,5 +1,5 @@
-//! Synthetic demo archive (shakeflow demo-archive): every (test, unit) channel of
-//! DAQ2_equipment.csv; toppled exactly where manifest.json says (within 0.05 s after converting
+//! Synthetic demo archive (shakeflow demo-archive): every (test, unit) channel of each test's
+//! DAQ2 file (raw volts, through the archive's sensitivity table); toppled exactly where manifest.json says (within 0.05 s after converting
 //! DAQ1 -> DAQ2 time), no toppling anywhere else.
 use crate::toppling_common as common;
 
@@ -41,10 +41,10 @@ fn demo_archive_toppling_and_no_false_alarms() {
     for test in tests {
         let id = test.get("id").str();
         let offset = test.get("clock_offset_s").num();
-        let daq2 = Csv::read(&dir.join(id).join("DAQ2_equipment.csv"));
-        let daq1 = Csv::read(&dir.join(id).join("DAQ1_floors.csv"));
-        let t2 = daq2.col("Time");
-        let t1 = daq1.col("Time");
+        let daq2 = crate::common::DemoDaq::read(&dir, test.get("daq2_file").str());
+        let daq1 = crate::common::DemoDaq::read(&dir, test.get("daq1_file").str());
+        let t2 = &daq2.column("Time")[..];
+        let t1 = &daq1.column("Time")[..];
         let topples: Vec<(String, f64)> = test
             .get("toppling")
             .arr()
@@ -55,10 +55,10 @@ fn demo_archive_toppling_and_no_false_alarms() {
             let unit = eq.get("unit").str();
             let channel = eq.get("channel").str();
             let floor = eq.get("floor").num() as i64;
-            let ax: Vec<f64> = daq2.col(channel).iter().map(|v| v * G).collect();
+            let ax: Vec<f64> = daq2.g(channel, &dir).iter().map(|v| v * G).collect();
             // Floor vertical of the unit's floor, on the DAQ2 clock (DAQ1 time = tau + offset).
-            let ud = daq1.col(&format!("A{floor}_UD"));
-            let fv: Vec<f64> = t2.iter().map(|&tau| interp(t1, ud, tau + offset) * G).collect();
+            let ud = daq1.g(&format!("A{floor}_UD"), &dir);
+            let fv: Vec<f64> = t2.iter().map(|&tau| interp(t1, &ud, tau + offset) * G).collect();
             let truth = topples.iter().find(|(u, _)| u == unit).map(|(_, t)| *t);
             let default = DetectOptions::default();
             for (label, floor_v, opts) in

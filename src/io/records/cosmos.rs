@@ -5,7 +5,7 @@
 //! real header each announced by a line with its count and Fortran format, comment lines, a
 //! data line with the count, units and format, the values, and optionally `End-of-data`.
 
-use super::fixed::{after, fortran_format, is_blank, leading_count, Lines};
+use super::fixed::{after, fortran_format, is_blank, leading_count, Lines, Values};
 use super::{quote, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -19,8 +19,18 @@ pub fn read_cosmos(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_cosmos`] of a file's bytes (read once and hashed by `load`); `path` only names the file in errors.
 pub fn parse_cosmos(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
+    cosmos(path, bytes, Values::Parse)
+}
+
+/// `validate`'s check that the file holds the values its header announces: the reader with
+/// its data blocks counted, not parsed.
+pub(super) fn count_cosmos(path: &Path, bytes: &[u8]) -> Result<(), ParseError> {
+    cosmos(path, bytes, Values::Count).map(drop)
+}
+
+fn cosmos(path: &Path, bytes: &[u8], values: Values) -> Result<RawRecord, ParseError> {
     let text = record_text(path, bytes, "a COSMOS record (text header, integer and real headers, data)")?;
-    let lines = Lines::new(path, &text);
+    let lines = Lines::new(path, &text, values);
     let mut header = BTreeMap::new();
     let mut channels: Vec<RawChannel> = Vec::new();
     let mut dt: Option<(f64, usize)> = None;
@@ -281,5 +291,5 @@ fn numeric_block(lines: &Lines<'_>, at: usize, what: &str) -> Result<(Vec<f64>, 
             "the block before it holds more or fewer lines than announced, or this is not a COSMOS file",
         ));
     };
-    lines.fixed(at, at + 1, count, per_line, width, &format!("{what} values"))
+    lines.fixed_parsed(at, at + 1, count, per_line, width, &format!("{what} values"))
 }

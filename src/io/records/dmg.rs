@@ -9,7 +9,7 @@
 //! and an end line `/&`. The headers are located by content, not by fixed line counts, so the
 //! Vol.1 and Vol.2 layouts (13 or 25 text lines) and older upper-case files read alike.
 
-use super::fixed::{after, fortran_format, is_blank, leading_count, Lines};
+use super::fixed::{after, fortran_format, is_blank, leading_count, Lines, Values};
 use super::{quote, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -23,8 +23,18 @@ pub fn read_dmg(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_dmg`] of a file's bytes (read once and hashed by `load`); `path` only names the file in errors.
 pub fn parse_dmg(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
+    dmg(path, bytes, Values::Parse)
+}
+
+/// `validate`'s check that the file holds the values its header announces: the reader with
+/// its data blocks counted, not parsed.
+pub(super) fn count_dmg(path: &Path, bytes: &[u8]) -> Result<(), ParseError> {
+    dmg(path, bytes, Values::Count).map(drop)
+}
+
+fn dmg(path: &Path, bytes: &[u8], values: Values) -> Result<RawRecord, ParseError> {
     let text = record_text(path, bytes, "a CSMIP/DMG Vol.1 or Vol.2 record")?;
-    let lines = Lines::new(path, &text);
+    let lines = Lines::new(path, &text, values);
     let mut header = BTreeMap::new();
     let mut channels: Vec<RawChannel> = Vec::new();
     let mut dt: Option<f64> = None;
@@ -303,10 +313,11 @@ fn time_value_pairs(lines: &Lines<'_>, start: usize) -> Result<Block, ParseError
     })?;
     let first = lines.get(data_at).map_or(0, |l| l.trim_end().len());
     let pairs = npts.saturating_mul(2);
+    // The time column gives the sampling: parsed even when counting.
     let (both, next) = if first > 0 && first.is_multiple_of(10) {
-        lines.fixed(count_at, data_at, pairs, 10, first / 10, "(time, accel)")?
+        lines.fixed_parsed(count_at, data_at, pairs, 10, first / 10, "(time, accel)")?
     } else {
-        lines.free(count_at, data_at, pairs, "(time, accel)")?
+        lines.free_parsed(count_at, data_at, pairs, "(time, accel)")?
     };
     let time: Vec<f64> = both.iter().step_by(2).copied().collect();
     let values: Vec<f64> = both.iter().skip(1).step_by(2).copied().collect();

@@ -4,7 +4,7 @@
 //! `UNITS`, `STREAM`, `PGA_CM/S^2`, ...), then the values, one or more to a line. Every header
 //! key is kept (lower-cased); the AFAD-derived files' other date layouts are kept as written.
 
-use super::fixed::{is_blank, Lines};
+use super::fixed::{is_blank, Lines, Values};
 use super::{quote, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -15,8 +15,18 @@ pub fn read_esm(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_esm`] of a file's bytes (read once and hashed by `load`); `path` only names the file in errors.
 pub fn parse_esm(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
+    esm(path, bytes, Values::Parse)
+}
+
+/// `validate`'s check that the file holds the values its header announces: the reader with
+/// its data blocks counted, not parsed.
+pub(super) fn count_esm(path: &Path, bytes: &[u8]) -> Result<(), ParseError> {
+    esm(path, bytes, Values::Count).map(drop)
+}
+
+fn esm(path: &Path, bytes: &[u8], values: Values) -> Result<RawRecord, ParseError> {
     let text = record_text(path, bytes, "an ESM ASCII record (KEY: value header lines, then values)")?;
-    let lines = Lines::new(path, &text);
+    let lines = Lines::new(path, &text, values);
     let mut keys: BTreeMap<String, (String, usize)> = BTreeMap::new();
     let mut k = 0;
     while let Some(line) = lines.get(k) {

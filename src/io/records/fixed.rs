@@ -1,10 +1,21 @@
 //! What the fixed-width strong-motion formats (COSMOS, CSMIP/DMG, SMC, GeoNet, K-NET, ESM)
 //! share: a file as numbered lines, Fortran-style fields that may touch (`-1.2E+0-3.4E+0`),
 //! value counts checked against the bytes left in the file before anything is allocated, and
-//! errors that name the file, the line and the column.
+//! errors that name the file, the line and the column. `validate` runs the readers with
+//! [`Values::Count`]: data blocks are walked and their values counted, not parsed.
 
 use super::{char_column, offset_in, parse_finite, quote, ParseError};
 use std::path::Path;
+
+/// What a reader does with a data block's values.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Values {
+    /// Parses them (`load`).
+    Parse,
+    /// Checks that each one is there (a field, a token) without parsing it, and gives zeros:
+    /// `validate`'s cheap check that a file holds the values its header announces.
+    Count,
+}
 
 /// A record file as lines (without `\r`), 0-based here, reported 1-based.
 pub(super) struct Lines<'a> {
@@ -13,10 +24,12 @@ pub(super) struct Lines<'a> {
     /// Byte offset of each line's start, to bound counts by what is left of the file.
     starts: Vec<usize>,
     len: usize,
+    /// What [`Lines::fixed`] and [`Lines::free`] do with values (header blocks are always parsed).
+    values: Values,
 }
 
 impl<'a> Lines<'a> {
-    pub fn new(path: &'a Path, text: &'a str) -> Self {
+    pub fn new(path: &'a Path, text: &'a str, values: Values) -> Self {
         let mut lines = Vec::new();
         let mut starts = Vec::new();
         let mut at = 0;
@@ -30,7 +43,7 @@ impl<'a> Lines<'a> {
             lines.pop();
             starts.pop();
         }
-        Lines { path, lines, starts, len: text.len() }
+        Lines { path, lines, starts, len: text.len(), values }
     }
 
     pub fn count(&self) -> usize {
@@ -97,8 +110,9 @@ impl<'a> Lines<'a> {
         Ok(())
     }
 
-    /// `count` numbers in fields `width` characters wide, `per_line` to a line, from line
-    /// `first`; returns them and the index of the line after the last one read.
+    /// A data block: `count` numbers in fields `width` characters wide, `per_line` to a line,
+    /// from line `first`; returns them (zeros when counting) and the index of the line after the
+    /// last one read.
     pub fn fixed(
         &self,
         count_line: usize,
@@ -107,6 +121,33 @@ impl<'a> Lines<'a> {
         per_line: usize,
         width: usize,
         what: &str,
+    ) -> Result<(Vec<f64>, usize), ParseError> {
+        self.fixed_as(count_line, first, count, per_line, width, what, self.values)
+    }
+
+    /// [`Lines::fixed`] for a block whose values the reader needs even when counting (a header).
+    pub fn fixed_parsed(
+        &self,
+        count_line: usize,
+        first: usize,
+        count: usize,
+        per_line: usize,
+        width: usize,
+        what: &str,
+    ) -> Result<(Vec<f64>, usize), ParseError> {
+        self.fixed_as(count_line, first, count, per_line, width, what, Values::Parse)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn fixed_as(
+        &self,
+        count_line: usize,
+        first: usize,
+        count: usize,
+        per_line: usize,
+        width: usize,
+        what: &str,
+        mode: Values,
     ) -> Result<(Vec<f64>, usize), ParseError> {
         self.check_room(count_line, first, count, width, what)?;
         let per_line = per_line.max(1);
@@ -121,7 +162,11 @@ impl<'a> Lines<'a> {
                 let start = k * width;
                 let field = line.get(start..(start + width).min(line.len())).unwrap_or("");
                 let token = field.trim();
-                let value = if token.is_empty() { None } else { parse_finite(token) };
+                let value = match mode {
+                    _ if token.is_empty() => None,
+                    Values::Parse => parse_finite(token),
+                    Values::Count => Some(0.0),
+                };
                 let Some(value) = value else {
                     let column = if token.is_empty() { start.min(line.len()) } else { offset_in(line, token) };
                     let found = if token.is_empty() { "nothing".to_string() } else { format!("'{token}'") };
@@ -155,14 +200,37 @@ impl<'a> Lines<'a> {
         Ok((values, i))
     }
 
-    /// `count` numbers separated by blanks, any number to a line, from line `first`; a line
-    /// holding more than the count needs is an error (two blocks run together).
+    /// A data block: `count` numbers separated by blanks, any number to a line, from line
+    /// `first` (zeros when counting); a line holding more than the count needs is an error (two
+    /// blocks run together).
     pub fn free(
         &self,
         count_line: usize,
         first: usize,
         count: usize,
         what: &str,
+    ) -> Result<(Vec<f64>, usize), ParseError> {
+        self.free_as(count_line, first, count, what, self.values)
+    }
+
+    /// [`Lines::free`] for a block whose values the reader needs even when counting.
+    pub fn free_parsed(
+        &self,
+        count_line: usize,
+        first: usize,
+        count: usize,
+        what: &str,
+    ) -> Result<(Vec<f64>, usize), ParseError> {
+        self.free_as(count_line, first, count, what, Values::Parse)
+    }
+
+    fn free_as(
+        &self,
+        count_line: usize,
+        first: usize,
+        count: usize,
+        what: &str,
+        mode: Values,
     ) -> Result<(Vec<f64>, usize), ParseError> {
         self.check_room(count_line, first, count, 2, what)?;
         let mut values = Vec::with_capacity(count);
@@ -181,7 +249,11 @@ impl<'a> Lines<'a> {
                         "the count in the header is wrong or two blocks run together",
                     ));
                 }
-                let Some(value) = parse_finite(token) else {
+                let value = match mode {
+                    Values::Parse => parse_finite(token),
+                    Values::Count => Some(0.0),
+                };
+                let Some(value) = value else {
                     return Err(self.error(
                         i,
                         Some(column()),
@@ -281,14 +353,14 @@ mod tests {
     #[test]
     fn touching_fields_are_split_by_width_and_counts_bounded_by_the_file() {
         let text = " 1.5057E+0-2.2223E+0\n-1.9234E+0\n";
-        let lines = Lines::new(Path::new("x.smc"), text);
+        let lines = Lines::new(Path::new("x.smc"), text, Values::Parse);
         let (values, next) = lines.fixed(0, 0, 3, 2, 10, "acceleration").unwrap();
         assert_eq!(values, vec![1.5057, -2.2223, -1.9234]);
         assert_eq!(next, 2);
         let err = lines.fixed(0, 0, 99_999_999_999, 2, 10, "acceleration").unwrap_err();
         assert_eq!(err.line, Some(1));
         assert!(err.message.contains("room for at most 3"), "{}", err.message);
-        let bad = Lines::new(Path::new("x.smc"), " 1.5057E+0-2.2223E+0\n-1.9234E+0   abc    \n");
+        let bad = Lines::new(Path::new("x.smc"), " 1.5057E+0-2.2223E+0\n-1.9234E+0   abc    \n", Values::Parse);
         let err = bad.fixed(0, 0, 4, 2, 10, "acceleration").unwrap_err();
         assert!(err.message.contains("value 4 of 4 here, found 'abc'"), "{err}");
         assert_eq!((err.line, err.column), (Some(2), Some(14)));

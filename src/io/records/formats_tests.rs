@@ -563,3 +563,43 @@ fn damaged_files_never_panic() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A reader's two modes: values parsed (`load`) and values counted (`validate`).
+type Modes = (fn(&Path, &[u8]) -> Result<RawRecord, ParseError>, fn(&Path, &[u8]) -> Result<(), ParseError>);
+
+/// `validate`'s count of a record's values agrees with its reader: every shared record passes
+/// whole, and a copy cut short anywhere is refused by both at the same line.
+#[test]
+fn counting_refuses_truncated_copies_at_the_line_parsing_does() {
+    let modes = |folder: &str| -> Modes {
+        match folder {
+            "nga" => (parse_at2, super::at2::count_at2),
+            "cosmos" => (parse_cosmos, super::cosmos::count_cosmos),
+            "dmg" => (parse_dmg, super::dmg::count_dmg),
+            "smc" => (parse_smc, super::smc::count_smc),
+            "knet" => (parse_knet, super::knet::count_knet),
+            "esm" => (parse_esm, super::esm::count_esm),
+            "geonet" => (parse_geonet, super::geonet::count_geonet),
+            other => panic!("no reader for the shared folder {other}"),
+        }
+    };
+    record("SOURCES.md");
+    let mut files = 0;
+    for folder in ["nga", "cosmos", "dmg", "smc", "knet", "esm", "geonet"] {
+        let (parse, count) = modes(folder);
+        for entry in std::fs::read_dir(Path::new(RECORDS_DIR).join(folder)).unwrap() {
+            let path = entry.unwrap().path();
+            let bytes = std::fs::read(&path).unwrap();
+            count(&path, &bytes).unwrap_or_else(|e| panic!("the whole file is refused: {e}"));
+            files += 1;
+            for percent in [5, 30, 50, 77, 90, 99] {
+                let cut = &bytes[..bytes.len() * percent / 100];
+                let parsed = parse(&path, cut).err().map(|e| e.line);
+                let counted = count(&path, cut).err().map(|e| e.line);
+                assert_eq!(counted, parsed, "{} cut to {percent} %", path.display());
+                assert!(counted.is_some() || percent == 99, "{} cut to {percent} % passes", path.display());
+            }
+        }
+    }
+    assert_eq!(files, 18);
+}

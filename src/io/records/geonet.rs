@@ -7,7 +7,7 @@
 //! R(26) is the sampling interval; a V2A follows each acceleration block with its velocity and
 //! displacement blocks, which the reader skips.
 
-use super::fixed::{after, compass_azimuth, is_blank, Lines};
+use super::fixed::{after, compass_azimuth, is_blank, Lines, Values};
 use super::{quote, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -22,8 +22,18 @@ pub fn read_geonet(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_geonet`] of a file's bytes (read once and hashed by `load`); `path` only names the file in errors.
 pub fn parse_geonet(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
+    geonet(path, bytes, Values::Parse)
+}
+
+/// `validate`'s check that the file holds the values its header announces: the reader with
+/// its data blocks counted, not parsed.
+pub(super) fn count_geonet(path: &Path, bytes: &[u8]) -> Result<(), ParseError> {
+    geonet(path, bytes, Values::Count).map(drop)
+}
+
+fn geonet(path: &Path, bytes: &[u8], values: Values) -> Result<RawRecord, ParseError> {
     let text = record_text(path, bytes, "a GeoNet V1A/V2A record")?;
-    let lines = Lines::new(path, &text);
+    let lines = Lines::new(path, &text, values);
     let mut header = BTreeMap::new();
     let mut channels: Vec<RawChannel> = Vec::new();
     let mut dt: Option<f64> = None;
@@ -48,9 +58,15 @@ pub fn parse_geonet(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> 
         }
         let text: Vec<&str> =
             (i..i + TEXT_LINES).map(|k| lines.line(k, "the 16-line GeoNet text header")).collect::<Result<_, _>>()?;
-        let (ints, _) = lines.fixed(i + TEXT_LINES, i + TEXT_LINES, 40, 10, 8, "GeoNet integer-header")?;
-        let (reals, _) =
-            lines.fixed(i + TEXT_LINES + INT_LINES, i + TEXT_LINES + INT_LINES, 60, 10, 8, "GeoNet real-header")?;
+        let (ints, _) = lines.fixed_parsed(i + TEXT_LINES, i + TEXT_LINES, 40, 10, 8, "GeoNet integer-header")?;
+        let (reals, _) = lines.fixed_parsed(
+            i + TEXT_LINES + INT_LINES,
+            i + TEXT_LINES + INT_LINES,
+            60,
+            10,
+            8,
+            "GeoNet real-header",
+        )?;
         let int_line = i + TEXT_LINES + 3;
         let count = |k: usize| -> Result<usize, ParseError> {
             let v = ints[k - 1];

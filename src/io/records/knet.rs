@@ -7,7 +7,7 @@
 //! DC offset (the header's `Max. Acc.` is measured after removing the mean): that is left to a
 //! baseline step. The number of values must be `Duration Time(s)` × `Sampling Freq(Hz)`.
 
-use super::fixed::{is_blank, Lines};
+use super::fixed::{is_blank, Lines, Values};
 use super::{char_column, quote, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -39,8 +39,18 @@ pub fn read_knet(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_knet`] of a file's bytes (read once and hashed by `load`); `path` only names the file in errors.
 pub fn parse_knet(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
+    knet(path, bytes, Values::Parse)
+}
+
+/// `validate`'s check that the file holds the values its header announces: the reader with
+/// its data blocks counted, not parsed.
+pub(super) fn count_knet(path: &Path, bytes: &[u8]) -> Result<(), ParseError> {
+    knet(path, bytes, Values::Count).map(drop)
+}
+
+fn knet(path: &Path, bytes: &[u8], values: Values) -> Result<RawRecord, ParseError> {
     let text = record_text(path, bytes, "a K-NET/KiK-net ASCII record (17 header lines, then counts)")?;
-    let lines = Lines::new(path, &text);
+    let lines = Lines::new(path, &text, values);
     let mut header = BTreeMap::new();
     for (k, (key, name)) in KEYS.iter().enumerate() {
         let line = lines.line(k, "the 17-line K-NET header")?;

@@ -198,7 +198,10 @@ const HEADER_BYTES: u64 = 16 * 1024;
 /// `validate`'s quick look at a record file (the first is loaded whole): its first 16 KB are
 /// text and, by their content, not another format than the source declares (`format`, as
 /// pipelines name it); a delimited file's header rows and first data rows parse with `delimited`,
-/// and its channel names are returned. Not a full parse: damage further on is found by `load`.
+/// and its channel names are returned. A format that states its sample count (AT2, COSMOS,
+/// CSMIP/DMG, SMC, K-NET, ESM, GeoNet) is read whole with its data values counted, not parsed: a
+/// truncated record is refused at its last line. Not a full parse: a damaged value is found by
+/// `load`.
 pub fn check_header(
     path: &Path,
     format: &str,
@@ -219,6 +222,19 @@ pub fn check_header(
                 "a file of another format among the source's files: move it, or narrow the source's path",
             ));
         }
+    }
+    let count: Option<fn(&Path, &[u8]) -> Result<(), ParseError>> = match format {
+        "at2" => Some(at2::count_at2),
+        "cosmos" => Some(cosmos::count_cosmos),
+        "dmg" => Some(dmg::count_dmg),
+        "smc" => Some(smc::count_smc),
+        "knet" => Some(knet::count_knet),
+        "esm" => Some(esm::count_esm),
+        "geonet" => Some(geonet::count_geonet),
+        _ => None,
+    };
+    if let Some(count) = count {
+        count(path, &read_bytes(path)?)?;
     }
     let Some(opts) = delimited else { return Ok(None) };
     // A prefix ends at its last complete line.

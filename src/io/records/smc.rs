@@ -5,7 +5,7 @@
 //! in 10-character fields that touch (`1.5057E+0-2.2223E+0`), 8 to a line. R(2) is the
 //! sampling rate. Integer I(1) and real R(1) hold the file's "unknown" markers.
 
-use super::fixed::{after, is_blank, Lines};
+use super::fixed::{after, is_blank, Lines, Values};
 use super::{quote, read_bytes, record_text, ParseError, RawChannel, RawRecord};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -20,8 +20,18 @@ pub fn read_smc(path: &Path) -> Result<RawRecord, ParseError> {
 
 /// [`read_smc`] of a file's bytes (read once and hashed by `load`); `path` only names the file in errors.
 pub fn parse_smc(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
+    smc(path, bytes, Values::Parse)
+}
+
+/// `validate`'s check that the file holds the values its header announces: the reader with
+/// its data blocks counted, not parsed.
+pub(super) fn count_smc(path: &Path, bytes: &[u8]) -> Result<(), ParseError> {
+    smc(path, bytes, Values::Count).map(drop)
+}
+
+fn smc(path: &Path, bytes: &[u8], values: Values) -> Result<RawRecord, ParseError> {
     let text = record_text(path, bytes, "a USGS SMC record")?;
-    let lines = Lines::new(path, &text);
+    let lines = Lines::new(path, &text, values);
     let head: Vec<&str> =
         (0..TEXT_LINES).map(|k| lines.line(k, "the 11-line SMC text header")).collect::<Result<_, _>>()?;
     let kind = head[0].trim();
@@ -48,8 +58,9 @@ pub fn parse_smc(path: &Path, bytes: &[u8]) -> Result<RawRecord, ParseError> {
             "only SMC accelerograms are read",
         ));
     }
-    let (ints, _) = lines.fixed(TEXT_LINES, TEXT_LINES, 48, 8, 10, "SMC integer-header")?;
-    let (reals, _) = lines.fixed(TEXT_LINES + INT_LINES, TEXT_LINES + INT_LINES, 50, 5, 15, "SMC real-header")?;
+    let (ints, _) = lines.fixed_parsed(TEXT_LINES, TEXT_LINES, 48, 8, 10, "SMC integer-header")?;
+    let (reals, _) =
+        lines.fixed_parsed(TEXT_LINES + INT_LINES, TEXT_LINES + INT_LINES, 50, 5, 15, "SMC real-header")?;
     let int = |k: usize| Some(ints[k - 1]).filter(|v| *v != ints[0]);
     let real = |k: usize| Some(reals[k - 1]).filter(|v| *v != reals[0]);
     let int_line = |k: usize| TEXT_LINES + (k - 1) / 8;

@@ -259,3 +259,68 @@ pub fn test_slurm() -> shakeflow::pipeline::slurm::Slurm {
     );
     shakeflow::pipeline::slurm::Slurm::with_conf(conf)
 }
+
+/// A DAQ file of the demo archive, read here without shakeflow's readers: NEES tab-delimited
+/// text, a 4-line preamble, then the name (line 5), description (6) and units (7) rows, then data.
+pub struct DemoDaq {
+    pub preamble: Vec<String>,
+    pub names: Vec<String>,
+    pub descriptions: Vec<String>,
+    pub units: Vec<String>,
+    /// The data rows, numbers as written.
+    pub rows: Vec<Vec<f64>>,
+    /// The time cells as written.
+    pub times: Vec<String>,
+}
+
+impl DemoDaq {
+    /// The file at `path` below the archive `archive` (the manifest's `daq1_file`/`daq2_file`).
+    pub fn read(archive: &Path, path: &str) -> DemoDaq {
+        let full = archive.join(path);
+        let text = std::fs::read_to_string(&full).unwrap_or_else(|e| panic!("cannot read {}: {e}", full.display()));
+        let mut lines = text.lines();
+        let mut row = || lines.next().unwrap().split('\t').map(String::from).collect::<Vec<String>>();
+        let preamble: Vec<String> = (0..4).map(|_| row().join("\t")).collect();
+        let (names, descriptions, units) = (row(), row(), row());
+        let (mut rows, mut times) = (Vec::new(), Vec::new());
+        for line in lines {
+            let cells: Vec<&str> = line.split('\t').collect();
+            assert_eq!(cells.len(), names.len(), "{}: a row of {} cells: {line}", full.display(), cells.len());
+            times.push(cells[0].to_string());
+            rows.push(cells.iter().map(|c| c.parse::<f64>().unwrap()).collect());
+        }
+        DemoDaq { preamble, names, descriptions, units, rows, times }
+    }
+
+    pub fn index(&self, name: &str) -> usize {
+        self.names.iter().position(|n| n == name).unwrap_or_else(|| panic!("no column {name} in {:?}", self.names))
+    }
+
+    /// A column as written.
+    pub fn column(&self, name: &str) -> Vec<f64> {
+        let k = self.index(name);
+        self.rows.iter().map(|r| r[k]).collect()
+    }
+
+    /// An acceleration column in g: in/sec^2 ÷ (9.80665 / 0.0254), g as written, volts through
+    /// the archive's sensitivity table (`channel,sensitivity,unit,offset`, V per g).
+    pub fn g(&self, name: &str, archive: &Path) -> Vec<f64> {
+        let values = self.column(name);
+        match self.units[self.index(name)].as_str() {
+            "g" => values,
+            "in/sec^2" => values.iter().map(|v| v * 0.0254 / 9.80665).collect(),
+            "V" => {
+                let table = std::fs::read_to_string(archive.join(shakeflow::demo::archive::SENSITIVITY_FILE)).unwrap();
+                let row = table
+                    .lines()
+                    .find_map(|l| l.strip_prefix(&format!("{name},")))
+                    .unwrap_or_else(|| panic!("no sensitivity for {name}"));
+                let cells: Vec<&str> = row.split(',').collect();
+                let (sensitivity, offset): (f64, f64) = (cells[0].parse().unwrap(), cells[2].parse().unwrap());
+                assert_eq!(cells[1], "g");
+                values.iter().map(|v| (v - offset) / sensitivity).collect()
+            }
+            other => panic!("{name}: unexpected unit {other}"),
+        }
+    }
+}
