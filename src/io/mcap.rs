@@ -284,7 +284,7 @@ mod tests {
 
     #[test]
     fn chunks_are_lz4_and_read_back() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         let path = dir.path().join("t.mcap");
         let mut t = Table::new();
         let time: Vec<f64> = (0..2000).map(|i| i as f64 * 0.005).collect();

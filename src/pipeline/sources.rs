@@ -167,7 +167,7 @@ mod tests {
 
     #[test]
     fn wildcards_beside_keys_match_one_segment_and_name_no_partition() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = crate::tempdir::tempdir().unwrap();
         for (experiment, trial, test) in [(1, 2, "BI-2"), (2, 5, "FB-4"), (2, 10, "WN-6")] {
             let folder = dir.path().join(format!("Experiment-{experiment}/Trial-{trial}/Rep-1/Converted_Data"));
             std::fs::create_dir_all(&folder).unwrap();

@@ -112,7 +112,7 @@ fn every_record_file_gets_a_header_check_not_only_the_first() {
 /// suite is refused before a run at its file and the line `load` would name.
 #[test]
 fn a_record_truncated_past_its_head_is_refused_where_load_would() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = crate::tempdir::tempdir().unwrap();
     let root = dir.path();
     let records = crate::common::shared_dir().join("data/records");
     let suite = [

@@ -115,7 +115,7 @@ pub fn pipeline_with_twins() -> String {
 }
 
 /// [`small_project`] whose `baseline` also writes MCAP twins.
-pub fn small_project_with_twins() -> tempfile::TempDir {
+pub fn small_project_with_twins() -> crate::tempdir::TempDir {
     let dir = small_project();
     std::fs::write(dir.path().join("pipeline.yaml"), pipeline_with_twins()).unwrap();
     dir
