@@ -220,6 +220,10 @@ enum Command {
         /// Rewrite it even when an up-to-date archive is already there.
         #[arg(long)]
         force: bool,
+        /// How many tests: the study's 14, then variations (scale, seed) of its motions, V-0001 …
+        /// (for scale benchmarks).
+        #[arg(long, default_value_t = crate::demo::archive::STUDY_TESTS)]
+        tests: usize,
     },
     /// Print the JSON Schema of pipeline files (the source of schemas/pipeline.schema.json).
     Schema,
@@ -471,13 +475,13 @@ pub fn main() -> anyhow::Result<ExitCode> {
             );
             Ok(ExitCode::SUCCESS)
         }
-        Command::DemoArchive { dir, force } => {
-            if !force && crate::demo::archive::is_current(&dir) {
+        Command::DemoArchive { dir, force, tests } => {
+            if !force && crate::demo::archive::is_current_tests(&dir, tests) {
                 eprintln!("{}: demo archive is up to date (use --force to rewrite it)", dir.display());
                 return Ok(ExitCode::SUCCESS);
             }
             let started = std::time::Instant::now();
-            let report = crate::demo::archive::write_demo_archive(&dir)
+            let report = crate::demo::archive::write_demo_archive_tests(&dir, tests)
                 .with_context(|| format!("writing the demo archive to `{}`", dir.display()))?;
             let bytes: u64 = report.files.iter().map(|f| f.bytes).sum();
             eprintln!(

@@ -41,6 +41,8 @@ pub const DAQ2_FILE: &str = "DAQ2_equipment.csv";
 pub const CPT_CONTROL_POINTS_FILE: &str = "cpt/control_points.csv";
 pub const CPT_TRUTH_FILE: &str = "cpt/truth.csv";
 pub const CPT_FRAMES_DIR: &str = "cpt/frames";
+/// The study's tests (Table 1's twelve motions and two white-noise tests): the archive's default.
+pub const STUDY_TESTS: usize = 14;
 pub const DAQ1_RATE_HZ: u32 = 200;
 pub const DAQ2_RATE_HZ: u32 = 256;
 pub const DAQ1_COLUMNS: [&str; 7] = ["Time", "A4_EW", "A4_NS", "A4_UD", "A5_EW", "A5_NS", "A5_UD"];
@@ -163,6 +165,12 @@ pub struct TestEntry {
     pub clock_offset_s: f64,
     /// "before FB-1" or "before FB-6" (Table 3 column used).
     pub frequency_set: String,
+    /// Extra tests (`--tests N` above 14): the study motion this test varies and the factor on
+    /// its peak input acceleration (its ground motion has its own seed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub variation_of: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub variation_scale: Option<f64>,
     pub floor_channels: Vec<FloorChannel>,
     pub equipment: Vec<EquipmentChannel>,
     pub toppling: Vec<Toppling>,
@@ -213,9 +221,21 @@ pub struct DemoArchiveReport {
     pub files: Vec<FileEntry>,
 }
 
-/// Writes the archive atomically: into `<dir>.tmp-<pid>`, then renamed into place (an older
-/// archive at `dir` is moved aside and removed). The temp directory is removed on error.
+/// Writes the study's archive (its 14 tests) atomically; see [`write_demo_archive_tests`].
 pub fn write_demo_archive(dir: &Path) -> io::Result<DemoArchiveReport> {
+    write_demo_archive_tests(dir, STUDY_TESTS)
+}
+
+/// Writes an archive of `tests` tests (at least [`STUDY_TESTS`]: the study's, then variations of
+/// its motions) atomically: into `<dir>.tmp-<pid>`, then renamed into place (an older archive at
+/// `dir` is moved aside and removed). The temp directory is removed on error.
+pub fn write_demo_archive_tests(dir: &Path, tests: usize) -> io::Result<DemoArchiveReport> {
+    if tests < STUDY_TESTS {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!("{tests} tests: the archive holds at least the study's {STUDY_TESTS}"),
+        ));
+    }
     let name = dir
         .file_name()
         .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "archive path has no final component"))?
@@ -229,7 +249,7 @@ pub fn write_demo_archive(dir: &Path) -> io::Result<DemoArchiveReport> {
         fs::remove_dir_all(&tmp)?;
     }
     fs::create_dir(&tmp)?;
-    let files = match write_contents(&tmp) {
+    let files = match write_contents(&tmp, tests) {
         Ok(files) => files,
         Err(e) => {
             let _ = fs::remove_dir_all(&tmp);
@@ -251,17 +271,18 @@ pub fn write_demo_archive(dir: &Path) -> io::Result<DemoArchiveReport> {
     if old.exists() {
         fs::remove_dir_all(&old)?;
     }
-    Ok(DemoArchiveReport {
-        dir: dir.to_path_buf(),
-        test_ids: plans().iter().map(|p| p.id.to_string()).collect(),
-        files,
-    })
+    Ok(DemoArchiveReport { dir: dir.to_path_buf(), test_ids: plans(tests).into_iter().map(|p| p.id).collect(), files })
 }
 
-/// True when `dir` holds a complete archive written by this generator version: the manifest
-/// parses, names this generator and version, lists exactly the expected tests and files, and
-/// every listed file exists with the recorded size.
+/// [`is_current_tests`] for the study's archive (its 14 tests).
 pub fn is_current(dir: &Path) -> bool {
+    is_current_tests(dir, STUDY_TESTS)
+}
+
+/// True when `dir` holds a complete archive of `tests` tests written by this generator version:
+/// the manifest parses, names this generator and version, lists exactly the expected tests and
+/// files, and every listed file exists with the recorded size.
+pub fn is_current_tests(dir: &Path, tests: usize) -> bool {
     let Ok(text) = fs::read_to_string(dir.join(MANIFEST_FILE)) else {
         return false;
     };
@@ -271,8 +292,8 @@ pub fn is_current(dir: &Path) -> bool {
     if manifest.generator.name != GENERATOR_NAME || manifest.generator.version != GENERATOR_VERSION {
         return false;
     }
-    let ids: Vec<&str> = plans().iter().map(|p| p.id).collect();
-    if manifest.tests.iter().map(|t| t.id.as_str()).ne(ids.iter().copied()) {
+    let ids: Vec<String> = plans(tests).into_iter().map(|p| p.id).collect();
+    if manifest.tests.iter().map(|t| &t.id).ne(ids.iter()) {
         return false;
     }
     if manifest.files.iter().map(|f| f.path.clone()).ne(expected_files(&ids)) {
@@ -284,7 +305,7 @@ pub fn is_current(dir: &Path) -> bool {
         .all(|f| fs::metadata(dir.join(&f.path)).map(|m| m.is_file() && m.len() == f.bytes).unwrap_or(false))
 }
 
-fn expected_files(ids: &[&str]) -> Vec<String> {
+fn expected_files(ids: &[String]) -> Vec<String> {
     let mut out = vec![README_FILE.to_string()];
     for id in ids {
         out.push(format!("{id}/{DAQ1_FILE}"));
@@ -376,37 +397,68 @@ enum Kind {
     WhiteNoise,
 }
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 struct TestPlan {
-    id: &'static str,
+    id: String,
     kind: Kind,
     base: Base,
     frequency_set: FrequencySet,
+    variation: Option<Variation>,
 }
 
-/// All tests in chronological order: BI-1..BI-6, WN-1, FB-1..FB-5, WN-6, FB-6.
-fn plans() -> Vec<TestPlan> {
+/// An extra test: a study motion at another scale, with its own ground-motion seed.
+#[derive(Clone, Copy, Debug)]
+struct Variation {
+    /// 1, 2, …: the extra test's number (`V-0001`, …).
+    number: usize,
+    /// Factor on the motion's peak input acceleration, in [0.5, 1.5] (3 decimals).
+    scale: f64,
+}
+
+/// The study's tests in chronological order (BI-1..BI-6, WN-1, FB-1..FB-5, WN-6, FB-6), then
+/// `tests - 14` variations `V-0001`, … of Table 1's motions in turn.
+fn plans(tests: usize) -> Vec<TestPlan> {
+    let mut out = study_plans();
+    for number in 1..=tests.saturating_sub(out.len()) {
+        let m = &MOTIONS[(number - 1) % MOTIONS.len()];
+        let late = matches!(m.id, "FB-4" | "FB-5" | "FB-6");
+        let frequency_set = if late { FrequencySet::BeforeFb6 } else { FrequencySet::BeforeFb1 };
+        let scale = quantize(SplitMix64::new(seed_from_label(&format!("variation:{number}"))).uniform(0.5, 1.5), 3);
+        out.push(TestPlan {
+            id: format!("V-{number:04}"),
+            kind: Kind::Earthquake(m),
+            base: m.base,
+            frequency_set,
+            variation: Some(Variation { number, scale }),
+        });
+    }
+    out
+}
+
+fn study_plans() -> Vec<TestPlan> {
     let mut out = Vec::new();
     for m in &MOTIONS {
         if m.id == "FB-1" {
             out.push(TestPlan {
-                id: "WN-1",
+                id: "WN-1".into(),
                 kind: Kind::WhiteNoise,
                 base: Base::Fixed,
                 frequency_set: FrequencySet::BeforeFb1,
+                variation: None,
             });
         }
         if m.id == "FB-6" {
             out.push(TestPlan {
-                id: "WN-6",
+                id: "WN-6".into(),
                 kind: Kind::WhiteNoise,
                 base: Base::Fixed,
                 frequency_set: FrequencySet::BeforeFb6,
+                variation: None,
             });
         }
         let late = matches!(m.id, "FB-4" | "FB-5" | "FB-6");
         let frequency_set = if late { FrequencySet::BeforeFb6 } else { FrequencySet::BeforeFb1 };
-        out.push(TestPlan { id: m.id, kind: Kind::Earthquake(m), base: m.base, frequency_set });
+        out.push(TestPlan { id: m.id.into(), kind: Kind::Earthquake(m), base: m.base, frequency_set, variation: None });
     }
     out
 }
@@ -517,7 +569,7 @@ struct GeneratedTest {
 }
 
 fn generate_test(plan: &TestPlan) -> GeneratedTest {
-    let id = plan.id;
+    let id = plan.id.as_str();
     let sh = shape(plan.kind);
     let dt = 1.0 / SIM_RATE_HZ;
     let n_sim = (sh.duration_s + SIM_MARGIN_S) as usize * SIM_RATE_HZ as usize;
@@ -529,16 +581,15 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
     };
 
     // Ground motion: earthquake shape seeded by record name, so e.g. ICA50/100/140 are the same
-    // record at different scales, as on the real table.
+    // record at different scales, as on the real table; a variation has its own seed and scale.
     let ground = match (plan.kind, &sh.filter) {
-        (Kind::Earthquake(m), Some(f)) => synthetic_ground_motion(
-            seed_from_label(&format!("record:{}", m.record)),
-            n_sim,
-            dt,
-            f,
-            &sh.envelope,
-            m.pia_g,
-        ),
+        (Kind::Earthquake(m), Some(f)) => {
+            let (label, pia_g) = match plan.variation {
+                None => (format!("record:{}", m.record), m.pia_g),
+                Some(v) => (format!("record:{}:variation:{}", m.record, v.number), m.pia_g * v.scale),
+            };
+            synthetic_ground_motion(seed_from_label(&label), n_sim, dt, f, &sh.envelope, pia_g)
+        }
         _ => band_limited_white_noise(stream("ground"), n_sim, dt, 0.5, 25.0, &sh.envelope, WHITE_NOISE_PEAK_G),
     };
     let model = building(plan.base);
@@ -629,9 +680,10 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
         });
     }
 
+    let scale_percent = |m: &Motion| plan.variation.map_or(m.scale_percent, |v| quantize(m.scale_percent * v.scale, 3));
     let (kind, input, event, motion) = match plan.kind {
         Kind::Earthquake(m) => {
-            ("earthquake", m.input.to_string(), format!("{} ({} %)", m.event_site, m.scale_percent), Some(m))
+            ("earthquake", m.input.to_string(), format!("{} ({} %)", m.event_site, scale_percent(m)), Some(m))
         }
         Kind::WhiteNoise => (
             "white_noise",
@@ -650,10 +702,11 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
         input,
         event: motion.map_or_else(|| event.clone(), |m| m.event_site.to_string()),
         base: plan.base.code().into(),
-        scale_percent: motion.map(|m| m.scale_percent),
-        table1_pia_g: motion.map(|m| m.pia_g),
-        table1_piv_cm_s: motion.map(|m| m.piv_cm_s),
-        table1_pid_cm: motion.map(|m| m.pid_cm),
+        scale_percent: motion.map(scale_percent),
+        // Table 1 states the study's tests only.
+        table1_pia_g: motion.filter(|_| plan.variation.is_none()).map(|m| m.pia_g),
+        table1_piv_cm_s: motion.filter(|_| plan.variation.is_none()).map(|m| m.piv_cm_s),
+        table1_pid_cm: motion.filter(|_| plan.variation.is_none()).map(|m| m.pid_cm),
         duration_s: duration,
         daq1_sample_rate_hz: DAQ1_RATE_HZ,
         daq2_sample_rate_hz: DAQ2_RATE_HZ,
@@ -663,6 +716,8 @@ fn generate_test(plan: &TestPlan) -> GeneratedTest {
         building_period_s: quantize(model.fundamental_period(), 6),
         clock_offset_s: clock_offset,
         frequency_set: plan.frequency_set.label().into(),
+        variation_of: plan.variation.and(motion).map(|m| m.id.to_string()),
+        variation_scale: plan.variation.map(|v| v.scale),
         floor_channels,
         equipment,
         toppling: topples,
@@ -761,27 +816,39 @@ Tests (chronological)
 
 /// Writes all files into `dir` (which exists and is empty); returns them with sizes,
 /// manifest.json last.
-fn write_contents(dir: &Path) -> io::Result<Vec<FileEntry>> {
-    let mut files = Vec::new();
+fn write_contents(dir: &Path, tests: usize) -> io::Result<Vec<FileEntry>> {
+    use rayon::prelude::*;
+    // Tests are generated and written in parallel, each as soon as it is made (an archive of
+    // hundreds of tests is not held in memory); the floors the cases need are kept.
+    type Written = (TestEntry, Vec<FileEntry>, Option<[[Vec<f64>; 2]; 2]>);
+    let written: Vec<Written> = plans(tests)
+        .par_iter()
+        .map(|plan| {
+            let g = generate_test(plan);
+            let id = &plan.id;
+            fs::create_dir(dir.join(id))?;
+            let mut entries = Vec::new();
+            for (name, text) in [(DAQ1_FILE, g.daq1_csv), (DAQ2_FILE, g.daq2_csv)] {
+                fs::write(dir.join(id).join(name), &text)?;
+                entries.push(FileEntry { path: format!("{id}/{name}"), bytes: text.len() as u64 });
+            }
+            Ok((g.entry, entries, plan.variation.is_none().then_some(g.floors_mps2)))
+        })
+        .collect::<io::Result<_>>()?;
     let mut tests = Vec::new();
-    let mut csvs = Vec::new();
+    let mut test_files = Vec::new();
     let mut floors = std::collections::BTreeMap::new();
-    for plan in plans() {
-        let g = generate_test(&plan);
-        tests.push(g.entry);
-        csvs.push((plan.id, g.daq1_csv, g.daq2_csv));
-        floors.insert(plan.id, g.floors_mps2);
+    for (entry, entries, floors_mps2) in written {
+        if let Some(f) = floors_mps2 {
+            floors.insert(entry.id.clone(), f);
+        }
+        tests.push(entry);
+        test_files.extend(entries);
     }
     let readme_text = readme(&tests);
     fs::write(dir.join(README_FILE), &readme_text)?;
-    files.push(FileEntry { path: README_FILE.into(), bytes: readme_text.len() as u64 });
-    for (id, daq1, daq2) in csvs {
-        fs::create_dir(dir.join(id))?;
-        for (name, text) in [(DAQ1_FILE, daq1), (DAQ2_FILE, daq2)] {
-            fs::write(dir.join(id).join(name), &text)?;
-            files.push(FileEntry { path: format!("{id}/{name}"), bytes: text.len() as u64 });
-        }
-    }
+    let mut files = vec![FileEntry { path: README_FILE.into(), bytes: readme_text.len() as u64 }];
+    files.extend(test_files);
     let (cpt_files, cpt) = cpt_contents()?;
     fs::create_dir_all(dir.join(CPT_FRAMES_DIR))?;
     for (path, bytes) in cpt_files {
@@ -825,8 +892,8 @@ mod tests {
 
     #[test]
     fn plan_order_and_frequency_sets() {
-        let p = plans();
-        let ids: Vec<&str> = p.iter().map(|t| t.id).collect();
+        let p = plans(STUDY_TESTS);
+        let ids: Vec<&str> = p.iter().map(|t| t.id.as_str()).collect();
         assert_eq!(
             ids,
             [
@@ -835,15 +902,37 @@ mod tests {
             ]
         );
         for t in &p {
-            let late = matches!(t.id, "FB-4" | "FB-5" | "FB-6" | "WN-6");
+            let late = matches!(t.id.as_str(), "FB-4" | "FB-5" | "FB-6" | "WN-6");
             assert_eq!(t.frequency_set == FrequencySet::BeforeFb6, late, "{}", t.id);
         }
     }
 
     #[test]
+    fn extra_tests_vary_the_study_motions_in_turn() {
+        let p = plans(STUDY_TESTS + 30);
+        let study: Vec<String> = plans(STUDY_TESTS).into_iter().map(|t| t.id).collect();
+        assert_eq!(p[..STUDY_TESTS].iter().map(|t| &t.id).collect::<Vec<_>>(), study.iter().collect::<Vec<_>>());
+        assert!(p[..STUDY_TESTS].iter().all(|t| t.variation.is_none()));
+        let mut scales = Vec::new();
+        for (k, t) in p[STUDY_TESTS..].iter().enumerate() {
+            let v = t.variation.expect("an extra test is a variation");
+            assert_eq!((t.id.as_str(), v.number), (format!("V-{:04}", k + 1).as_str(), k + 1));
+            let Kind::Earthquake(m) = t.kind else { panic!("{} is not an earthquake", t.id) };
+            assert_eq!(m.id, MOTIONS[k % MOTIONS.len()].id, "{}", t.id);
+            assert_eq!(t.base, m.base);
+            assert!((0.5..=1.5).contains(&v.scale) && v.scale == quantize(v.scale, 3), "{}", v.scale);
+            scales.push(v.scale);
+        }
+        // Seeded per number: not one scale repeated.
+        scales.dedup();
+        assert!(scales.len() > 20, "{scales:?}");
+        assert_eq!(plans(STUDY_TESTS + 30)[STUDY_TESTS + 7].variation.unwrap().scale, scales[7]);
+    }
+
+    #[test]
     fn clock_offsets_are_in_range_and_off_grid() {
-        for p in plans() {
-            let us = clock_offset_us(&mut SplitMix64::new(seed_from_label(p.id)));
+        for p in plans(40) {
+            let us = clock_offset_us(&mut SplitMix64::new(seed_from_label(&p.id)));
             assert!((400_000..2_500_000).contains(&us));
             assert_ne!((us * 200) % 1_000_000, 0);
             assert_ne!((us * 256) % 1_000_000, 0);

@@ -1,8 +1,8 @@
 //! End-to-end checks of the synthetic archive (written under CARGO_TARGET_TMPDIR).
 
 use shakeflow::demo::archive::{
-    is_current, write_demo_archive, Manifest, DAQ1_COLUMNS, DAQ1_FILE, DAQ2_COLUMNS, DAQ2_FILE, MANIFEST_FILE,
-    README_FILE,
+    is_current, is_current_tests, write_demo_archive, write_demo_archive_tests, Manifest, DAQ1_COLUMNS, DAQ1_FILE,
+    DAQ2_COLUMNS, DAQ2_FILE, MANIFEST_FILE, README_FILE, STUDY_TESTS,
 };
 use shakeflow::demo::study::{equipment_by_id, motion_by_id};
 use std::fs;
@@ -275,4 +275,39 @@ fn layout_headers_rows_and_manifest() {
     );
     assert!(m.tests.iter().find(|t| t.id == "FB-5").unwrap().toppling.iter().any(|p| p.unit == "PS2"));
     assert!(m.tests.iter().find(|t| t.id == "FB-6").unwrap().toppling.iter().any(|p| p.unit == "WSU1"));
+}
+
+/// `demo-archive --tests N`: the study's 14 tests byte for byte as in the default archive, then
+/// variations of its motions in turn (scale and seed), named in the manifest.
+#[test]
+fn extra_tests_vary_the_motions_and_keep_the_study_bytes() {
+    let study = primary();
+    let dir = scratch("extra");
+    let report = write_demo_archive_tests(&dir, STUDY_TESTS + 2).unwrap();
+    assert_eq!(report.test_ids[STUDY_TESTS..], ["V-0001", "V-0002"]);
+    assert!(is_current_tests(&dir, STUDY_TESTS + 2));
+    assert!(!is_current(&dir), "a 16-test archive is not the study's");
+    assert!(!is_current_tests(study, STUDY_TESTS + 2));
+    assert!(write_demo_archive_tests(&scratch("too-few"), STUDY_TESTS - 1).is_err());
+    let extra: std::collections::BTreeMap<String, Vec<u8>> = all_files(&dir).into_iter().collect();
+    for (path, bytes) in all_files(study) {
+        if path == README_FILE || path == MANIFEST_FILE {
+            continue;
+        }
+        assert!(extra.get(&path) == Some(&bytes), "{path} differs from the study archive's");
+    }
+    let m = manifest(&dir);
+    assert_eq!(m.tests[..STUDY_TESTS], manifest(study).tests[..]);
+    for (t, of) in m.tests[STUDY_TESTS..].iter().zip(["BI-1", "BI-2"]) {
+        let mo = motion_by_id(of).unwrap();
+        let scale = t.variation_scale.unwrap();
+        assert_eq!((t.variation_of.as_deref(), t.base.as_str(), t.kind.as_str()), (Some(of), "BI", "earthquake"));
+        assert!((0.5..=1.5).contains(&scale));
+        assert_eq!(t.table1_pia_g, None);
+        assert!((t.ground_pga_g - mo.pia_g * scale).abs() <= 1e-6 * mo.pia_g, "{} pga {}", t.id, t.ground_pga_g);
+        let (_, _, rows, _) = read_csv(&dir.join(&t.id).join(DAQ1_FILE));
+        assert_eq!(rows.len(), t.daq1_rows);
+        let (_, _, study_rows, _) = read_csv(&study.join(of).join(DAQ1_FILE));
+        assert!(rows.iter().zip(&study_rows).any(|(a, b)| a[1] != b[1]), "{} is a copy of {of}", t.id);
+    }
 }
