@@ -104,7 +104,12 @@ pub fn lock_path(plan: &Plan) -> PathBuf {
     plan.file.output_dir().join(LOCK_FILE)
 }
 
+/// Where a run keeps the hashes of the files it read ([`hash::StatMemo`]): a no-op rerun then
+/// reads no file whose size and times are unchanged.
+pub const HASH_MEMO: &str = "hashes.json";
+
 fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, UserError> {
+    hash::use_memo(&plan.file.output_dir().join(super::lease::STATE_DIR).join(HASH_MEMO));
     let base = plan.file.base_dir();
     let used: BTreeSet<&str> = plan
         .stages
@@ -646,6 +651,10 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
         return Err(error.context("the units that finished before it were committed"));
     }
     commit(transaction, &state, plan, &lock)?;
+    // Under the lease still: only the run holding the folder writes the memo.
+    if let Err(e) = hash::save_memo() {
+        reporter.line(&format!("warning: the hash memo was not saved ({e:#}); the next run reads every file"));
+    }
     let reports = plan.stages.keys().filter_map(|n| state.reports.get(n).cloned()).collect();
     Ok(RunSummary { reports, failed: state.failed, flagged: state.flagged })
 }

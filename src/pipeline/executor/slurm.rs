@@ -170,6 +170,7 @@ pub fn submit(
     let files = param_file_hashes(plan)?;
     let (lease, lock) = super::take_output_folder(plan, &sources, reporter)?;
     let lines = predict(plan, &lock, &sources, &files, &forced)?;
+    save_hash_memo(reporter);
     let client = Slurm::new();
     let limits = client.limits()?;
     let Some(run) = submit_run(plan, options, slurm, reporter, &lines, &selected, &client, &limits)? else {
@@ -187,6 +188,13 @@ pub fn submit(
         return Ok(RunSummary::default());
     }
     wait(&client, &limits, run, &output_dir, reporter)
+}
+
+/// Saves the hashes planning read (the lease is held), so the next plan need not read them.
+fn save_hash_memo(reporter: &Reporter) {
+    if let Err(e) = crate::io::hash::save_memo() {
+        reporter.line(&format!("warning: the hash memo was not saved ({e:#}); the next run reads every file"));
+    }
 }
 
 /// A new run's id: `shakeflow-<pipeline file stem>-<clock>`, a Slurm job name.
@@ -272,6 +280,7 @@ fn run_in_allocation(
     let files = param_file_hashes(plan)?;
     let (lease, lock) = super::take_output_folder(plan, &sources, reporter)?;
     let lines = predict(plan, &lock, &sources, &files, &forced)?;
+    save_hash_memo(reporter);
     let cut = cut_shards(&lines, &selected, slurm.units_per_task);
     if cut.is_empty() {
         reporter.line("every unit is up to date: nothing to run");
