@@ -439,7 +439,12 @@ impl StatusLine {
 /// know besides (a run in progress, an interrupted commit completed, orphaned folders).
 pub fn status(plan: &Plan, notes: &mut Vec<String>) -> Result<Vec<StatusLine>, UserError> {
     let output_dir = plan.file.output_dir();
-    if output_dir.join(super::lease::STATE_DIR).is_dir() {
+    // A lease or an unfinished commit, not merely the hash memo or finished Slurm runs' folders:
+    // `status` takes the lease only then, so a run starting meanwhile is not refused.
+    let in_progress = std::fs::read_dir(output_dir.join(super::lease::STATE_DIR))
+        .map(|d| d.flatten().any(|e| e.file_name() != HASH_MEMO && e.file_name() != slurm::RUNS_DIR))
+        .unwrap_or(false);
+    if in_progress {
         // An interrupted commit is completed first, so the answer is about what is on disk now;
         // while a run holds the folder, the committed state is reported as it stands.
         match Lease::acquire(&output_dir) {
