@@ -76,7 +76,7 @@ impl StatMemo {
             return Ok(hash.clone());
         }
         let hash = read_and_hash(path)?;
-        if meta.modified().ok().and_then(|m| m.elapsed().ok()).is_some_and(|age| age >= MEMO_SETTLED) {
+        if settled(&meta) {
             remember(stat, &hash);
         }
         Ok(hash)
@@ -100,6 +100,25 @@ impl StatMemo {
 /// process wins; later ones are ignored.
 pub fn use_memo(file: &Path) {
     MEMO.get_or_init(|| StatMemo::load(file));
+}
+
+/// Records `hash` as `path`'s content in the process's memo, if it has one and the file is
+/// settled: for files this run wrote and hashed on the way out, so the next run need not read
+/// them.
+pub fn remember(path: &Path, hash: &str) {
+    let Some(memo) = MEMO.get() else { return };
+    let Ok(meta) = std::fs::metadata(path) else { return };
+    if settled(&meta) {
+        memo.used
+            .lock()
+            .expect("the memo lock is never poisoned")
+            .insert(path.to_path_buf(), (Stat::of(&meta), hash.to_string()));
+    }
+}
+
+/// Whether a file had not changed for [`MEMO_SETTLED`] (and may be remembered).
+fn settled(meta: &std::fs::Metadata) -> bool {
+    meta.modified().ok().and_then(|m| m.elapsed().ok()).is_some_and(|age| age >= MEMO_SETTLED)
 }
 
 /// Saves the process's memo, if it has one ([`StatMemo::save`]).

@@ -656,7 +656,13 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
         return Err(error.context("the units that finished before it were committed"));
     }
     commit(transaction, &state, plan, &lock)?;
-    // Under the lease still: only the run holding the folder writes the memo.
+    // Under the lease still: only the run holding the folder writes the memo. The files this run
+    // wrote go in too (their hashes came from the bytes written), those written 2 s ago or more.
+    for (name, entry) in &state.entries {
+        for (file, hash) in entry.units.values().flat_map(|u| u.files.iter()) {
+            hash::remember(&output_dir.join(name).join(file), hash);
+        }
+    }
     if let Err(e) = hash::save_memo() {
         reporter.line(&format!("warning: the hash memo was not saved ({e:#}); the next run reads every file"));
     }
