@@ -19,12 +19,13 @@ VENV_PY := $(VENV)/bin/python
 PY_STAMP := $(VENV)/.requirements-$(shell cksum < tests/reference/requirements.txt | cut -d' ' -f1)
 BIN := $(CARGO_TARGET_DIR)/release/shakeflow
 
-.PHONY: all demo test bench prove prove-rolling prove-check release schema fmt lint clean help rolling-findings fuzz
+.PHONY: all demo test bench bench-scale prove prove-rolling prove-check release schema fmt lint clean help rolling-findings fuzz
 
 help:
 	@echo "make demo    build (release) and run the demo study: runs/demo-archive -> runs/demo"
 	@echo "make test    build and run the whole test suite (installs the Python references it needs)"
 	@echo "make bench   the demo study's artifact footprint vs its raw archive; load+baseline and the whole demo study vs numpy/scipy/pyarrow scripts; the rocking and rolling models vs scipy and RK4; CPT matching and 1080p tracking vs OpenCV"
+	@echo "make bench-scale  the per-record stages over a generated archive of TESTS=200 tests, local and on the test Slurm; no-op rerun"
 	@echo "make prove   fresh concealed-effect cases (prove/generate_cases.py) scored against shakeflow diagnose"
 	@echo "             [SEED=n] [PER_EFFECT=5] [PROVE_JOBS=2]; make prove-check re-checks the generator's physics"
 	@echo "make prove-rolling   the same for rolling units (prove/rolling/) [SEED=n] [ROLLING_PER_EFFECT=4]"
@@ -75,6 +76,12 @@ bench: release $(PY_STAMP)
 	$(CARGO) build --release --locked --example cpt_match
 	$(VENV_PY) bench/cpt.py --shakeflow $(BIN) --matcher $(CARGO_TARGET_DIR)/release/examples/cpt_match
 	$(VENV_PY) bench/load_formats.py --shakeflow $(BIN)
+
+# Scale: the demo's per-record stages over a generated archive of TESTS tests, local and on the
+# single-node test Slurm (started and stopped here when it was not running; needs root), no-op rerun.
+TESTS ?= 200
+bench-scale: release $(PY_STAMP)
+	$(VENV_PY) bench/scale.py --shakeflow $(BIN) --tests $(TESTS)
 
 # The proof: a fresh set of concealed-effect cases (new seed unless SEED is given), diagnosed and scored.
 PROVE_DIR ?= runs/prove

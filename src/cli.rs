@@ -228,9 +228,14 @@ enum Command {
     /// Print the JSON Schema of pipeline files (the source of schemas/pipeline.schema.json).
     Schema,
     /// One array task of a Slurm run (submitted by `run --executor slurm`; its shard is
-    /// `$SLURM_ARRAY_TASK_ID`).
+    /// `$SLURM_ARRAY_TASK_ID`), or one job step of an in-allocation run (`--shard`).
     #[command(hide = true)]
-    SlurmTask { run_dir: PathBuf, stage: String },
+    SlurmTask {
+        run_dir: PathBuf,
+        stage: String,
+        #[arg(long)]
+        shard: Option<usize>,
+    },
     /// The commit job of a Slurm run (submitted by `run --executor slurm`).
     #[command(hide = true)]
     SlurmCommit { run_dir: PathBuf },
@@ -316,11 +321,10 @@ pub fn main() -> anyhow::Result<ExitCode> {
             }
             Ok(exit_status(&summary))
         }
-        Command::SlurmTask { run_dir, stage } => {
-            let shard: usize = std::env::var("SLURM_ARRAY_TASK_ID")
-                .ok()
-                .and_then(|v| v.parse().ok())
-                .context("`slurm-task` runs inside a Slurm array task ($SLURM_ARRAY_TASK_ID)")?;
+        Command::SlurmTask { run_dir, stage, shard } => {
+            let shard: usize = shard
+                .or_else(|| std::env::var("SLURM_ARRAY_TASK_ID").ok().and_then(|v| v.parse().ok()))
+                .context("`slurm-task` runs inside a Slurm array task ($SLURM_ARRAY_TASK_ID) or with --shard")?;
             let ok = executor::slurm::task(&run_dir, &stage, shard, stages::registry())?;
             Ok(if ok { ExitCode::SUCCESS } else { ExitCode::from(1) })
         }

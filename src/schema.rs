@@ -86,8 +86,9 @@ pub fn pipeline_schema() -> Value {
                     "cpus_per_task": {"type": "integer", "minimum": 1},
                     "mem": {"type": "string", "description": "per task, e.g. 4G"},
                     "array_throttle": {"type": "integer", "minimum": 1, "description": "at most this many tasks of one array at once"},
-                    "retries": {"type": "integer", "minimum": 0, "description": "attempts again a failed task this many times"},
+                    "retries": {"type": "integer", "minimum": 0, "description": "resubmits the failed shards this many times"},
                     "requeue": {"type": "boolean", "description": "let Slurm requeue preempted tasks"},
+                    "in_allocation": {"type": "boolean", "description": "run each shard as an srun step inside the current sbatch/salloc allocation"},
                     "sbatch_args": {"type": "array", "items": {"type": "string"}}
                 }
             },

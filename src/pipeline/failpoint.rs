@@ -4,7 +4,10 @@
 //! - `SHAKEFLOW_FAILPOINT=trace` prints `failpoint: <name>` to stderr at every point passed;
 //! - `SHAKEFLOW_FAILPOINT=<name>` kills the process with SIGKILL there (as `kill -9` would);
 //! - `SHAKEFLOW_FAILPOINT=<name>:enospc` makes the operation there fail with "No space left on device";
-//! - `SHAKEFLOW_FAILPOINT=<name>:sleep=<ms>` pauses there (to hold a lease while another run starts).
+//! - `SHAKEFLOW_FAILPOINT=<name>:sleep=<ms>` pauses there (to hold a lease while another run starts);
+//! - `SHAKEFLOW_FAILPOINT=<name>:once=<file>` kills the process there the first time only: it
+//!   creates `<file>` (exclusively) before dying, and passes when `<file>` exists (a Slurm task
+//!   that dies once and succeeds when resubmitted).
 //!
 //! The crash tests (`tests/it/crash_safety.rs`) kill a run at every point its trace lists, so a
 //! new step in the commit is covered as soon as it calls [`hit`].
@@ -15,6 +18,7 @@ enum Action {
     Kill,
     NoSpace,
     Sleep(u64),
+    Once(std::path::PathBuf),
 }
 
 fn armed() -> &'static Option<(String, Option<Action>)> {
@@ -27,6 +31,7 @@ fn armed() -> &'static Option<(String, Option<Action>)> {
         let (name, action) = match value.split_once(':') {
             None => (value.as_str(), Action::Kill),
             Some((name, "enospc")) => (name, Action::NoSpace),
+            Some((name, once)) if once.starts_with("once=") => (name, Action::Once(once["once=".len()..].into())),
             Some((name, sleep)) => {
                 let ms = sleep.strip_prefix("sleep=").and_then(|ms| ms.parse().ok()).unwrap_or(1000);
                 (name, Action::Sleep(ms))
@@ -47,10 +52,12 @@ pub fn hit(name: &str) -> std::io::Result<()> {
         return Ok(());
     }
     match action {
-        Some(Action::Kill) => {
-            // SAFETY: raising a signal on our own process; SIGKILL cannot be caught, exactly as `kill -9`.
-            unsafe { libc::kill(libc::getpid(), libc::SIGKILL) };
-            unreachable!("SIGKILL ends the process")
+        Some(Action::Kill) => kill(),
+        Some(Action::Once(marker)) => {
+            if std::fs::OpenOptions::new().write(true).create_new(true).open(marker).is_ok() {
+                kill()
+            }
+            Ok(())
         }
         Some(Action::NoSpace) => Err(std::io::Error::from_raw_os_error(libc::ENOSPC)),
         Some(Action::Sleep(ms)) => {
@@ -59,4 +66,10 @@ pub fn hit(name: &str) -> std::io::Result<()> {
         }
         None => Ok(()),
     }
+}
+
+fn kill() -> ! {
+    // SAFETY: raising a signal on our own process; SIGKILL cannot be caught, exactly as `kill -9`.
+    unsafe { libc::kill(libc::getpid(), libc::SIGKILL) };
+    unreachable!("SIGKILL ends the process")
 }

@@ -192,5 +192,9 @@ fn leftovers_of_older_shakeflow_runs_are_removed_and_nothing_else() {
     let left: Vec<_> = std::fs::read_dir(root.join("out")).unwrap().map(|e| e.unwrap().file_name()).collect();
     let mut left: Vec<String> = left.into_iter().map(|n| n.to_string_lossy().into_owned()).collect();
     left.sort();
-    assert_eq!(left, ["NOTES.txt", "baseline", "load", "shakeflow.lock"]);
+    // `.shakeflow` keeps the hash memo only (no lease, no transaction).
+    assert_eq!(left, [".shakeflow", "NOTES.txt", "baseline", "load", "shakeflow.lock"]);
+    let state: Vec<_> =
+        std::fs::read_dir(root.join("out/.shakeflow")).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(state, ["hashes.json"]);
 }

@@ -22,6 +22,7 @@ mod diagnose_cases;
 mod example_pipelines;
 mod export;
 mod fragility_scipy;
+mod hash_memo;
 mod hostile_input;
 mod interop;
 mod load_shared_records;

@@ -8,11 +8,34 @@ use std::process::Output;
 use std::time::{Duration, Instant};
 
 fn slurm_run(root: &Path, args: &[&str]) -> Output {
+    slurm_run_env(root, args, &[])
+}
+
+/// `slurm_run` with extra environment variables (which the jobs inherit: sbatch exports them).
+fn slurm_run_env(root: &Path, args: &[&str], env: &[(&str, &str)]) -> Output {
     let conf = test_slurm_conf();
     test_slurm(); // fails, saying how to start it, when the test Slurm is not running
     let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_shakeflow"));
     command.args([&["run", "pipeline.yaml", "--executor", "slurm", "--units-per-task", "1"], args].concat());
+    command.envs(env.iter().copied());
     command.current_dir(root).env("SLURM_CONF", conf).output().unwrap()
+}
+
+/// The job id of stage `stage`'s array, from the submit line `<stage> submitted: … (<job id>)`.
+fn array_job(log: &str, stage: &str) -> String {
+    let line = log.lines().find(|l| l.starts_with(&format!("{stage} "))).unwrap_or_else(|| panic!("{log}"));
+    line.rsplit('(').next().unwrap().trim_end_matches(')').to_string()
+}
+
+/// `scontrol show job <job>` (finished jobs stay known for MinJobAge).
+fn show_job(job: &str) -> String {
+    let out = std::process::Command::new("scontrol")
+        .args(["show", "job", job])
+        .env("SLURM_CONF", test_slurm_conf())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    stdout(&out)
 }
 
 fn status_text(root: &Path) -> String {
@@ -52,6 +75,7 @@ fn a_slurm_run_writes_the_local_runs_artifacts_and_lockfile() {
     let log = stderr(&out);
     assert!(out.status.success(), "{log}");
     assert!(log.contains("load               submitted: 2 of 2 shard(s)"), "{log}");
+    assert!(show_job(&array_job(&log, "load")).contains("Requeue=0"), "submitted --no-requeue by default");
     assert_eq!(artifacts(local.path()), artifacts(cluster.path()), "bit-identical artifacts and lockfile");
     assert!(!cluster.path().join("out/.shakeflow/lease").exists(), "the commit job released the lease");
     // Up to date afterwards, by either executor.
@@ -88,9 +112,7 @@ fn a_cancelled_task_is_the_only_shard_a_rerun_submits_and_status_follows_the_run
     let status = status_text(root);
     assert!(status.contains("Slurm run `shakeflow-pipeline-") && status.contains("task(s) not finished"), "{status}");
     assert!(status.contains("load ") && status.contains("Pending"), "{status}");
-    // The load array's job id, from `load submitted: 2 of 2 shard(s), … (<job id>)`.
-    let line = log.lines().find(|l| l.starts_with("load ")).unwrap();
-    let job = line.rsplit('(').next().unwrap().trim_end_matches(')');
+    let job = array_job(&log, "load");
     let cancelled = std::process::Command::new("scancel")
         .arg(format!("{job}_1"))
         .env("SLURM_CONF", test_slurm_conf())
@@ -106,4 +128,97 @@ fn a_cancelled_task_is_the_only_shard_a_rerun_submits_and_status_follows_the_run
     assert!(rerun.status.success(), "{log}");
     assert!(log.contains("load               submitted: 1 of 2 shard(s), 1 stale unit(s) of 2"), "{log}");
     assert!(root.join("out/load/records/motion=FB-2/data.parquet").is_file());
+}
+
+#[test]
+fn retries_resubmit_the_shard_whose_task_died_and_requeue_reaches_sbatch() {
+    let local = small_project();
+    assert!(shakeflow(&["run", "pipeline.yaml"], local.path()).status.success());
+    let project = small_project();
+    let root = project.path();
+    // The task of load's shard 1 dies (SIGKILL, as on a node that crashed) the first time only.
+    let marker = root.join("died-once");
+    let failpoint = format!("slurm-task.load.1:once={}", marker.display());
+    let out = slurm_run_env(root, &["--wait", "--retries", "1", "--requeue"], &[("SHAKEFLOW_FAILPOINT", &failpoint)]);
+    let log = stderr(&out);
+    assert!(out.status.success(), "{log}");
+    assert!(marker.is_file(), "the task died once: {log}");
+    assert!(show_job(&array_job(&log, "load")).contains("Requeue=1"), "--requeue reached sbatch");
+    // The first run committed shard 0 and resubmitted the dead shard and its baseline: one
+    // resubmission, which succeeded.
+    let resubmitted: Vec<&str> = log.lines().filter(|l| l.contains("failed unit(s) resubmitted")).collect();
+    assert_eq!(resubmitted.len(), 1, "{log}");
+    let runs = root.join("out/.shakeflow/slurm");
+    let summaries: Vec<String> = std::fs::read_dir(&runs)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.to_string_lossy().ends_with(".summary.json"))
+        .map(|p| std::fs::read_to_string(p).unwrap())
+        .collect();
+    assert_eq!(summaries.len(), 2, "{summaries:?}");
+    let first = summaries.iter().find(|s| !s.contains("\"retried_as\": null")).expect("one run retried");
+    assert!(first.contains("did not finish"), "{first}");
+    // The first commit job resubmitted load's shard 1 alone (its log says so).
+    let logs: String = std::fs::read_dir(&runs)
+        .unwrap()
+        .map(|e| e.unwrap().path().join("logs"))
+        .filter(|p| p.is_dir())
+        .flat_map(|p| std::fs::read_dir(p).unwrap().map(|e| std::fs::read_to_string(e.unwrap().path()).unwrap()))
+        .collect();
+    assert!(logs.contains("load               submitted: 1 of 2 shard(s), 1 stale unit(s) of 2"), "{logs}");
+    assert_eq!(artifacts(local.path()), artifacts(project.path()), "bit-identical artifacts and lockfile");
+    assert!(!root.join("out/.shakeflow/lease").exists(), "the last commit job released the lease");
+}
+
+#[test]
+fn in_allocation_runs_the_shards_as_srun_steps_with_the_local_runs_artifacts() {
+    let local = small_project();
+    assert!(shakeflow(&["run", "pipeline.yaml"], local.path()).status.success());
+    let project = small_project();
+    let root = project.path();
+    test_slurm(); // fails, saying how to start it, when the test Slurm is not running
+                  // One job of two tasks, as a Tapis app gets: shakeflow runs in its batch script.
+    let wrap = format!(
+        "'{}' run pipeline.yaml --executor slurm --in-allocation --units-per-task 1",
+        env!("CARGO_BIN_EXE_shakeflow")
+    );
+    let log_file = root.join("allocation.out");
+    let out = std::process::Command::new("sbatch")
+        .args(["--wait", "--ntasks=2", "--cpus-per-task=1", "--job-name=shakeflow-allocation-test"])
+        .arg(format!("--output={}", log_file.display()))
+        .args(["--wrap", &wrap])
+        .current_dir(root)
+        .env("SLURM_CONF", test_slurm_conf())
+        .output()
+        .unwrap();
+    let log = std::fs::read_to_string(&log_file).unwrap_or_default();
+    assert!(out.status.success(), "{}\n{log}", stderr(&out));
+    assert!(log.contains("2 step(s) at once, 1 CPU(s) each"), "{log}");
+    assert!(log.contains("load               2 step(s), 0 failed"), "{log}");
+    assert!(log.contains("baseline           2 step(s), 0 failed"), "{log}");
+    assert_eq!(artifacts(local.path()), artifacts(root), "bit-identical artifacts and lockfile");
+    assert!(!root.join("out/.shakeflow/lease").exists(), "the run released the lease");
+    // Each shard ran as a step of its own, with its own log.
+    let runs = root.join("out/.shakeflow/slurm");
+    let run = std::fs::read_dir(&runs).unwrap().map(|e| e.unwrap().path()).find(|p| p.is_dir()).unwrap();
+    let id = run.file_name().unwrap().to_string_lossy().into_owned();
+    for shard in 0..2 {
+        let step = std::fs::read_to_string(run.join(format!("logs/{id}_baseline_{shard}.out"))).unwrap();
+        assert!(step.contains(&format!("baseline shard {shard}: 1 unit(s), 1 ran, 0 failed")), "{step}");
+    }
+    assert!(stderr(&shakeflow(&["run", "pipeline.yaml"], root)).contains("2 cached"));
+}
+
+#[test]
+fn in_allocation_outside_an_allocation_says_where_to_run_it() {
+    let project = small_project();
+    let out = shakeflow_env(
+        &["run", "pipeline.yaml", "--executor", "slurm", "--in-allocation"],
+        project.path(),
+        &[("SLURM_JOB_ID", "")],
+    );
+    let log = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{log}");
+    assert!(log.contains("$SLURM_JOB_ID is not set") && log.contains("sbatch"), "{log}");
+    assert!(!project.path().join("out").exists(), "nothing written: {log}");
 }

@@ -104,7 +104,12 @@ pub fn lock_path(plan: &Plan) -> PathBuf {
     plan.file.output_dir().join(LOCK_FILE)
 }
 
+/// Where a run keeps the hashes of the files it read ([`hash::StatMemo`]): a no-op rerun then
+/// reads no file whose size and times are unchanged.
+pub const HASH_MEMO: &str = "hashes.json";
+
 fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, UserError> {
+    hash::use_memo(&plan.file.output_dir().join(super::lease::STATE_DIR).join(HASH_MEMO));
     let base = plan.file.base_dir();
     let used: BTreeSet<&str> = plan
         .stages
@@ -434,7 +439,12 @@ impl StatusLine {
 /// know besides (a run in progress, an interrupted commit completed, orphaned folders).
 pub fn status(plan: &Plan, notes: &mut Vec<String>) -> Result<Vec<StatusLine>, UserError> {
     let output_dir = plan.file.output_dir();
-    if output_dir.join(super::lease::STATE_DIR).is_dir() {
+    // A lease or an unfinished commit, not merely the hash memo or finished Slurm runs' folders:
+    // `status` takes the lease only then, so a run starting meanwhile is not refused.
+    let in_progress = std::fs::read_dir(output_dir.join(super::lease::STATE_DIR))
+        .map(|d| d.flatten().any(|e| e.file_name() != HASH_MEMO && e.file_name() != slurm::RUNS_DIR))
+        .unwrap_or(false);
+    if in_progress {
         // An interrupted commit is completed first, so the answer is about what is on disk now;
         // while a run holds the folder, the committed state is reported as it stands.
         match Lease::acquire(&output_dir) {
@@ -646,6 +656,16 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
         return Err(error.context("the units that finished before it were committed"));
     }
     commit(transaction, &state, plan, &lock)?;
+    // Under the lease still: only the run holding the folder writes the memo. The files this run
+    // wrote go in too (their hashes came from the bytes written), those written 2 s ago or more.
+    for (name, entry) in &state.entries {
+        for (file, hash) in entry.units.values().flat_map(|u| u.files.iter()) {
+            hash::remember(&output_dir.join(name).join(file), hash);
+        }
+    }
+    if let Err(e) = hash::save_memo() {
+        reporter.line(&format!("warning: the hash memo was not saved ({e:#}); the next run reads every file"));
+    }
     let reports = plan.stages.keys().filter_map(|n| state.reports.get(n).cloned()).collect();
     Ok(RunSummary { reports, failed: state.failed, flagged: state.flagged })
 }

@@ -19,7 +19,11 @@
 //! exits 1 when a unit failed. No task writes the lockfile or a stage folder: the commit job
 //! takes the lease back, folds the manifests as a local run folds its units, moves the results
 //! into a transaction and commits it. Rerunning the same command resubmits only the shards
-//! whose units are still stale (a cancelled task's, a failed unit's).
+//! whose units are still stale (a cancelled task's, a failed unit's); with `retries` the commit
+//! job does that itself, as a new run it hands the lease to.
+//!
+//! With `in_allocation` nothing is submitted: inside one `sbatch`/`salloc` job, the shards run
+//! as `srun` steps of the same `slurm-task`, stage after stage, and the process commits itself.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -68,10 +72,28 @@ struct RunFile {
     force: Vec<String>,
     only: Vec<String>,
     keep_going: bool,
+    /// The Slurm options it was submitted with (a resubmission takes them, one retry less).
+    options: SlurmOptions,
     /// Per stage with an array: its shards, each the unit ids it runs.
     shards: BTreeMap<String, Vec<Vec<String>>>,
+    /// Per stage with an array: the shards submitted (the others' units were all cached).
+    tasks: BTreeMap<String, BTreeSet<u32>>,
     arrays: BTreeMap<String, SubmittedArray>,
     commit: Option<SubmittedArray>,
+    /// In-allocation runs: the allocation's job id (no arrays, no commit job).
+    #[serde(default)]
+    allocation: Option<String>,
+}
+
+impl RunFile {
+    /// Whether shard `shard` of `stage` was submitted (has a task) in this run.
+    fn submitted(&self, stage: &str, shard: usize) -> bool {
+        self.tasks.get(stage).is_some_and(|t| t.contains(&(shard as u32)))
+    }
+
+    fn commit_job(&self) -> String {
+        self.commit.as_ref().expect("submitted runs have a commit job").parts[0].job_id.to_string()
+    }
 }
 
 /// A task's manifest: every unit of its shard, and what the stage's planning found.
@@ -87,6 +109,9 @@ struct Summary {
     failed: Vec<(String, String, String)>,
     flagged: Vec<(String, String, String)>,
     committed_units: usize,
+    /// With retries left after a failure: the run that resubmitted the failed shards.
+    #[serde(default)]
+    retried_as: Option<String>,
 }
 
 fn runs_dir(output_dir: &Path) -> PathBuf {
@@ -134,6 +159,9 @@ pub fn submit(
     reporter: &Reporter,
 ) -> anyhow::Result<RunSummary> {
     slurm.executor.check().map_err(|e| e.error)?;
+    if slurm.executor.in_allocation == Some(true) {
+        return run_in_allocation(plan, options, slurm, reporter);
+    }
     let selected = selected_stages(plan, options)?;
     let forced = forced_stages(plan, &options.force);
     let forced: Vec<&str> = forced.iter().map(String::as_str).collect();
@@ -142,52 +170,232 @@ pub fn submit(
     let files = param_file_hashes(plan)?;
     let (lease, lock) = super::take_output_folder(plan, &sources, reporter)?;
     let lines = predict(plan, &lock, &sources, &files, &forced)?;
-
-    let stem = plan.file.path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    let stem: String =
-        stem.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).take(24).collect();
-    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
-    let id = format!("shakeflow-{stem}-{:x}", nanos % 0xffff_ffff);
-    let run_dir = runs_dir(&output_dir).join(&id);
-    let shakeflow = std::env::current_exe().context("locating the shakeflow binary")?;
+    save_hash_memo(reporter);
     let client = Slurm::new();
     let limits = client.limits()?;
-    std::fs::create_dir_all(&run_dir)?;
-    let submitted = submit_arrays(
-        plan,
-        options,
-        slurm,
-        reporter,
-        &lines,
-        &selected,
-        &client,
-        &limits,
-        RunNaming { id: &id, run_dir: &run_dir, shakeflow: &shakeflow },
-    );
-    let run = match submitted {
-        Ok(Some(run)) => run,
-        Ok(None) => {
-            let _ = std::fs::remove_dir_all(&run_dir);
-            let _ = std::fs::remove_dir(runs_dir(&output_dir));
-            reporter.line("every unit is up to date: nothing submitted");
-            return Ok(RunSummary::default());
-        }
-        Err(e) => {
-            let _ = std::fs::remove_dir_all(&run_dir);
-            let _ = std::fs::remove_dir(runs_dir(&output_dir));
-            return Err(e);
-        }
+    let Some(run) = submit_run(plan, options, slurm, reporter, &lines, &selected, &client, &limits)? else {
+        reporter.line("every unit is up to date: nothing submitted");
+        return Ok(RunSummary::default());
     };
-    let commit_job = run.commit.as_ref().expect("submitted runs have a commit job").parts[0].job_id.to_string();
-    lease.hand_over(&id, &commit_job)?;
+    let commit_job = run.commit_job();
+    lease.hand_over(&run.id, &commit_job)?;
     reporter.line(&format!(
-        "Slurm run `{id}` submitted (commit job {commit_job}); `shakeflow status {}` follows it",
+        "Slurm run `{}` submitted (commit job {commit_job}); `shakeflow status {}` follows it",
+        run.id,
         plan.file.path.display()
     ));
     if !slurm.wait {
         return Ok(RunSummary::default());
     }
-    wait(&client, &limits, &run, &output_dir, reporter)
+    wait(&client, &limits, run, &output_dir, reporter)
+}
+
+/// Saves the hashes planning read (the lease is held), so the next plan need not read them.
+fn save_hash_memo(reporter: &Reporter) {
+    if let Err(e) = crate::io::hash::save_memo() {
+        reporter.line(&format!("warning: the hash memo was not saved ({e:#}); the next run reads every file"));
+    }
+}
+
+/// A new run's id: `shakeflow-<pipeline file stem>-<clock>`, a Slurm job name.
+fn new_run_id(plan: &Plan) -> String {
+    let stem = plan.file.path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let stem: String =
+        stem.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).take(24).collect();
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+    format!("shakeflow-{stem}-{:x}", nanos % 0xffff_ffff)
+}
+
+/// Makes a run folder and submits the arrays of `lines`' stale units and the commit job; None
+/// (and no folder) when nothing is stale. The caller hands its lease to the run.
+#[allow(clippy::too_many_arguments)]
+fn submit_run(
+    plan: &Plan,
+    options: &RunOptions,
+    slurm: &SlurmOptions,
+    reporter: &Reporter,
+    lines: &[super::StatusLine],
+    selected: &BTreeSet<String>,
+    client: &Slurm,
+    limits: &crate::pipeline::slurm::ClusterLimits,
+) -> anyhow::Result<Option<RunFile>> {
+    let output_dir = plan.file.output_dir();
+    let id = new_run_id(plan);
+    let run_dir = runs_dir(&output_dir).join(&id);
+    let shakeflow = std::env::current_exe().context("locating the shakeflow binary")?;
+    std::fs::create_dir_all(&run_dir)?;
+    let naming = RunNaming { id: &id, run_dir: &run_dir, shakeflow: &shakeflow };
+    let submitted = submit_arrays(plan, options, slurm, reporter, lines, selected, client, limits, naming);
+    if !matches!(submitted, Ok(Some(_))) {
+        let _ = std::fs::remove_dir_all(&run_dir);
+        let _ = std::fs::remove_dir(runs_dir(&output_dir));
+    }
+    submitted
+}
+
+/// Per stage in run order, its shards cut from the predicted units, and those holding a stale
+/// unit (the shards to run); stages with none are left out.
+fn cut_shards(
+    lines: &[super::StatusLine],
+    selected: &BTreeSet<String>,
+    per_task: usize,
+) -> Vec<(String, Vec<Vec<String>>, BTreeSet<u32>)> {
+    lines
+        .iter()
+        .filter(|l| selected.contains(&l.name) && !l.stale.is_empty())
+        .map(|line| {
+            let shards: Vec<Vec<String>> = line.ids.chunks(per_task.max(1)).map(<[String]>::to_vec).collect();
+            let stale: BTreeSet<&str> = line.stale.iter().map(|u| u.id.as_str()).collect();
+            let only = (0..shards.len() as u32)
+                .filter(|&i| shards[i as usize].iter().any(|id| stale.contains(id.as_str())))
+                .collect();
+            (line.name.clone(), shards, only)
+        })
+        .collect()
+}
+
+/// Whether shard i of `stage` reads only shard i of `upstream`: both per-record, cut alike.
+fn aligned(plan: &Plan, run: &RunFile, stage: &str, upstream: &str) -> bool {
+    plan.stages[stage].stage.work_units() == WorkUnits::EachRecord
+        && plan.stages[upstream].stage.work_units() == WorkUnits::EachRecord
+        && run.shards.contains_key(upstream)
+        && run.shards.get(upstream) == run.shards.get(stage)
+}
+
+/// `--in-allocation`: inside one `sbatch`/`salloc` allocation, each stage's shards run as
+/// `srun` steps (as many at once as the allocation has tasks), stage after stage; a failed
+/// step is run again up to `retries` times; then this process commits, as a commit job would.
+fn run_in_allocation(
+    plan: &Plan,
+    options: &RunOptions,
+    slurm: &SlurmOptions,
+    reporter: &Reporter,
+) -> anyhow::Result<RunSummary> {
+    let allocation = crate::pipeline::slurm::Allocation::current()?;
+    let selected = selected_stages(plan, options)?;
+    let forced = forced_stages(plan, &options.force);
+    let forced: Vec<&str> = forced.iter().map(String::as_str).collect();
+    let output_dir = plan.file.output_dir();
+    let sources = resolve_sources(plan)?;
+    let files = param_file_hashes(plan)?;
+    let (lease, lock) = super::take_output_folder(plan, &sources, reporter)?;
+    let lines = predict(plan, &lock, &sources, &files, &forced)?;
+    save_hash_memo(reporter);
+    let cut = cut_shards(&lines, &selected, slurm.units_per_task);
+    if cut.is_empty() {
+        reporter.line("every unit is up to date: nothing to run");
+        return Ok(RunSummary::default());
+    }
+    let id = new_run_id(plan);
+    let run_dir = runs_dir(&output_dir).join(&id);
+    let mut run = RunFile {
+        id: id.clone(),
+        pipeline: std::fs::canonicalize(&plan.file.path)?,
+        pipeline_hash: crate::io::hash::hash_bytes(plan.file.text.as_bytes()),
+        force: options.force.clone(),
+        only: options.only.clone(),
+        keep_going: options.keep_going,
+        options: SlurmOptions { wait: false, ..slurm.clone() },
+        shards: BTreeMap::new(),
+        tasks: BTreeMap::new(),
+        arrays: BTreeMap::new(),
+        commit: None,
+        allocation: Some(allocation.job_id.clone()),
+    };
+    let order: Vec<String> = cut.iter().map(|(name, _, _)| name.clone()).collect();
+    for (name, shards, only) in cut {
+        run.shards.insert(name.clone(), shards);
+        run.tasks.insert(name, only);
+    }
+    std::fs::create_dir_all(run_dir.join("logs"))?;
+    publish(&run_dir.join(RUN_FILE), &serde_json::to_vec_pretty(&run)?)?;
+    reporter.line(&format!(
+        "Slurm run `{id}` in allocation {}: {} step(s) at once, {} CPU(s) each",
+        allocation.job_id, allocation.slots, allocation.cpus_per_step
+    ));
+    let shakeflow = std::env::current_exe().context("locating the shakeflow binary")?;
+    let retries = slurm.executor.retries.unwrap_or(0);
+    let mut failed: BTreeMap<&str, BTreeSet<u32>> = BTreeMap::new();
+    for name in &order {
+        let mut todo = run.tasks[name].clone();
+        if !run.keep_going {
+            // As afterok/aftercorr would: nothing waits on a failed upstream shard.
+            for upstream in upstream_stages(&plan.stages[name]) {
+                match failed.get(upstream) {
+                    Some(f) if !f.is_empty() && aligned(plan, &run, name, upstream) => todo.retain(|s| !f.contains(s)),
+                    Some(f) if !f.is_empty() => todo.clear(),
+                    _ => {}
+                }
+            }
+        }
+        let mut not_run: BTreeSet<u32> = run.tasks[name].difference(&todo).copied().collect();
+        let mut attempt = 0;
+        loop {
+            let failures = run_steps(&allocation, &shakeflow, &run_dir, &id, name, &todo);
+            reporter.line(&format!(
+                "{name:<18} {} step(s), {} failed{}",
+                todo.len(),
+                failures.len(),
+                if attempt > 0 { format!(" (retry {attempt})") } else { String::new() }
+            ));
+            if failures.is_empty() || attempt == retries {
+                not_run.extend(failures);
+                break;
+            }
+            attempt += 1;
+            todo = failures;
+        }
+        failed.insert(name, not_run);
+    }
+    let (summary, _) = commit_manifests(&run_dir, &run, plan, &lease)?;
+    publish(&runs_dir(&output_dir).join(format!("{id}{SUMMARY_SUFFIX}")), &serde_json::to_vec_pretty(&summary)?)?;
+    drop(lease);
+    let problem = |(stage, unit, reason): &(String, String, String)| UnitProblem {
+        stage: stage.clone(),
+        unit: unit.clone(),
+        reason: reason.clone(),
+    };
+    Ok(RunSummary {
+        reports: Vec::new(),
+        failed: summary.failed.iter().map(problem).collect(),
+        flagged: summary.flagged.iter().map(problem).collect(),
+    })
+}
+
+/// Runs `shards` of `stage` as `srun` steps, `allocation.slots` at once; the shards that failed.
+fn run_steps(
+    allocation: &crate::pipeline::slurm::Allocation,
+    shakeflow: &Path,
+    run_dir: &Path,
+    id: &str,
+    stage: &str,
+    shards: &BTreeSet<u32>,
+) -> BTreeSet<u32> {
+    let queue = std::sync::Mutex::new(shards.iter().copied().collect::<std::collections::VecDeque<u32>>());
+    let failed = std::sync::Mutex::new(BTreeSet::new());
+    let threads = [("RAYON_NUM_THREADS", allocation.cpus_per_step.to_string())];
+    std::thread::scope(|scope| {
+        for _ in 0..allocation.slots.min(shards.len()) {
+            scope.spawn(|| loop {
+                let Some(shard) = queue.lock().expect("no step thread panics").pop_front() else { break };
+                let args = [
+                    "slurm-task".into(),
+                    run_dir.as_os_str().to_owned(),
+                    stage.into(),
+                    format!("--shard={shard}").into(),
+                ];
+                let log = run_dir.join("logs").join(format!("{id}_{stage}_{shard}.out"));
+                let ok = allocation.run_step(id, shakeflow, &args, &threads, &log).unwrap_or_else(|e| {
+                    eprintln!("error: {e}");
+                    false
+                });
+                if !ok {
+                    failed.lock().expect("no step thread panics").insert(shard);
+                }
+            });
+        }
+    });
+    failed.into_inner().expect("no step thread panics")
 }
 
 /// The run's name, folder and the binary its tasks run.
@@ -219,29 +427,23 @@ fn submit_arrays(
         force: options.force.clone(),
         only: options.only.clone(),
         keep_going: options.keep_going,
+        options: SlurmOptions { wait: false, ..slurm.clone() },
         shards: BTreeMap::new(),
+        tasks: BTreeMap::new(),
         arrays: BTreeMap::new(),
         commit: None,
+        allocation: None,
     };
-    let mut submitted_tasks: BTreeMap<String, BTreeSet<u32>> = BTreeMap::new();
     let quote = |p: &Path| format!("'{}'", p.display().to_string().replace('\'', r"'\''"));
-    for line in lines.iter().filter(|l| selected.contains(&l.name)) {
-        if line.stale.is_empty() {
-            continue;
-        }
-        let stage = &plan.stages[&line.name];
-        let shards: Vec<Vec<String>> = line.ids.chunks(per_task).map(<[String]>::to_vec).collect();
-        let stale: BTreeSet<&str> = line.stale.iter().map(|u| u.id.as_str()).collect();
-        let only: BTreeSet<u32> = (0..shards.len() as u32)
-            .filter(|&i| shards[i as usize].iter().any(|id| stale.contains(id.as_str())))
-            .collect();
+    let stale_units: BTreeMap<&str, (usize, usize)> =
+        lines.iter().map(|l| (l.name.as_str(), (l.stale.len(), l.units))).collect();
+    for (name, shards, only) in cut_shards(lines, selected, per_task) {
+        let stage = &plan.stages[&name];
+        run.shards.insert(name.clone(), shards.clone());
         let mut dependencies = Vec::new();
         for upstream in upstream_stages(stage) {
             let Some(array) = run.arrays.get(upstream) else { continue };
-            let aligned = stage.stage.work_units() == WorkUnits::EachRecord
-                && plan.stages[upstream].stage.work_units() == WorkUnits::EachRecord
-                && run.shards.get(upstream) == Some(&shards)
-                && only.is_subset(&submitted_tasks[upstream]);
+            let aligned = aligned(plan, &run, &name, upstream) && only.is_subset(&run.tasks[upstream]);
             let kind = if options.keep_going {
                 DepKind::AfterAny
             } else if aligned {
@@ -251,13 +453,7 @@ fn submit_arrays(
             };
             dependencies.push(Dependency { on: array.clone(), kind });
         }
-        let retries = slurm.executor.retries.unwrap_or(0);
-        let command = format!(
-            "for attempt in $(seq 0 {retries}); do {} slurm-task {} {} && exit 0; done; exit 1",
-            quote(shakeflow),
-            quote(run_dir),
-            line.name
-        );
+        let command = format!("{} slurm-task {} {name}", quote(shakeflow), quote(run_dir));
         let job = ArrayJob {
             name: id.to_string(),
             command,
@@ -268,18 +464,15 @@ fn submit_arrays(
             log_dir: run_dir.join("logs"),
         };
         let array = client.submit(&job, limits).map_err(|e| cancel_all(client, &run, e))?;
+        let (stale, units) = stale_units[name.as_str()];
         reporter.line(&format!(
-            "{:<18} submitted: {} of {} shard(s), {} stale unit(s) of {} ({})",
-            line.name,
+            "{name:<18} submitted: {} of {} shard(s), {stale} stale unit(s) of {units} ({})",
             only.len(),
             shards.len(),
-            line.stale.len(),
-            line.units,
             array.parts.iter().map(|p| p.job_id.to_string()).collect::<Vec<_>>().join(", ")
         ));
-        submitted_tasks.insert(line.name.clone(), only);
-        run.shards.insert(line.name.clone(), shards);
-        run.arrays.insert(line.name.clone(), array);
+        run.tasks.insert(name.clone(), only);
+        run.arrays.insert(name, array);
     }
     if run.arrays.is_empty() {
         return Ok(None);
@@ -306,24 +499,34 @@ fn cancel_all(client: &Slurm, run: &RunFile, error: UserError) -> UserError {
     error
 }
 
-/// `--wait`: polls with backoff until the commit job ended, then reads its summary.
+/// `--wait`: polls with backoff until the commit job ended, then reads its summary; follows
+/// the runs that resubmitted failed shards (`retries`) to the last one.
 fn wait(
     client: &Slurm,
     limits: &crate::pipeline::slurm::ClusterLimits,
-    run: &RunFile,
+    mut run: RunFile,
     output_dir: &Path,
     reporter: &Reporter,
 ) -> anyhow::Result<RunSummary> {
-    let mut arrays: Vec<SubmittedArray> = run.arrays.values().cloned().collect();
-    arrays.extend(run.commit.clone());
-    let mut status = crate::pipeline::slurm::RunStatus::new(&arrays);
-    client.wait(&mut status, limits, Default::default(), |s| {
-        reporter.line(&format!("Slurm run `{}`: {} task(s) not finished", run.id, s.unfinished()))
-    })?;
-    let path = runs_dir(output_dir).join(format!("{}{SUMMARY_SUFFIX}", run.id));
-    let summary: Summary = serde_json::from_slice(
-        &std::fs::read(&path).with_context(|| format!("the commit job left no summary `{}`", path.display()))?,
-    )?;
+    let summary = loop {
+        let mut arrays: Vec<SubmittedArray> = run.arrays.values().cloned().collect();
+        arrays.extend(run.commit.clone());
+        let mut status = crate::pipeline::slurm::RunStatus::new(&arrays);
+        client.wait(&mut status, limits, Default::default(), |s| {
+            reporter.line(&format!("Slurm run `{}`: {} task(s) not finished", run.id, s.unfinished()))
+        })?;
+        let path = runs_dir(output_dir).join(format!("{}{SUMMARY_SUFFIX}", run.id));
+        let summary: Summary = serde_json::from_slice(
+            &std::fs::read(&path).with_context(|| format!("the commit job left no summary `{}`", path.display()))?,
+        )?;
+        let Some(next) = summary.retried_as else { break summary };
+        run = read_run(&runs_dir(output_dir).join(&next))?;
+        reporter.line(&format!(
+            "Slurm run `{next}`: {} failed unit(s) resubmitted (commit job {})",
+            summary.failed.len(),
+            run.commit_job()
+        ));
+    };
     let problem = |(stage, unit, reason): &(String, String, String)| UnitProblem {
         stage: stage.clone(),
         unit: unit.clone(),
@@ -372,7 +575,7 @@ fn upstream_produced(
                     let path = run_dir.join("manifests").join(name).join(format!("{shard}.json"));
                     let Ok(bytes) = std::fs::read(&path) else {
                         // Not submitted (all cached) or not finished: what is committed stands.
-                        let submitted = run.arrays[name].tasks().any(|t| t as usize == shard);
+                        let submitted = run.submitted(name, shard);
                         tainted |= submitted;
                         if !submitted {
                             for id in ids {
@@ -405,6 +608,7 @@ fn upstream_produced(
 
 /// `shakeflow slurm-task RUN_DIR STAGE`: one array task, its shard from `$SLURM_ARRAY_TASK_ID`.
 pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) -> anyhow::Result<bool> {
+    crate::pipeline::failpoint::hit(&format!("slurm-task.{stage_name}.{shard}"))?;
     let run = read_run(run_dir)?;
     let plan = pipeline_plan(&run, registry)?;
     let stage = plan.stages.get(stage_name).ok_or_else(|| anyhow!("the pipeline has no stage `{stage_name}`"))?;
@@ -478,14 +682,55 @@ pub fn commit(run_dir: &Path, registry: Registry) -> anyhow::Result<()> {
     let plan = pipeline_plan(&run, registry)?;
     let output_dir = plan.file.output_dir();
     let lease = Lease::take_handed(&output_dir, &run.id)?;
+    let (mut summary, new_lock) = commit_manifests(run_dir, &run, &plan, &lease)?;
+    let retries = run.options.executor.retries.unwrap_or(0);
+    let retry = if summary.failed.is_empty() || retries == 0 {
+        None
+    } else {
+        resubmit(&run, &plan, &new_lock, retries - 1).unwrap_or_else(|e| {
+            eprintln!("error: the failed shards could not be resubmitted: {e:#}");
+            None
+        })
+    };
+    summary.retried_as = retry.as_ref().map(|r| r.id.clone());
+    let runs = runs_dir(&output_dir);
+    publish(&runs.join(format!("{}{SUMMARY_SUFFIX}", run.id)), &serde_json::to_vec_pretty(&summary)?)?;
+    match retry {
+        Some(next) => {
+            let job = next.commit_job();
+            lease.hand_over(&next.id, &job)?;
+            eprintln!(
+                "{} unit(s) failed: resubmitted as the Slurm run `{}` (commit job {job}, {} retr{} left after it)",
+                summary.failed.len(),
+                next.id,
+                retries - 1,
+                if retries == 2 { "y" } else { "ies" }
+            );
+            Ok(())
+        }
+        None => {
+            drop(lease);
+            if summary.failed.is_empty() {
+                Ok(())
+            } else {
+                Err(anyhow!("{} unit(s) failed; the units that finished were committed", summary.failed.len()))
+            }
+        }
+    }
+}
+
+/// Folds every shard's manifest as a local run folds its units and commits the results with
+/// the lockfile, under `lease`; what failed is printed and summarised; returns the new lockfile.
+fn commit_manifests(run_dir: &Path, run: &RunFile, plan: &Plan, lease: &Lease) -> anyhow::Result<(Summary, LockFile)> {
+    let output_dir = plan.file.output_dir();
     let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
-    let transaction = Transaction::begin(&lease)?;
+    let transaction = Transaction::begin(lease)?;
     let mut new_lock = lock.clone();
     new_lock.pipeline = Some(ownership::pipeline_label(&plan.file));
     let mut install: BTreeSet<String> = BTreeSet::new();
     let mut remove: BTreeSet<String> = BTreeSet::new();
     let mut tainted: BTreeSet<String> = BTreeSet::new();
-    let mut summary = Summary { failed: Vec::new(), flagged: Vec::new(), committed_units: 0 };
+    let mut summary = Summary { failed: Vec::new(), flagged: Vec::new(), committed_units: 0, retried_as: None };
     for (name, stage) in &plan.stages {
         let Some(shards) = run.shards.get(name) else {
             if upstream_stages(stage).iter().any(|u| tainted.contains(*u)) {
@@ -505,7 +750,7 @@ pub fn commit(run_dir: &Path, registry: Registry) -> anyhow::Result<()> {
                     vanished.extend(manifest.vanished);
                     records.extend(manifest.records);
                 }
-                Err(_) if run.arrays[name].tasks().any(|t| t as usize == shard) => {
+                Err(_) if run.submitted(name, shard) => {
                     // The task did not finish (cancelled, timed out, killed): its units keep
                     // their committed state and count as failed.
                     records.extend(ids.iter().map(|id| UnitRecord {
@@ -532,7 +777,7 @@ pub fn commit(run_dir: &Path, registry: Registry) -> anyhow::Result<()> {
         records.retain(|r| {
             !matches!(r.outcome, UnitOutcome::Cached) || entry.is_some_and(|e| e.units.contains_key(&r.id))
         });
-        let folded = fold(&plan, stage, entry, records, &vanished, upstream_tainted, &output_dir, &staging)?;
+        let folded = fold(plan, stage, entry, records, &vanished, upstream_tainted, &output_dir, &staging)?;
         for (relative, from) in &folded.install {
             let to = transaction.new_path(relative);
             if *from != to {
@@ -555,21 +800,27 @@ pub fn commit(run_dir: &Path, registry: Registry) -> anyhow::Result<()> {
     let install: Vec<String> = install.into_iter().collect();
     let remove: Vec<String> = remove.into_iter().filter(|r| !install.contains(r)).collect();
     transaction.commit(&install, &remove, Some(&new_lock))?;
-    let runs = runs_dir(&output_dir);
-    publish(&runs.join(format!("{}{SUMMARY_SUFFIX}", run.id)), &serde_json::to_vec_pretty(&summary)?)?;
+    for (stage, unit, reason) in &summary.failed {
+        eprintln!("error: stage `{stage}` {} failed: {reason}", crate::pipeline::units::describe(unit));
+    }
     // The logs stay (`<run>/logs`); results and manifests were moved or are no longer needed.
     for folder in ["results", "manifests"] {
         let _ = std::fs::remove_dir_all(run_dir.join(folder));
     }
-    for (stage, unit, reason) in &summary.failed {
-        eprintln!("error: stage `{stage}` {} failed: {reason}", crate::pipeline::units::describe(unit));
-    }
-    drop(lease);
-    if summary.failed.is_empty() {
-        Ok(())
-    } else {
-        Err(anyhow!("{} unit(s) failed; the units that finished were committed", summary.failed.len()))
-    }
+    Ok((summary, new_lock))
+}
+
+/// `retries`: after a commit with failed units, submits the units still stale — the failed
+/// ones and what depends on them, nothing forced again — as a new run with `retries_left`.
+fn resubmit(run: &RunFile, plan: &Plan, lock: &LockFile, retries_left: u32) -> anyhow::Result<Option<RunFile>> {
+    let options = RunOptions { force: Vec::new(), only: run.only.clone(), keep_going: run.keep_going };
+    let selected = selected_stages(plan, &options)?;
+    let lines = predict(plan, lock, &resolve_sources(plan)?, &param_file_hashes(plan)?, &[])?;
+    let mut slurm = run.options.clone();
+    slurm.executor.retries = Some(retries_left);
+    let client = Slurm::new();
+    let limits = client.limits()?;
+    submit_run(plan, &options, &slurm, &Reporter::new(false), &lines, &selected, &client, &limits)
 }
 
 /// What `status` says of a Slurm run holding the folder: per stage, its tasks' states.
@@ -577,12 +828,22 @@ pub fn progress(output_dir: &Path) -> Vec<String> {
     let Ok(entries) = std::fs::read_dir(runs_dir(output_dir)) else { return Vec::new() };
     let mut lines = Vec::new();
     let client = Slurm::new();
-    let Ok(limits) = client.limits() else { return lines };
     for entry in entries.flatten() {
         let Ok(run) = read_run(&entry.path()) else { continue };
         if runs_dir(output_dir).join(format!("{}{SUMMARY_SUFFIX}", run.id)).exists() {
             continue;
         }
+        if let Some(job) = &run.allocation {
+            // Steps of one allocation: their manifests say how far it is.
+            lines.push(format!("Slurm run `{}` in allocation {job}:", run.id));
+            for (name, tasks) in &run.tasks {
+                let manifests = entry.path().join("manifests").join(name);
+                let done = tasks.iter().filter(|t| manifests.join(format!("{t}.json")).exists()).count();
+                lines.push(format!("  {name:<18} {done} of {} shard(s) done", tasks.len()));
+            }
+            continue;
+        }
+        let Ok(limits) = client.limits() else { return lines };
         let mut arrays: Vec<SubmittedArray> = run.arrays.values().cloned().collect();
         arrays.extend(run.commit.clone());
         let mut status = crate::pipeline::slurm::RunStatus::new(&arrays);

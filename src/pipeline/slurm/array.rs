@@ -315,6 +315,7 @@ mod tests {
             retries: Some(2),
             requeue: Some(true),
             sbatch_args: vec!["--qos=normal".into()],
+            in_allocation: None,
         };
         let plans = plan_parts(&j, 1001).unwrap();
         assert_eq!(plans.len(), 1);

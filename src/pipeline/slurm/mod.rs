@@ -44,11 +44,13 @@
 //! task's index makes that task wait for the whole earlier array, and cancels it when any task
 //! there fails — hence the counterpart rule of [`array::plan_parts`].
 
+pub mod allocation;
 pub mod array;
 pub mod limits;
 pub mod options;
 pub mod status;
 
+pub use allocation::Allocation;
 pub use array::{ArrayJob, ArrayPart, DepKind, Dependency, JobId, PartPlan, SubmittedArray};
 pub use limits::ClusterLimits;
 pub use options::{ExecutorFlags, ExecutorOptions, OptionError};

@@ -28,7 +28,8 @@ pub struct ExecutorOptions {
     /// At most this many tasks of one stage's array run at once (`--array=…%N`).
     #[serde(default)]
     pub array_throttle: Option<u32>,
-    /// How many times the executor resubmits the tasks that failed (0: none).
+    /// How many times the executor resubmits the tasks that failed (0: none): the commit job
+    /// submits the failed shards and what depends on them again, with a new commit job.
     #[serde(default)]
     pub retries: Option<u32>,
     /// `--requeue`: Slurm puts a preempted or node-failed task back in the queue (default: `--no-requeue`).
@@ -37,6 +38,10 @@ pub struct ExecutorOptions {
     /// Further `sbatch` arguments, each one word (`--qos=debug`, `--constraint=skx`).
     #[serde(default)]
     pub sbatch_args: Vec<String>,
+    /// Run inside the current `sbatch`/`salloc` allocation: each shard an `srun` job step, no job
+    /// arrays (a Tapis app's single job).
+    #[serde(default)]
+    pub in_allocation: Option<bool>,
 }
 
 /// An option that cannot be used: which key of the `executor:` block (or which flag) and why.
@@ -82,6 +87,7 @@ impl ExecutorOptions {
             retries: flags.retries.or(self.retries),
             requeue: flags.requeue.or(self.requeue),
             sbatch_args,
+            in_allocation: flags.in_allocation.or(self.in_allocation),
         }
     }
 
@@ -210,6 +216,10 @@ pub struct ExecutorFlags {
     /// Let Slurm requeue preempted or node-failed tasks (overrides `executor.requeue`).
     #[arg(long)]
     pub requeue: bool,
+    /// Run inside this sbatch/salloc allocation, each shard an srun job step (overrides
+    /// `executor.in_allocation`).
+    #[arg(long = "in-allocation")]
+    pub in_allocation: bool,
     /// A further sbatch argument, one word (repeatable), e.g. --sbatch-arg=--qos=debug.
     #[arg(long = "sbatch-arg", allow_hyphen_values = true)]
     pub sbatch_args: Vec<String>,
@@ -227,6 +237,7 @@ impl ExecutorFlags {
             retries: self.retries,
             requeue: self.requeue.then_some(true),
             sbatch_args: self.sbatch_args.clone(),
+            in_allocation: self.in_allocation.then_some(true),
         }
     }
 }
@@ -239,12 +250,14 @@ mod tests {
     #[test]
     fn the_executor_block_deserialises_and_refuses_unknown_keys() {
         let yaml = "partition: normal\naccount: DesignSafe-123\ntime_limit: \"02:00:00\"\ncpus_per_task: 8\nmem: 16G\n\
-                    array_throttle: 50\nretries: 2\nrequeue: true\nsbatch_args: [--qos=normal, --constraint=skx]\n";
+                    array_throttle: 50\nretries: 2\nrequeue: true\nsbatch_args: [--qos=normal, --constraint=skx]\n\
+                    in_allocation: true\n";
         let o: ExecutorOptions = serde_yaml::from_str(yaml).unwrap();
         assert_eq!(o.partition.as_deref(), Some("normal"));
         assert_eq!(o.cpus_per_task, Some(8));
         assert_eq!(o.requeue, Some(true));
         assert_eq!(o.sbatch_args, ["--qos=normal", "--constraint=skx"]);
+        assert_eq!(o.in_allocation, Some(true));
         assert_eq!(o.check(), Ok(()));
         let e = serde_yaml::from_str::<ExecutorOptions>("partiton: normal\n").unwrap_err().to_string();
         assert!(e.contains("unknown field `partiton`"), "{e}");
@@ -258,8 +271,15 @@ mod tests {
             #[command(flatten)]
             slurm: ExecutorFlags,
         }
-        let cli =
-            Cli::try_parse_from(["x", "--partition", "development", "--requeue", "--sbatch-arg=--qos=debug"]).unwrap();
+        let cli = Cli::try_parse_from([
+            "x",
+            "--partition",
+            "development",
+            "--requeue",
+            "--sbatch-arg=--qos=debug",
+            "--in-allocation",
+        ])
+        .unwrap();
         let file = ExecutorOptions {
             partition: Some("normal".into()),
             account: Some("A-123".into()),
@@ -272,6 +292,7 @@ mod tests {
         assert_eq!(merged.account.as_deref(), Some("A-123"));
         assert_eq!(merged.requeue, Some(true));
         assert_eq!(merged.sbatch_args, ["--constraint=skx", "--qos=debug"]);
+        assert_eq!(merged.in_allocation, Some(true));
         // No flag: the file's values stay.
         assert_eq!(file.merged_with(&Cli::try_parse_from(["x"]).unwrap().slurm.options()), file);
     }

@@ -1,0 +1,166 @@
+"""`make bench-scale`: the per-record stages of the demo study over a generated archive of
+--tests tests (`shakeflow demo-archive --tests N`), through the local executor and through the
+single-node test Slurm (`tests/system/slurm.sh`), and a no-op rerun of the whole archive.
+
+Prints, per executor: wall time, work units run, wall time per unit, files created (artifacts
+and lockfile, not shakeflow's state folder), their bytes, the lockfile's size and the commit's
+time; for Slurm also array tasks, the per-task overhead over the local run and the commit job's
+time (Slurm's start/end, 1 s resolution); and whether both lockfiles are identical. The no-op
+reruns: the first after the run reads the files the memo does not hold yet, the next ones are
+what a user sees. Figures, not assertions: ARCHITECTURE.md's scale estimate uses them.
+
+The local commit time is measured from `SHAKEFLOW_FAILPOINT=trace`'s `failpoint: commit.*`
+lines on standard error, timestamped as they arrive: from the commit's first step to its last.
+"""
+import argparse
+import os
+import pathlib
+import re
+import shutil
+import subprocess
+import sys
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+
+
+def project(folder: pathlib.Path, archive: pathlib.Path) -> pathlib.Path:
+    """`folder`/pipeline.yaml: pipelines/demo.yaml reading `archive`, writing `folder`/out (both
+    executors' projects have the same file name: it is part of every artifact's provenance)."""
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    text = (ROOT / "pipelines/demo.yaml").read_text().replace("../runs/demo-archive", str(archive))
+    (folder / "pipeline.yaml").write_text(re.sub(r"(?m)^output_dir: .*$", "output_dir: out", text))
+    return folder
+
+
+def files_and_bytes(out: pathlib.Path):
+    n, size = 0, 0
+    for dirpath, dirnames, filenames in os.walk(out):
+        if ".shakeflow" in pathlib.Path(dirpath).relative_to(out).parts[:1]:
+            continue
+        for f in filenames:
+            n += 1
+            size += (pathlib.Path(dirpath) / f).stat().st_size
+    return n, size
+
+
+def timed_run(cmd, cwd, env=None):
+    """Runs cmd; returns (wall s, stderr lines with their arrival in s since the start, exit code)."""
+    started = time.monotonic()
+    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    lines = [(time.monotonic() - started, line.rstrip("\n")) for line in proc.stderr]
+    code = proc.wait()
+    return time.monotonic() - started, lines, code
+
+
+def units_ran(lines):
+    return sum(int(m.group(1)) for _, l in lines for m in [re.search(r"done in .*?: (\d+) unit\(s\) ran", l)] if m)
+
+
+def slurm_times(job, env):
+    out = subprocess.run(["scontrol", "-o", "show", "job", job], env=env, capture_output=True, text=True).stdout
+    fields = dict(kv.split("=", 1) for kv in out.split() if "=" in kv)
+    parse = lambda s: time.mktime(time.strptime(s, "%Y-%m-%dT%H:%M:%S"))
+    return parse(fields["EndTime"]) - parse(fields["StartTime"])
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--shakeflow", required=True)
+    ap.add_argument("--tests", type=int, default=200)
+    ap.add_argument("--work", default="runs/bench-scale")
+    ap.add_argument("--stages", default="synchronize", help="run these stages and what they need")
+    ap.add_argument("--units-per-task", type=int, default=50)
+    ap.add_argument("--noop-repeat", type=int, default=3)
+    ap.add_argument("--no-slurm", action="store_true")
+    a = ap.parse_args()
+    shakeflow = str(pathlib.Path(a.shakeflow).resolve())
+    work = pathlib.Path(a.work).resolve()
+    archive = work / "archive"
+    work.mkdir(parents=True, exist_ok=True)
+    subprocess.run([shakeflow, "demo-archive", str(archive), "--tests", str(a.tests)], check=True)
+    stages = a.stages.split(",")
+    report = {}
+
+    # Local.
+    local = project(work / "local", archive)
+    env = dict(os.environ, SHAKEFLOW_FAILPOINT="trace")
+    wall, lines, code = timed_run([shakeflow, "run", "pipeline.yaml", *stages], local, env)
+    if code != 0:
+        sys.exit("local run failed:\n" + "\n".join(l for _, l in lines[-20:]))
+    commit = [t for t, l in lines if l.startswith("failpoint: commit.")]
+    n_files, n_bytes = files_and_bytes(local / "out")
+    units = units_ran(lines)
+    report["local"] = dict(
+        wall=wall,
+        units=units,
+        files=n_files,
+        bytes=n_bytes,
+        lock=(local / "out/shakeflow.lock").stat().st_size,
+        commit=commit[-1] - commit[0] if commit else float("nan"),
+    )
+    noops = []
+    for _ in range(a.noop_repeat):
+        w, lines, code = timed_run([shakeflow, "run", "pipeline.yaml", *stages, "-q"], local)
+        if code != 0:
+            sys.exit("no-op rerun failed:\n" + "\n".join(l for _, l in lines[-20:]))
+        noops.append(w)
+    w, lines, _ = timed_run([shakeflow, "status", "pipeline.yaml"], local)
+    status_wall = w
+
+    # Slurm.
+    slurm_sh = ROOT / "tests/system/slurm.sh"
+    started_slurm = False
+    if not a.no_slurm:
+        if subprocess.run(["sh", str(slurm_sh), "status"], capture_output=True).returncode != 0:
+            subprocess.run(["sh", str(slurm_sh), "start"], check=True)
+            started_slurm = True
+        try:
+            conf = pathlib.Path(os.environ.get("SHAKEFLOW_SLURM_DIR", pathlib.Path.home() / ".cache/shakeflow/slurm"))
+            env = dict(os.environ, SLURM_CONF=str(conf / "slurm.conf"))
+            cluster = project(work / "slurm", archive)
+            cmd = [shakeflow, "run", "pipeline.yaml", *stages, "--executor", "slurm", "--wait"]
+            cmd += ["--units-per-task", str(a.units_per_task)]
+            wall, lines, code = timed_run(cmd, cluster, env)
+            if code != 0:
+                sys.exit("Slurm run failed:\n" + "\n".join(l for _, l in lines[-30:]))
+            submit = next(t for t, l in lines if "submitted (commit job" in l)
+            tasks = sum(int(m.group(1)) for _, l in lines for m in [re.search(r"submitted: (\d+) of", l)] if m)
+            commit_job = next(re.search(r"commit job (\d+)", l).group(1) for _, l in lines if "commit job" in l)
+            n_files, n_bytes = files_and_bytes(cluster / "out")
+            same = (cluster / "out/shakeflow.lock").read_bytes() == (local / "out/shakeflow.lock").read_bytes()
+            report["slurm"] = dict(
+                wall=wall,
+                units=report["local"]["units"],
+                files=n_files,
+                bytes=n_bytes,
+                lock=(cluster / "out/shakeflow.lock").stat().st_size,
+                commit=slurm_times(commit_job, env),
+                tasks=tasks,
+                submit=submit,
+                same=same,
+            )
+        finally:
+            if started_slurm:
+                subprocess.run(["sh", str(slurm_sh), "stop"])
+
+    print(f"\nbench-scale: {a.tests} tests, stages {', '.join(stages)} and what they need ({shakeflow})")
+    print(f"{'':8} {'wall s':>8} {'units':>6} {'ms/unit':>8} {'files':>6} {'MB':>8} {'lock KB':>8} {'commit s':>9}")
+    for name, r in report.items():
+        print(
+            f"{name:8} {r['wall']:8.2f} {r['units']:6d} {1000 * r['wall'] / max(r['units'], 1):8.2f} {r['files']:6d} "
+            f"{r['bytes'] / 1e6:8.1f} {r['lock'] / 1e3:8.1f} {r['commit']:9.2f}"
+        )
+    if "slurm" in report:
+        s, l = report["slurm"], report["local"]
+        print(
+            f"slurm: {s['tasks']} array task(s) + 1 commit job, submitted in {s['submit']:.2f} s; "
+            f"overhead over local {(s['wall'] - l['wall']) / max(s['tasks'], 1):.2f} s per task; "
+            f"lockfile {'identical to' if s['same'] else 'DIFFERENT from'} the local run's"
+        )
+    print("no-op reruns: " + ", ".join(f"{w:.2f} s" for w in noops) + f"; status {status_wall:.2f} s")
+
+
+if __name__ == "__main__":
+    main()
