@@ -73,3 +73,41 @@ fn a_rolling_equipment_file_with_a_misspelt_key_is_refused_with_its_line() {
     let err = stderr(&run);
     assert!(err.contains("mu_s_rol") && err.contains(&format!(":{line}")), "{err}");
 }
+
+/// The demo archive's rolling cases (src/demo/cases.rs: MC2 losing shelves and bottles in FB-5,
+/// PS1 carrying the fallen WSU1 in FB-5), made with shakeflow's own cart: `shakeflow
+/// demo-archive` writes them in the case contract, and the diagnosis names the mass change they
+/// conceal, from its onset, with the right sign, fitting the window at least threefold better.
+#[test]
+fn demo_archive_rolling_cases_are_diagnosed_as_their_mass_changes() {
+    let dir = tempfile::tempdir().unwrap();
+    let archive = dir.path().join("archive");
+    let run = shakeflow(&["demo-archive", archive.to_str().unwrap()], dir.path());
+    assert!(run.status.success(), "{}", stderr(&run));
+    let ids = ["MC2_FB-5", "PS1_FB-5"];
+    let cases: Vec<String> = ids.iter().map(|id| archive.join("cases").join(id).display().to_string()).collect();
+    let out = dir.path().join("diagnosis");
+    let mut args = vec!["diagnose"];
+    args.extend(cases.iter().map(String::as_str));
+    args.extend(["--out", out.to_str().unwrap()]);
+    let run = shakeflow(&args, dir.path());
+    assert!(run.status.success(), "{}", stderr(&run));
+    for id in ids {
+        let truth: serde_yaml::Value = serde_yaml::from_str(
+            &std::fs::read_to_string(archive.join("cases/truth").join(format!("{id}.yaml"))).unwrap(),
+        )
+        .unwrap();
+        let d: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join(id).join("diagnosis.json")).unwrap()).unwrap();
+        let (before, after) = (d["rmse_before"].as_f64().unwrap(), d["rmse_after"].as_f64().unwrap());
+        let onset = truth["onset_s"].as_f64().unwrap();
+        let start = d["window"]["start_s"].as_f64().expect("a mismatch window");
+        println!("{id}: {} from {start:.2} s (onset {onset:.2} s), rmse {before:.1} → {after:.2}", d["verdict"]);
+        assert_eq!(d["verdict"], "mass_change", "{id}: {}", d["explanation"]);
+        assert!((start - onset).abs() <= 0.5, "{id}: window starts at {start} s, onset {onset} s");
+        assert!(after <= before / 3.0, "{id}: rmse {before} → {after}");
+        let dm = d["candidates"][1]["params"]["dm_kg"].as_f64().unwrap();
+        let true_dm = truth["parameters"]["dm_kg"].as_f64().unwrap();
+        assert!(dm * true_dm > 0.0, "{id}: fitted dm {dm} kg, concealed {true_dm} kg: a loss is a loss");
+    }
+}
