@@ -499,14 +499,14 @@ mod tests {
     }
 
     #[test]
-    fn uncoupled_friction_rocks_as_the_nominal_block_and_slides_between_rocking_phases() {
+    fn uncoupled_friction_rocks_as_the_nominal_block_and_slides_while_flat() {
         // The uncoupled formulation's defining property: θ(t) is the nominal (non-slipping)
         // block's, computed by the other integrator path (no friction), while the base slides when
-        // flat. A slender block (tan α = 0.25) under 0.5 g at 1 Hz with μ = 0.15: the first slip
+        // flat. A slender block (tan α = 0.25) under 0.3 g at 1 Hz with μ = 0.15: the first slip
         // starts at sin ωt = μg/A (closed form), toward −x, and the top then reads +μg.
         let block = rectangle(0.25, 1.0);
         let tan = block.alpha_rad.tan();
-        let (amplitude, omega, mu, dt) = (0.5 * G, std::f64::consts::TAU, 0.6 * tan, 1e-3);
+        let (amplitude, omega, mu, dt) = (0.3 * G, std::f64::consts::TAU, 0.6 * tan, 1e-3);
         let floor: Vec<f64> = (0..4001).map(|k| amplitude * (omega * k as f64 * dt).sin()).collect();
         let uncoupled = run(&block, &floor, dt, Friction { coupled: false, ..Friction::coulomb(mu) });
         let exc = Excitation { t0_s: 0.0, dt_s: dt, horizontal_mps2: &floor, vertical_mps2: None };
@@ -519,12 +519,15 @@ mod tests {
         }
         let start = (mu * G / amplitude).asin() / omega;
         let slides = times(&uncoupled, EventKind::SlideStart);
-        assert!((slides[0] - start).abs() < 1e-9, "first slip at {} s, closed form {start} s", slides[0]);
-        assert!(slides.len() >= 2, "it slides again between rocking phases: {:?}", uncoupled.events);
+        // The floor is linear between its samples: within Aω²dt²/8 = 1.5e-5 m/s² of the sine, where
+        // it rises at Aω = 18 m/s³ or more, which moves the threshold crossing by up to 2e-6 s.
+        assert!((slides[0] - start).abs() < 2e-6, "first slip at {} s, closed form {start} s", slides[0]);
+        let uplift = times(&uncoupled, EventKind::Uplift);
+        assert!(uplift.first().is_some_and(|&t| t > slides[0]), "a slide, then rocking: {:?}", uncoupled.events);
         let k = (start / dt).ceil() as usize + 1;
         assert!((uncoupled.top_ax_mps2[k] - mu * G).abs() < 1e-12, "top {} while sliding", uncoupled.top_ax_mps2[k]);
         let slipped = uncoupled.slip_m.iter().fold(0.0f64, |m, u| m.max(u.abs()));
-        assert!(slipped > 1e-3, "the base slips by {slipped} m");
+        assert!(slipped > 5e-4, "the base slips by {slipped} m");
         // The coupled block with the same μ < tan α slides instead of rocking.
         let coupled = run(&block, &floor, dt, Friction::coulomb(mu));
         assert!(coupled.theta_rad.iter().all(|&th| th == 0.0));
@@ -697,7 +700,12 @@ mod tests {
                     }
                 })
                 .collect();
-            let resp = run(&block, &floor, dt, Friction { static_mu: num("static_mu"), kinetic_mu: num("kinetic_mu"), coupled: true });
+            let resp = run(
+                &block,
+                &floor,
+                dt,
+                Friction { static_mu: num("static_mu"), kinetic_mu: num("kinetic_mu"), coupled: true },
+            );
             let events = case["events"].as_array().unwrap();
             assert_eq!(resp.events.len(), events.len(), "{name}: {:?}", resp.events);
             for (mine, theirs) in resp.events.iter().zip(events) {
@@ -757,7 +765,8 @@ mod tests {
         let floor = vec![0.0; 10];
         let exc = Excitation { t0_s: 0.0, dt_s: 0.01, horizontal_mps2: &floor, vertical_mps2: None };
         let with = |friction| Options { friction: Some(friction), ..Options::default() };
-        let message = simulate(&block, &exc, &with(Friction { static_mu: 0.2, kinetic_mu: 0.3, coupled: true })).unwrap_err();
+        let message =
+            simulate(&block, &exc, &with(Friction { static_mu: 0.2, kinetic_mu: 0.3, coupled: true })).unwrap_err();
         assert!(message.contains("μ_k ≤ μ_s"), "{message}");
         let obstacle = Some(super::super::Obstacle { side: 1, angle_rad: 0.1, restitution: 0.5 });
         let message = simulate(&block, &exc, &Options { obstacle, ..with(Friction::coulomb(0.3)) }).unwrap_err();
