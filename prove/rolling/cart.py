@@ -2,15 +2,24 @@
 ../shared/docs/4WMC-NOTES.md ("A consistent formulation", with the swivel erratum) with numba,
 and nothing taken from shakeflow's Rust code; each concealed effect is this file's own physics:
 
+Each effect has two formulations (generate.py draws one), so that the proof does not only measure
+how well the diagnosis recovers the parameters of the physics it fits itself:
+
 - mass change: the platform is a uniform plate plus a point mass dm (negative: lost) at a body
   offset; wheel loads of a rigid plate on four equal supports; a loss leaves with its own velocity
-  (nu continuous), a gain is captured at rest on the floor (generalised momentum conserved);
-- caster brake: one wheel locks (no spin inertia) and slides along its heading with mu_drag N;
-- swivel jam: one caster's swivel stops (delta_dot = 0 as a Lagrange-multiplier constraint with
-  Baumgarte stabilisation; the jam is a plastic impulse onto the constraint);
-- lateral impact: a RIGID wall across X or Y struck by a platform corner: Newton's impact law with
-  restitution e on the corner's normal speed, an impulse through the generalised mass (shakeflow
-  models a compliant contact instead; the proof checks it copes);
+  (nu continuous), a gain is captured at rest on the floor (generalised momentum conserved).
+  Formulations: a step, or a loss spread linearly over ramp_s (bottles falling off one by one);
+- caster brake: one wheel's slide along its heading is resisted by mu_drag N. Formulations: the
+  wheel locks (no spin inertia), or a pad drags a still spinning wheel with a drag that builds up
+  over ramp_s;
+- swivel jam: one caster's swivel stops. Formulations: a rigid lock (delta_dot = 0 as a
+  Lagrange-multiplier constraint with Baumgarte stabilisation; the jam is a plastic impulse onto
+  the constraint), or a friction lock (a swivel torque mu_jam N rho tanh(delta_dot / 0.01 rad/s)
+  that slips when the cart pulls harder);
+- lateral impact: a wall across X or Y struck by a platform corner. Formulations: RIGID (Newton's
+  impact law with restitution e on the corner's normal speed, an impulse through the generalised
+  mass), or a COMPLIANT neighbour (a compressive spring-dashpot k pen + c pen_dot at every corner
+  past its face, contact frequencies from 4 Hz, far softer than shakeflow's 20 ms contact);
 - floor tilt (an `unexplained` kind): the slab tilts by sigma(t), adding -g sin(sigma) to the
   floor acceleration the cart feels but not to floor.csv.
 
@@ -28,8 +37,11 @@ G = 9.80665
 
 # Parameter vector layout.
 (A, B, R, D, RHO, MP, MW, IP, IS, IZ, GG, MUSR, MUKR, MUSS, MUKS, BETA, GAMMA, PEXP, EPS, EPSSW,
- DM, DX, DY, BRAKE, MUDRAG, JAM, WAXIS, WSIDE, WPOS, WE, TILT, TILTDIR, TILT0, TILTRAMP) = range(34)
-NPAR = 34
+ DM, DX, DY, BRAKE, MUDRAG, JAM, WAXIS, WSIDE, WPOS, WE, TILT, TILTDIR, TILT0, TILTRAMP,
+ WK, WC, JAMMU, BRAKESPIN, BRAKE0, BRAKERAMP, DM0, DMRAMP) = range(42)
+NPAR = 42
+# A friction jam's regularisation (rad/s): a stiff but finite swivel lock that can slip.
+EPS_JAM = 0.01
 SIGNS = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]])
 
 
@@ -60,7 +72,15 @@ def _mu(p, ms, mk, v):
 
 
 @njit(cache=True)
-def _system(y, p, ux, uy):
+def _ramp(t, t0, duration):
+    """0 before t0, rising linearly to 1 over duration (a step when duration is 0)."""
+    if duration <= 0.0:
+        return 1.0
+    return min(1.0, max(0.0, (t - t0) / duration))
+
+
+@njit(cache=True)
+def _system(y, p, ux, uy, t):
     """Mass matrix M, right-hand side Q (forces minus velocity terms), the jam row (c, c_dot.nu)."""
     a, b, r, d, rho = p[A], p[B], p[R], p[D], p[RHO]
     mw = p[MW]
@@ -76,7 +96,8 @@ def _system(y, p, ux, uy):
     Q[0] -= p[MP] * ux
     Q[1] -= p[MP] * uy
     # Point mass dm at body (DX, DY).
-    dm = p[DM]
+    # A gradual loss (DMRAMP > 0) leaves with its own velocity: no thrust, M(t) only.
+    dm = p[DM] * _ramp(t, p[DM0], p[DMRAMP])
     if dm != 0.0:
         qx = c * p[DX] - s * p[DY]
         qy = s * p[DX] + c * p[DY]
@@ -107,7 +128,7 @@ def _system(y, p, ux, uy):
         # a_dot.nu and b_dot.nu, from e_dot = psi_dot n, n_dot = -psi_dot e, r_dot = w k x r.
         adot = psidot * vb - w * w * (rx * ex + ry * ey)
         bdot = -psidot * va - w * w * (rx * nx + ry * ny)
-        spin = 0.0 if i == brake else p[IS] / (r * r)
+        spin = 0.0 if i == brake and p[BRAKESPIN] == 0.0 else p[IS] / (r * r)
         kroll = mw + spin
         kyaw = p[IZ] / (d * d)
         M += kroll * np.outer(av, av) + kyaw * np.outer(bv, bv)
@@ -115,25 +136,44 @@ def _system(y, p, ux, uy):
         Q -= mw * av * (ex * ux + ey * uy)
         N = (mw + mtot * 0.25 * (1.0 + cx * sx / a + cy * sy / b)) * p[GG]
         if i == brake:
-            Q -= p[MUDRAG] * N * math.tanh(va / p[EPS]) * av
+            mud = p[MUDRAG] * _ramp(t, p[BRAKE0], p[BRAKERAMP])
+            Q -= mud * N * math.tanh(va / p[EPS]) * av
         else:
             Q -= _mu(p, p[MUSR], p[MUKR], abs(va)) * N * math.tanh(va / p[EPS]) * av
         dd = psidot - w
         kvec = np.array([bv[0] / d, bv[1] / d, bv[2] / d - 1.0])
-        if i == jam:
+        if i == jam and p[JAMMU] == 0.0:
             crow = kvec
             cdot = bdot / d
+        elif i == jam:
+            # A friction jam: the swivel holds against JAMMU N rho unless the torque exceeds it.
+            Q -= p[JAMMU] * N * rho * math.tanh(dd / EPS_JAM) * kvec
         else:
             torque = _mu(p, p[MUSS], p[MUKS], rho * abs(dd)) * N * rho * math.tanh(dd / p[EPSSW])
             Q -= torque * kvec
+    if p[WAXIS] >= 0.0 and p[WK] > 0.0:
+        # A compliant neighbour: a compressive spring-dashpot at every corner past its face.
+        for i in range(4):
+            px, py = SIGNS[i, 0] * a, SIGNS[i, 1] * b
+            rx, ry = c * px - s * py, s * px + c * py
+            if p[WAXIS] == 0.0:
+                pen = p[WSIDE] * (y[0] + rx - p[WPOS])
+                J = np.array([p[WSIDE], 0.0, -p[WSIDE] * ry])
+            else:
+                pen = p[WSIDE] * (y[1] + ry - p[WPOS])
+                J = np.array([0.0, p[WSIDE], p[WSIDE] * rx])
+            if pen > 0.0:
+                F = p[WK] * pen + p[WC] * (J @ nu)
+                if F > 0.0:
+                    Q -= F * J
     return M, Q, crow, cdot
 
 
 @njit(cache=True)
-def _accel(y, p, ux, uy):
-    M, Q, crow, cdot = _system(y, p, ux, uy)
+def _accel(y, p, ux, uy, t):
+    M, Q, crow, cdot = _system(y, p, ux, uy, t)
     acc = np.linalg.solve(M, Q)
-    if p[JAM] >= 0.0:
+    if p[JAM] >= 0.0 and p[JAMMU] == 0.0:
         mc = np.linalg.solve(M, crow)
         viol = crow @ y[7:10]
         lam = -(crow @ acc + cdot + 20.0 * viol) / (crow @ mc)
@@ -159,7 +199,7 @@ def _rhs(t, y, p, t0, ax0, ax1, ay0, ay1, dt):
     if sig != 0.0:
         ux -= p[GG] * math.sin(sig) * math.cos(p[TILTDIR])
         uy -= p[GG] * math.sin(sig) * math.sin(p[TILTDIR])
-    acc = _accel(y, p, ux, uy)
+    acc = _accel(y, p, ux, uy, t)
     out = np.empty(10)
     out[0:3] = y[7:10]
     th = y[2]
@@ -170,7 +210,7 @@ def _rhs(t, y, p, t0, ax0, ax1, ay0, ay1, dt):
         px, py = SIGNS[i, 0] * p[A], SIGNS[i, 1] * p[B]
         rx, ry = c * px - s * py, s * px + c * py
         vb = nx * y[7] + ny * y[8] + (rx * ny - ry * nx) * y[9]
-        out[3 + i] = 0.0 if i == int(p[JAM]) else vb / p[D] - y[9]
+        out[3 + i] = 0.0 if i == int(p[JAM]) and p[JAMMU] == 0.0 else vb / p[D] - y[9]
     out[7:10] = acc
     return out
 
@@ -178,7 +218,7 @@ def _rhs(t, y, p, t0, ax0, ax1, ay0, ay1, dt):
 @njit(cache=True)
 def _penetration(y, p):
     """Deepest corner past the wall (m, > 0 inside) and that corner's index."""
-    if p[WAXIS] < 0.0:
+    if p[WAXIS] < 0.0 or p[WK] > 0.0:
         return -1.0, -1
     c, s = math.cos(y[2]), math.sin(y[2])
     best, at = -1e30, -1
@@ -192,7 +232,7 @@ def _penetration(y, p):
 
 
 @njit(cache=True)
-def _impact(y, p, corner):
+def _impact(y, p, corner, t):
     """Newton's law at the corner: its normal speed reverses times e, impulse through M."""
     c, s = math.cos(y[2]), math.sin(y[2])
     px, py = SIGNS[corner, 0] * p[A], SIGNS[corner, 1] * p[B]
@@ -202,7 +242,7 @@ def _impact(y, p, corner):
         J[0], J[2] = p[WSIDE], -p[WSIDE] * ry
     else:
         J[1], J[2] = p[WSIDE], p[WSIDE] * rx
-    M, _, _, _ = _system(y, p, 0.0, 0.0)
+    M, _, _, _ = _system(y, p, 0.0, 0.0, t)
     nu = y[7:10].copy()
     vn = J @ nu
     if vn <= 0.0:
@@ -255,7 +295,7 @@ def _interval(y, p, t0, t1, ax0, ax1, ay0, ay1, dt, h, rtol, atol, stats):
             t += h
             y = y5
             if pen > -1e-9 and corner >= 0:
-                y, vn = _impact(y, p, corner)
+                y, vn = _impact(y, p, corner, t)
                 if vn > 0.0:
                     impacts += 1
                     stats[1] += 1
@@ -291,13 +331,13 @@ def _run(y0, p, p_after, t_change, change_kind, ax, ay, dt, rtol, atol, out, sta
             if not changed and t_change <= t:
                 y, h = _interval(y, cur, tp, t_change, a0x, a1x, a0y, a1y, dt, h, rtol, atol, stats)
                 if change_kind == 1:
-                    Mb, _, _, _ = _system(y, cur, 0.0, 0.0)
-                    Ma, _, _, _ = _system(y, p_after, 0.0, 0.0)
+                    Mb, _, _, _ = _system(y, cur, 0.0, 0.0, t_change)
+                    Ma, _, _, _ = _system(y, p_after, 0.0, 0.0, t_change)
                     y[7:10] = np.linalg.solve(Ma, Mb @ y[7:10])
                 cur = p_after
                 changed = True
                 if change_kind == 2:
-                    Ma, _, crow, _ = _system(y, cur, 0.0, 0.0)
+                    Ma, _, crow, _ = _system(y, cur, 0.0, 0.0, t_change)
                     mc = np.linalg.solve(Ma, crow)
                     y[7:10] = y[7:10] - (crow @ y[7:10]) / (crow @ mc) * mc
                 if t_change < t:
@@ -316,8 +356,12 @@ def _run(y0, p, p_after, t_change, change_kind, ax, ay, dt, rtol, atol, out, sta
 def simulate(unit: dict, ax: np.ndarray, ay: np.ndarray, dt: float, alteration: dict | None = None,
              yaw0_perturbation: float = 0.0, rtol: float = 1e-9, tilt: dict | None = None):
     """Returns (out[n, 8]: x, y, yaw, ax_abs, delta1..4; stats dict). `alteration` is
-    {kind, t0_s, ...} for mass_change (dm_kg, dx_m, dy_m), caster_brake (wheel 0..3, mu_drag),
-    swivel_jam (caster 0..3), lateral_impact (axis, side, position_m, e, from t = 0)."""
+    {kind, t0_s, ...} for mass_change (dm_kg, dx_m, dy_m; ramp_s > 0: a loss spread over that
+    time), caster_brake (wheel 0..3, mu_drag; spinning: the wheel keeps its spin inertia, a brake
+    pad drags; ramp_s: the drag builds up over that time), swivel_jam (caster 0..3; mu_jam > 0: a
+    friction lock mu_jam N rho that can slip instead of a rigid constraint), lateral_impact (axis,
+    side, position_m, e, from t = 0; stiffness_npm > 0: a compliant neighbour, a spring-dashpot
+    with damping_nspm, e then unused)."""
     p = params(unit)
     if tilt:
         p[TILT], p[TILTDIR], p[TILT0], p[TILTRAMP] = tilt["sigma_max_rad"], tilt["direction_rad"], tilt["t0_s"], tilt["ramp_s"]
@@ -328,14 +372,22 @@ def simulate(unit: dict, ax: np.ndarray, ay: np.ndarray, dt: float, alteration: 
         t_change = alteration.get("t0_s", -1.0)
         if eff == "mass_change":
             q[DM], q[DX], q[DY] = alteration["dm_kg"], alteration["dx_m"], alteration["dy_m"]
+            q[DM0], q[DMRAMP] = t_change, alteration.get("ramp_s", 0.0)
+            if q[DMRAMP] > 0.0 and q[DM] > 0.0:
+                raise ValueError("a gradual mass change is a loss (a gain is captured at once)")
             kind = 1 if alteration["dm_kg"] > 0 else 0
         elif eff == "caster_brake":
             q[BRAKE], q[MUDRAG] = alteration["wheel"], alteration["mu_drag"]
+            q[BRAKESPIN] = 1.0 if alteration.get("spinning", False) else 0.0
+            q[BRAKE0], q[BRAKERAMP] = t_change, alteration.get("ramp_s", 0.0)
         elif eff == "swivel_jam":
             q[JAM] = alteration["caster"]
-            kind = 2
+            q[JAMMU] = alteration.get("mu_jam", 0.0)
+            kind = 2 if q[JAMMU] == 0.0 else 0
         elif eff == "lateral_impact":
             q[WAXIS], q[WSIDE], q[WPOS], q[WE] = alteration["axis"], alteration["side"], alteration["position_m"], alteration["e"]
+            if alteration.get("stiffness_npm", 0.0) > 0.0:
+                q[WK], q[WC] = alteration["stiffness_npm"], alteration["damping_nspm"]
             t_change = -1.0
     y0 = np.zeros(10)
     y0[2] = math.radians(unit["yaw0_deg"]) + yaw0_perturbation

@@ -5,7 +5,10 @@ truth in truth/<case>.yaml, from this folder's own cart (cart.py) and prove/floo
     python prove/rolling/generate.py OUT_DIR [--per-effect 4] [--seed N] [--jobs 2]
 
 Effects: none, lateral_impact, mass_change, caster_brake, swivel_jam, unexplained (a slab tilt,
-an accelerometer clock offset or gain change after t0, or a camera drift). An effect must be
+an accelerometer clock offset, gain change or bias step after t0, a camera drift or yaw jump).
+Each physical effect is drawn in one of two formulations (cart.py: a step or gradual mass loss, a
+locked or dragging brake, a rigid or friction swivel lock, a rigid wall or compliant neighbour),
+recorded as parameters.formulation, with ranges wider than the diagnosis's bounds. An effect must be
 visible (noise-free observations beyond 3 noise sd from the baseline at >= 5 of 10 camera frames,
 or 5 accelerometer samples beyond 5 sd within 0.1 s); the baseline must be predictable to the end
 (a twin with yaw0 moved by 1e-6 rad stays within a quarter of the camera noise). Case names are
@@ -117,15 +120,26 @@ def conceal(rng, effect, unit, ax, ay, base):
     if len(cands) == 0:
         return None
     t0 = round(float(rng.choice(cands)), 3)
+    # Two formulations per effect (cart.py) and ranges wider than the diagnosis's own bounds.
     if effect == "mass_change":
         a, b = unit["length_m"] / 2, unit["width_m"] / 2
-        frac = rng.uniform(0.15, 0.45) * (-1 if rng.random() < 0.7 else 1)
+        gain = rng.random() < 0.3
+        frac = rng.uniform(0.08, 0.8) if gain else -rng.uniform(0.08, 0.65)
         alt = dict(effect=effect, t0_s=t0, dm_kg=round(frac * unit["platform_mass_kg"], 3),
-                   dx_m=round(float(rng.uniform(-0.8, 0.8) * a), 4), dy_m=round(float(rng.uniform(-0.8, 0.8) * b), 4))
+                   dx_m=round(float(rng.uniform(-0.95, 0.95) * a), 4), dy_m=round(float(rng.uniform(-0.95, 0.95) * b), 4),
+                   formulation="step")
+        if not gain and rng.random() < 0.4:
+            alt.update(formulation="gradual", ramp_s=round(float(rng.uniform(0.2, 1.5)), 3))
     elif effect == "caster_brake":
-        alt = dict(effect=effect, t0_s=t0, wheel=int(rng.integers(4)), mu_drag=round(float(rng.uniform(0.15, 0.8)), 4))
+        alt = dict(effect=effect, t0_s=t0, wheel=int(rng.integers(4)), formulation="locked",
+                   mu_drag=round(float(rng.uniform(0.05, 1.2)), 4))
+        if rng.random() < 0.5:
+            alt.update(formulation="dragging", spinning=True, mu_drag=round(float(rng.uniform(0.05, 0.8)), 4),
+                       ramp_s=round(float(rng.uniform(0.05, 0.5)), 3))
     elif effect == "swivel_jam":
-        alt = dict(effect=effect, t0_s=t0, caster=int(rng.integers(4)))
+        alt = dict(effect=effect, t0_s=t0, caster=int(rng.integers(4)), formulation="rigid")
+        if rng.random() < 0.5:
+            alt.update(formulation="friction", mu_jam=round(float(rng.uniform(0.2, 3.0)), 3))
     elif effect == "lateral_impact":
         axis = int(rng.integers(2))
         side = float(rng.choice([-1.0, 1.0]))
@@ -140,18 +154,28 @@ def conceal(rng, effect, unit, ax, ay, base):
         gain = run[k] - reach[0]
         if gain < 0.02:
             return None
-        position = side * (reach[0] + gain * rng.uniform(0.6, 0.95))
+        position = side * (reach[0] + gain * rng.uniform(0.5, 0.97))
         alt = dict(effect=effect, axis=axis, side=side, position_m=round(float(position), 5),
-                   e=round(float(rng.uniform(0.2, 0.8)), 3))
+                   e=round(float(rng.uniform(0.02, 0.9)), 3), formulation="rigid")
+        if rng.random() < 0.5:
+            # A neighbour bed or cart: contact frequency with the platform's mass, damping ratio.
+            m = unit["platform_mass_kg"]
+            f, zeta = float(rng.uniform(4.0, 40.0)), float(rng.uniform(0.05, 0.6))
+            k_n = m * (2 * math.pi * f) ** 2
+            alt.update(formulation="compliant", contact_hz=round(f, 2), damping_ratio=round(zeta, 3),
+                       stiffness_npm=round(k_n, 1), damping_nspm=round(2 * zeta * math.sqrt(k_n * m), 2))
     else:
         raise ValueError(effect)
     out, st = cart.simulate(unit, ax, ay, DT, alt)
-    if st["failed"]:
+    if st["failed"] or not np.isfinite(out).all():
         return None
     if effect == "lateral_impact":
-        if st["impacts"] == 0:
+        if alt["formulation"] == "rigid":
+            if st["impacts"] == 0:
+                return None
+            alt["impacts"] = st["impacts"]
+        elif not (np.abs(out[:, 3] - base[:, 3]) > 1e-6).any():
             return None
-        alt["impacts"] = st["impacts"]
     return alt, out
 
 
@@ -159,7 +183,7 @@ def unexplained(rng, unit, ax, ay, base):
     """A disturbance outside the library; (params, out, accel override or None)."""
     T = (len(ax) - 1) * DT
     t0 = round(float(rng.uniform(2.0, 0.6 * T)), 3)
-    kind = str(rng.choice(["floor_tilt", "clock_offset", "gain", "camera_drift"]))
+    kind = str(rng.choice(["floor_tilt", "clock_offset", "gain", "camera_drift", "accel_bias", "yaw_jump"]))
     out = base.copy()
     accel = base[:, 3].copy()
     if kind == "floor_tilt":
@@ -180,6 +204,15 @@ def unexplained(rng, unit, ax, ay, base):
         k0 = int(t0 / DT)
         accel[k0:] *= g
         params = dict(kind=kind, t0_s=t0, gain=g)
+    elif kind == "accel_bias":
+        bias = float(rng.uniform(0.1, 0.5)) * float(rng.choice([-1, 1]))
+        accel[int(t0 / DT):] += bias
+        params = dict(kind=kind, t0_s=t0, bias_mps2=bias)
+    elif kind == "yaw_jump":
+        # The camera re-identifies the platform's markers: its yaw jumps and stays off.
+        jump = float(rng.uniform(0.01, 0.05)) * float(rng.choice([-1, 1]))
+        out[int(t0 / DT):, 2] += jump
+        params = dict(kind=kind, t0_s=t0, jump_rad=jump)
     else:
         drift = float(rng.uniform(0.02, 0.08)) * float(rng.choice([-1, 1]))
         ramp = float(rng.uniform(0.5, 2.0))

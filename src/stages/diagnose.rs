@@ -18,7 +18,7 @@ pub struct Diagnose;
 
 static INFO: StageInfo = StageInfo {
     name: "diagnose",
-    version: 3,
+    version: 4,
     summary: "Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt; rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted, ranked by BIC, or `unexplained`.",
     inputs: InputKind::Files(&[RecordFormat::Case]),
     outputs: &[
@@ -405,6 +405,7 @@ pub fn rolling_json(d: &RollingDiagnosis) -> Value {
                 "bic": c.bic,
                 "chi2": c.misfit.chi2,
                 "flagged_samples": c.flagged,
+                "flagged_early_samples": c.flagged_early,
                 "evaluations": c.evaluations,
                 "onset_s": c.track.onset_s,
                 "explanation": c.sentence,

@@ -3,6 +3,13 @@
 //! tan α the unit slides instead of rocking; above it, it rocks and its pivot slips where the
 //! contact cannot carry the horizontal force (short, sparse slips, as PS2's 1 cm slip).
 //!
+//! Two variants, a discrete parameter (`coupled`, 1 or 0): the block above, and the *uncoupled*
+//! simplification (the base slides only while flat, rocking starts from the floor's acceleration
+//! as if the base held and its pivot never slips), which is how sliding is often modelled and
+//! what a block does whose slips are too short to disturb its rocking much: it rocks as the
+//! nominal model says *and* slides between rocking phases, which the coupled block, sliding
+//! instead of rocking below tan α, cannot fit.
+//!
 //! The evidence is mostly the top accelerometer: while the base slips flat, the unit's
 //! acceleration is the friction, a plateau at μ_k(g + a_v) where the floor goes beyond it. The
 //! starting grid therefore includes the plateau levels the records show (accelerometer readings
@@ -52,24 +59,34 @@ impl Effect for Sliding {
     }
 
     fn parameter_names(&self) -> &'static [&'static str] {
-        &["mu_s", "mu_k_over_mu_s"]
+        &["mu_s", "mu_k_over_mu_s", "coupled"]
+    }
+
+    fn discrete(&self) -> &'static [bool] {
+        &[false, false, true]
     }
 
     fn bounds(&self, case: &Case, _: (f64, f64)) -> Vec<(f64, f64)> {
         // Slips during rocking need μ_s above tan α but below Shenton's critical value, which
         // grows with the floor's acceleration: the range reaches well past tan α.
-        vec![(0.02, 2.5 * case.block.alpha_rad.tan()), (0.5, 1.0)]
+        vec![(0.02, 2.5 * case.block.alpha_rad.tan()), (0.5, 1.0), (0.0, 1.0)]
     }
 
     fn grid(&self, case: &Case, window: (f64, f64)) -> Vec<Vec<f64>> {
         let bounds = self.bounds(case, window);
         let (lo, hi) = bounds[0];
-        let mut points = product(&[linspace(lo, hi, 30), vec![0.7, 0.85, 1.0]]);
+        let tan = case.block.alpha_rad.tan();
+        let mut points = product(&[linspace(lo, hi, 30), vec![0.7, 0.85, 1.0], vec![1.0]]);
+        // Uncoupled: above tan α the block rocks before it slides, as the nominal model.
+        points.extend(product(&[linspace(lo, tan, 16), vec![0.85, 1.0], vec![0.0]]));
         for level in plateau_levels(case, window) {
             for ratio in [1.0, 0.85, 0.7] {
                 let mu_s = level / ratio;
                 if mu_s > lo && mu_s < hi {
-                    points.push(vec![mu_s, ratio]);
+                    points.push(vec![mu_s, ratio, 1.0]);
+                    if mu_s < tan && ratio > 0.8 {
+                        points.push(vec![mu_s, ratio, 0.0]);
+                    }
                 }
             }
         }
@@ -77,14 +94,16 @@ impl Effect for Sliding {
     }
 
     fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, String> {
-        let friction = Friction { static_mu: params[0], kinetic_mu: params[0] * params[1] };
+        let friction = Friction { static_mu: params[0], kinetic_mu: params[0] * params[1], coupled: params[2] >= 0.5 };
         let options = Options { friction: Some(friction), ..case.nominal_options() };
         Ok(case.simulate(&case.block, &options)?.1)
     }
 
     fn explain(&self, case: &Case, params: &[f64]) -> String {
         let tan = case.block.alpha_rad.tan();
-        let how = if params[0] < tan {
+        let how = if params[2] < 0.5 {
+            "uncoupled: the base slides while the block is flat, and rocking starts from the floor's acceleration on a pivot that holds"
+        } else if params[0] < tan {
             "below tan α: the unit slides where the nominal model has it rock"
         } else {
             "above tan α: it rocks, and its pivot slips where the contact cannot carry the floor's pull"

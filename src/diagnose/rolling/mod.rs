@@ -205,6 +205,8 @@ pub struct Candidate {
     pub bic: f64,
     pub score: f64,
     pub flagged: usize,
+    /// Flagged samples in the first seconds past the window's start (the acceptance horizon).
+    pub flagged_early: usize,
     pub evaluations: usize,
     pub sentence: String,
     pub track: Track,
@@ -268,6 +270,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
         bic: base_misfit.chi2,
         score: 0.0,
         flagged: evidence.flagged(&baseline),
+        flagged_early: window.map_or(0, |w| evidence.flagged_between(&baseline, w.0, w.0 + FLAG_HORIZON_S)),
         misfit: base_misfit,
         evaluations: 1,
         sentence: "the nominal 4WMC cart as the equipment file describes it".into(),
@@ -331,6 +334,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
                 rmse: evidence.window_rmse(&fit.track, Some(window)),
                 score: 0.0,
                 flagged: evidence.flagged(&fit.track),
+                flagged_early: evidence.flagged_between(&fit.track, window.0, window.0 + FLAG_HORIZON_S),
                 sentence: effect.explain(case, &baseline, &fit.params),
                 misfit: fit.misfit,
                 evaluations: fit.evaluations,
@@ -351,10 +355,9 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
     // Disagreement left is counted over the first seconds after the window's start only: a
     // correct physics with parameters a hair off drifts away late (the cart is sensitive), a
     // wrong one, or a cause outside the library, leaves disagreement right after the onset.
-    let early = |t: &Track| evidence.flagged_between(t, window.0, window.0 + FLAG_HORIZON_S) as f64;
     let accepted = best.bic < candidates[0].bic
         && best.rmse * settings.min_improvement <= candidates[0].rmse
-        && early(&best.track) <= settings.max_remaining_flagged * early(&candidates[0].track).max(1.0);
+        && best.flagged_early as f64 <= settings.max_remaining_flagged * (candidates[0].flagged_early as f64).max(1.0);
     let (verdict, model, window) = if accepted {
         let onset = best.track.onset_s.unwrap_or(window.0);
         (best.effect, best.track.clone(), (onset.min(window.0), window.1))

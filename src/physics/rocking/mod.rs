@@ -187,12 +187,17 @@ pub struct Friction {
     pub static_mu: f64,
     /// μ_k ≤ μ_s: the friction of a slipping contact, opposing the slip.
     pub kinetic_mu: f64,
+    /// true: the sliding–rocking block (a rocking pivot slips, a sliding block rocks only when
+    /// friction tips it). false: the *uncoupled* simplification common in practice: the base
+    /// slides only while the block is flat, rocking starts from the floor's acceleration alone
+    /// (Eq. 20/21, also out of a slide, whose slip velocity it drops) and its pivot never slips.
+    pub coupled: bool,
 }
 
 impl Friction {
-    /// One coefficient for sticking and slipping.
+    /// One coefficient for sticking and slipping, the sliding–rocking block.
     pub fn coulomb(mu: f64) -> Self {
-        Friction { static_mu: mu, kinetic_mu: mu }
+        Friction { static_mu: mu, kinetic_mu: mu, coupled: true }
     }
 }
 

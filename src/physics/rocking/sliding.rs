@@ -114,8 +114,18 @@ impl Model<'_> {
         [hold + ag, hold - ag, grip - ag, grip + ag]
     }
 
+    /// Uncoupled friction only: positive while the floor's acceleration cannot uplift the block
+    /// (toward +x, toward −x), whether it sticks or slides (Eq. 20/21).
+    fn uplift_margins(&self, seg: &Segment, t: f64) -> [f64; 2] {
+        let m = self.stick_margins(seg, t);
+        [m[0], m[1]]
+    }
+
     /// Positive while the rocking pivot sticks: μ_s N ∓ F (slip toward −x, toward +x).
     fn grip_margins(&self, side: i8, seg: &Segment, t: f64, y: &[f64; 4]) -> [f64; 2] {
+        if !self.friction.coupled {
+            return [f64::INFINITY; 2];
+        }
         let (ag, av) = seg.at(t);
         let theta_ddot = self.rocking(side, y, ag, av);
         let (f, n) = self.contact(side, y, theta_ddot, ag, av);
@@ -157,7 +167,7 @@ pub(super) fn simulate<S: Stepper<4>>(
     let model = Model { block, friction };
     let restitution = options.restitution.unwrap_or(block.restitution_eq24);
     let rest_speed_squared = 2.0 * block.p_radps.powi(2) * block.alpha_rad.sin() * options.rest_amplitude_rad;
-    let tips_while_sliding = friction.kinetic_mu > block.alpha_rad.tan();
+    let tips_while_sliding = friction.coupled && friction.kinetic_mu > block.alpha_rad.tan();
     let sensor_height = options.sensor_height_m.unwrap_or(block.height_m);
     let segment = |k: usize| {
         let k1 = (k + 1).min(n - 1);
@@ -245,6 +255,17 @@ pub(super) fn simulate<S: Stepper<4>>(
                         continue;
                     }
                 }
+                Regime::Slide { .. } if !friction.coupled => {
+                    let m = model.uplift_margins(&seg, t);
+                    if let Some(i) = (0..2).filter(|&i| m[i] < 0.0).min_by(|&a, &b| m[a].total_cmp(&m[b])) {
+                        let (next, kind, side) = leave_stick(i);
+                        regime = next;
+                        y = [0.0, 0.0, y[2], 0.0];
+                        push(&mut response, t, kind, side, 0.0, 0.0);
+                        stepper.reset();
+                        continue;
+                    }
+                }
                 Regime::Slide { dir } if tips_while_sliding => {
                     // Kinetic friction beyond tan α tips a sliding block onto its leading corner.
                     regime = Regime::SlideRock { side: dir, dir };
@@ -297,17 +318,38 @@ pub(super) fn simulate<S: Stepper<4>>(
                 },
                 Regime::Slide { dir } => {
                     let d = f64::from(dir);
-                    match stepper.advance(&f, t, y, t_end, &|_, state| [d * state[3]]) {
+                    // Uncoupled friction: the floor's acceleration uplifts a sliding block too.
+                    let uplift = |time: f64| {
+                        if friction.coupled {
+                            [f64::INFINITY; 2]
+                        } else {
+                            model.uplift_margins(&seg, time)
+                        }
+                    };
+                    let events = |time: f64, state: &[f64; 4]| {
+                        let u = uplift(time);
+                        [d * state[3], u[0], u[1]]
+                    };
+                    match stepper.advance(&f, t, y, t_end, &events) {
                         Advance::Reached(y1) => {
                             y = y1;
                             t = t_end;
                         }
-                        Advance::Event { t: te, y: ye, .. } => {
+                        Advance::Event { index: 0, t: te, y: ye } => {
                             y = [0.0, 0.0, ye[2], 0.0];
                             t = te;
                             regime = Regime::Stick;
                             stepper.reset();
                             push(&mut response, te, EventKind::Stick, 0, 0.0, 0.0);
+                        }
+                        Advance::Event { index, t: te, y: ye } => {
+                            // Rocking takes over on a stuck pivot; the slide's velocity is dropped.
+                            y = [0.0, 0.0, ye[2], 0.0];
+                            t = te;
+                            let (next, kind, side) = leave_stick(index - 1);
+                            regime = next;
+                            stepper.reset();
+                            push(&mut response, te, kind, side, 0.0, 0.0);
                         }
                     }
                 }
@@ -456,6 +498,41 @@ mod tests {
         assert!(resp.theta_rad.iter().all(|&th| th == 0.0), "μ < tan α: it never tips");
     }
 
+    #[test]
+    fn uncoupled_friction_rocks_as_the_nominal_block_and_slides_while_flat() {
+        // The uncoupled formulation's defining property: θ(t) is the nominal (non-slipping)
+        // block's, computed by the other integrator path (no friction), while the base slides when
+        // flat. A slender block (tan α = 0.25) under 0.3 g at 1 Hz with μ = 0.15: the first slip
+        // starts at sin ωt = μg/A (closed form), toward −x, and the top then reads +μg.
+        let block = rectangle(0.25, 1.0);
+        let tan = block.alpha_rad.tan();
+        let (amplitude, omega, mu, dt) = (0.3 * G, std::f64::consts::TAU, 0.6 * tan, 1e-3);
+        let floor: Vec<f64> = (0..4001).map(|k| amplitude * (omega * k as f64 * dt).sin()).collect();
+        let uncoupled = run(&block, &floor, dt, Friction { coupled: false, ..Friction::coulomb(mu) });
+        let exc = Excitation { t0_s: 0.0, dt_s: dt, horizontal_mps2: &floor, vertical_mps2: None };
+        let nominal = simulate(&block, &exc, &Options::default()).unwrap();
+        let rocked = nominal.theta_rad.iter().fold(0.0f64, |m, th| m.max(th.abs()));
+        assert!(rocked > 0.01, "the floor must rock the block: {rocked} rad");
+        for (k, (a, b)) in uncoupled.theta_rad.iter().zip(&nominal.theta_rad).enumerate() {
+            // Both integrate Eq. 22 to rtol 1e-11 from the same uplift instant.
+            assert!((a - b).abs() < 1e-7, "t = {} s: θ {a} vs the nominal {b}", k as f64 * dt);
+        }
+        let start = (mu * G / amplitude).asin() / omega;
+        let slides = times(&uncoupled, EventKind::SlideStart);
+        // The floor is linear between its samples: within Aω²dt²/8 = 1.5e-5 m/s² of the sine, where
+        // it rises at Aω = 18 m/s³ or more, which moves the threshold crossing by up to 2e-6 s.
+        assert!((slides[0] - start).abs() < 2e-6, "first slip at {} s, closed form {start} s", slides[0]);
+        let uplift = times(&uncoupled, EventKind::Uplift);
+        assert!(uplift.first().is_some_and(|&t| t > slides[0]), "a slide, then rocking: {:?}", uncoupled.events);
+        let k = (start / dt).ceil() as usize + 1;
+        assert!((uncoupled.top_ax_mps2[k] - mu * G).abs() < 1e-12, "top {} while sliding", uncoupled.top_ax_mps2[k]);
+        let slipped = uncoupled.slip_m.iter().fold(0.0f64, |m, u| m.max(u.abs()));
+        assert!(slipped > 5e-4, "the base slips by {slipped} m");
+        // The coupled block with the same μ < tan α slides instead of rocking.
+        let coupled = run(&block, &floor, dt, Friction::coulomb(mu));
+        assert!(coupled.theta_rad.iter().all(|&th| th == 0.0));
+    }
+
     /// One slip episode of a block at rest under a(t) = A sin ωt (A > μg): it starts at
     /// sin ωt_s = μg/A toward −x with u̇(t) = (A/ω)(cos ωt − cos ωt_s) + μg(t − t_s); the stop
     /// t_e is the root of u̇ after t_s (bisection), the slip u(t_e).
@@ -519,7 +596,7 @@ mod tests {
         let block = rectangle(1.0, 1.0);
         let (r, dt) = (2.0, 0.005);
         let floor: Vec<f64> = (0..401).map(|k| r * k as f64 * dt).collect();
-        let resp = run(&block, &floor, dt, Friction { static_mu: 0.4, kinetic_mu: 0.25 });
+        let resp = run(&block, &floor, dt, Friction { static_mu: 0.4, kinetic_mu: 0.25, coupled: true });
         let start = times(&resp, EventKind::SlideStart)[0];
         assert!((start - 0.4 * G / r).abs() < 1e-9);
         assert!((resp.top_ax_mps2.last().unwrap() - 0.25 * G).abs() < 1e-12);
@@ -623,7 +700,12 @@ mod tests {
                     }
                 })
                 .collect();
-            let resp = run(&block, &floor, dt, Friction { static_mu: num("static_mu"), kinetic_mu: num("kinetic_mu") });
+            let resp = run(
+                &block,
+                &floor,
+                dt,
+                Friction { static_mu: num("static_mu"), kinetic_mu: num("kinetic_mu"), coupled: true },
+            );
             let events = case["events"].as_array().unwrap();
             assert_eq!(resp.events.len(), events.len(), "{name}: {:?}", resp.events);
             for (mine, theirs) in resp.events.iter().zip(events) {
@@ -657,7 +739,7 @@ mod tests {
                 -3.5 * (4.0 * t).sin() * (-0.3 * t).exp()
             })
             .collect();
-        let friction = Friction { static_mu: 0.3, kinetic_mu: 0.27 };
+        let friction = Friction { static_mu: 0.3, kinetic_mu: 0.27, coupled: true };
         let exc = Excitation { t0_s: 0.0, dt_s: dt, horizontal_mps2: &floor, vertical_mps2: None };
         let adaptive = run(&block, &floor, dt, friction);
         let rk4 = simulate(
@@ -683,7 +765,8 @@ mod tests {
         let floor = vec![0.0; 10];
         let exc = Excitation { t0_s: 0.0, dt_s: 0.01, horizontal_mps2: &floor, vertical_mps2: None };
         let with = |friction| Options { friction: Some(friction), ..Options::default() };
-        let message = simulate(&block, &exc, &with(Friction { static_mu: 0.2, kinetic_mu: 0.3 })).unwrap_err();
+        let message =
+            simulate(&block, &exc, &with(Friction { static_mu: 0.2, kinetic_mu: 0.3, coupled: true })).unwrap_err();
         assert!(message.contains("μ_k ≤ μ_s"), "{message}");
         let obstacle = Some(super::super::Obstacle { side: 1, angle_rad: 0.1, restitution: 0.5 });
         let message = simulate(&block, &exc, &Options { obstacle, ..with(Friction::coulomb(0.3)) }).unwrap_err();

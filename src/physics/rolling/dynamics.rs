@@ -49,6 +49,11 @@ pub struct Wall {
     pub position_m: f64,
     pub restitution: f64,
     pub contact_s: f64,
+    /// false: a stiff wall, its spring and dashpot scaled by the striking corner's effective mass
+    /// (the rebound is e whatever the pose). true: a compliant neighbour (a bed's frame or
+    /// mattress), a Kelvin–Voigt contact of fixed stiffness k = m ω² and damping c = 2ζωm with m
+    /// the cart's mass, that only pushes (the force is clamped at zero as the corner leaves).
+    pub neighbour: bool,
 }
 
 /// What a model offers the simulation driver.
@@ -355,8 +360,13 @@ impl NoSlip {
             jac[wall.axis] = wall.side;
             jac[2] = wall.side * lever;
             let speed = dot3(&jac, &[y[7], y[8], y[9]]);
-            let mass = 1.0 / dot3(&jac, &solve3(m, &jac));
-            let force = mass * (omega * omega * penetration + 2.0 * zeta * omega * speed);
+            let force = if wall.neighbour {
+                let mass = self.derived.total_mass_kg;
+                (mass * (omega * omega * penetration + 2.0 * zeta * omega * speed)).max(0.0)
+            } else {
+                let mass = 1.0 / dot3(&jac, &solve3(m, &jac));
+                mass * (omega * omega * penetration + 2.0 * zeta * omega * speed)
+            };
             for (qj, jj) in q.iter_mut().zip(jac) {
                 *qj -= force * jj;
             }

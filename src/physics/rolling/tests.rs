@@ -573,7 +573,14 @@ mod alterations {
         let e = 0.6;
         let (a, b) = (0.5 * cart.length_m, 0.5 * cart.width_m);
         let corner_x = |x: f64, th: f64| x + th.cos() * a + th.sin() * b;
-        let wall = Wall { axis: 0, side: 1.0, position_m: corner_x(0.0, yaw) + 0.02, restitution: e, contact_s: 0.02 };
+        let wall = Wall {
+            axis: 0,
+            side: 1.0,
+            position_m: corner_x(0.0, yaw) + 0.02,
+            restitution: e,
+            contact_s: 0.02,
+            neighbour: false,
+        };
         let alteration = Alteration { wall: Some(wall), ..Alteration::default() };
         let n = 201;
         let zeros = vec![0.0; n];
@@ -597,5 +604,65 @@ mod alterations {
         eprintln!("wall: corner speed {before:.4} → {after:.4} m/s, ratio {ratio:.4} (e = {e})");
         assert!((speed(0) - 0.5).abs() < 1e-9 && (before - 0.5).abs() < 1e-9, "{before}");
         assert!((ratio - e).abs() < 0.03 * e, "rebound ratio {ratio} vs e = {e}");
+    }
+
+    #[test]
+    fn a_compliant_neighbour_rebounds_as_a_clamped_kelvin_voigt_contact() {
+        // Frictionless, unforced, unyawed, casters along +X: corners 1 and 4 strike together, so
+        // the cart (mass M, light wheels) meets a spring 2k and dashpot 2c, k = mω², c = 2ζωm
+        // (m = the cart's mass, ω, ζ from the contact time and e). Closed form of that oscillator
+        // from x = 0, ẋ = v₀: x = v₀/ω_d e^(−ζ'ω't) sin ω_d t; the contact ends where the force
+        // 2k x + 2c ẋ reaches zero (a neighbour only pushes), found by bisection; the speed then.
+        let cart = Cart { trail_m: 0.2, wheel_mass_kg: 0.01, ..prototype() };
+        let (e, contact_s, v0) = (0.5, 0.06, 0.4);
+        let a = 0.5 * cart.length_m;
+        let wall = Wall { axis: 0, side: 1.0, position_m: a + 0.01, restitution: e, contact_s, neighbour: true };
+        let alteration = Alteration { wall: Some(wall), ..Alteration::default() };
+        let n = 301;
+        let zeros = vec![0.0; n];
+        let dt = 0.001;
+        let excitation = Excitation { t0_s: 0.0, dt_s: dt, ax_mps2: &zeros, ay_mps2: &zeros };
+        let y0 = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, v0, 0.0, 0.0];
+        let r = simulate_altered(
+            &cart,
+            &frictionless(),
+            &excitation,
+            &Options::default(),
+            &alteration,
+            Some((0, &y0)),
+            n - 1,
+        )
+        .unwrap();
+        let m = cart.platform_mass_kg + 4.0 * cart.wheel_mass_kg;
+        let ln_e = e.ln();
+        let zeta = -ln_e / (std::f64::consts::PI.powi(2) + ln_e * ln_e).sqrt();
+        let omega = std::f64::consts::PI / (contact_s * (1.0 - zeta * zeta).sqrt());
+        // The wheels' spin inertia adds 4 I_s/r² = 2 m_w to the mass moving along X (I_s = m_w r²/2).
+        let moving = cart.platform_mass_kg + 6.0 * cart.wheel_mass_kg;
+        let (k2, c2) = (2.0 * m * omega * omega, 2.0 * 2.0 * zeta * omega * m);
+        let w0 = (k2 / moving).sqrt();
+        let z = c2 / (2.0 * (k2 * moving).sqrt());
+        let wd = w0 * (1.0 - z * z).sqrt();
+        let x = |t: f64| v0 / wd * (-z * w0 * t).exp() * (wd * t).sin();
+        let v = |t: f64| v0 * (-z * w0 * t).exp() * ((wd * t).cos() - z * w0 / wd * (wd * t).sin());
+        let force = |t: f64| k2 * x(t) + c2 * v(t);
+        let (mut lo, mut hi) = (0.5 * std::f64::consts::PI / wd, std::f64::consts::PI / wd);
+        assert!(force(lo) > 0.0 && force(hi) < 0.0);
+        for _ in 0..100 {
+            let mid = 0.5 * (lo + hi);
+            if force(mid) > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let exact = -v(lo) / v0;
+        // After the contact the cart rolls freely: its speed is the exit speed.
+        let after = r.states[n - 1][7];
+        let ratio = -after / v0;
+        eprintln!("neighbour: rebound ratio {ratio:.4}, clamped Kelvin–Voigt closed form {exact:.4} (e = {e})");
+        assert!(after < 0.0 && r.x_m[n - 1] < 0.01, "the cart rebounds: {after} m/s at x = {}", r.x_m[n - 1]);
+        // The integrator's tolerance and the light wheels' inertia: within 1 %.
+        assert!((ratio - exact).abs() < 0.01 * exact, "rebound ratio {ratio} vs the closed form {exact}");
     }
 }

@@ -2,10 +2,14 @@
 //! resists its slide along the heading with μ N tanh(v/ε) instead of rolling resistance.
 //! Parameters: the caster, t0, μ.
 
-use super::{caster, linspace, onset_bounds, product, sharp_onsets, Effect, RollingCase, Track};
+use super::{caster, linspace, onset_bounds, onsets_at, product, Effect, RollingCase, Track};
 use crate::physics::rolling::{Alteration, Brake};
 
 pub struct CasterBrake;
+
+/// Onsets tried (s from the window's start): a locked wheel shows within a few samples, a pad
+/// whose drag builds up over some tenths of a second shows once the drag is strong.
+const ONSETS: [f64; 6] = [-0.4, -0.2, -0.1, -0.05, -0.02, 0.0];
 
 impl Effect for CasterBrake {
     fn name(&self) -> &'static str {
@@ -25,7 +29,7 @@ impl Effect for CasterBrake {
     }
 
     fn grid(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<Vec<f64>> {
-        product(&[linspace(0.0, 3.0, 4), sharp_onsets(case, window), vec![0.2, 0.5]])
+        product(&[linspace(0.0, 3.0, 4), onsets_at(case, window, &ONSETS), vec![0.2, 0.5]])
     }
 
     fn alteration(&self, _: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {

@@ -1,17 +1,21 @@
 //! `lateral_impact`: the platform strikes a wall or a neighbour across one floor axis (±X, ±Y)
 //! at some distance, and rebounds with a restitution e: a spring–dashpot contact at each corner
-//! past the wall, scaled by the corner's effective mass so that a contact lasts 20 ms and
-//! rebounds with e. The distance is fitted as the time the nominal cart's corner first reaches
-//! it (the farthest the corners have gone toward that side by then): the fit then moves in time,
-//! where the records located the disagreement. Parameters: side, contact time, e.
+//! past the wall, scaled by the corner's effective mass so that a contact lasts a fitted
+//! duration (a stiff frame some milliseconds, a neighbour's mattress or bumper a few tenths of a
+//! second) and rebounds with e; or, the discrete `neighbour` variant, a compliant neighbour whose
+//! stiffness and damping are its own (fixed, with the cart's mass), pushing only. The distance is fitted as the time the nominal cart's corner
+//! first reaches it (the farthest the corners have gone toward that side by then): the fit then
+//! moves in time, where the records located the disagreement. Parameters: side, contact time,
+//! e, contact duration, neighbour (0: wall, 1: compliant neighbour).
 
 use super::{linspace, onset_bounds, onsets_at, product, Effect, RollingCase, Track};
 use crate::physics::rolling::{Alteration, Wall};
 
 pub struct LateralImpact;
 
-/// Duration of one contact (s): a stiff bumper or frame.
-const CONTACT_S: f64 = 0.02;
+/// Contact durations (s) the grid tries: a stiff frame; a compliant neighbour.
+const WALL_S: f64 = 0.02;
+const NEIGHBOUR_S: [f64; 2] = [0.05, 0.15];
 
 /// (axis, side) of side index 0..3: +X, −X, +Y, −Y.
 fn side(param: f64) -> (usize, f64) {
@@ -49,30 +53,34 @@ impl Effect for LateralImpact {
     }
 
     fn parameter_names(&self) -> &'static [&'static str] {
-        &["side_index", "contact_s", "restitution"]
+        &["side_index", "contact_s", "restitution", "contact_duration_s", "neighbour"]
     }
 
     fn discrete(&self) -> &'static [bool] {
-        &[true, false, false]
+        &[true, false, false, false, true]
     }
 
     fn bounds(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<(f64, f64)> {
-        vec![(0.0, 3.0), onset_bounds(case, window, 1.0, 0.2), (0.05, 0.95)]
+        vec![(0.0, 3.0), onset_bounds(case, window, 1.0, 0.2), (0.05, 0.95), (0.005, 0.4), (0.0, 1.0)]
     }
 
     fn grid(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<Vec<f64>> {
         // A soft impact (low e, low speed) may show only some tenths of a second after the contact.
-        product(&[
-            linspace(0.0, 3.0, 4),
-            onsets_at(case, window, &[-0.6, -0.4, -0.25, -0.12, -0.05, 0.0]),
-            vec![0.2, 0.5, 0.8],
-        ])
+        let sides_and_times =
+            product(&[linspace(0.0, 3.0, 4), onsets_at(case, window, &[-0.6, -0.4, -0.25, -0.12, -0.05, 0.0])]);
+        let wall = product(&[vec![0.2, 0.5, 0.8], vec![WALL_S], vec![0.0]]);
+        let neighbour = product(&[vec![0.3, 0.7], NEIGHBOUR_S.to_vec(), vec![1.0]]);
+        sides_and_times
+            .iter()
+            .flat_map(|p| wall.iter().chain(&neighbour).map(move |q| [p.as_slice(), q].concat()))
+            .collect()
     }
 
     fn alteration(&self, case: &RollingCase, nominal: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {
         let (axis, sign) = side(p[0]);
         let (position, onset) = wall_for(case, nominal, axis, sign, p[1]);
-        let wall = Wall { axis, side: sign, position_m: position, restitution: p[2], contact_s: CONTACT_S };
+        let wall =
+            Wall { axis, side: sign, position_m: position, restitution: p[2], contact_s: p[3], neighbour: p[4] >= 0.5 };
         Ok((Alteration { wall: Some(wall), ..Alteration::default() }, onset))
     }
 
@@ -80,13 +88,15 @@ impl Effect for LateralImpact {
         let (axis, sign) = side(p[0]);
         let (position, onset) = wall_for(case, nominal, axis, sign, p[1]);
         format!(
-            "at {:.2} s a corner of the platform strikes a wall or neighbour across {}{} at {:.3} m from the platform centre's start (its nearest corner was {:.3} m from it), rebounding with a restitution of {:.2}",
+            "at {:.2} s a corner of the platform strikes {} across {}{} at {:.3} m from the platform centre's start (its nearest corner was {:.3} m from it), rebounding with a restitution of {:.2} after a contact of {:.0} ms",
             onset + case.dt_s,
+            if p[4] >= 0.5 { "a compliant neighbour" } else { "a wall" },
             if sign > 0.0 { "+" } else { "−" },
             ["X", "Y"][axis],
             position.abs(),
             sign * position - reach(case, nominal, axis, sign, 0),
-            p[2]
+            p[2],
+            1e3 * p[3]
         )
     }
 }

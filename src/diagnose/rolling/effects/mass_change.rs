@@ -14,6 +14,10 @@ use crate::physics::rolling::{Alteration, MassChange as Change};
 
 pub struct MassChange;
 
+/// Onsets tried (s from the window's start): a large or far off-centre change shows at once
+/// (the accelerometer sees the wheel loads jump), a small or centred one a second or more later.
+const ONSETS: [f64; 6] = [-1.5, -1.0, -0.6, -0.3, -0.1, 0.0];
+
 /// Largest offset as a fraction of the half-length and half-width.
 const REACH: f64 = 0.9;
 
@@ -39,7 +43,7 @@ impl Effect for MassChange {
     fn grid(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<Vec<f64>> {
         let (m, a, b) = (case.cart.platform_mass_kg, 0.5 * case.cart.length_m, 0.5 * case.cart.width_m);
         let offsets = [(0.0, 0.0), (0.5, 0.5), (-0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)];
-        product(&[onsets_at(case, window, &[-1.5, -1.0, -0.6, -0.3, -0.1]), vec![-0.35 * m, -0.15 * m, 0.3 * m]])
+        product(&[onsets_at(case, window, &ONSETS), vec![-0.35 * m, -0.15 * m, 0.3 * m]])
             .into_iter()
             .flat_map(|p| offsets.iter().map(move |(x, y)| vec![p[0], p[1], x * a, y * b]))
             .collect()
