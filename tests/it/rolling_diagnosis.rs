@@ -73,4 +73,3 @@ fn a_rolling_equipment_file_with_a_misspelt_key_is_refused_with_its_line() {
     let err = stderr(&run);
     assert!(err.contains("mu_s_rol") && err.contains(&format!(":{line}")), "{err}");
 }
-
