@@ -124,6 +124,20 @@ fn read_run(run_dir: &Path) -> anyhow::Result<RunFile> {
     serde_json::from_slice(&bytes).with_context(|| format!("`{}` is damaged", path.display()))
 }
 
+/// A committed Slurm run's summary as `run` reports a local run's.
+fn run_summary(summary: &Summary) -> RunSummary {
+    let problem = |(stage, unit, reason): &(String, String, String)| UnitProblem {
+        stage: stage.clone(),
+        unit: unit.clone(),
+        reason: reason.clone(),
+    };
+    RunSummary {
+        reports: Vec::new(),
+        failed: summary.failed.iter().map(problem).collect(),
+        flagged: summary.flagged.iter().map(problem).collect(),
+    }
+}
+
 /// Writes `bytes` to `path` through a temp file named by host and job, then a rename.
 fn publish(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
     let tmp = path.with_extension(format!("tmp-{}", task_tag()));
@@ -350,16 +364,7 @@ fn run_in_allocation(
     let (summary, _) = commit_manifests(&run_dir, &run, plan, &lease)?;
     publish(&runs_dir(&output_dir).join(format!("{id}{SUMMARY_SUFFIX}")), &serde_json::to_vec_pretty(&summary)?)?;
     drop(lease);
-    let problem = |(stage, unit, reason): &(String, String, String)| UnitProblem {
-        stage: stage.clone(),
-        unit: unit.clone(),
-        reason: reason.clone(),
-    };
-    Ok(RunSummary {
-        reports: Vec::new(),
-        failed: summary.failed.iter().map(problem).collect(),
-        flagged: summary.flagged.iter().map(problem).collect(),
-    })
+    Ok(run_summary(&summary))
 }
 
 /// Runs `shards` of `stage` as `srun` steps, `allocation.slots` at once; the shards that failed.
@@ -527,16 +532,7 @@ fn wait(
             run.commit_job()
         ));
     };
-    let problem = |(stage, unit, reason): &(String, String, String)| UnitProblem {
-        stage: stage.clone(),
-        unit: unit.clone(),
-        reason: reason.clone(),
-    };
-    Ok(RunSummary {
-        reports: Vec::new(),
-        failed: summary.failed.iter().map(problem).collect(),
-        flagged: summary.flagged.iter().map(problem).collect(),
-    })
+    Ok(run_summary(&summary))
 }
 
 /// The files each upstream stage of `stage` has this run: committed ones (lockfile) overlaid
