@@ -86,6 +86,30 @@ struct RunFile {
 }
 
 impl RunFile {
+    /// A run of `plan` with nothing submitted yet; `allocation` for an in-allocation run.
+    fn new(
+        id: &str,
+        plan: &Plan,
+        options: &RunOptions,
+        slurm: &SlurmOptions,
+        allocation: Option<String>,
+    ) -> anyhow::Result<RunFile> {
+        Ok(RunFile {
+            id: id.to_string(),
+            pipeline: std::fs::canonicalize(&plan.file.path)?,
+            pipeline_hash: crate::io::hash::hash_bytes(plan.file.text.as_bytes()),
+            force: options.force.clone(),
+            only: options.only.clone(),
+            keep_going: options.keep_going,
+            options: SlurmOptions { wait: false, ..slurm.clone() },
+            shards: BTreeMap::new(),
+            tasks: BTreeMap::new(),
+            arrays: BTreeMap::new(),
+            commit: None,
+            allocation,
+        })
+    }
+
     /// Whether shard `shard` of `stage` was submitted (has a task) in this run.
     fn submitted(&self, stage: &str, shard: usize) -> bool {
         self.tasks.get(stage).is_some_and(|t| t.contains(&(shard as u32)))
@@ -302,20 +326,7 @@ fn run_in_allocation(
     }
     let id = new_run_id(plan);
     let run_dir = runs_dir(&output_dir).join(&id);
-    let mut run = RunFile {
-        id: id.clone(),
-        pipeline: std::fs::canonicalize(&plan.file.path)?,
-        pipeline_hash: crate::io::hash::hash_bytes(plan.file.text.as_bytes()),
-        force: options.force.clone(),
-        only: options.only.clone(),
-        keep_going: options.keep_going,
-        options: SlurmOptions { wait: false, ..slurm.clone() },
-        shards: BTreeMap::new(),
-        tasks: BTreeMap::new(),
-        arrays: BTreeMap::new(),
-        commit: None,
-        allocation: Some(allocation.job_id.clone()),
-    };
+    let mut run = RunFile::new(&id, plan, options, slurm, Some(allocation.job_id.clone()))?;
     let order: Vec<String> = cut.iter().map(|(name, _, _)| name.clone()).collect();
     for (name, shards, only) in cut {
         run.shards.insert(name.clone(), shards);
@@ -425,20 +436,7 @@ fn submit_arrays(
 ) -> anyhow::Result<Option<RunFile>> {
     let RunNaming { id, run_dir, shakeflow } = naming;
     let per_task = slurm.units_per_task.max(1);
-    let mut run = RunFile {
-        id: id.to_string(),
-        pipeline: std::fs::canonicalize(&plan.file.path)?,
-        pipeline_hash: crate::io::hash::hash_bytes(plan.file.text.as_bytes()),
-        force: options.force.clone(),
-        only: options.only.clone(),
-        keep_going: options.keep_going,
-        options: SlurmOptions { wait: false, ..slurm.clone() },
-        shards: BTreeMap::new(),
-        tasks: BTreeMap::new(),
-        arrays: BTreeMap::new(),
-        commit: None,
-        allocation: None,
-    };
+    let mut run = RunFile::new(id, plan, options, slurm, None)?;
     let quote = |p: &Path| format!("'{}'", p.display().to_string().replace('\'', r"'\''"));
     let stale_units: BTreeMap<&str, (usize, usize)> =
         lines.iter().map(|l| (l.name.as_str(), (l.stale.len(), l.units))).collect();
