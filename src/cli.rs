@@ -29,7 +29,7 @@ A rerun recomputes only stages whose inputs, parameters or code changed (see `sh
     after_help = "Start here:\n  shakeflow demo-archive runs/demo-archive   write the synthetic demo archive\n  \
 shakeflow run pipelines/demo.yaml          run the demo study (again: everything cached)\n  \
 shakeflow status pipelines/demo.yaml       what is stale, and why\n  \
-shakeflow inspect runs/demo/baseline_floors/records/motion=FB-4/floor=5/data.parquet\n  \
+shakeflow inspect runs/demo/synchronize/records/motion=FB-4/data.parquet\n  \
 shakeflow stages                           stage types, their parameters, units and defaults"
 )]
 struct Cli {
@@ -347,7 +347,8 @@ pub fn main() -> anyhow::Result<ExitCode> {
                 if line.is_stale() {
                     println!("{:<18} stale: {}", line.name, line.summary());
                 } else {
-                    println!("{:<18} up to date ({} unit(s))", line.name, line.units);
+                    let kept = if line.keep { "" } else { "; an intermediate, its files not kept" };
+                    println!("{:<18} up to date ({} unit(s){kept})", line.name, line.units);
                 }
                 for flagged in &line.flagged {
                     println!(

@@ -226,7 +226,7 @@ fn format_of(out: &Path) -> anyhow::Result<Format> {
 fn parts_of(dataset: &Path, out: Option<&Path>) -> anyhow::Result<Vec<Part>> {
     let not_output = |what: &str| {
         UserError::new(format!("`{}` is not a shakeflow output: {what}", dataset.display()))
-            .hint("name a stage's output folder or one of its files, e.g. runs/demo/report/summary or runs/demo/baseline_floors/records/motion=FB-4/floor=5/data.parquet")
+            .hint("name a stage's output folder or one of its files, e.g. runs/demo/report/summary or runs/demo/synchronize/records/motion=FB-4/data.parquet")
     };
     let files: Vec<PathBuf> = if dataset.is_dir() {
         let target = out.and_then(|out| {

@@ -143,7 +143,8 @@ pub fn pipeline_schema() -> Value {
                     "description": {"type": "string"},
                     "inputs": {"type": "array", "items": {"type": "string"}, "description": "sources or stages (stage or stage.output)"},
                     "params": {"type": "object"},
-                    "select": {"type": "object", "additionalProperties": {"type": "array", "items": {"type": "string"}}, "description": "only input records whose partition keys take these values"}
+                    "select": {"type": "object", "additionalProperties": {"type": "array", "items": {"type": "string"}}, "description": "only input records whose partition keys take these values"},
+                    "keep": {"type": "boolean", "default": true, "description": "false: an intermediate; its files go once the stages reading it are up to date and are made again when one reruns"}
                 },
                 "allOf": conditionals
             }

@@ -35,6 +35,8 @@ pub struct PlannedStage {
     pub select: BTreeMap<String, Vec<String>>,
     /// Files named by `Path` parameters (parameter → path): their contents are inputs too.
     pub files: BTreeMap<String, PathBuf>,
+    /// `keep: false`: its files go once every stage reading them is up to date.
+    pub keep: bool,
 }
 
 impl PlannedStage {
@@ -79,6 +81,10 @@ impl Plan {
                 Err(e) => errors.push(e),
             }
         }
+        if !errors.is_empty() {
+            return Err(errors);
+        }
+        errors.extend(unread_intermediates(&file, &planned));
         if !errors.is_empty() {
             return Err(errors);
         }
@@ -150,6 +156,29 @@ impl Plan {
     }
 }
 
+/// A `keep: false` stage that no stage reads would lose its files as soon as it wrote them.
+fn unread_intermediates(file: &PipelineFile, planned: &IndexMap<String, PlannedStage>) -> Vec<UserError> {
+    let read: BTreeSet<&str> = planned
+        .values()
+        .flat_map(|s| &s.inputs)
+        .filter_map(|i| match i {
+            InputRef::Stage { stage, .. } => Some(stage.as_str()),
+            InputRef::Source(_) => None,
+        })
+        .collect();
+    planned
+        .values()
+        .filter(|s| !s.keep && !read.contains(s.name.as_str()))
+        .map(|s| {
+            file.error_at(
+                &["stages", &s.name, "keep"],
+                format!("stage `{}` has `keep: false`, but no stage reads it", s.name),
+            )
+            .hint("an intermediate's files go once the stages reading them are up to date: with no reader they would go as soon as they were written; remove `keep: false`")
+        })
+        .collect()
+}
+
 /// One stage of the file, checked: name, type, parameters, inputs.
 fn plan_stage(
     file: &PipelineFile,
@@ -185,7 +214,15 @@ fn plan_stage(
     let files = param_files(info.params, &params, &file.base_dir(), info.name).map_err(located)?;
     stage.check(&params, &file.base_dir()).map_err(located)?;
     let inputs = resolve_inputs(file, registry, name, &spec.inputs, info.inputs)?;
-    Ok(PlannedStage { name: name.to_string(), stage, params, inputs, select: spec.select.clone(), files })
+    Ok(PlannedStage {
+        name: name.to_string(),
+        stage,
+        params,
+        inputs,
+        select: spec.select.clone(),
+        files,
+        keep: spec.keep,
+    })
 }
 
 /// The files `Path` parameters name, resolved against the pipeline's folder; each must exist.
@@ -511,6 +548,15 @@ mod tests {
     fn bad_param_points_at_the_param() {
         let err = plan_err(&format!("{SOURCE}  l:\n    type: load\n    inputs: [rec]\n  b:\n    type: baseline\n    inputs: [l]\n    params:\n      ordr: 2\n"));
         assert_eq!(err.line, Some(15), "{err}");
+    }
+
+    #[test]
+    fn an_intermediate_nobody_reads_is_refused_at_its_keep_line() {
+        let err = plan_err(&format!("{SOURCE}  l:\n    type: load\n    inputs: [rec]\n    keep: false\n"));
+        assert_eq!(err.line, Some(11), "{err}");
+        assert!(err.message.contains("`keep: false`, but no stage reads it"), "{err}");
+        let read = format!("{SOURCE}  l:\n    type: load\n    inputs: [rec]\n    keep: false\n  b:\n    type: baseline\n    inputs: [l]\n");
+        assert!(!plan(&read).unwrap().stages["l"].keep);
     }
 
     #[test]

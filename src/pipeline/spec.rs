@@ -47,6 +47,19 @@ pub struct StageSpec {
     /// Only the input records whose partition keys take these values (`motion: [WN-1, WN-6]`).
     #[serde(default)]
     pub select: BTreeMap<String, Vec<String>>,
+    /// `false`: an intermediate. Its files are removed at the commit once every stage reading
+    /// them is up to date, and made again (the same bytes) when one of those must rerun; its
+    /// lockfile entry, with the files' hashes, stays.
+    #[serde(default = "keep_by_default", skip_serializing_if = "is_true")]
+    pub keep: bool,
+}
+
+fn keep_by_default() -> bool {
+    true
+}
+
+fn is_true(value: &bool) -> bool {
+    *value
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Deserialize, Serialize)]

@@ -24,6 +24,7 @@ mod export;
 mod fragility_scipy;
 mod hash_memo;
 mod hostile_input;
+mod intermediates;
 mod interop;
 mod load_shared_records;
 mod mutation_harness;

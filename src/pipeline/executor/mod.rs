@@ -51,6 +51,16 @@ pub struct RunOptions {
     pub keep_going: bool,
 }
 
+/// What a run reruns whatever the lockfile says.
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
+pub struct Rerun {
+    /// The `--force`d stages and every stage reading them.
+    pub stages: BTreeSet<String>,
+    /// Per `keep: false` stage, the units whose removed files a unit that runs needs → why.
+    #[serde(default)]
+    pub remake: BTreeMap<String, BTreeMap<String, String>>,
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub enum Outcome {
     Cached,
@@ -186,7 +196,14 @@ fn stage_reasons(stage: &PlannedStage, entry: Option<&StageLock>) -> Vec<String>
 }
 
 /// Why one unit is stale (empty: up to date), given its stage's entry and reasons.
-fn unit_reasons(unit: &Unit, key: &str, entry: Option<&StageLock>, stage_dir: &Path) -> anyhow::Result<Vec<String>> {
+/// The files of a `keep: false` stage may be gone: only a file changed on disk makes it stale.
+fn unit_reasons(
+    unit: &Unit,
+    key: &str,
+    entry: Option<&StageLock>,
+    stage_dir: &Path,
+    keep: bool,
+) -> anyhow::Result<Vec<String>> {
     if unit.hashes.values().any(|h| h == PENDING) {
         return Ok(vec!["an upstream unit will rerun".into()]);
     }
@@ -210,6 +227,7 @@ fn unit_reasons(unit: &Unit, key: &str, entry: Option<&StageLock>, stage_dir: &P
     }
     for (file, hash) in &old.files {
         match hash::hash_file(&stage_dir.join(file)) {
+            Err(_) if !keep => {}
             Err(_) => reasons.push(format!("output file `{file}` missing")),
             Ok(now) if now != *hash => reasons.push(format!("output file `{file}` was modified on disk")),
             Ok(_) => {}
@@ -402,6 +420,8 @@ pub struct StatusLine {
     pub vanished: Vec<String>,
     /// Records skipped by `on_error: skip`, with why.
     pub flagged: Vec<UnitStatus>,
+    /// `keep: false`: its files go once the stages reading them are up to date.
+    pub keep: bool,
 }
 
 impl StatusLine {
@@ -471,29 +491,40 @@ pub fn status(plan: &Plan, notes: &mut Vec<String>) -> Result<Vec<StatusLine>, U
     }
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;
-    predict(plan, &lock, &sources, &files, &[])
+    Ok(predict(plan, &lock, &sources, &files, &Rerun::default())?.lines)
+}
+
+/// What a run would do: each stage's status line, and the units of `keep: false` stages it
+/// makes again because a unit that runs reads their removed files.
+pub struct Prediction {
+    pub lines: Vec<StatusLine>,
+    pub remake: BTreeMap<String, BTreeMap<String, String>>,
 }
 
 /// Each stage's units and which would run, and why: upstream units that would run stand for
 /// the files they wrote last time (or one table per output at their partition), with a
-/// [`PENDING`] hash.
+/// [`PENDING`] hash. A unit of a `keep: false` stage whose files are gone but that a stale unit
+/// reads is made again: it stands for its recorded hashes (it writes the same bytes).
 fn predict(
     plan: &Plan,
     lock: &LockFile,
     sources: &BTreeMap<String, ResolvedSource>,
     files: &BTreeMap<String, BTreeMap<String, String>>,
-    forced: &[&str],
-) -> Result<Vec<StatusLine>, UserError> {
+    rerun: &Rerun,
+) -> Result<Prediction, UserError> {
     let output_dir = plan.file.output_dir();
     let mut produced: BTreeMap<String, Produced> = BTreeMap::new();
     let mut lines = Vec::new();
+    // Removed files of up-to-date `keep: false` units → (stage, unit); and, in run order, the
+    // units reading some of them: (stage, unit, stale, the units whose files it reads).
+    let mut removed: BTreeMap<PathBuf, (String, String)> = BTreeMap::new();
+    let mut readers: Vec<(String, String, bool, BTreeSet<(String, String)>)> = Vec::new();
     let error = |e: anyhow::Error| match e.downcast::<UserError>() {
         Ok(user) => user,
         Err(e) => UserError::new(format!("{e:#}")),
     };
     for stage in plan.stages.values() {
-        let assessed =
-            assess_stage(plan, stage, sources, &produced, files, lock, &output_dir, forced).map_err(error)?;
+        let assessed = assess_stage(plan, stage, sources, &produced, files, lock, &output_dir, rerun).map_err(error)?;
         let stage_dir = output_dir.join(&stage.name);
         let entry = lock.stages.get(&stage.name);
         let mut mine = Produced::new();
@@ -505,12 +536,24 @@ fn predict(
             stale: Vec::new(),
             vanished: assessed.vanished.clone(),
             flagged: Vec::new(),
+            keep: stage.keep,
         };
         for (unit, _, reasons) in &assessed.units {
             let old = entry.and_then(|e| e.units.get(&unit.id));
+            let reads: BTreeSet<(String, String)> =
+                unit.inputs.iter().flat_map(|i| i.parts()).filter_map(|p| removed.get(&p.path).cloned()).collect();
+            if !reads.is_empty() {
+                readers.push((stage.name.clone(), unit.id.clone(), !reasons.is_empty(), reads));
+            }
             if reasons.is_empty() {
                 if let Some(old) = old {
-                    mine.extend(cached_files(old, &stage_dir));
+                    let cached = cached_files(old, &stage_dir);
+                    if !stage.keep {
+                        for file in cached.values().filter(|f| !f.path.exists()) {
+                            removed.insert(file.path.clone(), (stage.name.clone(), unit.id.clone()));
+                        }
+                    }
+                    mine.extend(cached);
                     if let Some(why) = &old.flagged {
                         line.flagged.push(UnitStatus { id: unit.id.clone(), reasons: vec![why.clone()] });
                     }
@@ -523,7 +566,26 @@ fn predict(
         produced.insert(stage.name.clone(), mine);
         lines.push(line);
     }
-    Ok(lines)
+    // Readers come after what they read: walking back, a unit made again marks what it reads.
+    let mut remake: BTreeMap<String, BTreeMap<String, String>> = BTreeMap::new();
+    for (stage, unit, stale, reads) in readers.into_iter().rev() {
+        let needed = stale || remake.get(&stage).is_some_and(|u| u.contains_key(&unit));
+        if !needed {
+            continue;
+        }
+        for (up, id) in reads {
+            let why = format!("made again: its files were not kept (`keep: false`) and `{stage}` reads them");
+            remake.entry(up).or_default().entry(id).or_insert(why);
+        }
+    }
+    for line in &mut lines {
+        for (id, why) in remake.get(&line.name).into_iter().flatten() {
+            line.stale.push(UnitStatus { id: id.clone(), reasons: vec![why.clone()] });
+        }
+        let order: BTreeMap<&str, usize> = line.ids.iter().enumerate().map(|(i, id)| (id.as_str(), i)).collect();
+        line.stale.sort_by_key(|u| order.get(u.id.as_str()).copied().unwrap_or(usize::MAX));
+    }
+    Ok(Prediction { lines, remake })
 }
 
 /// A stage split into units, each with its cache key and why it is stale (empty: cached).
@@ -542,14 +604,15 @@ fn assess_stage(
     files: &BTreeMap<String, BTreeMap<String, String>>,
     lock: &LockFile,
     output_dir: &Path,
-    forced: &[&str],
+    rerun: &Rerun,
 ) -> anyhow::Result<AssessedStage> {
     let inputs = stage_inputs(plan, stage, sources, produced)?;
     let split = units::split(stage, &inputs, files.get(&stage.name).unwrap_or(&BTreeMap::new()))?;
     let entry = lock.stages.get(&stage.name);
     let common = stage_reasons(stage, entry);
     let stage_dir = output_dir.join(&stage.name);
-    let forced = forced.contains(&stage.name.as_str());
+    let forced = rerun.stages.contains(&stage.name);
+    let remake = rerun.remake.get(&stage.name);
     let units = split
         .into_par_iter()
         .map(|unit| {
@@ -558,8 +621,11 @@ fn assess_stage(
             if forced {
                 reasons.push("forced".into());
             }
-            let own = unit_reasons(&unit, &key, entry, &stage_dir)?;
+            let own = unit_reasons(&unit, &key, entry, &stage_dir, stage.keep)?;
             reasons.extend(own.into_iter().filter(|r| common.is_empty() || !r.starts_with("new record")));
+            if let Some(why) = remake.and_then(|r| r.get(&unit.id)).filter(|_| reasons.is_empty()) {
+                reasons.push(why.clone());
+            }
             Ok((unit, key, reasons))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
@@ -573,10 +639,9 @@ fn assess_stage(
 /// `shakeflow run --dry-run`: the units that would run, and why.
 pub fn dry_run(plan: &Plan, options: &RunOptions) -> Result<Vec<StatusLine>, UserError> {
     let selected = selected_stages(plan, options)?;
-    let forced = forced_stages(plan, &options.force);
-    let forced: Vec<&str> = forced.iter().map(String::as_str).collect();
+    let rerun = Rerun { stages: forced_stages(plan, &options.force), remake: BTreeMap::new() };
     let lock = LockFile::read(&lock_path(plan))?;
-    let lines = predict(plan, &lock, &resolve_sources(plan)?, &param_file_hashes(plan)?, &forced)?;
+    let lines = predict(plan, &lock, &resolve_sources(plan)?, &param_file_hashes(plan)?, &rerun)?.lines;
     Ok(lines.into_iter().filter(|l| selected.contains(&l.name)).collect())
 }
 
@@ -615,16 +680,19 @@ fn selected_stages(plan: &Plan, options: &RunOptions) -> Result<BTreeSet<String>
 
 pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Result<RunSummary> {
     let selected = selected_stages(plan, options)?;
-    let forced = forced_stages(plan, &options.force);
     let output_dir = plan.file.output_dir();
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;
     let (lease, lock) = take_output_folder(plan, &sources, reporter)?;
+    let mut rerun = Rerun { stages: forced_stages(plan, &options.force), remake: BTreeMap::new() };
+    if plan.stages.values().any(|s| !s.keep) {
+        rerun.remake = predict(plan, &lock, &sources, &files, &rerun)?.remake;
+    }
     let transaction = Transaction::begin(&lease)?;
     let env = RunEnv {
         plan,
         selected: &selected,
-        forced: &forced,
+        rerun: &rerun,
         keep_going: options.keep_going,
         lock: &lock,
         sources: &sources,
@@ -637,7 +705,7 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
     };
     let outcome = run_stages(&env);
     let state = env.state.into_inner().map_err(|_| anyhow!("a stage panicked"));
-    let (state, fatal) = match (state, outcome) {
+    let (mut state, fatal) = match (state, outcome) {
         (Ok(state), Ok(())) => (state, None),
         (Ok(state), Err(e)) => (state, Some(e)),
         (Err(e), _) => {
@@ -645,6 +713,12 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
             return Err(e);
         }
     };
+    for path in not_kept(plan, &selected, &state.tainted, &state.entries) {
+        state.install.remove(&path);
+        if output_dir.join(&path).exists() {
+            state.remove.insert(path);
+        }
+    }
     if let Some(error) = fatal {
         // A stage could not be planned (a bad select, two records with one partition): what
         // finished before it is still committed below only when nothing is in doubt.
@@ -706,6 +780,33 @@ fn take_output_folder(
     Ok((lease, lock))
 }
 
+/// The files of `keep: false` stages this commit leaves out (paths relative to the output
+/// folder): those of every such stage that ran in full, as did every stage reading it (cached
+/// counts: it is up to date with them). Their lockfile entries stay, hashes and all.
+fn not_kept(
+    plan: &Plan,
+    selected: &BTreeSet<String>,
+    tainted: &BTreeSet<String>,
+    entries: &BTreeMap<String, StageLock>,
+) -> Vec<String> {
+    let done = |name: &str| selected.contains(name) && !tainted.contains(name);
+    plan.stages
+        .values()
+        .filter(|s| !s.keep && done(&s.name))
+        .filter(|s| {
+            plan.stages.values().filter(|r| upstream_stages(r).contains(s.name.as_str())).all(|r| done(&r.name))
+        })
+        .filter_map(|s| entries.get(&s.name).map(|entry| (s, entry)))
+        .flat_map(|(s, entry)| {
+            entry
+                .units
+                .iter()
+                .filter(|(id, _)| *id != FLAGGED_UNIT)
+                .flat_map(|(_, unit)| unit.files.keys().map(|file| format!("{}/{file}", s.name)))
+        })
+        .collect()
+}
+
 fn commit(transaction: Transaction, state: &RunState, plan: &Plan, lock: &LockFile) -> anyhow::Result<()> {
     let mut stages = lock.stages.clone();
     // Stages the pipeline no longer has keep their entries until `gc` removes their folders.
@@ -759,7 +860,7 @@ fn input_paths(plan: &Plan, sources: &BTreeMap<String, ResolvedSource>) -> Vec<P
 struct RunEnv<'a> {
     plan: &'a Plan,
     selected: &'a BTreeSet<String>,
-    forced: &'a BTreeSet<String>,
+    rerun: &'a Rerun,
     keep_going: bool,
     lock: &'a LockFile,
     sources: &'a BTreeMap<String, ResolvedSource>,
@@ -1120,8 +1221,8 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
         return Ok(());
     }
     let snapshot = env.state.lock().expect("no poisoned lock").produced.clone();
-    let forced: Vec<&str> = env.forced.iter().map(String::as_str).collect();
-    let assessed = assess_stage(env.plan, stage, env.sources, &snapshot, env.files, env.lock, env.output_dir, &forced)?;
+    let assessed =
+        assess_stage(env.plan, stage, env.sources, &snapshot, env.files, env.lock, env.output_dir, env.rerun)?;
     let new_dir = env.transaction.new_path(name);
     let stale: Vec<&(Unit, String, Vec<String>)> = assessed.units.iter().filter(|(_, _, r)| !r.is_empty()).collect();
     let started = Instant::now();

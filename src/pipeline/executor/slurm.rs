@@ -33,8 +33,9 @@ use anyhow::{anyhow, bail, Context};
 use serde::{Deserialize, Serialize};
 
 use super::{
-    assess_stage, execute, fold, forced_stages, param_file_hashes, predict, resolve_sources, selected_stages,
-    upstream_stages, Produced, ProducedFile, RunOptions, RunSummary, UnitOutcome, UnitProblem, UnitRecord,
+    assess_stage, execute, fold, forced_stages, not_kept, param_file_hashes, predict, resolve_sources, selected_stages,
+    upstream_stages, Prediction, Produced, ProducedFile, Rerun, RunOptions, RunSummary, UnitOutcome, UnitProblem,
+    UnitRecord,
 };
 use crate::error::UserError;
 use crate::pipeline::lease::{Lease, STATE_DIR};
@@ -83,6 +84,9 @@ struct RunFile {
     /// In-allocation runs: the allocation's job id (no arrays, no commit job).
     #[serde(default)]
     allocation: Option<String>,
+    /// Units of `keep: false` stages made again for the units that read them (see [`Rerun`]).
+    #[serde(default)]
+    remake: BTreeMap<String, BTreeMap<String, String>>,
 }
 
 impl RunFile {
@@ -107,6 +111,7 @@ impl RunFile {
             arrays: BTreeMap::new(),
             commit: None,
             allocation,
+            remake: BTreeMap::new(),
         })
     }
 
@@ -201,17 +206,16 @@ pub fn submit(
         return run_in_allocation(plan, options, slurm, reporter);
     }
     let selected = selected_stages(plan, options)?;
-    let forced = forced_stages(plan, &options.force);
-    let forced: Vec<&str> = forced.iter().map(String::as_str).collect();
+    let rerun = Rerun { stages: forced_stages(plan, &options.force), remake: BTreeMap::new() };
     let output_dir = plan.file.output_dir();
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;
     let (lease, lock) = super::take_output_folder(plan, &sources, reporter)?;
-    let lines = predict(plan, &lock, &sources, &files, &forced)?;
+    let prediction = predict(plan, &lock, &sources, &files, &rerun)?;
     save_hash_memo(reporter);
     let client = Slurm::new();
     let limits = client.limits()?;
-    let Some(run) = submit_run(plan, options, slurm, reporter, &lines, &selected, &client, &limits)? else {
+    let Some(run) = submit_run(plan, options, slurm, reporter, &prediction, &selected, &client, &limits)? else {
         reporter.line("every unit is up to date: nothing submitted");
         return Ok(RunSummary::default());
     };
@@ -252,7 +256,7 @@ fn submit_run(
     options: &RunOptions,
     slurm: &SlurmOptions,
     reporter: &Reporter,
-    lines: &[super::StatusLine],
+    prediction: &Prediction,
     selected: &BTreeSet<String>,
     client: &Slurm,
     limits: &crate::pipeline::slurm::ClusterLimits,
@@ -263,7 +267,7 @@ fn submit_run(
     let shakeflow = std::env::current_exe().context("locating the shakeflow binary")?;
     std::fs::create_dir_all(&run_dir)?;
     let naming = RunNaming { id: &id, run_dir: &run_dir, shakeflow: &shakeflow };
-    let submitted = submit_arrays(plan, options, slurm, reporter, lines, selected, client, limits, naming);
+    let submitted = submit_arrays(plan, options, slurm, reporter, prediction, selected, client, limits, naming);
     if !matches!(submitted, Ok(Some(_))) {
         let _ = std::fs::remove_dir_all(&run_dir);
         let _ = std::fs::remove_dir(runs_dir(&output_dir));
@@ -311,15 +315,14 @@ fn run_in_allocation(
 ) -> anyhow::Result<RunSummary> {
     let allocation = crate::pipeline::slurm::Allocation::current()?;
     let selected = selected_stages(plan, options)?;
-    let forced = forced_stages(plan, &options.force);
-    let forced: Vec<&str> = forced.iter().map(String::as_str).collect();
+    let rerun = Rerun { stages: forced_stages(plan, &options.force), remake: BTreeMap::new() };
     let output_dir = plan.file.output_dir();
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;
     let (lease, lock) = super::take_output_folder(plan, &sources, reporter)?;
-    let lines = predict(plan, &lock, &sources, &files, &forced)?;
+    let prediction = predict(plan, &lock, &sources, &files, &rerun)?;
     save_hash_memo(reporter);
-    let cut = cut_shards(&lines, &selected, slurm.units_per_task);
+    let cut = cut_shards(&prediction.lines, &selected, slurm.units_per_task);
     if cut.is_empty() {
         reporter.line("every unit is up to date: nothing to run");
         return Ok(RunSummary::default());
@@ -327,6 +330,7 @@ fn run_in_allocation(
     let id = new_run_id(plan);
     let run_dir = runs_dir(&output_dir).join(&id);
     let mut run = RunFile::new(&id, plan, options, slurm, Some(allocation.job_id.clone()))?;
+    run.remake = prediction.remake;
     let order: Vec<String> = cut.iter().map(|(name, _, _)| name.clone()).collect();
     for (name, shards, only) in cut {
         run.shards.insert(name.clone(), shards);
@@ -428,7 +432,7 @@ fn submit_arrays(
     options: &RunOptions,
     slurm: &SlurmOptions,
     reporter: &Reporter,
-    lines: &[super::StatusLine],
+    prediction: &Prediction,
     selected: &BTreeSet<String>,
     client: &Slurm,
     limits: &crate::pipeline::slurm::ClusterLimits,
@@ -436,7 +440,9 @@ fn submit_arrays(
 ) -> anyhow::Result<Option<RunFile>> {
     let RunNaming { id, run_dir, shakeflow } = naming;
     let per_task = slurm.units_per_task.max(1);
+    let lines = &prediction.lines;
     let mut run = RunFile::new(id, plan, options, slurm, None)?;
+    run.remake = prediction.remake.clone();
     let quote = |p: &Path| format!("'{}'", p.display().to_string().replace('\'', r"'\''"));
     let stale_units: BTreeMap<&str, (usize, usize)> =
         lines.iter().map(|l| (l.name.as_str(), (l.stale.len(), l.units))).collect();
@@ -616,9 +622,8 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let sources = resolve_sources(&plan)?;
     let files = param_file_hashes(&plan)?;
     let (produced, upstream_tainted) = upstream_produced(run_dir, &run, &plan, &lock, stage_name)?;
-    let forced = forced_stages(&plan, &run.force);
-    let forced: Vec<&str> = forced.iter().map(String::as_str).collect();
-    let assessed = assess_stage(&plan, stage, &sources, &produced, &files, &lock, &output_dir, &forced)?;
+    let rerun = Rerun { stages: forced_stages(&plan, &run.force), remake: run.remake.clone() };
+    let assessed = assess_stage(&plan, stage, &sources, &produced, &files, &lock, &output_dir, &rerun)?;
     // A unit nobody predicted (a partition no earlier output had) goes to the last shard.
     let ours: Vec<&(crate::pipeline::units::Unit, String, Vec<String>)> = assessed
         .units
@@ -791,6 +796,13 @@ fn commit_manifests(run_dir: &Path, run: &RunFile, plan: &Plan, lease: &Lease) -
         summary.committed_units += entry.units.len();
         new_lock.stages.insert(name.clone(), entry);
     }
+    let options = RunOptions { force: run.force.clone(), only: run.only.clone(), keep_going: run.keep_going };
+    for path in not_kept(plan, &selected_stages(plan, &options)?, &tainted, &new_lock.stages) {
+        install.remove(&path);
+        if output_dir.join(&path).exists() {
+            remove.insert(path);
+        }
+    }
     let install: Vec<String> = install.into_iter().collect();
     let remove: Vec<String> = remove.into_iter().filter(|r| !install.contains(r)).collect();
     transaction.commit(&install, &remove, Some(&new_lock))?;
@@ -809,12 +821,12 @@ fn commit_manifests(run_dir: &Path, run: &RunFile, plan: &Plan, lease: &Lease) -
 fn resubmit(run: &RunFile, plan: &Plan, lock: &LockFile, retries_left: u32) -> anyhow::Result<Option<RunFile>> {
     let options = RunOptions { force: Vec::new(), only: run.only.clone(), keep_going: run.keep_going };
     let selected = selected_stages(plan, &options)?;
-    let lines = predict(plan, lock, &resolve_sources(plan)?, &param_file_hashes(plan)?, &[])?;
+    let prediction = predict(plan, lock, &resolve_sources(plan)?, &param_file_hashes(plan)?, &Rerun::default())?;
     let mut slurm = run.options.clone();
     slurm.executor.retries = Some(retries_left);
     let client = Slurm::new();
     let limits = client.limits()?;
-    submit_run(plan, &options, &slurm, &Reporter::new(false), &lines, &selected, &client, &limits)
+    submit_run(plan, &options, &slurm, &Reporter::new(false), &prediction, &selected, &client, &limits)
 }
 
 /// What `status` says of a Slurm run holding the folder: per stage, its tasks' states.
