@@ -142,6 +142,22 @@ impl Plan {
         self.stages.get(stage).and_then(|s| s.stage.info().outputs.first()).map(|o| o.name)
     }
 
+    /// `names` and every stage they read, directly or not.
+    pub fn with_upstream<'a>(&self, names: impl IntoIterator<Item = &'a str>) -> BTreeSet<String> {
+        let mut set: BTreeSet<String> = names.into_iter().map(String::from).collect();
+        // Stages are in dependency order: walking backwards adds what each stage in the set reads.
+        for (name, stage) in self.stages.iter().rev() {
+            if set.contains(name) {
+                for input in &stage.inputs {
+                    if let InputRef::Stage { stage, .. } = input {
+                        set.insert(stage.clone());
+                    }
+                }
+            }
+        }
+        set
+    }
+
     /// The stages that read `name`'s outputs, directly or not, plus `name` itself.
     pub fn with_dependents(&self, name: &str) -> BTreeSet<String> {
         let mut set = BTreeSet::from([name.to_string()]);

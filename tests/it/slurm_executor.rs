@@ -247,3 +247,20 @@ fn an_intermediate_goes_and_comes_back_on_slurm_as_it_does_locally() {
         assert_eq!(artifacts(local.path()), artifacts(cluster.path()), "bit-identical artifacts and lockfile");
     }
 }
+
+#[test]
+fn a_branch_still_running_does_not_taint_another_on_slurm() {
+    let project = small_project();
+    let root = project.path();
+    // `other` comes first in run order but is no input of `baseline`; its task sleeps, so
+    // `baseline`'s tasks run while `other`'s manifest is missing.
+    let text = PIPELINE
+        .replace("stages:\n", "stages:\n  other:\n    type: load\n    inputs: [daq]\n")
+        .replace("    inputs: [daq]\n  baseline:", "    inputs: [daq]\n    keep: false\n  baseline:");
+    assert!(text.contains("keep: false") && text.contains("  other:"), "{text}");
+    std::fs::write(root.join("pipeline.yaml"), text).unwrap();
+    let out = slurm_run_env(root, &["--wait"], &[("SHAKEFLOW_FAILPOINT", "slurm-task.other.0:sleep=6000")]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(root.join("out/baseline/records/motion=FB-1/data.parquet").is_file());
+    assert!(!root.join("out/load/records").exists(), "baseline ran in full: load's tables go");
+}

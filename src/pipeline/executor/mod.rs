@@ -664,18 +664,7 @@ fn selected_stages(plan: &Plan, options: &RunOptions) -> Result<BTreeSet<String>
     if options.only.is_empty() {
         return Ok(plan.stages.keys().cloned().collect());
     }
-    let mut wanted: BTreeSet<String> = options.only.iter().cloned().collect();
-    // Stages are in dependency order: walking backwards adds what each wanted stage reads.
-    for (name, stage) in plan.stages.iter().rev() {
-        if wanted.contains(name) {
-            for input in &stage.inputs {
-                if let InputRef::Stage { stage, .. } = input {
-                    wanted.insert(stage.clone());
-                }
-            }
-        }
-    }
-    Ok(wanted)
+    Ok(plan.with_upstream(options.only.iter().map(String::as_str)))
 }
 
 pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Result<RunSummary> {

@@ -551,8 +551,9 @@ fn upstream_produced(
     let output_dir = plan.file.output_dir();
     let mut produced = BTreeMap::new();
     let mut tainted = false;
-    // Stages are in dependency order: everything before `stage` may be read (transitively).
-    for (name, _) in plan.stages.iter().take_while(|(n, _)| n.as_str() != stage) {
+    // Only a failure upstream taints `stage`: a stage of another branch may not have finished.
+    let upstream = plan.with_upstream([stage]);
+    for (name, _) in plan.stages.iter().filter(|(n, _)| n.as_str() != stage && upstream.contains(n.as_str())) {
         let stage_dir = output_dir.join(name);
         let committed = |id: &str| -> Produced {
             lock.stages
