@@ -254,8 +254,7 @@ fn study_page(
     suffix: &str,
     drawn: &[String],
 ) -> anyhow::Result<html::Page> {
-    let mut page = html::Page::default();
-    page.tests = identified.iter().map(|(m, _)| m.clone()).collect();
+    let mut page = html::Page { tests: identified.iter().map(|(m, _)| m.clone()).collect(), ..html::Page::default() };
     let unit_name = |channel: &str| channel.strip_suffix(suffix).unwrap_or(channel).to_string();
     for (i, (_, table)) in identified.iter().enumerate() {
         for (channel, f) in strings(table, "output")?.iter().zip(optionals(table, "frequency_hz")?) {

@@ -409,7 +409,7 @@ impl Setup {
             )
         })?;
         let steer = m.steer0_deg.unwrap_or([0.0; 4]);
-        let lateral = lateral_slip.then(|| LateralSlip { mu: params.mu_lateral, eps_mps: params.lateral_eps });
+        let lateral = lateral_slip.then_some(LateralSlip { mu: params.mu_lateral, eps_mps: params.lateral_eps });
         if let Some(l) = lateral {
             if !(l.mu > 0.0 && l.eps_mps > 0.0) {
                 return Err(refuse(
