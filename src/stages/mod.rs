@@ -179,6 +179,47 @@ mod tests {
         }
     }
 
+    /// `baseline`'s declaration with a struct that has a field too many: the defect of a stage
+    /// whose struct and declaration drifted apart.
+    struct Drifted;
+
+    #[derive(Deserialize, Serialize)]
+    #[serde(deny_unknown_fields)]
+    struct DriftedParams {
+        order: usize,
+        columns: Vec<String>,
+        mcap: bool,
+        window: Option<f64>,
+    }
+
+    impl Stage for Drifted {
+        fn info(&self) -> &'static StageInfo {
+            Stage::info(&baseline::Baseline)
+        }
+
+        fn check_params(&self, params: &crate::pipeline::params::Params) -> Result<(), ParamError> {
+            crate::pipeline::params::check_typed::<DriftedParams>(params)
+        }
+
+        fn run(&self, _ctx: &StageContext<'_>) -> anyhow::Result<()> {
+            unreachable!("the planner refuses it")
+        }
+    }
+
+    /// The planner checks every stage's struct against its declaration before anything runs:
+    /// a disagreement is an error at the stage's line, not a panic in a worker.
+    #[test]
+    fn a_stage_whose_struct_disagrees_is_refused_when_planned() {
+        let text = "version: 1\noutput_dir: out\ninputs:\n  rec:\n    format: at2\n    path: a.AT2\nstages:\n  l:\n    type: load\n    inputs: [rec]\n  b:\n    type: baseline\n    inputs: [l]\n";
+        let file = || crate::pipeline::spec::PipelineFile::parse(std::path::Path::new("p.yaml"), text.into()).unwrap();
+        assert!(crate::pipeline::plan::Plan::new(file(), registry()).is_ok());
+        let drifted = Registry(&[&load::Load, &Drifted]);
+        let err = crate::pipeline::plan::Plan::new(file(), drifted).err().expect("the plan was accepted");
+        assert!(err.message.contains("do not fit `DriftedParams`: field `window` is not declared"), "{err}");
+        assert_eq!(err.line, Some(11), "{err}");
+        assert!(err.hint.unwrap().contains("a defect of shakeflow"));
+    }
+
     #[test]
     fn every_stage_with_time_series_has_the_opt_in_mcap_parameter() {
         for stage in registry().0 {
