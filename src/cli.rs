@@ -617,6 +617,7 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
             (params, stage_inputs)
         }
     };
+    stage.check_params(&params)?;
     let mut input_hashes: BTreeMap<String, String> = stage_inputs
         .iter()
         .map(|i| {
@@ -855,7 +856,7 @@ fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Resu
         set.iter().map(|s| params::parse_set(s)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
     let params = params::normalize(info.params, info.name, assignments.iter().map(|(k, v)| (k.as_str(), v.clone())))
         .map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;
-    let settings = stages::diagnose::settings(&params);
+    let settings = stages::diagnose::settings(&params)?;
     // Written into a transaction and committed at once: `--out` is replaced whole, and only
     // when it is new, empty or an earlier diagnosis (its marker). Refused before any work.
     refuse_foreign_output(out, cases, DIAGNOSE, None)?;

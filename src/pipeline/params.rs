@@ -5,6 +5,8 @@
 //! keys sorted, canonical JSON) is what the cache key hashes, so writing a default explicitly
 //! does not invalidate the cache.
 
+use serde::de::DeserializeOwned;
+use serde::Serialize;
 use serde_json::{Map, Value};
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -174,48 +176,68 @@ pub fn parse_set(assignment: &str) -> Result<(String, Value), String> {
     Ok((key.trim().to_string(), yaml_to_json(&yaml)))
 }
 
-/// Typed access for stage implementations; the values were checked by `normalize`.
-pub trait ParamsExt {
-    fn f64_of(&self, key: &str) -> f64;
-    fn i64_of(&self, key: &str) -> i64;
-    fn bool_of(&self, key: &str) -> bool;
-    fn str_of(&self, key: &str) -> &str;
-    fn list_of(&self, key: &str) -> Vec<String>;
-    /// None when the parameter is null (its "not given" default).
-    fn opt_f64(&self, key: &str) -> Option<f64>;
-    fn opt_str(&self, key: &str) -> Option<&str>;
-    fn f64_list_of(&self, key: &str) -> Option<Vec<f64>>;
+/// The normalised parameters as a stage type's parameter struct: `#[derive(Deserialize)]
+/// #[serde(deny_unknown_fields)]`, declared beside the stage, with enums for choices and `Option`
+/// for parameters whose default is null (as Vector deserialises a component's config). The
+/// declaration ([`ParamSpec`]) stays what users see; [`check_typed`] proves the two agree.
+pub fn typed<T: DeserializeOwned>(params: &Params) -> Result<T, ParamError> {
+    serde_json::from_value(Value::Object(params.clone())).map_err(|e| disagreement::<T>(e.to_string()))
 }
 
-impl ParamsExt for Params {
-    fn f64_of(&self, key: &str) -> f64 {
-        self[key].as_f64().unwrap_or_else(|| panic!("parameter `{key}` was normalised as a number"))
+/// [`typed`], then the struct written back: it must give the normalised parameters exactly, so
+/// every declared parameter is a field (`deny_unknown_fields`), every field a declared parameter
+/// (a field the declaration lacks comes back as an extra key, even an `Option` one), and every
+/// value, choices included, means the same on both sides. The planner calls it through
+/// `Stage::check_params` before anything runs.
+pub fn check_typed<T: DeserializeOwned + Serialize>(params: &Params) -> Result<(), ParamError> {
+    let back = match serde_json::to_value(typed::<T>(params)?) {
+        Ok(Value::Object(map)) => map,
+        Ok(other) => return Err(disagreement::<T>(format!("it is written back as {other}, not a map"))),
+        Err(e) => return Err(disagreement::<T>(e.to_string())),
+    };
+    let mut differences: Vec<String> = Vec::new();
+    for (key, value) in params {
+        match back.get(key) {
+            None => differences.push(format!("`{key}` is not a field")),
+            Some(v) if v != value => differences.push(format!("`{key}`: {value} reads back as {v}")),
+            Some(_) => {}
+        }
     }
-    fn i64_of(&self, key: &str) -> i64 {
-        self[key].as_i64().unwrap_or_else(|| panic!("parameter `{key}` was normalised as an integer"))
-    }
-    fn bool_of(&self, key: &str) -> bool {
-        self[key].as_bool().unwrap_or_else(|| panic!("parameter `{key}` was normalised as a bool"))
-    }
-    fn str_of(&self, key: &str) -> &str {
-        self[key].as_str().unwrap_or_else(|| panic!("parameter `{key}` was normalised as text"))
-    }
-    fn list_of(&self, key: &str) -> Vec<String> {
-        self[key]
-            .as_array()
-            .map(|a| a.iter().filter_map(|v| v.as_str().map(String::from)).collect())
-            .unwrap_or_default()
-    }
-    fn opt_f64(&self, key: &str) -> Option<f64> {
-        self[key].as_f64()
-    }
-    fn opt_str(&self, key: &str) -> Option<&str> {
-        self[key].as_str()
-    }
-    fn f64_list_of(&self, key: &str) -> Option<Vec<f64>> {
-        self[key].as_array().map(|a| a.iter().filter_map(Value::as_f64).collect())
+    differences
+        .extend(back.keys().filter(|k| !params.contains_key(*k)).map(|k| format!("field `{k}` is not declared")));
+    if differences.is_empty() {
+        Ok(())
+    } else {
+        Err(disagreement::<T>(differences.join("; ")))
     }
 }
+
+/// A choice's value as pipelines write it (its serde name: `rk4`, `first_frame`), for messages.
+pub fn choice_name<T: Serialize>(choice: &T) -> String {
+    match serde_json::to_value(choice) {
+        Ok(Value::String(name)) => name,
+        other => format!("{other:?}"),
+    }
+}
+
+fn disagreement<T>(detail: String) -> ParamError {
+    ParamError {
+        key: None,
+        message: format!(
+            "the parameters do not fit `{}`: {detail}",
+            std::any::type_name::<T>().rsplit("::").next().unwrap_or_default()
+        ),
+        hint: "a defect of shakeflow: the stage type's declared parameters (`shakeflow stages`) and its parameter struct disagree; please report it".into(),
+    }
+}
+
+impl std::fmt::Display for ParamError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}\n  help: {}", self.message, self.hint)
+    }
+}
+
+impl std::error::Error for ParamError {}
 
 #[cfg(test)]
 mod tests {
@@ -278,6 +300,72 @@ mod tests {
         let short = normalize(&specs, "s", [("steer0_deg", json!([1, 2]))]).unwrap_err();
         assert!(short.message.contains("list of 4 numbers"), "{}", short.message);
         assert!(normalize(&specs, "s", [("steer0_deg", json!([1, 2, 3, 400]))]).unwrap_err().message.contains("400"));
+    }
+
+    #[derive(serde::Deserialize, serde::Serialize)]
+    #[serde(deny_unknown_fields)]
+    struct Agrees {
+        order: usize,
+        columns: Vec<String>,
+    }
+
+    #[derive(serde::Deserialize, serde::Serialize)]
+    #[serde(deny_unknown_fields)]
+    struct UndeclaredField {
+        order: usize,
+        columns: Vec<String>,
+        window: Option<f64>,
+    }
+
+    #[derive(serde::Deserialize, serde::Serialize)]
+    #[serde(deny_unknown_fields)]
+    struct MissingField {
+        order: usize,
+    }
+
+    #[derive(serde::Deserialize, serde::Serialize)]
+    #[serde(deny_unknown_fields)]
+    struct OtherType {
+        order: f64,
+        columns: Vec<String>,
+    }
+
+    #[derive(serde::Deserialize, serde::Serialize)]
+    #[serde(rename_all = "lowercase")]
+    enum Zero {
+        FirstFrame,
+        Upright,
+    }
+
+    #[derive(serde::Deserialize, serde::Serialize)]
+    #[serde(deny_unknown_fields)]
+    struct Choices {
+        theta_zero: Zero,
+    }
+
+    #[test]
+    fn a_struct_agrees_with_its_declaration_only_when_fields_and_values_match() {
+        let params = normalize(SPECS, "baseline", [("columns", json!("ax_mps2"))]).unwrap();
+        check_typed::<Agrees>(&params).unwrap();
+        assert_eq!(typed::<Agrees>(&params).unwrap().columns, ["ax_mps2"]);
+        let undeclared = check_typed::<UndeclaredField>(&params).unwrap_err().message;
+        assert!(undeclared.contains("`UndeclaredField`: field `window` is not declared"), "{undeclared}");
+        let missing = check_typed::<MissingField>(&params).unwrap_err().message;
+        assert!(missing.contains("unknown field `columns`"), "{missing}");
+        let other = check_typed::<OtherType>(&params).unwrap_err().message;
+        assert!(other.contains("`order`: 3 reads back as 3.0"), "{other}");
+        let choice = [ParamSpec {
+            name: "theta_zero",
+            kind: ParamKind::Choice(&["first_frame", "upright"]),
+            default: Some("\"upright\""),
+            unit: "",
+            description: "",
+            range: None,
+        }];
+        check_typed::<Choices>(&normalize(&choice, "p", []).unwrap()).unwrap();
+        let first = normalize(&choice, "p", [("theta_zero", json!("first_frame"))]).unwrap();
+        let renamed = check_typed::<Choices>(&first).unwrap_err().message;
+        assert!(renamed.contains("unknown variant `first_frame`"), "{renamed}");
     }
 
     #[test]

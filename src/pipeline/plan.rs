@@ -227,6 +227,7 @@ fn plan_stage(
         UserError::new(e.message).in_file(&file.path).at(position).hint(e.hint)
     };
     let params = params::normalize(info.params, info.name, given).map_err(located)?;
+    stage.check_params(&params).map_err(located)?;
     let files = param_files(info.params, &params, &file.base_dir(), info.name).map_err(located)?;
     stage.check(&params, &file.base_dir()).map_err(located)?;
     let inputs = resolve_inputs(file, registry, name, &spec.inputs, info.inputs)?;

@@ -164,9 +164,9 @@ impl StageContext<'_> {
         }
     }
 
-    /// A `Path` parameter resolved against the base directory; None when it is null.
-    pub fn file_param(&self, key: &str) -> Option<PathBuf> {
-        self.params.get(key).and_then(|v| v.as_str()).map(|p| self.base_dir.join(p))
+    /// A `Path` parameter's value resolved against the base directory.
+    pub fn file_path(&self, relative: &Path) -> PathBuf {
+        self.base_dir.join(relative)
     }
 }
 
@@ -188,6 +188,12 @@ pub trait Stage: Sync + Send {
     /// Runs on the records `ctx.inputs` holds: all of them for a gathering stage, one record
     /// (and its companions) per call for a per-record stage.
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()>;
+
+    /// That the normalised parameters deserialise into the stage type's parameter struct and
+    /// back to the same map (`params::check_typed::<ItsParams>`): called by the planner after
+    /// normalisation, so a struct that disagrees with its declaration is an error before
+    /// anything runs; the stage's code then reads its parameters through `params::typed`.
+    fn check_params(&self, params: &Params) -> Result<(), ParamError>;
 
     fn work_units(&self) -> WorkUnits {
         WorkUnits::Gather

@@ -2,15 +2,26 @@
 //! from each channel, keeping peaks (no filtering). Fitted coefficients go into the metadata.
 
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::io::records::printable;
-use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
 use crate::signal::baseline::PolynomialBasis;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct Baseline;
+
+/// The parameters `INFO` declares, typed.
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct BaselineParams {
+    pub order: usize,
+    pub columns: Vec<String>,
+    /// Read by the engine's sink.
+    pub mcap: bool,
+}
 
 static INFO: StageInfo = StageInfo {
     name: "baseline",
@@ -48,6 +59,10 @@ impl Stage for Baseline {
         &INFO
     }
 
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<BaselineParams>(params)
+    }
+
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
     }
@@ -55,14 +70,17 @@ impl Stage for Baseline {
     /// The records keep their columns; every column named in `columns` must be one of them.
     fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {
         let Some(input) = input else { return (None, Vec::new()) };
-        let columns = params.list_of("columns");
-        let errors = columns.iter().filter_map(|c| super::require_column("columns", c, input).err());
+        let p: BaselineParams = match params::typed(params) {
+            Ok(p) => p,
+            Err(e) => return (None, vec![e]),
+        };
+        let errors = p.columns.iter().filter_map(|c| super::require_column("columns", c, input).err());
         (Some(input.to_vec()), errors.collect())
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let order = ctx.params.i64_of("order") as usize;
-        let wanted = ctx.params.list_of("columns");
+        let p: BaselineParams = params::typed(ctx.params)?;
+        let (order, wanted) = (p.order, p.columns);
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {

@@ -3,13 +3,23 @@
 //! units are reconciled through the columns' `unit` metadata, and the RMS and largest errors are
 //! reported per column pair, with a PNG overlay.
 
+use serde::{Deserialize, Serialize};
+
 use super::{partition_path, split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
-use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct Compare;
+
+/// The parameters `INFO` declares, typed.
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CompareParams {
+    pub pairs: Vec<String>,
+    pub relative: bool,
+}
 
 static INFO: StageInfo = StageInfo {
     name: "compare",
@@ -31,6 +41,10 @@ impl Stage for Compare {
         &INFO
     }
 
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<CompareParams>(params)
+    }
+
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::PerRecordOf { primary: 0 }
     }
@@ -41,16 +55,16 @@ impl Stage for Compare {
                 .hint("e.g. inputs: [cpt_rocking.motion, load_truth]")
                 .into());
         };
-        let pairs: Vec<(String, String)> = ctx
-            .params
-            .list_of("pairs")
+        let p: CompareParams = params::typed(ctx.params)?;
+        let pairs: Vec<(String, String)> = p
+            .pairs
             .iter()
             .map(|p| match split_pair(p) {
                 (m, Some(r)) => Ok((m, r)),
                 _ => Err(UserError::new(format!("pair `{p}` must look like `measured_column -> reference_column`"))),
             })
             .collect::<Result<_, _>>()?;
-        let relative = ctx.params.bool_of("relative");
+        let relative = p.relative;
         ctx.sink.set_total(measured.parts().len());
         for part in measured.parts() {
             let reference_part = match reference.parts().iter().find(|r| r.partition == part.partition) {

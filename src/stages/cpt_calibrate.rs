@@ -4,18 +4,45 @@
 //! control points whose residual stands out.
 
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::control_points::read_control_points;
-use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
 use crate::pipeline::spec::RecordFormat;
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
 use crate::vision::calibrate::{calibrate, expected_rms_px, Calibration, CalibrationError, Distortion, Model};
 
 pub struct CptCalibrate;
+
+/// The parameters `INFO` declares, typed.
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CptCalibrateParams {
+    pub distortion: DistortionChoice,
+    pub skew: Skew,
+    pub outlier_sigma: f64,
+}
+
+/// `distortion`: the radial terms fitted.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DistortionChoice {
+    None,
+    K1,
+    K1k2,
+}
+
+/// `skew`: the study's free skew, or none.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Skew {
+    Free,
+    Zero,
+}
 
 static INFO: StageInfo = StageInfo {
     name: "cpt_calibrate",
@@ -39,14 +66,19 @@ impl Stage for CptCalibrate {
         &INFO
     }
 
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<CptCalibrateParams>(params)
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let distortion = match ctx.params.str_of("distortion") {
-            "k1" => Distortion::K1,
-            "k1k2" => Distortion::K1K2,
-            _ => Distortion::None,
+        let p: CptCalibrateParams = params::typed(ctx.params)?;
+        let distortion = match p.distortion {
+            DistortionChoice::None => Distortion::None,
+            DistortionChoice::K1 => Distortion::K1,
+            DistortionChoice::K1k2 => Distortion::K1K2,
         };
-        let model = Model { distortion, zero_skew: ctx.params.str_of("skew") == "zero" };
-        let outlier_sigma = ctx.params.f64_of("outlier_sigma");
+        let model = Model { distortion, zero_skew: p.skew == Skew::Zero };
+        let outlier_sigma = p.outlier_sigma;
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {

@@ -6,11 +6,12 @@ use std::sync::Arc;
 
 use std::collections::BTreeMap;
 
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
-use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
 use crate::vision::camera::Camera;
@@ -18,6 +19,43 @@ use crate::vision::linalg::Vec3;
 use crate::vision::project::{backproject, pair_motion, Plane};
 
 pub struct CptProject;
+
+/// The parameters `INFO` declares, typed.
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CptProjectParams {
+    /// `a,b,c,d`, read by `parse_plane`.
+    pub plane: String,
+    pub points: Vec<String>,
+    pub unit_motion: UnitMotion,
+    pub theta_zero: ThetaZero,
+    pub min_ray_angle_deg: f64,
+    /// Read by the engine's sink.
+    pub mcap: bool,
+}
+
+/// `unit_motion`: what the first two points' motion is made into.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum UnitMotion {
+    None,
+    Rolling,
+    Rocking,
+}
+
+impl std::fmt::Display for UnitMotion {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&params::choice_name(self))
+    }
+}
+
+/// `theta_zero`: where a rocking unit's θ is measured from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ThetaZero {
+    FirstFrame,
+    Upright,
+}
 
 static INFO: StageInfo = StageInfo {
     name: "cpt_project",
@@ -44,17 +82,21 @@ impl Stage for CptProject {
         &INFO
     }
 
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<CptProjectParams>(params)
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let plane = parse_plane(ctx.params.str_of("plane"))?;
-        let wanted = ctx.params.list_of("points");
-        let unit_motion = ctx.params.str_of("unit_motion").to_string();
-        let upright = ctx.params.str_of("theta_zero") == "upright";
-        if upright && unit_motion != "rocking" {
+        let p: CptProjectParams = params::typed(ctx.params)?;
+        let plane = parse_plane(&p.plane)?;
+        let (wanted, unit_motion) = (p.points, p.unit_motion);
+        let upright = p.theta_zero == ThetaZero::Upright;
+        if upright && unit_motion != UnitMotion::Rocking {
             return Err(UserError::new("`theta_zero: upright` applies to `unit_motion: rocking` only")
                 .hint("a rolling unit's yaw is measured from its first frame")
                 .into());
         }
-        let min_angle = ctx.params.f64_of("min_ray_angle_deg");
+        let min_angle = p.min_ray_angle_deg;
         let mut tracks: Vec<(&InputPart, Arc<Table>)> = Vec::new();
         let mut calibrations: Vec<(&InputPart, Arc<Table>)> = Vec::new();
         for part in ctx.inputs.iter().flat_map(|i| i.parts()) {
@@ -105,7 +147,7 @@ impl Stage for CptProject {
                 }
             };
             let camera = camera_of(&calibration.1).map_err(|e| anyhow::anyhow!("{}: {e}", calibration.0.label))?;
-            let options = ProjectOptions { wanted: &wanted, unit_motion: &unit_motion, upright, min_angle };
+            let options = ProjectOptions { wanted: &wanted, unit_motion, upright, min_angle };
             let (mut points, motion, facts) = project(table, &camera, &plane, &options, &part.label)?;
             points.metadata.insert("shakeflow.cpt_project".into(), facts.to_string());
             points.metadata.extend(super::record_provenance(part));
@@ -116,7 +158,7 @@ impl Stage for CptProject {
                     p if p.is_empty() => "motion.png".to_string(),
                     p => format!("motion-{}.png", p.replace(['/', '='], "_")),
                 };
-                ctx.sink.write_file("figures", &name, &figure(&motion, &unit_motion, &part.label)?)?;
+                ctx.sink.write_file("figures", &name, &figure(&motion, unit_motion, &part.label)?)?;
                 ctx.sink.write("motion", &part.partition, motion)?;
             }
             ctx.sink.write_series("points", &part.partition, points, "point")?;
@@ -158,7 +200,7 @@ type Projected = (Table, Option<Table>, serde_json::Value);
 
 struct ProjectOptions<'a> {
     wanted: &'a [String],
-    unit_motion: &'a str,
+    unit_motion: UnitMotion,
     upright: bool,
     min_angle: f64,
 }
@@ -204,7 +246,7 @@ fn project(
         }
         wanted.to_vec()
     };
-    if unit_motion != "none" && selected.len() < 2 {
+    if unit_motion != UnitMotion::None && selected.len() < 2 {
         return Err(UserError::new(format!(
             "unit_motion `{unit_motion}` needs two points on the unit, {} given",
             selected.len()
@@ -252,7 +294,7 @@ fn project(
     points.push(Column::f64("Y_mm", "mm", &format!("world Y {on_plane}"), y_out));
     points.push(Column::f64("Z_mm", "mm", &format!("world Z {on_plane}"), z_out));
 
-    let motion = (unit_motion != "none").then(|| {
+    let motion = (unit_motion != UnitMotion::None).then(|| {
         let (a, b) = (&series[selected[0].as_str()], &series[selected[1].as_str()]);
         let zero = options.upright.then_some([0.0, 0.0, 1.0]);
         let motion = pair_motion(&a.iter().map(|s| s.1).collect::<Vec<_>>(), &b.iter().map(|s| s.1).collect::<Vec<_>>(), plane, zero);
@@ -261,7 +303,7 @@ fn project(
         let mut table = Table::new();
         table.push(Column::f64("time_s", "s", "frame time", time));
         let rotation = motion.rotation.clone();
-        if unit_motion == "rocking" {
+        if unit_motion == UnitMotion::Rocking {
             let zero = if options.upright { "from upright (the pair vertical)" } else { "from the first frame" };
             table.push(Column::f64("theta_rad", "rad", &format!("rocking angle θ: rotation of {pair} about the plane normal, {zero} (positive: top toward +X for a +Y normal)"), rotation.clone()));
         }
@@ -273,7 +315,7 @@ fn project(
                 motion.translation.iter().map(|t| t[k]).collect(),
             ));
         }
-        if unit_motion == "rolling" {
+        if unit_motion == UnitMotion::Rolling {
             table.push(Column::f64("yaw_rad", "rad", &format!("in-plane rotation of {pair} about the plane normal, from the first frame (right-handed)"), rotation));
         }
         table
@@ -288,11 +330,11 @@ fn project(
     Ok((points, motion, facts))
 }
 
-fn figure(motion: &Table, unit_motion: &str, label: &str) -> anyhow::Result<Vec<u8>> {
+fn figure(motion: &Table, unit_motion: UnitMotion, label: &str) -> anyhow::Result<Vec<u8>> {
     let time = motion.f64_column("time_s").expect("written above");
     let column = |name: &str| motion.f64_column(name).expect("written above");
     let mut panels = Vec::new();
-    let (rotation_name, rotation_title) = if unit_motion == "rocking" {
+    let (rotation_name, rotation_title) = if unit_motion == UnitMotion::Rocking {
         ("theta_rad", "rocking angle θ")
     } else {
         ("yaw_rad", "in-plane rotation (yaw)")
@@ -315,7 +357,7 @@ fn figure(motion: &Table, unit_motion: &str, label: &str) -> anyhow::Result<Vec<
         log_y: false,
         spans: Vec::new(),
     });
-    if unit_motion == "rolling" {
+    if unit_motion == UnitMotion::Rolling {
         panels.push(Panel {
             title: "trajectory of the midpoint (plan view)".into(),
             x_label: "dx [mm]".into(),

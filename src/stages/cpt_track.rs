@@ -3,12 +3,13 @@
 //! template, sub-pixel refinement, template refresh only when the score drops, lost points
 //! reported as NaN with a status, optional camera-shake correction from stationary points.
 
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::frames::FrameReader;
-use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
 use crate::pipeline::spec::RecordFormat;
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
@@ -16,6 +17,44 @@ use crate::vision::matcher::{Kernel, Score};
 use crate::vision::track::{NamedPoint, SequenceTracker, Status, TemplatePolicy, TrackError, TrackOptions};
 
 pub struct CptTrack;
+
+/// The parameters `INFO` declares, typed.
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CptTrackParams {
+    /// `u,v;u,v` or `M1=u,v;…`, read by `parse_points`.
+    pub points: String,
+    pub reference_points: String,
+    pub fps: Option<f64>,
+    pub window_px: usize,
+    pub search_px: usize,
+    pub score: ScoreChoice,
+    pub template: TemplateChoice,
+    pub subpixel: bool,
+    pub refresh_below: f64,
+    pub lost_below: f64,
+    pub max_jump_px: f64,
+    pub occluded_above: f64,
+    pub min_contrast: f64,
+    /// Read by the engine's sink.
+    pub mcap: bool,
+}
+
+/// `score`: the matching criterion.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ScoreChoice {
+    Zncc,
+    Ssd,
+}
+
+/// `template`: which template a point is matched against.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TemplateChoice {
+    Reference,
+    EveryFrame,
+}
 
 static INFO: StageInfo = StageInfo {
     name: "cpt_track",
@@ -52,16 +91,21 @@ impl Stage for CptTrack {
         &INFO
     }
 
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<CptTrackParams>(params)
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let points = parse_points(ctx.params.str_of("points"), "M", "points")?;
+        let p: CptTrackParams = params::typed(ctx.params)?;
+        let points = parse_points(&p.points, "M", "points")?;
         if points.is_empty() {
             return Err(UserError::new("parameter `points` of `cpt_track` names no point")
                 .hint("give start points as `u,v;u,v`")
                 .into());
         }
-        let references = parse_points(ctx.params.str_of("reference_points"), "R", "reference_points")?;
-        let options = options(ctx.params);
-        let fps = ctx.params.get("fps").and_then(|v| v.as_f64());
+        let references = parse_points(&p.reference_points, "R", "reference_points")?;
+        let options = options(&p);
+        let fps = p.fps;
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         // Sequences one after another: each already decodes its frames in parallel.
@@ -79,22 +123,24 @@ impl Stage for CptTrack {
     }
 }
 
-fn options(params: &Params) -> TrackOptions {
+fn options(p: &CptTrackParams) -> TrackOptions {
     TrackOptions {
-        window: params.i64_of("window_px") as usize,
-        search: params.i64_of("search_px") as usize,
-        score: if params.str_of("score") == "ssd" { Score::Ssd } else { Score::Zncc },
-        policy: if params.str_of("template") == "every_frame" {
-            TemplatePolicy::EveryFrame
-        } else {
-            TemplatePolicy::Reference
+        window: p.window_px,
+        search: p.search_px,
+        score: match p.score {
+            ScoreChoice::Zncc => Score::Zncc,
+            ScoreChoice::Ssd => Score::Ssd,
         },
-        subpixel: params.bool_of("subpixel"),
-        refresh_below: params.f64_of("refresh_below"),
-        lost_below: params.f64_of("lost_below"),
-        max_jump: params.f64_of("max_jump_px"),
-        occluded_above: params.f64_of("occluded_above"),
-        min_contrast: params.f64_of("min_contrast"),
+        policy: match p.template {
+            TemplateChoice::Reference => TemplatePolicy::Reference,
+            TemplateChoice::EveryFrame => TemplatePolicy::EveryFrame,
+        },
+        subpixel: p.subpixel,
+        refresh_below: p.refresh_below,
+        lost_below: p.lost_below,
+        max_jump: p.max_jump_px,
+        occluded_above: p.occluded_above,
+        min_contrast: p.min_contrast,
         kernel: Kernel::best(),
     }
 }

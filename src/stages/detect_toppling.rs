@@ -3,13 +3,24 @@
 //! confirmed by a lasting drop of the amplitude to about the floor's vertical level.
 
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 use super::{split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
 use crate::signal::toppling::{detect_toppling, detect_toppling_on, DetectOptions, TimeBase};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct DetectToppling;
+
+/// The parameters `INFO` declares, typed.
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DetectTopplingParams {
+    /// `top` or `top -> floor vertical`, read by `split_pair`.
+    pub channels: Vec<String>,
+    pub sta_lta_on: f64,
+    pub drop_ratio: f64,
+}
 
 static INFO: StageInfo = StageInfo {
     name: "detect_toppling",
@@ -29,6 +40,10 @@ impl Stage for DetectToppling {
         &INFO
     }
 
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<DetectTopplingParams>(params)
+    }
+
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
     }
@@ -36,8 +51,12 @@ impl Stage for DetectToppling {
     /// Every channel (and floor vertical after `->`) must be a column of the input records.
     fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {
         let Some(input) = input else { return (None, Vec::new()) };
+        let p: DetectTopplingParams = match params::typed(params) {
+            Ok(p) => p,
+            Err(e) => return (None, vec![e]),
+        };
         let mut errors = Vec::new();
-        for channel in params.list_of("channels") {
+        for channel in p.channels {
             let (top, floor) = split_pair(&channel);
             errors.extend(
                 std::iter::once(top).chain(floor).filter_map(|c| super::require_column("channels", &c, input).err()),
@@ -47,13 +66,9 @@ impl Stage for DetectToppling {
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let channels: Vec<(String, Option<String>)> =
-            ctx.params.list_of("channels").iter().map(|c| split_pair(c)).collect();
-        let opts = DetectOptions {
-            sta_lta_on: ctx.params.f64_of("sta_lta_on"),
-            drop_ratio: ctx.params.f64_of("drop_ratio"),
-            ..DetectOptions::default()
-        };
+        let p: DetectTopplingParams = params::typed(ctx.params)?;
+        let channels: Vec<(String, Option<String>)> = p.channels.iter().map(|c| split_pair(c)).collect();
+        let opts = DetectOptions { sta_lta_on: p.sta_lta_on, drop_ratio: p.drop_ratio, ..DetectOptions::default() };
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {

@@ -4,13 +4,14 @@
 //! residuals (Parquet + MCAP) and a figure with the located window shaded.
 
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
 use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::diagnose::rolling::RollingDiagnosis;
 use crate::diagnose::{diagnose, Diagnosis, Settings};
 use crate::io::case::read_case_unchanged;
-use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
 use crate::pipeline::spec::RecordFormat;
 use crate::table::{Column, Table, TIME_COLUMN};
 
@@ -35,12 +36,25 @@ static INFO: StageInfo = StageInfo {
     ],
 };
 
-pub fn settings(params: &Params) -> Settings {
-    Settings {
-        exceedance_sigma: params.f64_of("exceedance_sigma"),
-        min_improvement: params.f64_of("min_improvement"),
-        max_remaining_flagged: params.f64_of("max_remaining_flagged"),
-    }
+/// The parameters `INFO` declares, typed (also `shakeflow diagnose --set`'s).
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DiagnoseParams {
+    pub exceedance_sigma: f64,
+    pub min_improvement: f64,
+    pub max_remaining_flagged: f64,
+    /// Read by the engine's sink.
+    pub mcap: bool,
+}
+
+/// The diagnosis settings the normalised parameters give.
+pub fn settings(params: &Params) -> Result<Settings, ParamError> {
+    let p: DiagnoseParams = params::typed(params)?;
+    Ok(Settings {
+        exceedance_sigma: p.exceedance_sigma,
+        min_improvement: p.min_improvement,
+        max_remaining_flagged: p.max_remaining_flagged,
+    })
 }
 
 impl Stage for Diagnose {
@@ -48,8 +62,12 @@ impl Stage for Diagnose {
         &INFO
     }
 
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<DiagnoseParams>(params)
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let settings = settings(ctx.params);
+        let settings = settings(ctx.params)?;
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         let mut rows: Vec<(String, AnyDiagnosis)> = parts

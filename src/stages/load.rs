@@ -5,17 +5,24 @@
 use std::collections::{BTreeMap, HashMap};
 
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use super::{InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
 use crate::error::{did_you_mean_hint, UserError};
 use crate::io::records::{self, DelimitedOptions, RawRecord};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::pipeline::spec::{ColumnSpec, ComponentAs, GapPolicy, NonUniformPolicy, RecordFormat, SourceSpec};
 use crate::signal::resample;
 use crate::table::{Column, Table, TIME_COLUMN};
 use crate::units;
 
 pub struct Load;
+
+/// `load` takes no parameters (a source's reading options live in its spec).
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoadParams {}
 
 static INFO: StageInfo = StageInfo {
     name: "load",
@@ -40,6 +47,10 @@ static INFO: StageInfo = StageInfo {
 impl Stage for Load {
     fn info(&self) -> &'static StageInfo {
         &INFO
+    }
+
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<LoadParams>(params)
     }
 
     fn work_units(&self) -> super::WorkUnits {

@@ -5,6 +5,8 @@
 
 use std::collections::BTreeMap;
 
+use serde::{Deserialize, Serialize};
+
 use crate::pipeline::params::{ParamError, ParamSpec};
 // The contract lives in the engine (`pipeline::stage`); stage files name it from here.
 pub use crate::pipeline::stage::{
@@ -40,6 +42,15 @@ pub const MCAP_PARAM: ParamSpec = ParamSpec {
         "also write the time series as MCAP (lz4 chunks, protobuf) for Foxglove; opt-in: about twice the Parquet's size",
     range: None,
 };
+
+/// `method` of the rocking stages and `integrator` of `simulate_rolling`: adaptive Dormand–Prince
+/// 5(4) or fixed-step RK4.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Integrator {
+    Adaptive,
+    Rk4,
+}
 
 /// The file stem of a per-record figure: the partition path with `/` as `_` (`motion=FB-4`), or
 /// `fallback` for a record without partition keys. Stages name their figures with it and `report`
@@ -114,6 +125,100 @@ pub fn split_pair(text: &str) -> (String, Option<String>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::pipeline::params::{normalize, ParamKind};
+    use serde_json::{json, Value};
+
+    /// A value within the declaration's kind and range.
+    fn sample(spec: &ParamSpec) -> Value {
+        let x = spec.range.map_or(1.0, |(lo, hi)| if (lo..=hi).contains(&1.0) { 1.0 } else { lo });
+        match spec.kind {
+            ParamKind::Float => json!(x),
+            ParamKind::Int => json!(x as i64),
+            ParamKind::Bool => json!(true),
+            ParamKind::Str => json!("a"),
+            ParamKind::Choice(options) => json!(options[0]),
+            ParamKind::StrList => json!(["a"]),
+            ParamKind::FloatList(n) => json!(vec![x; n.unwrap_or(2)]),
+            ParamKind::Path => json!("equipment.yaml"),
+        }
+    }
+
+    /// Every stage type's parameter struct and its declaration agree (`params::check_typed`, as
+    /// the planner checks them): on the declared defaults (required parameters given a sample
+    /// value), on every option of every choice, and on a value for every parameter whose default
+    /// is null.
+    #[test]
+    fn every_stage_parameter_struct_agrees_with_its_declaration() {
+        for stage in registry().0 {
+            let info = stage.info();
+            let required: Vec<(&str, Value)> =
+                info.params.iter().filter(|p| p.default.is_none()).map(|p| (p.name, sample(p))).collect();
+            let mut cases = vec![required.clone()];
+            for spec in info.params {
+                let mut values: Vec<Value> = match spec.kind {
+                    ParamKind::Choice(options) => options.iter().map(|o| json!(o)).collect(),
+                    _ => Vec::new(),
+                };
+                if spec.default == Some("null") {
+                    values.push(sample(spec));
+                }
+                for value in values {
+                    let mut given: Vec<(&str, Value)> =
+                        required.iter().filter(|(k, _)| *k != spec.name).cloned().collect();
+                    given.push((spec.name, value));
+                    cases.push(given);
+                }
+            }
+            for given in cases {
+                let params = normalize(info.params, info.name, given.clone())
+                    .unwrap_or_else(|e| panic!("{}: {given:?}: {}", info.name, e.message));
+                if let Err(e) = stage.check_params(&params) {
+                    panic!("{}: {given:?}: {}", info.name, e.message);
+                }
+            }
+        }
+    }
+
+    /// `baseline`'s declaration with a struct that has a field too many: the defect of a stage
+    /// whose struct and declaration drifted apart.
+    struct Drifted;
+
+    #[derive(Deserialize, Serialize)]
+    #[serde(deny_unknown_fields)]
+    struct DriftedParams {
+        order: usize,
+        columns: Vec<String>,
+        mcap: bool,
+        window: Option<f64>,
+    }
+
+    impl Stage for Drifted {
+        fn info(&self) -> &'static StageInfo {
+            Stage::info(&baseline::Baseline)
+        }
+
+        fn check_params(&self, params: &crate::pipeline::params::Params) -> Result<(), ParamError> {
+            crate::pipeline::params::check_typed::<DriftedParams>(params)
+        }
+
+        fn run(&self, _ctx: &StageContext<'_>) -> anyhow::Result<()> {
+            unreachable!("the planner refuses it")
+        }
+    }
+
+    /// The planner checks every stage's struct against its declaration before anything runs:
+    /// a disagreement is an error at the stage's line, not a panic in a worker.
+    #[test]
+    fn a_stage_whose_struct_disagrees_is_refused_when_planned() {
+        let text = "version: 1\noutput_dir: out\ninputs:\n  rec:\n    format: at2\n    path: a.AT2\nstages:\n  l:\n    type: load\n    inputs: [rec]\n  b:\n    type: baseline\n    inputs: [l]\n";
+        let file = || crate::pipeline::spec::PipelineFile::parse(std::path::Path::new("p.yaml"), text.into()).unwrap();
+        assert!(crate::pipeline::plan::Plan::new(file(), registry()).is_ok());
+        let drifted = Registry(&[&load::Load, &Drifted]);
+        let err = crate::pipeline::plan::Plan::new(file(), drifted).err().expect("the plan was accepted");
+        assert!(err.message.contains("do not fit `DriftedParams`: field `window` is not declared"), "{err}");
+        assert_eq!(err.line, Some(11), "{err}");
+        assert!(err.hint.unwrap().contains("a defect of shakeflow"));
+    }
 
     #[test]
     fn every_stage_with_time_series_has_the_opt_in_mcap_parameter() {

@@ -13,15 +13,29 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 use rayon::prelude::*;
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
 
+use super::simulate_rolling::SimulateRollingParams;
+use super::simulate_toppling::RockingParams;
+use super::transfer_function::TransferFunctionParams;
 use super::{
     figure_stem, partition_values, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo,
     StageInput,
 };
-use crate::pipeline::params::{ParamKind, ParamSpec, ParamsExt};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
 use crate::table::{Column, ColumnData, Table};
 
 pub struct Report;
+
+/// The parameters `INFO` declares, typed.
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReportParams {
+    pub unit_suffix: String,
+    pub figure_motion: String,
+    pub title: String,
+}
 
 static INFO: StageInfo = StageInfo {
     name: "report",
@@ -82,7 +96,12 @@ impl Stage for Report {
         &INFO
     }
 
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<ReportParams>(params)
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
+        let p: ReportParams = params::typed(ctx.params)?;
         let mut inputs = Inputs::default();
         let mut provenance: Vec<html::Provenance> = Vec::new();
         for input in ctx.inputs {
@@ -115,10 +134,10 @@ impl Stage for Report {
         ctx.sink.set_total(1);
         let identified = read_every(ctx, &inputs.identified)?;
         let events = read_every(ctx, &inputs.events)?;
-        let suffix = ctx.params.str_of("unit_suffix");
+        let suffix = p.unit_suffix.as_str();
         let mut drawn = Vec::new();
         if let ([spectra, ..], [records, ..]) = (inputs.spectra.as_slice(), inputs.records.as_slice()) {
-            let motion = ctx.params.str_of("figure_motion");
+            let motion = p.figure_motion.as_str();
             let spectra = read_all(ctx, spectra)?;
             let record = records.parts().iter().find(|p| motion_of(p) == motion).ok_or_else(|| {
                 anyhow::anyhow!("no record of motion `{motion}` for the figures (set `figure_motion`)")
@@ -130,6 +149,7 @@ impl Stage for Report {
             }
         }
         let mut page = study_page(ctx, &inputs, &identified, &events, &rolling, suffix, &drawn)?;
+        page.title = p.title.clone();
         page.stages = provenance;
         page.stages.push(html::Provenance {
             stage: ctx.stage_name.to_string(),
@@ -180,10 +200,17 @@ fn meta<'t>(table: &'t Table, key: &str) -> &'t str {
     table.metadata.get(key).map_or("", String::as_str)
 }
 
-/// The unit a simulation stage modelled: its preset, else the stage's name.
+/// The parameters the stage that wrote `table` ran with (its `shakeflow.params`), as that stage
+/// type's struct; None when they are absent or do not fit it.
+fn upstream_params<T: DeserializeOwned>(table: &Table) -> Option<T> {
+    serde_json::from_str(meta(table, "shakeflow.params")).ok()
+}
+
+/// The unit a rocking stage modelled: its preset, else the stage's name.
 fn unit_of_stage(table: &Table) -> String {
-    let params: serde_json::Value = serde_json::from_str(meta(table, "shakeflow.params")).unwrap_or_default();
-    params["preset"].as_str().map_or_else(|| meta(table, "shakeflow.stage").to_string(), String::from)
+    upstream_params::<RockingParams>(table)
+        .and_then(|p| p.preset)
+        .unwrap_or_else(|| meta(table, "shakeflow.stage").to_string())
 }
 
 /// A link from the report's folder to a figure another stage wrote: `../<stage>/<output>/<file>`.
@@ -227,8 +254,7 @@ fn study_page(
     suffix: &str,
     drawn: &[String],
 ) -> anyhow::Result<html::Page> {
-    let mut page = html::Page { title: ctx.params.str_of("title").to_string(), ..html::Page::default() };
-    page.tests = identified.iter().map(|(m, _)| m.clone()).collect();
+    let mut page = html::Page { tests: identified.iter().map(|(m, _)| m.clone()).collect(), ..html::Page::default() };
     let unit_name = |channel: &str| channel.strip_suffix(suffix).unwrap_or(channel).to_string();
     for (i, (_, table)) in identified.iter().enumerate() {
         for (channel, f) in strings(table, "output")?.iter().zip(optionals(table, "frequency_hz")?) {
@@ -305,8 +331,7 @@ fn study_page(
     for (i, run) in rolling.iter().enumerate() {
         let unit = unit_entry(&mut page.units, &run.unit, page.tests.len());
         let stage = meta(&run.table, "shakeflow.stage").to_string();
-        let drawn = serde_json::from_str::<serde_json::Value>(meta(&run.table, "shakeflow.params"))
-            .is_ok_and(|p| p["figure"].as_bool() == Some(true));
+        let drawn = upstream_params::<SimulateRollingParams>(&run.table).is_some_and(|p| p.figure);
         let figure = drawn.then(|| figure_link(&run.table, "figures", &format!("{}.png", run.figure_stem)));
         let entry = html::RollingRun {
             motion: run.motion.clone(),
@@ -384,9 +409,8 @@ fn cases(table: &Table) -> anyhow::Result<Vec<html::Case>> {
 /// peaks (its `band_min_hz`/`band_max_hz`, recorded in the spectra's provenance), else 0-20 Hz
 /// (equipment modes sit at 2-5 Hz; above, the spectra are noise).
 fn figure_band(spectra: &Table) -> (f64, f64) {
-    let params: serde_json::Value = serde_json::from_str(meta(spectra, "shakeflow.params")).unwrap_or_default();
-    match (params["band_min_hz"].as_f64(), params["band_max_hz"].as_f64()) {
-        (Some(lo), Some(hi)) if lo < hi => (lo, hi),
+    match upstream_params::<TransferFunctionParams>(spectra) {
+        Some(p) if p.band_min_hz < p.band_max_hz => (p.band_min_hz, p.band_max_hz),
         _ => (0.0, 20.0),
     }
 }
@@ -707,8 +731,11 @@ mod tests {
 
     #[test]
     fn transfer_functions_are_drawn_in_the_band_their_stage_searched() {
+        let info = Stage::info(&super::super::transfer_function::TransferFunction);
+        let given = [("pairs", serde_json::json!(["a -> b"])), ("band_min_hz", 1.5.into()), ("band_max_hz", 8.into())];
+        let ran_with = params::normalize(info.params, info.name, given).unwrap();
         let mut spectra = Table::new();
-        spectra.metadata.insert("shakeflow.params".into(), r#"{"band_max_hz":8.0,"band_min_hz":1.5}"#.into());
+        spectra.metadata.insert("shakeflow.params".into(), serde_json::to_string(&ran_with).unwrap());
         assert_eq!(figure_band(&spectra), (1.5, 8.0));
         spectra.metadata.insert("shakeflow.params".into(), r#"{"band_max_hz":null}"#.into());
         assert_eq!(figure_band(&spectra), (0.0, 20.0));

@@ -2,9 +2,10 @@
 //! (the study's 4WMC model made well posed; `physics::rolling`). Parameters come in layers: a
 //! Table 4 `preset`, then an `equipment` file of the same keys, then the stage's own values.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 use serde_json::{json, Map, Value};
 
 use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
@@ -12,10 +13,95 @@ use crate::physics::rolling::{
     self, simulate, Cart, EventKind, Excitation, Friction, FrictionLaw, LateralSlip, Method, Options, Response,
     Stribeck,
 };
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params, ParamsExt};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct SimulateRolling;
+
+/// The model keys (the first `MODEL_KEYS` specs), typed: what a preset, an equipment file or the
+/// stage's own values give, None where one does not.
+#[derive(Debug, Default, Clone, Deserialize, Serialize)]
+pub struct RollingModel {
+    pub length_m: Option<f64>,
+    pub width_m: Option<f64>,
+    pub platform_mass_kg: Option<f64>,
+    pub wheel_diameter_m: Option<f64>,
+    pub wheel_width_m: Option<f64>,
+    pub wheel_mass_kg: Option<f64>,
+    pub yaw0_deg: Option<f64>,
+    pub steer0_deg: Option<[f64; 4]>,
+    pub mu_s_roll: Option<f64>,
+    pub mu_s_swivel: Option<f64>,
+    pub mu_k_roll: Option<f64>,
+    pub mu_k_swivel: Option<f64>,
+    pub beta_spm: Option<f64>,
+    pub gamma_n: Option<f64>,
+    pub p: Option<f64>,
+    pub trail_m: Option<f64>,
+    pub swivel_arm_m: Option<f64>,
+    pub friction_eps: Option<f64>,
+    pub friction_eps_swivel: Option<f64>,
+}
+
+impl RollingModel {
+    /// Each value of `self`, else the one of `under` (the layer below).
+    fn over(self, under: RollingModel) -> RollingModel {
+        RollingModel {
+            length_m: self.length_m.or(under.length_m),
+            width_m: self.width_m.or(under.width_m),
+            platform_mass_kg: self.platform_mass_kg.or(under.platform_mass_kg),
+            wheel_diameter_m: self.wheel_diameter_m.or(under.wheel_diameter_m),
+            wheel_width_m: self.wheel_width_m.or(under.wheel_width_m),
+            wheel_mass_kg: self.wheel_mass_kg.or(under.wheel_mass_kg),
+            yaw0_deg: self.yaw0_deg.or(under.yaw0_deg),
+            steer0_deg: self.steer0_deg.or(under.steer0_deg),
+            mu_s_roll: self.mu_s_roll.or(under.mu_s_roll),
+            mu_s_swivel: self.mu_s_swivel.or(under.mu_s_swivel),
+            mu_k_roll: self.mu_k_roll.or(under.mu_k_roll),
+            mu_k_swivel: self.mu_k_swivel.or(under.mu_k_swivel),
+            beta_spm: self.beta_spm.or(under.beta_spm),
+            gamma_n: self.gamma_n.or(under.gamma_n),
+            p: self.p.or(under.p),
+            trail_m: self.trail_m.or(under.trail_m),
+            swivel_arm_m: self.swivel_arm_m.or(under.swivel_arm_m),
+            friction_eps: self.friction_eps.or(under.friction_eps),
+            friction_eps_swivel: self.friction_eps_swivel.or(under.friction_eps_swivel),
+        }
+    }
+}
+
+/// The parameters `PARAMS` declares, typed (`report` reads `figure` from the events' provenance).
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimulateRollingParams {
+    #[serde(flatten)]
+    pub model: RollingModel,
+    /// A row of `rolling::PRESETS` (the table is the list, so it stays a name).
+    pub preset: Option<String>,
+    pub equipment: Option<PathBuf>,
+    pub unit: Option<String>,
+    pub x_channel: String,
+    pub y_channel: String,
+    pub friction_law: FrictionLawChoice,
+    pub lateral_slip: bool,
+    pub mu_lateral: f64,
+    pub lateral_eps: f64,
+    pub integrator: super::Integrator,
+    pub rtol: f64,
+    pub atol: f64,
+    pub rk4_dt_s: f64,
+    pub figure: bool,
+    /// Read by the engine's sink.
+    pub mcap: bool,
+}
+
+/// `friction_law`.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FrictionLawChoice {
+    Regularised,
+    StickSlip,
+}
 
 /// The model's keys: what a preset or an equipment file may give (the first `MODEL_KEYS` specs).
 const MODEL_KEYS: usize = 19;
@@ -192,8 +278,12 @@ impl Stage for SimulateRolling {
         &INFO
     }
 
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<SimulateRollingParams>(params)
+    }
+
     fn check(&self, params: &Params, base_dir: &Path) -> Result<(), ParamError> {
-        Setup::resolve(params, base_dir).map(|_| ())
+        Setup::resolve(&params::typed(params)?, base_dir).map(|_| ())
     }
 
     fn work_units(&self) -> super::WorkUnits {
@@ -201,15 +291,14 @@ impl Stage for SimulateRolling {
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let setup = Setup::resolve(ctx.params, ctx.base_dir)
-            .map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;
+        let p: SimulateRollingParams = params::typed(ctx.params)?;
+        let setup = Setup::resolve(&p, ctx.base_dir)?;
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
             let table = ctx.read_table(part)?;
             let record = super::record_title(&part.partition, &part.label);
-            let outputs =
-                setup.simulate(&table, ctx.params, &record).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
+            let outputs = setup.simulate(&table, &p, &record).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
             let (mut trajectory, mut events, png) = outputs;
             for t in [&mut trajectory, &mut events] {
                 t.metadata.extend(super::record_provenance(part));
@@ -240,25 +329,19 @@ fn refuse(key: &str, message: String, hint: impl Into<String>) -> ParamError {
 }
 
 impl Setup {
-    fn resolve(params: &Params, base_dir: &Path) -> Result<Setup, ParamError> {
-        let mut values: Map<String, Value> = Map::new();
-        let preset = params.opt_str("preset");
-        if let Some(name) = preset {
-            let row = rolling::preset(name).expect("the preset was checked against the list");
-            values.extend(table4_values(&row));
-        }
-        let equipment = params.opt_str("equipment");
+    fn resolve(params: &SimulateRollingParams, base_dir: &Path) -> Result<Setup, ParamError> {
+        let preset = params.preset.as_deref();
+        let mut values = match preset {
+            Some(name) => table4_values(&rolling::preset(name).expect("the preset was checked against the list")),
+            None => RollingModel::default(),
+        };
+        let equipment = params.equipment.as_deref();
         if let Some(relative) = equipment {
-            values.extend(read_equipment(&base_dir.join(relative))?);
+            values = read_equipment(&base_dir.join(relative))?.over(values);
         }
-        for spec in &PARAMS[..MODEL_KEYS] {
-            if !params[spec.name].is_null() {
-                values.insert(spec.name.to_string(), params[spec.name].clone());
-            }
-        }
-        let number = |key: &str| values.get(key).and_then(Value::as_f64);
-        let required = |key: &str| {
-            number(key).ok_or_else(|| {
+        let m = params.model.clone().over(values);
+        let required = |value: Option<f64>, key: &str| {
+            value.ok_or_else(|| {
                 refuse(
                     key,
                     format!("`simulate_rolling` needs `{key}`"),
@@ -269,17 +352,17 @@ impl Setup {
                 )
             })
         };
-        let diameter = required("wheel_diameter_m")?;
-        let lateral_slip = params.bool_of("lateral_slip");
+        let diameter = required(m.wheel_diameter_m, "wheel_diameter_m")?;
+        let lateral_slip = params.lateral_slip;
         let cart = Cart {
-            length_m: required("length_m")?,
-            width_m: required("width_m")?,
-            platform_mass_kg: required("platform_mass_kg")?,
+            length_m: required(m.length_m, "length_m")?,
+            width_m: required(m.width_m, "width_m")?,
+            platform_mass_kg: required(m.platform_mass_kg, "platform_mass_kg")?,
             wheel_diameter_m: diameter,
-            wheel_width_m: required("wheel_width_m")?,
-            wheel_mass_kg: required("wheel_mass_kg")?,
-            trail_m: number("trail_m").unwrap_or_else(|| Cart::default_trail_m(diameter)),
-            swivel_arm_m: number("swivel_arm_m").unwrap_or(rolling::DEFAULT_SWIVEL_ARM_M),
+            wheel_width_m: required(m.wheel_width_m, "wheel_width_m")?,
+            wheel_mass_kg: required(m.wheel_mass_kg, "wheel_mass_kg")?,
+            trail_m: m.trail_m.unwrap_or_else(|| Cart::default_trail_m(diameter)),
+            swivel_arm_m: m.swivel_arm_m.unwrap_or(rolling::DEFAULT_SWIVEL_ARM_M),
         };
         cart.check(lateral_slip).map_err(|message| {
             let key = [
@@ -297,12 +380,12 @@ impl Setup {
             .unwrap_or("length_m");
             refuse(key, format!("`simulate_rolling`: {message}"), "see `shakeflow stages simulate_rolling`")
         })?;
-        let p = number("p").unwrap_or(1.0);
-        let (beta, gamma) = (required("beta_spm")?, required("gamma_n")?);
+        let p = m.p.unwrap_or(1.0);
+        let (beta, gamma) = (required(m.beta_spm, "beta_spm")?, required(m.gamma_n, "gamma_n")?);
         let stribeck = |s: f64, k: f64| Stribeck { mu_s: s, mu_k: k, beta_spm: beta, gamma_n: gamma, p };
-        let law = match params.str_of("friction_law") {
-            "stick_slip" => FrictionLaw::StickSlip,
-            _ => FrictionLaw::Regularised,
+        let law = match params.friction_law {
+            FrictionLawChoice::Regularised => FrictionLaw::Regularised,
+            FrictionLawChoice::StickSlip => FrictionLaw::StickSlip,
         };
         if lateral_slip && law == FrictionLaw::StickSlip {
             return Err(refuse(
@@ -312,10 +395,10 @@ impl Setup {
             ));
         }
         let friction = Friction {
-            roll: stribeck(required("mu_s_roll")?, required("mu_k_roll")?),
-            swivel: stribeck(required("mu_s_swivel")?, required("mu_k_swivel")?),
-            eps_mps: number("friction_eps").unwrap_or(rolling::DEFAULT_FRICTION_EPS_MPS),
-            eps_swivel_radps: number("friction_eps_swivel").unwrap_or(rolling::DEFAULT_FRICTION_EPS_SWIVEL_RADPS),
+            roll: stribeck(required(m.mu_s_roll, "mu_s_roll")?, required(m.mu_k_roll, "mu_k_roll")?),
+            swivel: stribeck(required(m.mu_s_swivel, "mu_s_swivel")?, required(m.mu_k_swivel, "mu_k_swivel")?),
+            eps_mps: m.friction_eps.unwrap_or(rolling::DEFAULT_FRICTION_EPS_MPS),
+            eps_swivel_radps: m.friction_eps_swivel.unwrap_or(rolling::DEFAULT_FRICTION_EPS_SWIVEL_RADPS),
             law,
         };
         friction.check().map_err(|m| {
@@ -325,13 +408,8 @@ impl Setup {
                 "friction values must be zero or positive, ε positive",
             )
         })?;
-        let steer: Vec<f64> = values
-            .get("steer0_deg")
-            .and_then(Value::as_array)
-            .map(|a| a.iter().filter_map(Value::as_f64).collect())
-            .unwrap_or_else(|| vec![0.0; 4]);
-        let lateral = lateral_slip
-            .then(|| LateralSlip { mu: params.f64_of("mu_lateral"), eps_mps: params.f64_of("lateral_eps") });
+        let steer = m.steer0_deg.unwrap_or([0.0; 4]);
+        let lateral = lateral_slip.then_some(LateralSlip { mu: params.mu_lateral, eps_mps: params.lateral_eps });
         if let Some(l) = lateral {
             if !(l.mu > 0.0 && l.eps_mps > 0.0) {
                 return Err(refuse(
@@ -341,22 +419,23 @@ impl Setup {
                 ));
             }
         }
-        let method = match params.str_of("integrator") {
-            "rk4" => Method::Rk4 { dt_s: params.f64_of("rk4_dt_s") },
-            _ => Method::Adaptive { rtol: params.f64_of("rtol"), atol: params.f64_of("atol") },
+        let method = match params.integrator {
+            super::Integrator::Rk4 => Method::Rk4 { dt_s: params.rk4_dt_s },
+            super::Integrator::Adaptive => Method::Adaptive { rtol: params.rtol, atol: params.atol },
         };
         let options = Options {
-            yaw0_rad: number("yaw0_deg").unwrap_or(0.0).to_radians(),
-            steer0_rad: [steer[0], steer[1], steer[2], steer[3]].map(f64::to_radians),
+            yaw0_rad: m.yaw0_deg.unwrap_or(0.0).to_radians(),
+            steer0_rad: steer.map(f64::to_radians),
             lateral_slip: lateral,
             method,
             g_mps2: rolling::G_MPS2,
         };
         let unit = params
-            .opt_str("unit")
+            .unit
+            .as_deref()
             .or(preset)
             .map(String::from)
-            .or_else(|| equipment.and_then(|e| Path::new(e).file_stem()).map(|s| s.to_string_lossy().into_owned()))
+            .or_else(|| equipment.and_then(Path::file_stem).map(|s| s.to_string_lossy().into_owned()))
             .unwrap_or_else(|| "cart".into());
         let mut resolved = Map::new();
         resolved.insert("unit".into(), json!(unit));
@@ -367,7 +446,7 @@ impl Setup {
             ("wheel_diameter_m", cart.wheel_diameter_m),
             ("wheel_width_m", cart.wheel_width_m),
             ("wheel_mass_kg", cart.wheel_mass_kg),
-            ("yaw0_deg", number("yaw0_deg").unwrap_or(0.0)),
+            ("yaw0_deg", m.yaw0_deg.unwrap_or(0.0)),
             ("mu_s_roll", friction.roll.mu_s),
             ("mu_s_swivel", friction.swivel.mu_s),
             ("mu_k_roll", friction.roll.mu_k),
@@ -391,7 +470,7 @@ impl Setup {
     fn simulate(
         &self,
         table: &Table,
-        params: &Params,
+        params: &SimulateRollingParams,
         record: &str,
     ) -> Result<(Table, Table, Option<Vec<u8>>), String> {
         let time = table.f64_column(TIME_COLUMN).ok_or("no time_s column")?;
@@ -403,7 +482,7 @@ impl Setup {
                 )
             })
         };
-        let (x_name, y_name) = (params.str_of("x_channel"), params.str_of("y_channel"));
+        let (x_name, y_name) = (params.x_channel.as_str(), params.y_channel.as_str());
         let (ax, ay) = (column(x_name)?, column(y_name)?);
         let n = time.len();
         if n < 2 {
@@ -422,7 +501,7 @@ impl Setup {
         let response = simulate(&self.cart, &self.friction, &excitation, &self.options)?;
         let trajectory = self.trajectory(time, ax, ay, &response, x_name, y_name);
         let events = self.events(time, &response);
-        let png = if params.bool_of("figure") {
+        let png = if params.figure {
             Some(self.figure(record, time, ax, ay, &response).map_err(|e| format!("drawing the figure: {e}"))?)
         } else {
             None
@@ -649,33 +728,30 @@ impl Setup {
 }
 
 /// A Table 4 row as model-key values.
-fn table4_values(row: &rolling::Table4) -> Map<String, Value> {
-    let mut m = Map::new();
-    for (key, value) in [
-        ("length_m", row.length_m),
-        ("width_m", row.width_m),
-        ("platform_mass_kg", row.platform_mass_kg),
-        ("wheel_diameter_m", row.wheel_diameter_m),
-        ("wheel_width_m", row.wheel_width_m),
-        ("wheel_mass_kg", row.wheel_mass_kg),
-        ("yaw0_deg", row.yaw0_deg),
-        ("mu_s_roll", row.mu_s_roll),
-        ("mu_s_swivel", row.mu_s_swivel),
-        ("mu_k_roll", row.mu_k_roll),
-        ("mu_k_swivel", row.mu_k_swivel),
-        ("beta_spm", row.beta_spm),
-        ("gamma_n", row.gamma_n),
-        ("p", row.p),
-    ] {
-        m.insert(key.into(), json!(value));
+fn table4_values(row: &rolling::Table4) -> RollingModel {
+    RollingModel {
+        length_m: Some(row.length_m),
+        width_m: Some(row.width_m),
+        platform_mass_kg: Some(row.platform_mass_kg),
+        wheel_diameter_m: Some(row.wheel_diameter_m),
+        wheel_width_m: Some(row.wheel_width_m),
+        wheel_mass_kg: Some(row.wheel_mass_kg),
+        yaw0_deg: Some(row.yaw0_deg),
+        steer0_deg: Some(row.steer0_deg),
+        mu_s_roll: Some(row.mu_s_roll),
+        mu_s_swivel: Some(row.mu_s_swivel),
+        mu_k_roll: Some(row.mu_k_roll),
+        mu_k_swivel: Some(row.mu_k_swivel),
+        beta_spm: Some(row.beta_spm),
+        gamma_n: Some(row.gamma_n),
+        p: Some(row.p),
+        ..RollingModel::default()
     }
-    m.insert("steer0_deg".into(), json!(row.steer0_deg));
-    m
 }
 
 /// An equipment file: a YAML mapping of model keys, checked like stage parameters. Errors name
 /// the file and the line of the offending key.
-fn read_equipment(path: &Path) -> Result<Map<String, Value>, ParamError> {
+fn read_equipment(path: &Path) -> Result<RollingModel, ParamError> {
     let normal = crate::pipeline::spec::lexically_normal(path);
     let shown = normal.display();
     let hint = format!(
@@ -715,16 +791,30 @@ fn read_equipment(path: &Path) -> Result<Map<String, Value>, ParamError> {
                     e.message.replace(" for stage type `equipment file`", "").replace(" of `equipment file`", "");
                 refuse("equipment", format!("equipment file `{shown}`{at}: {message}"), e.hint)
             })?;
-    Ok(normalized.into_iter().filter(|(_, v)| !v.is_null()).collect())
+    params::typed(&normalized)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn params(given: Value) -> Params {
+    fn params(given: Value) -> SimulateRollingParams {
         let given = given.as_object().unwrap().clone();
-        params::normalize(INFO.params, INFO.name, given.iter().map(|(k, v)| (k.as_str(), v.clone()))).unwrap()
+        params::typed(
+            &params::normalize(INFO.params, INFO.name, given.iter().map(|(k, v)| (k.as_str(), v.clone()))).unwrap(),
+        )
+        .unwrap()
+    }
+
+    /// An equipment file is read as `RollingModel`: its fields are exactly the model keys.
+    #[test]
+    fn the_model_struct_is_the_model_keys() {
+        let none = params::normalize(&PARAMS[..MODEL_KEYS], "equipment file", []).unwrap();
+        params::check_typed::<RollingModel>(&none).unwrap();
+        let given = [("steer0_deg", json!([80, 0, 0, 80])), ("p", json!(2))];
+        let some = params::normalize(&PARAMS[..MODEL_KEYS], "equipment file", given).unwrap();
+        params::check_typed::<RollingModel>(&some).unwrap();
+        assert_eq!(params::typed::<RollingModel>(&some).unwrap().steer0_deg, Some([80.0, 0.0, 0.0, 80.0]));
     }
 
     #[test]

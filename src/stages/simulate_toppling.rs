@@ -2,15 +2,17 @@
 //! driven by floor records: θ(t), θ̇(t) and what a top accelerometer would record, the events,
 //! and a figure per record.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
+use serde::de::IntoDeserializer;
+use serde::{Deserialize, Serialize};
 
 use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::equipment;
 use crate::physics::rocking::{self, Anchorage, Block, Excitation, IsolatedBase, Method, Options, Response, Shape};
-use crate::pipeline::params::{ParamError, ParamKind, ParamSpec, Params, ParamsExt};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct SimulateToppling;
@@ -49,6 +51,61 @@ macro_rules! rocking_params {
 }
 pub(crate) use rocking_params;
 
+/// The parameters `rocking_params!` declares, typed: flattened into the parameter struct of each
+/// stage that declares them (no `deny_unknown_fields` here: the stage's struct refuses what
+/// neither takes).
+#[derive(Debug, Deserialize, Serialize)]
+pub struct RockingParams {
+    /// A row of `rocking::PRESETS` (the table is the list, so it stays a name).
+    pub preset: Option<String>,
+    pub equipment: Option<PathBuf>,
+    pub shape: Option<ShapeChoice>,
+    #[serde(rename = "B_m")]
+    pub b_m: Option<f64>,
+    #[serde(rename = "H_m")]
+    pub h_m: Option<f64>,
+    pub f: Option<f64>,
+    #[serde(rename = "B1_m")]
+    pub b1_m: Option<f64>,
+    #[serde(rename = "B2_m")]
+    pub b2_m: Option<f64>,
+    pub mass_kg: Option<f64>,
+    pub g_mps2: Option<f64>,
+    pub horizontal: String,
+    pub vertical: Option<String>,
+    pub restitution: Option<f64>,
+    pub anchor_strength: Option<f64>,
+    pub anchor_ductility: f64,
+    pub anchor_yield_rotation_rad: f64,
+    pub isolation_period_s: Option<f64>,
+    pub isolation_damping: f64,
+    pub isolation_mass_ratio: Option<f64>,
+    pub sensor_height_m: Option<f64>,
+    pub method: super::Integrator,
+    pub rtol: f64,
+    pub rk4_dt_s: f64,
+    pub rest_amplitude_rad: f64,
+}
+
+/// `shape` (and an equipment file's `shape`).
+#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ShapeChoice {
+    Rectangular,
+    Trapezoidal,
+}
+
+/// The parameters `INFO` declares, typed.
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimulateTopplingParams {
+    #[serde(flatten)]
+    pub model: RockingParams,
+    pub initial_theta_rad: f64,
+    /// Read by the engine's sink.
+    pub mcap: bool,
+}
+
 static INFO: StageInfo = StageInfo {
     name: "simulate_toppling",
     version: 3,
@@ -70,6 +127,10 @@ impl Stage for SimulateToppling {
         &INFO
     }
 
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<SimulateTopplingParams>(params)
+    }
+
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
     }
@@ -80,15 +141,16 @@ impl Stage for SimulateToppling {
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let (block, mut options) = model_from_params(ctx.params, ctx.file_param("equipment").as_deref())?;
-        options.initial_theta_rad = ctx.params.f64_of("initial_theta_rad");
-        let columns =
-            (ctx.params.str_of("horizontal").to_string(), ctx.params.get("vertical").and_then(|v| v.as_str()));
+        let p: SimulateTopplingParams = params::typed(ctx.params)?;
+        let equipment = p.model.equipment.as_deref().map(|e| ctx.file_path(e));
+        let (block, mut options) = model_from_params(&p.model, equipment.as_deref())?;
+        options.initial_theta_rad = p.initial_theta_rad;
+        let columns = (p.model.horizontal.as_str(), p.model.vertical.as_deref());
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
             let table = ctx.read_table(part)?;
-            let (floor, response) = simulate_record(&table, &block, &options, &columns.0, columns.1)
+            let (floor, response) = simulate_record(&table, &block, &options, columns.0, columns.1)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
             let mut series = response_table(&floor, &response);
             let mut events = events_table(&response);
@@ -100,7 +162,7 @@ impl Stage for SimulateToppling {
             let name = super::figure_stem(&part.partition, "response");
             let title = format!(
                 "{}: rocking model under {}",
-                unit_name(ctx.params, ctx.stage_name),
+                unit_name(&p.model, ctx.stage_name),
                 super::record_title(&part.partition, &part.label)
             );
             let png = figure(&title, &floor, &response).map_err(anyhow::Error::msg)?;
@@ -151,10 +213,9 @@ pub fn simulate_record(
 
 /// The block and model options from the parameters: a preset, then an equipment file, then
 /// the explicit geometry parameters, each overriding the one before.
-pub fn model_from_params(params: &Params, equipment_file: Option<&Path>) -> Result<(Block, Options), UserError> {
-    let number = |key: &str| params.get(key).and_then(|v| v.as_f64());
+pub fn model_from_params(p: &RockingParams, equipment_file: Option<&Path>) -> Result<(Block, Options), UserError> {
     let mut geometry = equipment::RockingEquipment::default();
-    if let Some(name) = params.get("preset").and_then(|v| v.as_str()) {
+    if let Some(name) = &p.preset {
         let (shape, mass) = rocking::preset(name).expect("presets are checked as a choice");
         geometry.mass_kg = Some(mass);
         match shape {
@@ -183,49 +244,53 @@ pub fn model_from_params(params: &Params, equipment_file: Option<&Path>) -> Resu
             ..Default::default()
         };
     }
-    let shape_name = params.get("shape").and_then(|v| v.as_str()).map(String::from).or(geometry.shape);
-    let pick = |key: &str, fallback: Option<f64>| number(key).or(fallback);
+    let shape = match (p.shape, geometry.shape.as_deref()) {
+        (Some(shape), _) => Some(shape),
+        (None, Some(name)) => {
+            Some(ShapeChoice::deserialize(name.into_deserializer()).map_err(|_: serde::de::value::Error| {
+                UserError::new(format!("unknown shape `{name}`")).hint("shape is rectangular or trapezoidal")
+            })?)
+        }
+        (None, None) => None,
+    };
     let missing = |key: &str| {
         UserError::new(format!("the block needs `{key}`")).hint(
             "set `preset`, an `equipment` file, or the geometry parameters (see `shakeflow stages simulate_toppling`)",
         )
     };
-    let shape = match shape_name.as_deref() {
-        Some("rectangular") => Shape::Rectangular {
-            b_m: pick("B_m", geometry.b_m).ok_or_else(|| missing("B_m"))?,
-            h_m: pick("H_m", geometry.h_m).ok_or_else(|| missing("H_m"))?,
-            f: pick("f", geometry.f).unwrap_or(0.0),
+    let shape = match shape {
+        Some(ShapeChoice::Rectangular) => Shape::Rectangular {
+            b_m: p.b_m.or(geometry.b_m).ok_or_else(|| missing("B_m"))?,
+            h_m: p.h_m.or(geometry.h_m).ok_or_else(|| missing("H_m"))?,
+            f: p.f.or(geometry.f).unwrap_or(0.0),
         },
-        Some("trapezoidal") => Shape::Trapezoidal {
-            b1_m: pick("B1_m", geometry.b1_m).ok_or_else(|| missing("B1_m"))?,
-            b2_m: pick("B2_m", geometry.b2_m).ok_or_else(|| missing("B2_m"))?,
-            h_m: pick("H_m", geometry.h_m).ok_or_else(|| missing("H_m"))?,
+        Some(ShapeChoice::Trapezoidal) => Shape::Trapezoidal {
+            b1_m: p.b1_m.or(geometry.b1_m).ok_or_else(|| missing("B1_m"))?,
+            b2_m: p.b2_m.or(geometry.b2_m).ok_or_else(|| missing("B2_m"))?,
+            h_m: p.h_m.or(geometry.h_m).ok_or_else(|| missing("H_m"))?,
         },
-        Some(other) => {
-            return Err(UserError::new(format!("unknown shape `{other}`")).hint("shape is rectangular or trapezoidal"))
-        }
         None => return Err(missing("shape")),
     };
-    let mass = pick("mass_kg", geometry.mass_kg).unwrap_or(1.0);
-    let g = number("g_mps2").or(geometry.g_mps2).unwrap_or(crate::units::G0);
+    let mass = p.mass_kg.or(geometry.mass_kg).unwrap_or(1.0);
+    let g = p.g_mps2.or(geometry.g_mps2).unwrap_or(crate::units::G0);
     let block = Block::new(shape, mass, g).map_err(|e| UserError::new(format!("invalid block: {e}")))?;
     let options = Options {
-        restitution: number("restitution"),
-        anchorage: number("anchor_strength").map(|strength_ratio| Anchorage {
+        restitution: p.restitution,
+        anchorage: p.anchor_strength.map(|strength_ratio| Anchorage {
             strength_ratio,
-            ductility: params.f64_of("anchor_ductility"),
-            yield_rotation_rad: params.f64_of("anchor_yield_rotation_rad"),
+            ductility: p.anchor_ductility,
+            yield_rotation_rad: p.anchor_yield_rotation_rad,
         }),
-        isolated_base: number("isolation_period_s").map(|period_s| IsolatedBase {
+        isolated_base: p.isolation_period_s.map(|period_s| IsolatedBase {
             period_s,
-            damping_ratio: params.f64_of("isolation_damping"),
-            mass_ratio: number("isolation_mass_ratio"),
+            damping_ratio: p.isolation_damping,
+            mass_ratio: p.isolation_mass_ratio,
         }),
-        sensor_height_m: number("sensor_height_m"),
-        rest_amplitude_rad: params.f64_of("rest_amplitude_rad"),
-        method: match params.str_of("method") {
-            "rk4" => Method::Rk4 { dt_s: params.f64_of("rk4_dt_s") },
-            _ => Method::Adaptive { rtol: params.f64_of("rtol"), atol_rad: 1e-2 * params.f64_of("rtol") },
+        sensor_height_m: p.sensor_height_m,
+        rest_amplitude_rad: p.rest_amplitude_rad,
+        method: match p.method {
+            super::Integrator::Rk4 => Method::Rk4 { dt_s: p.rk4_dt_s },
+            super::Integrator::Adaptive => Method::Adaptive { rtol: p.rtol, atol_rad: 1e-2 * p.rtol },
         },
         ..Options::default()
     };
@@ -233,8 +298,8 @@ pub fn model_from_params(params: &Params, equipment_file: Option<&Path>) -> Resu
 }
 
 /// The unit a rocking stage models, as titles name it: its preset, else the stage's name.
-pub fn unit_name<'a>(params: &'a Params, stage: &'a str) -> &'a str {
-    params.get("preset").and_then(|v| v.as_str()).unwrap_or(stage)
+pub fn unit_name<'a>(p: &'a RockingParams, stage: &'a str) -> &'a str {
+    p.preset.as_deref().unwrap_or(stage)
 }
 
 /// The derived quantities a reader needs to interpret the results (artifact metadata).
@@ -399,6 +464,10 @@ fn figure(title: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
 /// The floor columns the rocking stages read (`horizontal`, `vertical`) that `input` lacks.
 pub fn floor_column_errors(params: &Params, input: Option<&[String]>) -> Vec<ParamError> {
     let Some(input) = input else { return Vec::new() };
-    let wanted = [("horizontal", Some(params.str_of("horizontal"))), ("vertical", params.opt_str("vertical"))];
+    let p: RockingParams = match params::typed(params) {
+        Ok(p) => p,
+        Err(e) => return vec![e],
+    };
+    let wanted = [("horizontal", Some(p.horizontal.as_str())), ("vertical", p.vertical.as_deref())];
     wanted.into_iter().filter_map(|(key, column)| super::require_column(key, column?, input).err()).collect()
 }

@@ -13,14 +13,30 @@ use std::path::Path;
 use std::sync::Arc;
 
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{ParamError, ParamKind, ParamSpec, Params, ParamsExt};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
 use crate::signal::resample_bandlimited::Resampler;
 use crate::signal::sync::estimate_lag;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct Synchronize;
+
+/// The parameters `INFO` declares, typed.
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SynchronizeParams {
+    pub reference_channel: String,
+    /// `key=value` or empty, read by `reference_select`.
+    pub reference_select: String,
+    pub target_channel: String,
+    pub join: String,
+    pub known_lag_s: Option<f64>,
+    pub max_lag_s: f64,
+    /// Read by the engine's sink.
+    pub mcap: bool,
+}
 
 static INFO: StageInfo = StageInfo {
     name: "synchronize",
@@ -47,9 +63,14 @@ impl Stage for Synchronize {
         &INFO
     }
 
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<SynchronizeParams>(params)
+    }
+
     /// `reference_select` is checked with the pipeline, so `validate` points at its line.
     fn check(&self, params: &Params, _base_dir: &Path) -> Result<(), ParamError> {
-        reference_select(params).map(|_| ()).map_err(|message| ParamError {
+        let p: SynchronizeParams = params::typed(params)?;
+        reference_select(&p.reference_select).map(|_| ()).map_err(|message| ParamError {
             key: Some("reference_select".into()),
             message,
             hint: "name a partition of the reference records, e.g. `floor=5`".into(),
@@ -62,18 +83,18 @@ impl Stage for Synchronize {
 
     /// A target record reads the reference records that share its `join` key.
     fn companions(&self, params: &Params, primary: &InputPart, other: &super::StageInput) -> Vec<InputPart> {
-        let join = params.str_of("join");
-        let key = partition_value(primary, join);
-        other.parts().iter().filter(|r| key.is_some() && partition_value(r, join) == key).cloned().collect()
+        let p: SynchronizeParams = params::typed(params).expect("the planner checked the parameters (`check_params`)");
+        let key = partition_value(primary, &p.join);
+        other.parts().iter().filter(|r| key.is_some() && partition_value(r, &p.join) == key).cloned().collect()
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let [reference, target] = ctx.inputs else {
             anyhow::bail!("`synchronize` reads exactly two inputs: [reference, target] (e.g. [baseline_floors, baseline_equipment])");
         };
-        let join = ctx.params.str_of("join");
-        let select = reference_select(ctx.params).map_err(anyhow::Error::msg)?;
-        let known_lag = ctx.params.get("known_lag_s").and_then(|v| v.as_f64());
+        let p: SynchronizeParams = params::typed(ctx.params)?;
+        let join = p.join.as_str();
+        let select = reference_select(&p.reference_select).map_err(anyhow::Error::msg)?;
         ctx.sink.set_total(target.parts().len());
         target.parts().par_iter().try_for_each(|part| {
             let key = partition_value(part, join).ok_or_else(|| {
@@ -106,7 +127,7 @@ impl Stage for Synchronize {
                 .collect::<anyhow::Result<_>>()?;
             let clock_table = &references[group.iter().position(|r| std::ptr::eq(*r, **clock)).expect("clock is in the group")].1;
             let target_table = ctx.read_table(part)?;
-            let (aligned, lag) = align(clock_table, &references, &target_table, ctx.params, known_lag)
+            let (aligned, lag) = align(clock_table, &references, &target_table, &p)
                 .map_err(|e| anyhow::anyhow!("{} (`{join}={key}`): {e}", part.label))?;
             let mut aligned = aligned;
             aligned.metadata.extend(super::record_provenance(part));
@@ -117,8 +138,7 @@ impl Stage for Synchronize {
 }
 
 /// `reference_select` as (key, value); `None` when it is empty (a single reference record).
-fn reference_select(params: &Params) -> Result<Option<(&str, &str)>, String> {
-    let select = params.str_of("reference_select");
+fn reference_select(select: &str) -> Result<Option<(&str, &str)>, String> {
     if select.is_empty() {
         return Ok(None);
     }
@@ -156,11 +176,9 @@ fn align(
     clock: &Table,
     references: &[(String, Arc<Table>)],
     target: &Table,
-    params: &crate::pipeline::params::Params,
-    known_lag: Option<f64>,
+    p: &SynchronizeParams,
 ) -> Result<(Table, Table), String> {
-    let reference_channel = params.str_of("reference_channel");
-    let target_channel = params.str_of("target_channel");
+    let (reference_channel, target_channel) = (p.reference_channel.as_str(), p.target_channel.as_str());
     let (t0, fs) = sample_rate(clock)?;
     let (_, fs_target) = sample_rate(target)?;
     let reference = clock.f64_column(reference_channel).ok_or_else(|| {
@@ -180,11 +198,11 @@ fn align(
     let values: Vec<&[f64]> = float_columns.iter().map(|(_, v)| *v).collect();
     let resampler = Resampler::new(fs_target, fs);
     let n_target = resampler.output_len(values[0].len());
-    let (lag_s, uncertainty, correlation, method) = match known_lag {
+    let (lag_s, uncertainty, correlation, method) = match p.known_lag_s {
         Some(lag) => (lag, 0.0, None, "known"),
         None => {
             let sync = resampler.resample(values[sync_position]);
-            let e = estimate_lag(reference, &sync, fs, Some(params.f64_of("max_lag_s")))?;
+            let e = estimate_lag(reference, &sync, fs, Some(p.max_lag_s))?;
             (e.lag_s, e.uncertainty_s, Some(e.correlation), "estimated")
         }
     };

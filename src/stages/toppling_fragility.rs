@@ -5,14 +5,34 @@
 use std::sync::Arc;
 
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
-use super::simulate_toppling::{model_from_params, rocking_params, simulate_record};
+use super::simulate_toppling::{model_from_params, rocking_params, simulate_record, RockingParams};
 use super::{partition_values, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
 use crate::stats::fragility::{fit_lognormal, FitOutcome, LognormalFit};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct TopplingFragility;
+
+/// The parameters `INFO` declares, typed.
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct TopplingFragilityParams {
+    #[serde(flatten)]
+    pub model: RockingParams,
+    pub im: Intensity,
+    pub scales: Vec<f64>,
+    pub im_levels: Vec<f64>,
+}
+
+/// `im`: the intensity measure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Intensity {
+    Pfa,
+    Pfv,
+}
 
 static INFO: StageInfo = StageInfo {
     name: "toppling_fragility",
@@ -36,23 +56,25 @@ impl Stage for TopplingFragility {
         &INFO
     }
 
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<TopplingFragilityParams>(params)
+    }
+
     /// `horizontal` and `vertical` must be columns of the floor records.
     fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {
         (None, super::simulate_toppling::floor_column_errors(params, input))
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let (block, options) = model_from_params(ctx.params, ctx.file_param("equipment").as_deref())?;
-        let (scales, levels) = (
-            ctx.params.f64_list_of("scales").unwrap_or_default(),
-            ctx.params.f64_list_of("im_levels").unwrap_or_default(),
-        );
+        let p: TopplingFragilityParams = params::typed(ctx.params)?;
+        let equipment = p.model.equipment.as_deref().map(|e| ctx.file_path(e));
+        let (block, options) = model_from_params(&p.model, equipment.as_deref())?;
+        let (scales, levels) = (p.scales, p.im_levels);
         if scales.is_empty() == levels.is_empty() {
             anyhow::bail!("give either `scales` or `im_levels` (exactly one of them, non-empty)");
         }
-        let horizontal = ctx.params.str_of("horizontal").to_string();
-        let vertical = ctx.params.get("vertical").and_then(|v| v.as_str()).map(String::from);
-        let by_velocity = ctx.params.str_of("im") == "pfv";
+        let (horizontal, vertical) = (p.model.horizontal.clone(), p.model.vertical.clone());
+        let by_velocity = p.im == Intensity::Pfv;
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         if parts.is_empty() {
             anyhow::bail!("no records to scale: the stage's inputs (after `select`) are empty");
@@ -208,7 +230,7 @@ impl Stage for TopplingFragility {
 
         let title = format!(
             "{}: probability of overturning ({} runs)",
-            super::simulate_toppling::unit_name(ctx.params, ctx.stage_name),
+            super::simulate_toppling::unit_name(&p.model, ctx.stage_name),
             ims.len()
         );
         let png = figure(&title, &ims, &overturned, fit.as_ref(), by_velocity, &note).map_err(anyhow::Error::msg)?;

@@ -3,13 +3,47 @@
 //! half-power damping estimate, like Table 3 of the study.
 
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 use super::{split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{ParamKind, ParamSpec, Params, ParamsExt};
+use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
 use crate::signal::welch::{identify_peak, transfer_function, Detrend, WelchOptions, Window};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct TransferFunction;
+
+/// The parameters `INFO` declares, typed (`report` reads the band from the spectra's provenance).
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct TransferFunctionParams {
+    /// `input -> output`, read by `split_pair`.
+    pub pairs: Vec<String>,
+    pub band_min_hz: f64,
+    pub band_max_hz: f64,
+    pub window: WindowChoice,
+    pub segment_s: Option<f64>,
+    pub overlap: f64,
+    pub detrend: DetrendChoice,
+    pub coherence_threshold: f64,
+}
+
+/// `window`: the segment window.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WindowChoice {
+    Hamming,
+    Hann,
+    Boxcar,
+}
+
+/// `detrend`: per-segment detrending.
+#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DetrendChoice {
+    None,
+    Constant,
+    Linear,
+}
 
 static INFO: StageInfo = StageInfo {
     name: "transfer_function",
@@ -37,14 +71,18 @@ impl Stage for TransferFunction {
         &INFO
     }
 
+    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
+        params::check_typed::<TransferFunctionParams>(params)
+    }
+
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let pairs: Vec<(String, String)> = ctx
-            .params
-            .list_of("pairs")
+        let p: TransferFunctionParams = params::typed(ctx.params)?;
+        let pairs: Vec<(String, String)> = p
+            .pairs
             .iter()
             .map(|p| match split_pair(p) {
                 (input, Some(output)) => Ok((input, output)),
@@ -56,7 +94,7 @@ impl Stage for TransferFunction {
         parts.par_iter().try_for_each(|part| {
             let table = ctx.read_table(part)?;
             let (mut identified, mut spectra) =
-                analyse(&table, &pairs, ctx.params).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
+                analyse(&table, &pairs, &p).map_err(|e| anyhow::anyhow!("{}: {e}", part.label))?;
             identified.metadata.extend(super::record_provenance(part));
             spectra.metadata.extend(super::record_provenance(part));
             ctx.sink.write("spectra", &part.partition, spectra)?;
@@ -65,25 +103,25 @@ impl Stage for TransferFunction {
     }
 }
 
-fn options(params: &Params, n: usize, fs: f64) -> Result<WelchOptions, String> {
-    let window = match params.str_of("window") {
-        "hann" => Window::Hann,
-        "boxcar" => Window::Boxcar,
-        _ => Window::HammingSymmetric,
+fn options(p: &TransferFunctionParams, n: usize, fs: f64) -> Result<WelchOptions, String> {
+    let window = match p.window {
+        WindowChoice::Hamming => Window::HammingSymmetric,
+        WindowChoice::Hann => Window::Hann,
+        WindowChoice::Boxcar => Window::Boxcar,
     };
-    let detrend = match params.str_of("detrend") {
-        "constant" => Detrend::Constant,
-        "linear" => Detrend::Linear,
-        _ => Detrend::None,
+    let detrend = match p.detrend {
+        DetrendChoice::None => Detrend::None,
+        DetrendChoice::Constant => Detrend::Constant,
+        DetrendChoice::Linear => Detrend::Linear,
     };
-    let mut opts = match params.get("segment_s").and_then(|v| v.as_f64()) {
+    let mut opts = match p.segment_s {
         None => WelchOptions::matlab_default(n),
         Some(seconds) => {
             let segment_len = (seconds * fs).round() as usize;
             if segment_len < 8 || segment_len > n {
                 return Err(format!("segment_s = {seconds} s gives {segment_len} samples; the record has {n}"));
             }
-            let overlap = ((params.f64_of("overlap") * segment_len as f64).floor() as usize).min(segment_len - 1);
+            let overlap = ((p.overlap * segment_len as f64).floor() as usize).min(segment_len - 1);
             WelchOptions { window, segment_len, overlap, detrend, nfft: None }
         }
     };
@@ -92,15 +130,15 @@ fn options(params: &Params, n: usize, fs: f64) -> Result<WelchOptions, String> {
     Ok(opts)
 }
 
-fn analyse(table: &Table, pairs: &[(String, String)], params: &Params) -> Result<(Table, Table), String> {
+fn analyse(table: &Table, pairs: &[(String, String)], p: &TransferFunctionParams) -> Result<(Table, Table), String> {
     let time = table.f64_column(TIME_COLUMN).ok_or("no time_s column")?;
     let n = time.len();
     if n < 16 {
         return Err(format!("{n} samples are too few for a transfer function"));
     }
     let fs = crate::table::sample_rate(time);
-    let opts = options(params, n, fs)?;
-    let band = (params.f64_of("band_min_hz"), params.f64_of("band_max_hz"));
+    let opts = options(p, n, fs)?;
+    let band = (p.band_min_hz, p.band_max_hz);
     let column = |name: &str| {
         table
             .f64_column(name)
@@ -121,7 +159,7 @@ fn analyse(table: &Table, pairs: &[(String, String)], params: &Params) -> Result
             s_h2.push(tf.h2[k].norm());
             s_coh.push(tf.coherence[k]);
         }
-        let peak = identify_peak(&tf, band, params.f64_of("coherence_threshold"));
+        let peak = identify_peak(&tf, band, p.coherence_threshold);
         outputs.push(output.clone());
         inputs.push(input.clone());
         match peak {
@@ -185,7 +223,7 @@ fn analyse(table: &Table, pairs: &[(String, String)], params: &Params) -> Result
     spectra.push(Column::f64("h1_phase_rad", "rad", "phase of H1", s_phase));
     spectra.push(Column::f64("h2_gain", "", "|H2| = |Pyy/Pyx|", s_h2));
     spectra.push(Column::f64("coherence", "", "magnitude-squared coherence", s_coh));
-    let welch = serde_json::json!({"window": params.str_of("window"), "segment_len": opts.segment_len, "overlap": opts.overlap, "nfft": opts.nfft(), "detrend": params.str_of("detrend"), "fs_hz": fs});
+    let welch = serde_json::json!({"window": p.window, "segment_len": opts.segment_len, "overlap": opts.overlap, "nfft": opts.nfft(), "detrend": p.detrend, "fs_hz": fs});
     identified.metadata.insert("shakeflow.welch".into(), welch.to_string());
     spectra.metadata.insert("shakeflow.welch".into(), welch.to_string());
     Ok((identified, spectra))
