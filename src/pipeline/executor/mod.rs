@@ -27,12 +27,12 @@ use super::plan::{InputRef, Plan, PlannedStage};
 use super::progress::Reporter;
 use super::sink::{OutputSink, DATA_FILE};
 use super::sources;
-use super::spec::{OnError, RecordFormat};
+use super::spec::{OnError, RecordFormat, SourceSpec};
 use super::stage::{InputPart, OutputKind, Partition, StageContext, StageInfo, StageInput, WorkUnits};
 use super::txn::{self, Recovery, Transaction};
 use super::units::{self, Unit, GATHER};
 use crate::error::UserError;
-use crate::io::hash::{self, KnownHashes};
+use crate::io::hash;
 
 /// The `load` output the engine writes for records skipped under `on_error: skip`.
 pub const FLAGGED: &str = "flagged";
@@ -49,6 +49,9 @@ pub struct RunOptions {
     pub only: Vec<String>,
     /// After a failed unit, still run everything that does not depend on it.
     pub keep_going: bool,
+    /// Commit nothing unless every unit succeeded: the output folder stays as it was (a
+    /// command's one stage, as `shakeflow stage` always did).
+    pub all_or_nothing: bool,
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -125,23 +128,7 @@ fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, User
     let mut hashed: BTreeMap<PathBuf, String> = BTreeMap::new();
     for name in used {
         let spec = &plan.file.spec.inputs[name];
-        let folders = spec.format == RecordFormat::Frames;
-        let files = sources::resolve(&base, &spec.path, &spec.partition, folders).map_err(|e| {
-            let located = plan.file.error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message));
-            match e.hint {
-                Some(h) => located.hint(h),
-                None => located,
-            }
-        })?;
-        // A case source names each case by its equipment.yaml; the case is the whole folder.
-        let files: Vec<sources::MatchedFile> = if spec.format == RecordFormat::Case {
-            files
-                .into_iter()
-                .map(|f| sources::MatchedFile { path: f.path.parent().map(Path::to_path_buf).unwrap_or(f.path), ..f })
-                .collect()
-        } else {
-            files
-        };
+        let files = source_files(plan, name, spec)?;
         let unhashed: Vec<&Path> =
             files.iter().map(|f| f.path.as_path()).filter(|p| !hashed.contains_key(*p)).collect();
         let new_hashes: Vec<String> = unhashed
@@ -158,11 +145,69 @@ fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, User
                 InputPart { partition: f.partition, path: f.path, label: relative, hash }
             })
             .collect();
-        let input =
-            StageInput::Source { name: name.to_string(), spec: spec.clone(), base_dir: base.clone(), files: parts };
+        let input = match spec.format {
+            RecordFormat::Dataset => StageInput::Dataset { name: name.to_string(), parts },
+            _ => {
+                StageInput::Source { name: name.to_string(), spec: spec.clone(), base_dir: base.clone(), files: parts }
+            }
+        };
         resolved.insert(name.to_string(), ResolvedSource { input });
     }
     Ok(resolved)
+}
+
+/// The files a source reads, with their partitions: its path matched as a pattern (a command's
+/// names one file or folder literally); a case is its folder, a dataset folder its parts.
+fn source_files(plan: &Plan, name: &str, spec: &SourceSpec) -> Result<Vec<sources::MatchedFile>, UserError> {
+    let base = plan.file.base_dir();
+    let files = match plan.file.command {
+        Some(_) => {
+            let path = if base == Path::new(".") { PathBuf::from(&spec.path) } else { base.join(&spec.path) };
+            if !(path.is_file() || spec.format.names_folders() && path.is_dir()) {
+                let what = if path.is_dir() { "is a folder, not a file" } else { "does not exist" };
+                return Err(UserError::new(format!("the input `{}` {what}", path.display())).in_file(&path));
+            }
+            let partition = spec.partition.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+            vec![sources::MatchedFile { path, partition }]
+        }
+        None => sources::resolve(&base, &spec.path, &spec.partition, spec.format.names_folders()).map_err(|e| {
+            let located = plan.file.error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message));
+            match e.hint {
+                Some(h) => located.hint(h),
+                None => located,
+            }
+        })?,
+    };
+    let mut expanded = Vec::new();
+    for file in files {
+        match spec.format {
+            // A case source names each case by its equipment.yaml; the case is the whole folder.
+            RecordFormat::Case => expanded.push(sources::MatchedFile {
+                path: file.path.parent().map(Path::to_path_buf).unwrap_or(file.path),
+                ..file
+            }),
+            RecordFormat::Dataset if file.path.is_dir() => {
+                let parts: Vec<String> = hash::list_files(&file.path)
+                    .map_err(|e| UserError::new(format!("source `{name}`: {e:#}")).in_file(&file.path))?
+                    .into_iter()
+                    .filter(|f| f == DATA_FILE || f.ends_with(&format!("/{DATA_FILE}")))
+                    .collect();
+                if parts.is_empty() {
+                    return Err(UserError::new(format!("source `{name}`: the folder holds no `{DATA_FILE}`"))
+                        .in_file(&file.path)
+                        .hint("a dataset folder is a stage's output (`<stage>/<output>`), its tables in `key=value/…/data.parquet`"));
+                }
+                for part in parts {
+                    let mut partition = file.partition.clone();
+                    partition.extend(partition_of(&part));
+                    expanded.push(sources::MatchedFile { path: file.path.join(part), partition });
+                }
+            }
+            _ => expanded.push(file),
+        }
+    }
+    expanded.sort_by(|a, b| a.path.cmp(&b.path));
+    Ok(expanded)
 }
 
 /// Why every unit of a stage is stale, whatever its inputs: its type, version, params or select changed.
@@ -340,24 +385,6 @@ fn check_select(plan: &Plan, stage: &PlannedStage, inputs: &[StageInput]) -> Res
     Ok(())
 }
 
-/// The parts of a dataset directory: each `data.parquet` with the partition its path encodes.
-pub fn dataset_parts(dir: &Path, label: &str) -> anyhow::Result<Vec<InputPart>> {
-    let files: Vec<String> = hash::list_files(dir)?.into_iter().filter(|f| f.ends_with(DATA_FILE)).collect();
-    let paths: Vec<PathBuf> = files.iter().map(|f| dir.join(f)).collect();
-    let hashes = hash::hash_files_known(&paths, &KnownHashes::new())?;
-    Ok(files
-        .iter()
-        .zip(paths)
-        .zip(hashes)
-        .map(|((relative, path), hash)| InputPart {
-            partition: partition_of(relative),
-            path,
-            label: format!("{label}/{relative}"),
-            hash,
-        })
-        .collect())
-}
-
 /// The files a cached unit wrote, where they are.
 fn cached_files(old: &UnitLock, stage_dir: &Path) -> Produced {
     old.files.iter().map(|(f, h)| (f.clone(), ProducedFile { path: stage_dir.join(f), hash: h.clone() })).collect()
@@ -484,7 +511,6 @@ fn predict(
     files: &BTreeMap<String, BTreeMap<String, String>>,
     forced: &[&str],
 ) -> Result<Vec<StatusLine>, UserError> {
-    let output_dir = plan.file.output_dir();
     let mut produced: BTreeMap<String, Produced> = BTreeMap::new();
     let mut lines = Vec::new();
     let error = |e: anyhow::Error| match e.downcast::<UserError>() {
@@ -492,9 +518,8 @@ fn predict(
         Err(e) => UserError::new(format!("{e:#}")),
     };
     for stage in plan.stages.values() {
-        let assessed =
-            assess_stage(plan, stage, sources, &produced, files, lock, &output_dir, forced).map_err(error)?;
-        let stage_dir = output_dir.join(&stage.name);
+        let assessed = assess_stage(plan, stage, sources, &produced, files, lock, forced).map_err(error)?;
+        let stage_dir = plan.stage_dir(&stage.name);
         let entry = lock.stages.get(&stage.name);
         let mut mine = Produced::new();
         let mut line = StatusLine {
@@ -541,14 +566,13 @@ fn assess_stage(
     produced: &BTreeMap<String, Produced>,
     files: &BTreeMap<String, BTreeMap<String, String>>,
     lock: &LockFile,
-    output_dir: &Path,
     forced: &[&str],
 ) -> anyhow::Result<AssessedStage> {
     let inputs = stage_inputs(plan, stage, sources, produced)?;
     let split = units::split(stage, &inputs, files.get(&stage.name).unwrap_or(&BTreeMap::new()))?;
     let entry = lock.stages.get(&stage.name);
     let common = stage_reasons(stage, entry);
-    let stage_dir = output_dir.join(&stage.name);
+    let stage_dir = plan.stage_dir(&stage.name);
     let forced = forced.contains(&stage.name.as_str());
     let units = split
         .into_par_iter()
@@ -616,7 +640,6 @@ fn selected_stages(plan: &Plan, options: &RunOptions) -> Result<BTreeSet<String>
 pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Result<RunSummary> {
     let selected = selected_stages(plan, options)?;
     let forced = forced_stages(plan, &options.force);
-    let output_dir = plan.file.output_dir();
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;
     let (lease, lock) = take_output_folder(plan, &sources, reporter)?;
@@ -629,7 +652,6 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
         lock: &lock,
         sources: &sources,
         files: &files,
-        output_dir: &output_dir,
         transaction: &transaction,
         reporter,
         state: Mutex::new(RunState::default()),
@@ -648,19 +670,24 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
     if let Some(error) = fatal {
         // A stage could not be planned (a bad select, two records with one partition): what
         // finished before it is still committed below only when nothing is in doubt.
-        if state.install.is_empty() {
+        if state.install.is_empty() || options.all_or_nothing {
             transaction.abort();
             return Err(error);
         }
         commit(transaction, &state, plan, &lock)?;
         return Err(error.context("the units that finished before it were committed"));
     }
+    if options.all_or_nothing && !state.failed.is_empty() {
+        transaction.abort();
+        let reports = plan.stages.keys().filter_map(|n| state.reports.get(n).cloned()).collect();
+        return Ok(RunSummary { reports, failed: state.failed, flagged: state.flagged });
+    }
     commit(transaction, &state, plan, &lock)?;
     // Under the lease still: only the run holding the folder writes the memo. The files this run
     // wrote go in too (their hashes came from the bytes written), those written 2 s ago or more.
     for (name, entry) in &state.entries {
         for (file, hash) in entry.units.values().flat_map(|u| u.files.iter()) {
-            hash::remember(&output_dir.join(name).join(file), hash);
+            hash::remember(&plan.stage_dir(name).join(file), hash);
         }
     }
     if let Err(e) = hash::save_memo() {
@@ -702,7 +729,7 @@ fn take_output_folder(
     }
     let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
     ownership::check_pipeline(&plan.file, &lock)?;
-    ownership::check_stage_folders(&plan.file, &output_dir, plan.stages.keys().map(String::as_str), &lock)?;
+    ownership::check_stage_folders(plan, &lock)?;
     Ok((lease, lock))
 }
 
@@ -764,7 +791,6 @@ struct RunEnv<'a> {
     lock: &'a LockFile,
     sources: &'a BTreeMap<String, ResolvedSource>,
     files: &'a BTreeMap<String, BTreeMap<String, String>>,
-    output_dir: &'a Path,
     transaction: &'a Transaction,
     reporter: &'a Reporter,
     state: Mutex<RunState>,
@@ -855,7 +881,7 @@ fn start<'s, 'a: 's>(
             let left = state.readers_left.get_mut(upstream).expect("every upstream stage has readers");
             *left -= 1;
             if *left == 0 {
-                env.memo.release(&env.transaction.new_path(upstream));
+                env.memo.release(&env.transaction.new_path(env.plan.stage_path(upstream)));
             }
         }
         for dependent in dependents.get(stage.name.as_str()).into_iter().flatten() {
@@ -966,12 +992,12 @@ fn fold(
     records: Vec<UnitRecord>,
     vanished: &[String],
     upstream_tainted: bool,
-    output_dir: &Path,
     staging: &Path,
 ) -> anyhow::Result<Folded> {
     let name = stage.name.as_str();
     let info = stage.stage.info();
-    let stage_dir = output_dir.join(name);
+    let stage_dir = plan.stage_dir(name);
+    let at = |file: &str| plan.stage_entry(name, file);
     let mut folded = Folded::default();
     let mut new_entry = StageLock {
         stage_type: info.name.to_string(),
@@ -1014,10 +1040,10 @@ fn fold(
                         );
                     }
                     folded.produced.insert(file.clone(), ProducedFile { path: dir.join(file), hash: hash.clone() });
-                    folded.install.insert(format!("{name}/{file}"), dir.join(file));
+                    folded.install.insert(at(file), dir.join(file));
                 }
                 for gone in old_files.into_iter().filter(|f| !files.contains_key(*f)) {
-                    folded.remove.insert(format!("{name}/{gone}"));
+                    folded.remove.insert(at(gone));
                 }
                 new_entry
                     .units
@@ -1025,7 +1051,7 @@ fn fold(
             }
             UnitOutcome::Flagged { file, reason } => {
                 for gone in old_files {
-                    folded.remove.insert(format!("{name}/{gone}"));
+                    folded.remove.insert(at(gone));
                 }
                 flagged_rows.push((record.id.clone(), file, reason.clone()));
                 folded.flagged.push(UnitProblem {
@@ -1051,7 +1077,7 @@ fn fold(
     for id in vanished {
         let old = &entry.expect("vanished units come from the lockfile").units[id];
         if folded.complete {
-            folded.remove.extend(old.files.keys().map(|gone| format!("{name}/{gone}")));
+            folded.remove.extend(old.files.keys().map(|gone| at(gone)));
         } else {
             new_entry.units.insert(id.clone(), old.clone());
         }
@@ -1065,7 +1091,7 @@ fn fold(
         let (file, hash) = flagged_table(staging, name, info, &stage.params, &flagged_rows)?;
         let old = entry.and_then(|e| e.units.get(FLAGGED_UNIT));
         if old.is_none_or(|o| o.key != hash || !stage_dir.join(&file).is_file()) {
-            folded.install.insert(format!("{name}/{file}"), staging.join(&file));
+            folded.install.insert(at(&file), staging.join(&file));
         }
         folded.produced.insert(file.clone(), ProducedFile { path: staging.join(&file), hash: hash.clone() });
         let files = BTreeMap::from([(file, hash.clone())]);
@@ -1075,7 +1101,7 @@ fn fold(
     }
     if !folded.install.is_empty() && ownership::read_marker(&stage_dir).is_none() {
         ownership::write_marker(staging, name, info.name)?;
-        folded.install.insert(format!("{name}/{}", ownership::STAGE_MARKER), staging.join(ownership::STAGE_MARKER));
+        folded.install.insert(at(ownership::STAGE_MARKER), staging.join(ownership::STAGE_MARKER));
     }
     folded.entry = Some(new_entry);
     Ok(folded)
@@ -1110,7 +1136,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
             state.tainted.insert(name.to_string());
         }
         // Downstream stages outside the selection read what is committed.
-        let stage_dir = env.output_dir.join(name);
+        let stage_dir = env.plan.stage_dir(name);
         let committed = entry.map(|e| e.units.values().flat_map(|u| cached_files(u, &stage_dir)).collect());
         state.produced.insert(name.to_string(), committed.unwrap_or_default());
         let units = entry.map_or(0, |e| e.units.len());
@@ -1121,8 +1147,8 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
     }
     let snapshot = env.state.lock().expect("no poisoned lock").produced.clone();
     let forced: Vec<&str> = env.forced.iter().map(String::as_str).collect();
-    let assessed = assess_stage(env.plan, stage, env.sources, &snapshot, env.files, env.lock, env.output_dir, &forced)?;
-    let new_dir = env.transaction.new_path(name);
+    let assessed = assess_stage(env.plan, stage, env.sources, &snapshot, env.files, env.lock, &forced)?;
+    let new_dir = env.transaction.new_path(env.plan.stage_path(name));
     let stale: Vec<&(Unit, String, Vec<String>)> = assessed.units.iter().filter(|(_, _, r)| !r.is_empty()).collect();
     let started = Instant::now();
     let records_in: usize = stale.iter().map(|(u, _, _)| u.inputs.iter().map(|i| i.parts().len()).sum::<usize>()).sum();
@@ -1160,7 +1186,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
             _ => {}
         }
     }
-    let folded = fold(env.plan, stage, entry, records, &assessed.vanished, upstream_tainted, env.output_dir, &new_dir)?;
+    let folded = fold(env.plan, stage, entry, records, &assessed.vanished, upstream_tainted, &new_dir)?;
     let failed = folded.failed.len();
     if !stale.is_empty() {
         let written = folded.install.len();

@@ -542,12 +542,11 @@ fn upstream_produced(
     lock: &LockFile,
     stage: &str,
 ) -> anyhow::Result<(BTreeMap<String, Produced>, bool)> {
-    let output_dir = plan.file.output_dir();
     let mut produced = BTreeMap::new();
     let mut tainted = false;
     // Stages are in dependency order: everything before `stage` may be read (transitively).
     for (name, _) in plan.stages.iter().take_while(|(n, _)| n.as_str() != stage) {
-        let stage_dir = output_dir.join(name);
+        let stage_dir = plan.stage_dir(name);
         let committed = |id: &str| -> Produced {
             lock.stages
                 .get(name)
@@ -618,7 +617,7 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let (produced, upstream_tainted) = upstream_produced(run_dir, &run, &plan, &lock, stage_name)?;
     let forced = forced_stages(&plan, &run.force);
     let forced: Vec<&str> = forced.iter().map(String::as_str).collect();
-    let assessed = assess_stage(&plan, stage, &sources, &produced, &files, &lock, &output_dir, &forced)?;
+    let assessed = assess_stage(&plan, stage, &sources, &produced, &files, &lock, &forced)?;
     // A unit nobody predicted (a partition no earlier output had) goes to the last shard.
     let ours: Vec<&(crate::pipeline::units::Unit, String, Vec<String>)> = assessed
         .units
@@ -765,13 +764,13 @@ fn commit_manifests(run_dir: &Path, run: &RunFile, plan: &Plan, lease: &Lease) -
             }
         }
         let vanished: Vec<String> = vanished.into_iter().collect();
-        let staging = transaction.new_path(name);
+        let staging = transaction.new_path(plan.stage_path(name));
         let entry = lock.stages.get(name);
         // A unit the lockfile does not have cannot be cached: drop such records of shards not run.
         records.retain(|r| {
             !matches!(r.outcome, UnitOutcome::Cached) || entry.is_some_and(|e| e.units.contains_key(&r.id))
         });
-        let folded = fold(plan, stage, entry, records, &vanished, upstream_tainted, &output_dir, &staging)?;
+        let folded = fold(plan, stage, entry, records, &vanished, upstream_tainted, &staging)?;
         for (relative, from) in &folded.install {
             let to = transaction.new_path(relative);
             if *from != to {
@@ -807,7 +806,7 @@ fn commit_manifests(run_dir: &Path, run: &RunFile, plan: &Plan, lease: &Lease) -
 /// `retries`: after a commit with failed units, submits the units still stale — the failed
 /// ones and what depends on them, nothing forced again — as a new run with `retries_left`.
 fn resubmit(run: &RunFile, plan: &Plan, lock: &LockFile, retries_left: u32) -> anyhow::Result<Option<RunFile>> {
-    let options = RunOptions { force: Vec::new(), only: run.only.clone(), keep_going: run.keep_going };
+    let options = RunOptions { only: run.only.clone(), keep_going: run.keep_going, ..RunOptions::default() };
     let selected = selected_stages(plan, &options)?;
     let lines = predict(plan, lock, &resolve_sources(plan)?, &param_file_hashes(plan)?, &[])?;
     let mut slurm = run.options.clone();
