@@ -7,7 +7,6 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use clap::{Parser, Subcommand};
 
-use crate::io::hash;
 use crate::pipeline::executor::{self, Outcome, RunOptions};
 use crate::pipeline::params;
 use crate::pipeline::plan::Plan;
@@ -197,9 +196,12 @@ enum Command {
     ///
     /// A case folder holds equipment.yaml, floor.csv (time_s, ax_mps2, ay_mps2, az_mps2),
     /// observed_accel.csv (time_s, top_ax_mps2) and observed_cpt.csv (time_s, theta_rad).
-    /// Writes OUT/diagnosis.json (verdict, window, rmse before/after, candidates, explanation),
-    /// accel.parquet and camera.parquet (observed, nominal and accepted model, residuals),
-    /// diagnosis.mcap and diagnosis.png; with several cases, one sub-folder per case.
+    /// Runs the `diagnose` stage on them as a pipeline would (a lockfile in OUT: the same command
+    /// again is cached). Writes OUT/diagnosis.json (verdict, window, rmse before/after,
+    /// candidates, explanation), or OUT/<case>/diagnosis.json for each of several cases; the
+    /// stage's tables beside it: diagnosis/ (a row per case), accel/ and camera/ (observed,
+    /// nominal and accepted model, residuals; case=<case>/data.parquet, MCAP twins with
+    /// --set mcap=true) and reports/<case>.png. A failed case leaves OUT as it was.
     ///
     /// Example: shakeflow diagnose ../shared/cases/demo/demo_02 --out runs/diagnosis/demo_02
     Diagnose {
@@ -492,8 +494,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
             if let Some(jobs) = jobs {
                 rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build_global().context("setting --jobs")?;
             }
-            diagnose_cases(&cases, &out, &set)?;
-            Ok(ExitCode::SUCCESS)
+            diagnose_cases(&cases, &out, &set)
         }
         Command::Schema => {
             println!("{}", serde_json::to_string_pretty(&crate::schema::pipeline_schema())?);
@@ -724,162 +725,68 @@ fn check_first_record(
         })
 }
 
-/// The check behind `stage --output` and `diagnose --out`: `output` may be replaced when it is new,
-/// empty, or carries the marker of an earlier `command` and (when `ours` lists them) holds only
-/// those entries.
-fn refuse_foreign_output(
-    output: &Path,
-    inputs: &[PathBuf],
-    command: &str,
-    ours: Option<&[String]>,
-) -> anyhow::Result<()> {
-    let refuse = |why: String| -> anyhow::Result<()> {
-        Err(crate::error::UserError::new(why)
-            .in_file(output)
-            .hint("the output folder is replaced as a whole when the command succeeds: give a new or empty folder, or one an earlier run of the same command wrote")
-            .into())
-    };
-    if output.exists() && !output.is_dir() {
-        return refuse("the output is a file, not a folder".into());
-    }
-    let out = crate::pipeline::ownership::resolved(output);
-    if let Some(input) = inputs.iter().find(|i| crate::pipeline::ownership::resolved(i).starts_with(&out)) {
-        return refuse(format!("the input `{}` is inside the output folder", input.display()));
-    }
-    let Ok(entries) = std::fs::read_dir(output) else { return Ok(()) };
-    let names: Vec<String> =
-        entries.map(|e| e.map(|e| e.file_name().to_string_lossy().into_owned())).collect::<Result<_, _>>()?;
-    let names: Vec<&String> = names.iter().filter(|n| *n != crate::pipeline::lease::STATE_DIR).collect();
-    if names.is_empty() {
-        return Ok(());
-    }
-    match crate::pipeline::ownership::read_marker(output) {
-        Some(marker) if marker.stage_type == command => {}
-        Some(marker) => {
-            return refuse(format!(
-                "the output folder holds an earlier output of stage type `{}`, not `{command}`",
-                marker.stage_type
-            ))
-        }
-        None => {
-            return refuse(format!(
-                "the output folder holds `{}` and was not written by shakeflow (no `{}` marker)",
-                names[0],
-                crate::pipeline::ownership::STAGE_MARKER
-            ))
-        }
-    }
-    if let Some(foreign) = ours.and_then(|ours| names.iter().find(|n| !ours.contains(n))) {
-        return refuse(format!("the output folder holds `{foreign}`, which is not an output of `{command}`"));
-    }
-    Ok(())
-}
-
-/// A run-independent name for a file given on the command line: its file name.
+/// A run-independent name for a file: its file name.
 fn file_label(path: &Path) -> String {
     path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
 }
 
-/// The marker type of a `shakeflow diagnose` output folder.
-const DIAGNOSE: &str = "diagnose";
-
-/// `shakeflow diagnose`: every case is diagnosed first; files are written only when all succeeded.
-fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Result<()> {
-    use rayon::prelude::*;
-    let info = stages::Stage::info(&stages::diagnose::Diagnose);
-    let assignments: Vec<(String, serde_json::Value)> =
-        set.iter().map(|s| params::parse_set(s)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
-    let params = params::normalize(info.params, info.name, assignments.iter().map(|(k, v)| (k.as_str(), v.clone())))
-        .map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;
-    let settings = stages::diagnose::settings(&params);
-    // Written into a transaction and committed at once: `--out` is replaced whole, and only
-    // when it is new, empty or an earlier diagnosis (its marker). Refused before any work.
-    refuse_foreign_output(out, cases, DIAGNOSE, None)?;
-    let started = std::time::Instant::now();
-    let results: Vec<(PathBuf, stages::diagnose::AnyDiagnosis, String)> = cases
-        .par_iter()
-        .map(|dir| {
-            let d = stages::diagnose::diagnose_folder(dir, "", &settings)?;
-            let (before, after) = d.rmse();
-            eprintln!(
-                "{}: {} (window {}, rmse {before:.2} → {after:.2})",
-                dir.display(),
-                d.verdict(),
-                d.window().map_or("none".to_string(), |(a, b)| format!("{a:.2}-{b:.2} s")),
-            );
-            Ok((dir.clone(), d, hash::hash_dir(dir)?.0))
+/// `shakeflow diagnose`: a `diagnose` stage over the case folders, run by the executor as
+/// `shakeflow stage` is (all or nothing, cached): `out/diagnosis.json` for one case,
+/// `out/<case>/diagnosis.json` for several.
+fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Result<ExitCode> {
+    let params = set
+        .iter()
+        .map(|s| {
+            let (key, value) = params::parse_set(s).map_err(anyhow::Error::msg)?;
+            Ok((key, serde_yaml::to_value(value)?))
         })
         .collect::<anyhow::Result<_>>()?;
-    let created = !out.exists();
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create `{}`", out.display()))?;
-    let result = (|| -> anyhow::Result<()> {
-        let lease = crate::pipeline::lease::Lease::acquire(out)?;
-        crate::pipeline::txn::recover(&lease)?;
-        refuse_foreign_output(out, cases, DIAGNOSE, None)?;
-        let transaction = crate::pipeline::txn::Transaction::begin(&lease)?;
-        let root = transaction.new_path("");
-        let written = (|| -> anyhow::Result<()> {
-            for (dir, d, input_hash) in &results {
-                let target = if results.len() == 1 { root.clone() } else { root.join(d.case()) };
-                std::fs::create_dir_all(&target).with_context(|| format!("cannot create `{}`", target.display()))?;
-                let provenance = BTreeMap::from([
-                    ("shakeflow.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
-                    ("shakeflow.command".to_string(), "diagnose".to_string()),
-                    ("shakeflow.case".to_string(), d.case().to_string()),
-                    ("shakeflow.input_hash".to_string(), input_hash.clone()),
-                    ("shakeflow.params".to_string(), serde_json::to_string(&params)?),
-                    ("shakeflow.verdict".to_string(), d.verdict().to_string()),
-                ]);
-                let mut accel = d.accel_table();
-                let mut camera = d.camera_table();
-                accel.metadata.extend(provenance.clone());
-                camera.metadata.extend(provenance.clone());
-                let png = d.figure().map_err(anyhow::Error::msg)?;
-                crate::io::parquet::write_table(&target.join("accel.parquet"), &accel)?;
-                crate::io::parquet::write_table(&target.join("camera.parquet"), &camera)?;
-                crate::io::mcap::write_timeseries(
-                    &target.join("diagnosis.mcap"),
-                    &[
-                        crate::io::mcap::Topic { name: format!("/{}/accel", d.case()), table: &accel },
-                        crate::io::mcap::Topic { name: format!("/{}/camera", d.case()), table: &camera },
-                    ],
-                    &provenance,
-                )?;
-                crate::io::atomic::write_file(&target.join("diagnosis.png"), |w| {
-                    Ok(std::io::Write::write_all(w, &png)?)
-                })?;
-                // The contract file last: its presence means the folder is complete.
-                let json = d.json_bytes();
-                crate::io::atomic::write_file(&target.join("diagnosis.json"), |w| {
-                    Ok(std::io::Write::write_all(w, json.as_bytes())?)
-                })?;
-                let shown = if results.len() == 1 { out.to_path_buf() } else { out.join(d.case()) };
-                eprintln!("{} → {}", dir.display(), shown.join("diagnosis.json").display());
-            }
-            crate::pipeline::ownership::write_marker(&root, DIAGNOSE, DIAGNOSE)
-        })();
-        if let Err(e) = written {
-            transaction.abort();
-            return Err(e);
+    let mut sources: indexmap::IndexMap<String, SourceSpec> = indexmap::IndexMap::new();
+    let mut names: BTreeMap<String, &PathBuf> = BTreeMap::new();
+    for dir in cases {
+        let resolved = crate::pipeline::ownership::resolved(dir);
+        let name = resolved.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        if let Some(other) = names.insert(name.clone(), dir) {
+            bail!(
+                "two cases are named `{name}`: `{}` and `{}`; the results of each are named by its folder, so diagnose them into different --out folders",
+                other.display(),
+                dir.display()
+            );
         }
-        let entries = |dir: &Path| -> Vec<String> {
-            std::fs::read_dir(dir)
-                .map(|e| e.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect())
-                .unwrap_or_default()
-        };
-        let install = entries(&root);
-        let remove: Vec<String> = entries(out)
-            .into_iter()
-            .filter(|e| e != crate::pipeline::lease::STATE_DIR && !install.contains(e))
-            .collect();
-        transaction.commit(&install, &remove, None)
-    })();
-    if result.is_err() && created {
-        let _ = std::fs::remove_dir(out);
+        let spec = serde_json::json!({"format": RecordFormat::Case, "path": dir.join("equipment.yaml").display().to_string(),
+            "partition": {"case": name}});
+        sources.insert(dir.display().to_string(), serde_json::from_value(spec)?);
     }
-    result?;
-    eprintln!("{} case(s) in {:.1} s", results.len(), started.elapsed().as_secs_f64());
-    Ok(())
+    let stage = crate::pipeline::spec::StageSpec {
+        stage_type: stages::Stage::info(&stages::diagnose::Diagnose).name.to_string(),
+        description: None,
+        inputs: sources.keys().cloned().collect(),
+        params,
+        select: BTreeMap::new(),
+    };
+    let spec = crate::pipeline::spec::PipelineSpec {
+        version: crate::pipeline::spec::FORMAT_VERSION,
+        description: None,
+        output_dir: out.display().to_string(),
+        inputs: sources,
+        stages: indexmap::IndexMap::from([(stage.stage_type.clone(), stage)]),
+        executor: None,
+    };
+    let plan = Plan::for_command("shakeflow diagnose", spec, stages::registry())?;
+    let (status, succeeded) = run_command_plan(&plan, out)?;
+    if succeeded {
+        for (name, dir) in &names {
+            let contract = if names.len() == 1 { out.to_path_buf() } else { out.join(name) };
+            let contract = contract.join(stages::diagnose::CONTRACT);
+            let verdict = std::fs::read(&contract)
+                .ok()
+                .and_then(|bytes| serde_json::from_slice::<serde_json::Value>(&bytes).ok())
+                .and_then(|d| d["verdict"].as_str().map(String::from))
+                .unwrap_or_default();
+            eprintln!("{}: {verdict} → {}", dir.display(), contract.display());
+        }
+    }
+    Ok(status)
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

@@ -1,4 +1,4 @@
-//! `shakeflow stage` runs through the executor every pipeline runs on:
+//! `shakeflow stage` and `shakeflow diagnose` run through the executor every pipeline runs on:
 //! a lockfile in their output folder (a repeated command is cached, a changed `--set` reruns),
 //! dataset folders and Parquet files as inputs (also as `format: dataset` sources of pipelines),
 //! all or nothing (a failed unit leaves the output folder as it was), and foreign folders refused.
@@ -190,4 +190,56 @@ fn a_pipeline_reads_another_pipelines_outputs_as_a_dataset_source() {
         "{}",
         stderr(&refused)
     );
+}
+
+fn copy_case(id: &str, to: &Path) {
+    let from = shared_dir().join("cases/demo").join(id);
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        std::fs::copy(entry.path(), to.join(entry.file_name())).unwrap();
+    }
+}
+
+#[test]
+fn diagnose_writes_the_contract_for_one_case_and_for_several_and_is_cached() {
+    let dir = crate::tempdir::tempdir().unwrap();
+    let root = dir.path();
+    copy_case("demo_01", &root.join("cases/demo_01"));
+    copy_case("demo_02", &root.join("cases/demo_02"));
+    copy_case("demo_02", &root.join("again/demo_02"));
+    let twice = shakeflow(&["diagnose", "cases/demo_02", "again/demo_02", "--out", "out"], root);
+    assert!(stderr(&twice).contains("two cases are named `demo_02`"), "{}", stderr(&twice));
+    assert!(!root.join("out").exists());
+
+    let one = shakeflow(&["diagnose", "cases/demo_01", "--out", "out"], root);
+    assert!(one.status.success(), "{}", stderr(&one));
+    let contract = std::fs::read(root.join("out/diagnosis.json")).unwrap();
+    for file in
+        ["accel/case=demo_01/data.parquet", "camera/case=demo_01/data.parquet", "reports/demo_01.png", "shakeflow.lock"]
+    {
+        assert!(root.join("out").join(file).is_file(), "no {file}");
+    }
+    // The engine's provenance keys, as in a pipeline.
+    let accel = shakeflow::io::parquet::read_table(&root.join("out/accel/case=demo_01/data.parquet")).unwrap();
+    assert_eq!(accel.metadata["shakeflow.stage_type"], "diagnose");
+    assert!(accel.metadata["shakeflow.inputs"].contains("cases/demo_01"), "{:?}", accel.metadata);
+    assert!(!accel.metadata.contains_key("shakeflow.command"));
+    let before = outputs(&root.join("out"));
+    let again = shakeflow(&["diagnose", "cases/demo_01", "--out", "out"], root);
+    assert!(again.status.success() && stderr(&again).contains("cached"), "{}", stderr(&again));
+    assert!(outputs(&root.join("out")) == before, "the folder changed");
+
+    // Several cases: one folder each for the contract; the single case's file goes.
+    let both = shakeflow(&["diagnose", "cases/demo_01", "cases/demo_02", "--out", "out"], root);
+    assert!(both.status.success(), "{}", stderr(&both));
+    assert!(!root.join("out/diagnosis.json").exists());
+    assert_eq!(std::fs::read(root.join("out/demo_01/diagnosis.json")).unwrap(), contract, "the same diagnosis");
+    let verdict = |id: &str| -> String {
+        let d: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(root.join("out").join(id).join("diagnosis.json")).unwrap()).unwrap();
+        d["verdict"].as_str().unwrap().to_string()
+    };
+    assert_eq!((verdict("demo_01"), verdict("demo_02")), ("sensor_tilt".into(), "mass_change".into()));
+    assert!(root.join("out/diagnosis/data.parquet").is_file() && root.join("out/reports/demo_02.png").is_file());
 }
