@@ -243,3 +243,22 @@ fn diagnose_writes_the_contract_for_one_case_and_for_several_and_is_cached() {
     assert_eq!((verdict("demo_01"), verdict("demo_02")), ("sensor_tilt".into(), "mass_change".into()));
     assert!(root.join("out/diagnosis/data.parquet").is_file() && root.join("out/reports/demo_02.png").is_file());
 }
+
+/// A command names its files literally: brackets and braces are no pattern, and several files'
+/// stems become `file` partitions, percent-encoded into one folder each.
+#[test]
+fn stage_takes_file_names_as_they_are() {
+    let dir = crate::tempdir::tempdir().unwrap();
+    let root = dir.path();
+    write_daq_csv(&root.join("FB[1].csv"), 200, 200.0, 0.0);
+    write_daq_csv(&root.join("run {2}.csv"), 200, 200.0, 1.0);
+    let mut args = vec!["stage", "load", "-i", "FB[1].csv", "-i", "run {2}.csv", "-o", "loaded"];
+    args.extend(LOAD_SET);
+    let out = shakeflow(&args, root);
+    assert!(out.status.success(), "{}", stderr(&out));
+    for part in ["file=FB%5B1%5D", "file=run%20%7B2%7D"] {
+        assert!(root.join("loaded/records").join(part).join("data.parquet").is_file(), "no {part}");
+    }
+    let units: Vec<String> = lockfile(&root.join("loaded")).stages["load"].units.keys().cloned().collect();
+    assert_eq!(units, ["file=FB%5B1%5D", "file=run%20%7B2%7D"]);
+}
