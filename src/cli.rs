@@ -744,6 +744,12 @@ fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Resu
     let mut sources: indexmap::IndexMap<String, SourceSpec> = indexmap::IndexMap::new();
     let mut names: BTreeMap<String, &PathBuf> = BTreeMap::new();
     for dir in cases {
+        if !dir.join("equipment.yaml").is_file() {
+            let what = if dir.is_dir() { "has no `equipment.yaml`" } else { "is not a folder" };
+            return Err(crate::error::UserError::new(format!("the case `{}` {what}", dir.display()))
+                .hint("a case folder holds equipment.yaml, floor.csv, observed_accel.csv and observed_cpt.csv")
+                .into());
+        }
         let resolved = crate::pipeline::ownership::resolved(dir);
         let name = resolved.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         if let Some(other) = names.insert(name.clone(), dir) {

@@ -210,6 +210,8 @@ fn diagnose_writes_the_contract_for_one_case_and_for_several_and_is_cached() {
     copy_case("demo_02", &root.join("again/demo_02"));
     let twice = shakeflow(&["diagnose", "cases/demo_02", "again/demo_02", "--out", "out"], root);
     assert!(stderr(&twice).contains("two cases are named `demo_02`"), "{}", stderr(&twice));
+    let none = shakeflow(&["diagnose", "cases/demo_03", "--out", "out"], root);
+    assert!(stderr(&none).contains("the case `cases/demo_03` is not a folder"), "{}", stderr(&none));
     assert!(!root.join("out").exists());
 
     let one = shakeflow(&["diagnose", "cases/demo_01", "--out", "out"], root);
