@@ -44,7 +44,7 @@ demo: release
 	@$(BIN) show runs/demo/report/summary/data.parquet
 	@echo "Rolling units (runs/demo/report/rolling/data.parquet; figures in runs/demo/rolling_*/figures/):"
 	@$(BIN) show runs/demo/report/rolling/data.parquet
-	@echo "Mismatch diagnosis of the archive's cases (runs/demo/diagnosis/: diagnosis.json and a figure per case in reports/):"
+	@echo "Mismatch diagnosis of the archive's cases (runs/demo/diagnosis/: <case>/diagnosis.json and reports/<case>.png per case):"
 	@$(BIN) show runs/demo/diagnosis/diagnosis/data.parquet --columns case,verdict,window_start_s,window_end_s,rmse_before,rmse_after
 	@echo "The study report: open runs/demo/report/index.html in a browser"
 

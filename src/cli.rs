@@ -7,15 +7,13 @@ use std::process::ExitCode;
 use anyhow::{bail, Context};
 use clap::{Parser, Subcommand};
 
-use crate::io::hash;
 use crate::pipeline::executor::{self, Outcome, RunOptions};
 use crate::pipeline::params;
 use crate::pipeline::plan::Plan;
 use crate::pipeline::progress::Reporter;
-use crate::pipeline::sink::OutputSink;
 use crate::pipeline::sources;
 use crate::pipeline::spec::{PipelineFile, RecordFormat, SourceSpec};
-use crate::stages::{self, InputKind, InputPart, StageContext, StageInfo, StageInput};
+use crate::stages::{self, InputKind, InputPart};
 
 #[derive(Parser)]
 #[command(
@@ -108,7 +106,8 @@ enum Command {
         #[arg(long)]
         skip_inputs: bool,
     },
-    /// Run one stage type alone on files, without a pipeline.
+    /// Run one stage type alone on files, without a pipeline: a pipeline of one stage made in
+    /// memory and run as `run` runs one (work units, cache, lockfile in the output folder).
     ///
     /// Examples:
     ///
@@ -120,11 +119,13 @@ enum Command {
     Stage {
         /// Stage type (see `shakeflow stages`).
         name: String,
-        /// Input files (record files for `load`; Parquet files or dataset folders otherwise).
+        /// Input files (record files for `load`; Parquet files or dataset folders, such as another
+        /// stage's `<output>` folder, otherwise).
         #[arg(long = "input", short = 'i', required = true, num_args = 1..)]
         inputs: Vec<PathBuf>,
-        /// Output folder, replaced when the stage succeeds: new, empty, or an earlier output of
-        /// this stage type (anything else is refused).
+        /// Output folder: new, empty, or an earlier output of this stage type (anything else is
+        /// refused). Written only when every record succeeds; its `shakeflow.lock` makes the same
+        /// command again a no-op ("cached").
         #[arg(long, short = 'o')]
         output: PathBuf,
         /// Parameter as key=value, value in YAML syntax (repeatable).
@@ -195,9 +196,12 @@ enum Command {
     ///
     /// A case folder holds equipment.yaml, floor.csv (time_s, ax_mps2, ay_mps2, az_mps2),
     /// observed_accel.csv (time_s, top_ax_mps2) and observed_cpt.csv (time_s, theta_rad).
-    /// Writes OUT/diagnosis.json (verdict, window, rmse before/after, candidates, explanation),
-    /// accel.parquet and camera.parquet (observed, nominal and accepted model, residuals),
-    /// diagnosis.mcap and diagnosis.png; with several cases, one sub-folder per case.
+    /// Runs the `diagnose` stage on them as a pipeline would (a lockfile in OUT: the same command
+    /// again is cached). Writes OUT/diagnosis.json (verdict, window, rmse before/after,
+    /// candidates, explanation), or OUT/<case>/diagnosis.json for each of several cases; the
+    /// stage's tables beside it: diagnosis/ (a row per case), accel/ and camera/ (observed,
+    /// nominal and accepted model, residuals; case=<case>/data.parquet, MCAP twins with
+    /// --set mcap=true) and reports/<case>.png. A failed case leaves OUT as it was.
     ///
     /// Example: shakeflow diagnose ../shared/cases/demo/demo_02 --out runs/diagnosis/demo_02
     Diagnose {
@@ -261,7 +265,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
                 rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build_global().context("setting --jobs")?;
             }
             let plan = Plan::new(PipelineFile::read(&pipeline)?, stages::registry())?;
-            let options = RunOptions { force, only: stages, keep_going };
+            let options = RunOptions { force, only: stages, keep_going, ..RunOptions::default() };
             if dry_run {
                 let lines = executor::dry_run(&plan, &options)?;
                 let mut stale = 0;
@@ -314,7 +318,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
             ));
             // One line of results per stage that has one (fragility, detections, verdicts, …).
             for (name, stage) in &plan.stages {
-                let dir = plan.file.output_dir().join(name);
+                let dir = plan.stage_dir(name);
                 if let Some(line) = crate::summary::stage_line(&dir, stage.stage.info().name) {
                     reporter.line(&format!("  {name}: {line}"));
                 }
@@ -387,7 +391,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
             if !skip_inputs {
                 let mut columns = BTreeMap::new();
                 for (name, source) in &plan.file.spec.inputs {
-                    let folders = source.format == RecordFormat::Frames;
+                    let folders = source.format.names_folders();
                     let files = match sources::resolve(&plan.file.base_dir(), &source.path, &source.partition, folders)
                     {
                         Ok(files) => files,
@@ -424,12 +428,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
             let output_dir = plan.file.output_dir();
             let lock = crate::pipeline::lock::LockFile::read(&output_dir.join(crate::pipeline::lock::LOCK_FILE))?;
             crate::pipeline::ownership::check_pipeline(&plan.file, &lock)?;
-            crate::pipeline::ownership::check_stage_folders(
-                &plan.file,
-                &output_dir,
-                plan.stages.keys().map(String::as_str),
-                &lock,
-            )?;
+            crate::pipeline::ownership::check_stage_folders(&plan, &lock)?;
             for stage in plan.stages.values() {
                 let inputs: Vec<String> = stage.inputs.iter().map(|i| i.label()).collect();
                 println!("stage  {:<16} {:<10} ← {}", stage.name, stage.stage.info().name, inputs.join(", "));
@@ -442,10 +441,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
             );
             Ok(ExitCode::SUCCESS)
         }
-        Command::Stage { name, inputs, output, set } => {
-            run_single_stage(&name, &inputs, &output, &set)?;
-            Ok(ExitCode::SUCCESS)
-        }
+        Command::Stage { name, inputs, output, set } => run_single_stage(&name, &inputs, &output, &set),
         Command::Stages { name } => {
             print!("{}", describe_stages(name.as_deref())?);
             Ok(ExitCode::SUCCESS)
@@ -499,8 +495,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
             if let Some(jobs) = jobs {
                 rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build_global().context("setting --jobs")?;
             }
-            diagnose_cases(&cases, &out, &set)?;
-            Ok(ExitCode::SUCCESS)
+            diagnose_cases(&cases, &out, &set)
         }
         Command::Schema => {
             println!("{}", serde_json::to_string_pretty(&crate::schema::pipeline_schema())?);
@@ -546,139 +541,110 @@ fn describe_stages(only: Option<&str>) -> anyhow::Result<String> {
     Ok(out)
 }
 
-/// Gathers inputs for a stage run outside a pipeline: raw files for `load` and the stages that
-/// read files themselves (frames, control points), Parquet parts otherwise.
-fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String]) -> anyhow::Result<()> {
+/// `shakeflow stage`: one stage on files, run by the executor every pipeline runs on, as a
+/// pipeline made in memory: a source per input, the stage, `output` as its output folder.
+fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String]) -> anyhow::Result<ExitCode> {
     let stage = stages::registry().find(name).ok_or_else(|| {
         crate::error::UserError::new(format!("unknown stage type `{name}`"))
             .hint(format!("known stage types: {}", stages::registry().names().join(", ")))
     })?;
     let info = stage.info();
-    // Before any input is read: a refusal costs nothing.
-    refuse_to_replace_foreign_folder(output, inputs, info)?;
     let assignments: Vec<(String, serde_json::Value)> =
         set.iter().map(|s| params::parse_set(s)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
-    let (params, stage_inputs) = match info.inputs {
-        InputKind::Sources => {
-            let overrides: serde_json::Map<String, serde_json::Value> = assignments.into_iter().collect();
-            let mut stage_inputs = Vec::new();
-            for path in inputs {
-                let spec = stages::load::ad_hoc_source(path, &overrides)?;
-                stage_inputs.push(ad_hoc_input(path, spec, hash::hash_file(path)?, inputs.len() > 1));
-            }
-            (params::normalize(info.params, info.name, []).map_err(|e| anyhow::anyhow!("{}", e.message))?, stage_inputs)
+    // For `load`, --set keys are source options; for the others, parameters.
+    let (overrides, params) = match info.inputs {
+        InputKind::Sources => (assignments.into_iter().collect(), BTreeMap::new()),
+        _ => {
+            let params = assignments
+                .into_iter()
+                .map(|(k, v)| Ok((k, serde_yaml::to_value(v)?)))
+                .collect::<anyhow::Result<_>>()?;
+            (serde_json::Map::new(), params)
         }
-        InputKind::Files(formats) => {
-            let given = assignments.iter().map(|(k, v)| (k.as_str(), v.clone()));
-            let params = params::normalize(info.params, info.name, given)
-                .map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;
-            let mut stage_inputs = Vec::new();
-            for path in inputs {
-                if !path.exists() {
-                    return Err(crate::error::UserError::new("the input does not exist")
-                        .in_file(path)
-                        .hint("check the path")
-                        .into());
-                }
+    };
+    let mut sources = indexmap::IndexMap::new();
+    for path in inputs {
+        let mut spec: SourceSpec = match info.inputs {
+            InputKind::Sources => stages::load::ad_hoc_source(path, &overrides)?,
+            InputKind::Files(formats) => {
                 let format = if crate::io::frames::is_frame_source(path) && formats.contains(&RecordFormat::Frames) {
                     RecordFormat::Frames
                 } else {
                     formats[0]
                 };
-                let spec: SourceSpec =
-                    serde_json::from_value(serde_json::json!({"format": format, "path": path.display().to_string()}))?;
-                stage_inputs.push(ad_hoc_input(path, spec, hash::hash_path(path)?, inputs.len() > 1));
+                // A case source names a case by its equipment.yaml, as in a pipeline.
+                let named = if format == RecordFormat::Case { path.join("equipment.yaml") } else { path.clone() };
+                serde_json::from_value(serde_json::json!({"format": format, "path": named.display().to_string()}))?
             }
-            (params, stage_inputs)
-        }
-        InputKind::Datasets => {
-            let given = assignments.iter().map(|(k, v)| (k.as_str(), v.clone()));
-            let refuse = |e: params::ParamError| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint);
-            let params = params::normalize(info.params, info.name, given).map_err(refuse)?;
-            stage.check(&params, Path::new(".")).map_err(refuse)?;
-            let mut stage_inputs = Vec::new();
-            for path in inputs {
-                let parts = if path.is_dir() {
-                    executor::dataset_parts(path, &file_label(path))?
-                } else if path.is_file() {
-                    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-                    let partition = if inputs.len() > 1 { vec![("file".to_string(), stem)] } else { Vec::new() };
-                    vec![InputPart {
-                        partition,
-                        path: path.clone(),
-                        label: file_label(path),
-                        hash: hash::hash_file(path)?,
-                    }]
-                } else {
-                    bail!("input `{}` does not exist", path.display());
-                };
-                stage_inputs.push(StageInput::Dataset { name: path.display().to_string(), parts });
-            }
-            (params, stage_inputs)
-        }
-    };
-    stage.check_params(&params)?;
-    let mut input_hashes: BTreeMap<String, String> = stage_inputs
-        .iter()
-        .map(|i| {
-            (
-                i.name().to_string(),
-                hash::hash_bytes(i.parts().iter().map(|p| p.hash.as_str()).collect::<Vec<_>>().join("\n").as_bytes()),
-            )
-        })
-        .collect();
-    for (name, path) in crate::pipeline::plan::param_files(info.params, &params, Path::new("."), info.name)
-        .map_err(|e| anyhow::anyhow!("{}", e.message))?
-    {
-        input_hashes
-            .insert(format!("params.{name} ({})", params[&name].as_str().unwrap_or_default()), hash::hash_file(&path)?);
-    }
-    // A stage that fails leaves no trace: an output folder it had to create goes again.
-    let created = !output.exists();
-    std::fs::create_dir_all(output).with_context(|| format!("cannot create `{}`", output.display()))?;
-    let records: usize = stage_inputs.iter().map(|i| i.parts().len()).sum();
-    let result = (|| -> anyhow::Result<()> {
-        let lease = crate::pipeline::lease::Lease::acquire(output)?;
-        crate::pipeline::txn::recover(&lease)?;
-        // Again under the lease: what another run committed meanwhile counts too.
-        refuse_to_replace_foreign_folder(output, inputs, info)?;
-        let transaction = crate::pipeline::txn::Transaction::begin(&lease)?;
-        let root = transaction.new_path("");
-        let reporter = Reporter::new(false);
-        let sink = OutputSink::new(&root, name, info, &params, &input_hashes, reporter.stage_bar(name, records as u64));
-        let ctx = StageContext {
-            stage_name: name,
-            params: &params,
-            inputs: &stage_inputs,
-            sink: &sink,
-            base_dir: Path::new("."),
-            memo: None,
+            InputKind::Datasets => serde_json::from_value(
+                serde_json::json!({"format": RecordFormat::Dataset, "path": path.display().to_string()}),
+            )?,
         };
-        let staged = stage.run(&ctx).and_then(|()| {
-            for o in info.outputs.iter().filter(|o| o.kind != crate::stages::OutputKind::Page) {
-                std::fs::create_dir_all(root.join(o.name))?;
-            }
-            crate::pipeline::ownership::write_marker(&root, name, info.name)
-        });
-        if let Err(e) = staged {
-            transaction.abort();
-            return Err(e);
+        // Several files are told apart by a `file` partition (their stems); a dataset folder's
+        // parts by their own.
+        if inputs.len() > 1 && !path.is_dir() {
+            let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+            spec.partition.insert("file".into(), stem);
         }
-        // The folder is replaced whole: every entry of ours, new ones in, old ones without a new version out.
-        let ours = stage_entries(info);
-        let install: Vec<String> = ours.iter().filter(|e| root.join(e).exists()).cloned().collect();
-        let remove: Vec<String> = ours.into_iter().filter(|e| !install.contains(e)).collect();
-        transaction
-            .commit(&install, &remove, None)
-            .with_context(|| format!("moving results into `{}`", output.display()))?;
-        Ok(())
-    })();
-    if result.is_err() && created {
-        let _ = std::fs::remove_dir(output);
+        if sources.insert(path.display().to_string(), spec).is_some() {
+            bail!("`{}` is given twice as an input", path.display());
+        }
     }
-    result?;
-    eprintln!("{name}: {records} record(s) → {}", output.display());
-    Ok(())
+    let stage_spec = crate::pipeline::spec::StageSpec {
+        stage_type: name.to_string(),
+        description: None,
+        inputs: sources.keys().cloned().collect(),
+        params,
+        select: BTreeMap::new(),
+        keep: true,
+    };
+    let spec = crate::pipeline::spec::PipelineSpec {
+        version: crate::pipeline::spec::FORMAT_VERSION,
+        description: None,
+        output_dir: output.display().to_string(),
+        inputs: sources,
+        stages: indexmap::IndexMap::from([(name.to_string(), stage_spec)]),
+        executor: None,
+    };
+    let plan = Plan::for_command("shakeflow stage", spec, stages::registry())?;
+    Ok(run_command_plan(&plan, output)?.0)
+}
+
+/// Runs the one stage of a command's plan all or nothing: a failed unit leaves `output` as it
+/// was (a folder the run had to create goes again). Returns the exit status and whether every
+/// unit succeeded.
+fn run_command_plan(plan: &Plan, output: &Path) -> anyhow::Result<(ExitCode, bool)> {
+    // The run checks the folder again under its lease; a refusal now leaves it untouched.
+    let files: Vec<PathBuf> = plan.stages.values().flat_map(|s| s.files.values().cloned()).collect();
+    crate::pipeline::ownership::check_output_dir(&plan.file, &files)?;
+    let lock = crate::pipeline::lock::LockFile::read(&executor::lock_path(plan))?;
+    crate::pipeline::ownership::check_pipeline(&plan.file, &lock)?;
+    crate::pipeline::ownership::check_stage_folders(plan, &lock)?;
+    let created = !output.exists();
+    let reporter = Reporter::new(false);
+    let options = RunOptions { all_or_nothing: true, ..RunOptions::default() };
+    let result = executor::run(plan, &options, &reporter);
+    if !executor::lock_path(plan).exists() {
+        let state = output.join(crate::pipeline::lease::STATE_DIR);
+        let _ = if created { std::fs::remove_dir_all(&state) } else { std::fs::remove_dir(&state) };
+        if created {
+            let _ = std::fs::remove_dir(output);
+        }
+    }
+    let summary = result?;
+    if !summary.failed.is_empty() {
+        for failed in &summary.failed {
+            let unit = crate::pipeline::units::describe(&failed.unit);
+            eprintln!("error: stage `{}` {unit} failed: {}", failed.stage, failed.reason);
+        }
+        eprintln!("{} unit(s) failed; nothing was written: `{}` is as it was", summary.failed.len(), output.display());
+        return Ok((ExitCode::from(1), false));
+    }
+    for report in &summary.reports {
+        let ran = if report.ran == 0 { "cached".to_string() } else { format!("{} ran", report.ran) };
+        eprintln!("{}: {} unit(s), {ran} → {}", report.name, report.units, output.display());
+    }
+    Ok((exit_status(&summary), true))
 }
 
 /// `validate`'s look at a record file past a source's first: its header (`records::check_header`),
@@ -761,190 +727,75 @@ fn check_first_record(
         })
 }
 
-/// What `shakeflow stage` writes in its output folder: the outputs, their MCAP twins, its marker.
-fn stage_entries(info: &StageInfo) -> Vec<String> {
-    let mut entries: Vec<String> = info.outputs.iter().map(|o| o.name.to_string()).collect();
-    entries.push(crate::pipeline::sink::MCAP_DIR.into());
-    entries.push(crate::pipeline::ownership::STAGE_MARKER.into());
-    entries
-}
-
-/// `stage --output` replaces the folder whole: only a folder that is new, empty or an earlier
-/// output of this stage type (its marker says so) may be replaced, and never one holding an input.
-fn refuse_to_replace_foreign_folder(output: &Path, inputs: &[PathBuf], info: &StageInfo) -> anyhow::Result<()> {
-    refuse_foreign_output(output, inputs, info.name, Some(&stage_entries(info)))
-}
-
-/// The check behind `stage --output` and `diagnose --out`: `output` may be replaced when it is new,
-/// empty, or carries the marker of an earlier `command` and (when `ours` lists them) holds only
-/// those entries.
-fn refuse_foreign_output(
-    output: &Path,
-    inputs: &[PathBuf],
-    command: &str,
-    ours: Option<&[String]>,
-) -> anyhow::Result<()> {
-    let refuse = |why: String| -> anyhow::Result<()> {
-        Err(crate::error::UserError::new(why)
-            .in_file(output)
-            .hint("the output folder is replaced as a whole when the command succeeds: give a new or empty folder, or one an earlier run of the same command wrote")
-            .into())
-    };
-    if output.exists() && !output.is_dir() {
-        return refuse("the output is a file, not a folder".into());
-    }
-    let out = crate::pipeline::ownership::resolved(output);
-    if let Some(input) = inputs.iter().find(|i| crate::pipeline::ownership::resolved(i).starts_with(&out)) {
-        return refuse(format!("the input `{}` is inside the output folder", input.display()));
-    }
-    let Ok(entries) = std::fs::read_dir(output) else { return Ok(()) };
-    let names: Vec<String> =
-        entries.map(|e| e.map(|e| e.file_name().to_string_lossy().into_owned())).collect::<Result<_, _>>()?;
-    let names: Vec<&String> = names.iter().filter(|n| *n != crate::pipeline::lease::STATE_DIR).collect();
-    if names.is_empty() {
-        return Ok(());
-    }
-    match crate::pipeline::ownership::read_marker(output) {
-        Some(marker) if marker.stage_type == command => {}
-        Some(marker) => {
-            return refuse(format!(
-                "the output folder holds an earlier output of stage type `{}`, not `{command}`",
-                marker.stage_type
-            ))
-        }
-        None => {
-            return refuse(format!(
-                "the output folder holds `{}` and was not written by shakeflow (no `{}` marker)",
-                names[0],
-                crate::pipeline::ownership::STAGE_MARKER
-            ))
-        }
-    }
-    if let Some(foreign) = ours.and_then(|ours| names.iter().find(|n| !ours.contains(n))) {
-        return refuse(format!("the output folder holds `{foreign}`, which is not an output of `{command}`"));
-    }
-    Ok(())
-}
-
-/// A file given to `shakeflow stage` as a source of its own; several are told apart by a `file`
-/// partition (their stems).
-fn ad_hoc_input(path: &Path, spec: SourceSpec, hash: String, several: bool) -> StageInput {
-    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
-    let partition = if several { vec![("file".to_string(), stem)] } else { Vec::new() };
-    let part = InputPart { partition, path: path.to_path_buf(), label: file_label(path), hash };
-    StageInput::Source {
-        name: path.display().to_string(),
-        spec,
-        base_dir: path.parent().map(Path::to_path_buf).unwrap_or_default(),
-        files: vec![part],
-    }
-}
-
-/// A run-independent name for a file given on the command line: its file name.
+/// A run-independent name for a file: its file name.
 fn file_label(path: &Path) -> String {
     path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
 }
 
-/// The marker type of a `shakeflow diagnose` output folder.
-const DIAGNOSE: &str = "diagnose";
-
-/// `shakeflow diagnose`: every case is diagnosed first; files are written only when all succeeded.
-fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Result<()> {
-    use rayon::prelude::*;
-    let info = stages::Stage::info(&stages::diagnose::Diagnose);
-    let assignments: Vec<(String, serde_json::Value)> =
-        set.iter().map(|s| params::parse_set(s)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
-    let params = params::normalize(info.params, info.name, assignments.iter().map(|(k, v)| (k.as_str(), v.clone())))
-        .map_err(|e| anyhow::anyhow!("{}\n  help: {}", e.message, e.hint))?;
-    let settings = stages::diagnose::settings(&params)?;
-    // Written into a transaction and committed at once: `--out` is replaced whole, and only
-    // when it is new, empty or an earlier diagnosis (its marker). Refused before any work.
-    refuse_foreign_output(out, cases, DIAGNOSE, None)?;
-    let started = std::time::Instant::now();
-    let results: Vec<(PathBuf, stages::diagnose::AnyDiagnosis, String)> = cases
-        .par_iter()
-        .map(|dir| {
-            let d = stages::diagnose::diagnose_folder(dir, "", &settings)?;
-            let (before, after) = d.rmse();
-            eprintln!(
-                "{}: {} (window {}, rmse {before:.2} → {after:.2})",
-                dir.display(),
-                d.verdict(),
-                d.window().map_or("none".to_string(), |(a, b)| format!("{a:.2}-{b:.2} s")),
-            );
-            Ok((dir.clone(), d, hash::hash_dir(dir)?.0))
+/// `shakeflow diagnose`: a `diagnose` stage over the case folders, run by the executor as
+/// `shakeflow stage` is (all or nothing, cached): `out/diagnosis.json` for one case,
+/// `out/<case>/diagnosis.json` for several.
+fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Result<ExitCode> {
+    let params = set
+        .iter()
+        .map(|s| {
+            let (key, value) = params::parse_set(s).map_err(anyhow::Error::msg)?;
+            Ok((key, serde_yaml::to_value(value)?))
         })
         .collect::<anyhow::Result<_>>()?;
-    let created = !out.exists();
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create `{}`", out.display()))?;
-    let result = (|| -> anyhow::Result<()> {
-        let lease = crate::pipeline::lease::Lease::acquire(out)?;
-        crate::pipeline::txn::recover(&lease)?;
-        refuse_foreign_output(out, cases, DIAGNOSE, None)?;
-        let transaction = crate::pipeline::txn::Transaction::begin(&lease)?;
-        let root = transaction.new_path("");
-        let written = (|| -> anyhow::Result<()> {
-            for (dir, d, input_hash) in &results {
-                let target = if results.len() == 1 { root.clone() } else { root.join(d.case()) };
-                std::fs::create_dir_all(&target).with_context(|| format!("cannot create `{}`", target.display()))?;
-                let provenance = BTreeMap::from([
-                    ("shakeflow.version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
-                    ("shakeflow.command".to_string(), "diagnose".to_string()),
-                    ("shakeflow.case".to_string(), d.case().to_string()),
-                    ("shakeflow.input_hash".to_string(), input_hash.clone()),
-                    ("shakeflow.params".to_string(), serde_json::to_string(&params)?),
-                    ("shakeflow.verdict".to_string(), d.verdict().to_string()),
-                ]);
-                let mut accel = d.accel_table();
-                let mut camera = d.camera_table();
-                accel.metadata.extend(provenance.clone());
-                camera.metadata.extend(provenance.clone());
-                let png = d.figure().map_err(anyhow::Error::msg)?;
-                crate::io::parquet::write_table(&target.join("accel.parquet"), &accel)?;
-                crate::io::parquet::write_table(&target.join("camera.parquet"), &camera)?;
-                crate::io::mcap::write_timeseries(
-                    &target.join("diagnosis.mcap"),
-                    &[
-                        crate::io::mcap::Topic { name: format!("/{}/accel", d.case()), table: &accel },
-                        crate::io::mcap::Topic { name: format!("/{}/camera", d.case()), table: &camera },
-                    ],
-                    &provenance,
-                )?;
-                crate::io::atomic::write_file(&target.join("diagnosis.png"), |w| {
-                    Ok(std::io::Write::write_all(w, &png)?)
-                })?;
-                // The contract file last: its presence means the folder is complete.
-                let json = d.json_bytes();
-                crate::io::atomic::write_file(&target.join("diagnosis.json"), |w| {
-                    Ok(std::io::Write::write_all(w, json.as_bytes())?)
-                })?;
-                let shown = if results.len() == 1 { out.to_path_buf() } else { out.join(d.case()) };
-                eprintln!("{} → {}", dir.display(), shown.join("diagnosis.json").display());
-            }
-            crate::pipeline::ownership::write_marker(&root, DIAGNOSE, DIAGNOSE)
-        })();
-        if let Err(e) = written {
-            transaction.abort();
-            return Err(e);
+    let mut sources: indexmap::IndexMap<String, SourceSpec> = indexmap::IndexMap::new();
+    let mut names: BTreeMap<String, &PathBuf> = BTreeMap::new();
+    for dir in cases {
+        if !dir.join("equipment.yaml").is_file() {
+            let what = if dir.is_dir() { "has no `equipment.yaml`" } else { "is not a folder" };
+            return Err(crate::error::UserError::new(format!("the case `{}` {what}", dir.display()))
+                .hint("a case folder holds equipment.yaml, floor.csv, observed_accel.csv and observed_cpt.csv")
+                .into());
         }
-        let entries = |dir: &Path| -> Vec<String> {
-            std::fs::read_dir(dir)
-                .map(|e| e.flatten().map(|e| e.file_name().to_string_lossy().into_owned()).collect())
-                .unwrap_or_default()
-        };
-        let install = entries(&root);
-        let remove: Vec<String> = entries(out)
-            .into_iter()
-            .filter(|e| e != crate::pipeline::lease::STATE_DIR && !install.contains(e))
-            .collect();
-        transaction.commit(&install, &remove, None)
-    })();
-    if result.is_err() && created {
-        let _ = std::fs::remove_dir(out);
+        let resolved = crate::pipeline::ownership::resolved(dir);
+        let name = resolved.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        if let Some(other) = names.insert(name.clone(), dir) {
+            bail!(
+                "two cases are named `{name}`: `{}` and `{}`; the results of each are named by its folder, so diagnose them into different --out folders",
+                other.display(),
+                dir.display()
+            );
+        }
+        let spec = serde_json::json!({"format": RecordFormat::Case, "path": dir.join("equipment.yaml").display().to_string(),
+            "partition": {"case": name}});
+        sources.insert(dir.display().to_string(), serde_json::from_value(spec)?);
     }
-    result?;
-    eprintln!("{} case(s) in {:.1} s", results.len(), started.elapsed().as_secs_f64());
-    Ok(())
+    let stage = crate::pipeline::spec::StageSpec {
+        stage_type: stages::Stage::info(&stages::diagnose::Diagnose).name.to_string(),
+        description: None,
+        inputs: sources.keys().cloned().collect(),
+        params,
+        select: BTreeMap::new(),
+        keep: true,
+    };
+    let spec = crate::pipeline::spec::PipelineSpec {
+        version: crate::pipeline::spec::FORMAT_VERSION,
+        description: None,
+        output_dir: out.display().to_string(),
+        inputs: sources,
+        stages: indexmap::IndexMap::from([(stage.stage_type.clone(), stage)]),
+        executor: None,
+    };
+    let plan = Plan::for_command("shakeflow diagnose", spec, stages::registry())?;
+    let (status, succeeded) = run_command_plan(&plan, out)?;
+    if succeeded {
+        for (name, dir) in &names {
+            let contract = if names.len() == 1 { out.to_path_buf() } else { out.join(name) };
+            let contract = contract.join(stages::diagnose::CONTRACT);
+            let verdict = std::fs::read(&contract)
+                .ok()
+                .and_then(|bytes| serde_json::from_slice::<serde_json::Value>(&bytes).ok())
+                .and_then(|d| d["verdict"].as_str().map(String::from))
+                .unwrap_or_default();
+            eprintln!("{}: {verdict} → {}", dir.display(), contract.display());
+        }
+    }
+    Ok(status)
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]

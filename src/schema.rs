@@ -101,8 +101,8 @@ pub fn pipeline_schema() -> Value {
                 "additionalProperties": false,
                 "required": ["format", "path"],
                 "properties": {
-                    "format": {"enum": RecordFormat::ALL.map(|f| f.name()), "description": "record file format (read by `load`), or `frames` (an image sequence: a folder of PNG/JPEG frames or a video file, for `cpt_track`) or `control_points` (X_mm, Y_mm, Z_mm, u_px, v_px CSV, for `cpt_calibrate`)"},
-                    "path": {"type": "string", "description": "file (or, for `frames`, a folder), glob, or template whose {key} parts become partition keys"},
+                    "format": {"enum": RecordFormat::ALL.map(|f| f.name()), "description": "record file format (read by `load`), or `frames` (an image sequence: a folder of PNG/JPEG frames or a video file, for `cpt_track`) or `control_points` (X_mm, Y_mm, Z_mm, u_px, v_px CSV, for `cpt_calibrate`), or `case` (a diagnosis case folder, named by its equipment.yaml, for `diagnose`), or `dataset` (tables another stage or pipeline wrote: a dataset folder of `key=value/…/data.parquet` parts or one Parquet file, for stages that read stage outputs; record-file options do not apply)"},
+                    "path": {"type": "string", "description": "file (or, for `frames` and `dataset`, a folder), glob, or template whose {key} parts become partition keys"},
                     "description": {"type": "string"},
                     "partition": {"type": "object", "additionalProperties": {"type": "string"}, "description": "constant partition keys for every record"},
                     "header_lines": {"type": "integer", "minimum": 0, "default": 0, "description": "delimited: lines before the column-name row"},

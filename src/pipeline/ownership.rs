@@ -11,6 +11,7 @@ use std::path::{Component, Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::lock::LockFile;
+use super::plan::Plan;
 use super::spec::PipelineFile;
 use crate::error::UserError;
 
@@ -78,11 +79,13 @@ fn literal_prefix(base: &Path, pattern: &str) -> PathBuf {
 /// before the sources are resolved).
 pub fn check_output_dir(file: &PipelineFile, files: &[PathBuf]) -> Result<(), UserError> {
     let output_dir = resolved(&file.output_dir());
-    let refuse = |why: String| {
-        file.error_at(&["output_dir"], format!("`output_dir: {}` {why}", file.spec.output_dir)).hint(
+    let refuse = |why: String| match file.command {
+        Some(_) => UserError::new(format!("the output folder `{}` {why}", file.spec.output_dir))
+            .hint("give the command an output folder of its own (`--output`), new or written by it before"),
+        None => file.error_at(&["output_dir"], format!("`output_dir: {}` {why}", file.spec.output_dir)).hint(
             "shakeflow replaces stage folders in `output_dir` and may one day clean it: give it a folder of its own, \
              e.g. `output_dir: ../runs/<study>` (relative to the pipeline file)",
-        )
+        ),
     };
     let is_root = !output_dir.components().any(|c| matches!(c, Component::Normal(_)));
     if is_root {
@@ -94,56 +97,89 @@ pub fn check_output_dir(file: &PipelineFile, files: &[PathBuf]) -> Result<(), Us
         }
     }
     let pipeline = resolved(&file.path);
-    if pipeline.starts_with(&output_dir) {
+    if file.command.is_none() && pipeline.starts_with(&output_dir) {
         return Err(refuse(format!("holds the pipeline file itself (`{}`)", file.path.display())));
     }
     let base = file.base_dir();
+    let inside = |input: &str| match file.command {
+        Some(_) => {
+            UserError::new(format!("the input `{input}` is inside the output folder `{}`", file.spec.output_dir))
+                .hint("the output folder is shakeflow's to replace: give a new or empty folder outside the inputs")
+        }
+        None => refuse(format!("holds the input `{input}`")),
+    };
     for (name, source) in &file.spec.inputs {
-        let folder = resolved(&literal_prefix(&base, &source.path));
+        // A command's source names its file (or folder) literally.
+        let folder = match file.command {
+            Some(_) => resolved(&base.join(&source.path)),
+            None => resolved(&literal_prefix(&base, &source.path)),
+        };
         if folder.starts_with(&output_dir) {
-            return Err(refuse(format!("holds the files of source `{name}` (`{}`)", source.path)));
+            return Err(match file.command {
+                Some(_) => inside(&source.path),
+                None => refuse(format!("holds the files of source `{name}` (`{}`)", source.path)),
+            });
         }
     }
     if let Some(input) = files.iter().find(|f| resolved(f).starts_with(&output_dir)) {
-        return Err(refuse(format!("holds the input `{}`", input.display())));
+        return Err(inside(&input.display().to_string()));
     }
     Ok(())
 }
 
 /// Refuses, before anything runs, a stage whose folder in `output_dir` exists but is not that
-/// stage's: a user's folder that happens to share its name is never replaced.
-pub fn check_stage_folders<'a>(
-    file: &PipelineFile,
-    output_dir: &Path,
-    stages: impl IntoIterator<Item = &'a str>,
-    lock: &LockFile,
-) -> Result<(), UserError> {
-    for stage in stages {
-        let dir = output_dir.join(stage);
+/// stage's: a user's folder that happens to share its name is never replaced. An empty folder
+/// (but for shakeflow's own state) is anyone's.
+pub fn check_stage_folders(plan: &Plan, lock: &LockFile) -> Result<(), UserError> {
+    let file = &plan.file;
+    for stage in plan.stages.keys().map(String::as_str) {
+        let dir = plan.stage_dir(stage);
         let Ok(meta) = std::fs::symlink_metadata(&dir) else { continue };
+        let stage_type = plan.stages[stage].stage.info().name;
         let problem = if !meta.is_dir() {
             Some(if meta.file_type().is_symlink() { "is a symbolic link" } else { "is a file" }.to_string())
         } else {
             match read_marker(&dir) {
                 Some(marker) if marker.stage == stage => None,
+                // A command's stage is named by its type.
+                Some(marker) if file.command.is_some() => {
+                    Some(format!("holds an earlier output of stage type `{}`, not `{stage_type}`", marker.stage_type))
+                }
                 Some(marker) => Some(format!("holds the outputs of stage `{}`, not `{stage}`", marker.stage)),
                 // Written by a shakeflow from before markers: the lockfile knows it.
                 None if lock.stages.contains_key(stage) => None,
+                None if is_empty(&dir) => None,
                 None => Some(format!("was not written by shakeflow (it has no `{STAGE_MARKER}` marker)")),
             }
         };
         if let Some(problem) = problem {
-            return Err(file
-                .error_at(&["stages", stage], format!("stage `{stage}` would replace `{}`, which {problem}", dir.display()))
-                .hint("shakeflow replaces only folders it wrote: rename the stage or choose another `output_dir`; nothing was changed"));
+            return Err(match file.command {
+                Some(_) => UserError::new(format!("the output folder `{}` {problem}", dir.display())).hint(
+                    "give a new or empty folder, or one an earlier run of the same command wrote; nothing was changed",
+                ),
+                None => file
+                    .error_at(&["stages", stage], format!("stage `{stage}` would replace `{}`, which {problem}", dir.display()))
+                    .hint("shakeflow replaces only folders it wrote: rename the stage or choose another `output_dir`; nothing was changed"),
+            });
         }
     }
     Ok(())
 }
 
+/// Whether `dir` holds nothing but shakeflow's state folder and lockfile.
+fn is_empty(dir: &Path) -> bool {
+    std::fs::read_dir(dir).is_ok_and(|entries| {
+        entries.flatten().all(|e| e.file_name() == super::lease::STATE_DIR || e.file_name() == super::lock::LOCK_FILE)
+    })
+}
+
 /// How the lockfile names the pipeline that owns its folder: the pipeline file's path relative
 /// to the output folder, both resolved (`../pipelines/demo.yaml`); the same on every machine.
+/// A pipeline made by a command is named by the command (`shakeflow stage`).
 pub fn pipeline_label(file: &PipelineFile) -> String {
+    if let Some(command) = &file.command {
+        return command.clone();
+    }
     let from = resolved(&file.output_dir());
     let to = resolved(&file.path);
     let common = from.components().zip(to.components()).take_while(|(a, b)| a == b).count();
@@ -162,8 +198,11 @@ pub fn check_pipeline(file: &PipelineFile, lock: &LockFile) -> Result<(), UserEr
             .error_at(
                 &["output_dir"],
                 format!(
-                    "`output_dir: {}` holds the results of another pipeline, `{owner}` (relative to that folder; its lockfile says so)",
-                    file.spec.output_dir
+                    "{} holds the results of another pipeline, `{owner}` (relative to that folder; its lockfile says so)",
+                    match file.command {
+                        Some(_) => format!("the output folder `{}`", file.spec.output_dir),
+                        None => format!("`output_dir: {}`", file.spec.output_dir),
+                    }
                 ),
             )
             .hint(format!(

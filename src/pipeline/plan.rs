@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use indexmap::IndexMap;
 
 use super::params::{self, Params};
-use super::spec::{ColumnSpec, PipelineFile, RecordFormat, SourceSpec};
+use super::spec::{ColumnSpec, PipelineFile, PipelineSpec, RecordFormat, SourceSpec};
 use super::stage::{InputKind, OutputKind, Partition, Registry, Stage};
 use crate::error::{did_you_mean_hint, UserError};
 
@@ -158,6 +158,41 @@ impl Plan {
         set
     }
 
+    /// The plan of a command that runs one stage without a pipeline file (`shakeflow stage`,
+    /// `shakeflow diagnose`): `spec` made in memory, its one stage written at the output folder
+    /// itself rather than in a sub-folder named after it.
+    pub fn for_command(command: &str, spec: PipelineSpec, registry: Registry) -> Result<Plan, UserError> {
+        if spec.stages.len() != 1 {
+            return Err(UserError::new(format!("`{command}` runs one stage, not {}", spec.stages.len())));
+        }
+        Plan::new(PipelineFile::for_command(command, spec), registry)
+    }
+
+    /// A stage's folder relative to the output folder: its name, or `` for a command's one stage.
+    pub fn stage_path<'a>(&self, name: &'a str) -> &'a str {
+        match self.file.command {
+            Some(_) => "",
+            None => name,
+        }
+    }
+
+    /// Where a stage's outputs go: `<output_dir>/<name>` (a command's one stage: `output_dir`).
+    pub fn stage_dir(&self, name: &str) -> PathBuf {
+        match self.stage_path(name) {
+            "" => self.file.output_dir(),
+            path => self.file.output_dir().join(path),
+        }
+    }
+
+    /// The path, relative to the output folder, of `file` of a stage's folder (lockfile and
+    /// commit entries).
+    pub fn stage_entry(&self, name: &str, file: &str) -> String {
+        match self.stage_path(name) {
+            "" => file.to_string(),
+            path => format!("{path}/{file}"),
+        }
+    }
+
     /// The stages that read `name`'s outputs, directly or not, plus `name` itself.
     pub fn with_dependents(&self, name: &str) -> BTreeSet<String> {
         let mut set = BTreeSet::from([name.to_string()]);
@@ -219,12 +254,9 @@ fn plan_stage(
     })?;
     let info = stage.info();
     let given = spec.params.iter().map(|(k, v)| (k.as_str(), params::yaml_to_json(v)));
-    let located = |e: params::ParamError| {
-        let position = match &e.key {
-            Some(key) => super::locate::key_position(&file.text, &["stages", name, "params", key]),
-            None => super::locate::key_position(&file.text, &["stages", name]),
-        };
-        UserError::new(e.message).in_file(&file.path).at(position).hint(e.hint)
+    let located = |e: params::ParamError| match &e.key {
+        Some(key) => file.error_at(&["stages", name, "params", key], e.message).hint(e.hint),
+        None => file.error_at(&["stages", name], e.message).hint(e.hint),
     };
     let params = params::normalize(info.params, info.name, given).map_err(located)?;
     stage.check_params(&params).map_err(located)?;
@@ -296,11 +328,15 @@ fn check_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<
                 .error_at(&["inputs", name, "partition", key], format!("`{key}` is not a valid partition key"))
                 .hint("partition keys are letters, digits and `_`, as `{key}`s in paths are"));
         }
-        if let Some(problem) = super::paths::component_problem(value) {
+        // A command's partition values come from file names, percent-encoded like a template's.
+        if let Some(problem) = super::paths::component_problem(value).filter(|_| file.command.is_none()) {
             return Err(file
                 .error_at(&["inputs", name, "partition", key], format!("partition value `{value}` cannot name a folder: {problem}"))
                 .hint("partition values become folders (`key=value`) of every output: use a plain name such as `4` or `roof`"));
         }
+    }
+    if source.format == RecordFormat::Dataset {
+        check_dataset_source(file, name, source)?;
     }
     let known = || format!("known units: {}", crate::units::known_units().join(", "));
     if let Some(unit) = &source.unit {
@@ -360,6 +396,25 @@ fn check_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<
     Ok(())
 }
 
+/// A `dataset` source is read as its tables are: an option of record files would be ignored.
+fn check_dataset_source(file: &PipelineFile, name: &str, source: &SourceSpec) -> Result<(), UserError> {
+    let defaults: SourceSpec = serde_json::from_value(serde_json::json!({"format": "dataset", "path": source.path}))
+        .expect("a format and a path make a source");
+    let given = serde_json::to_value(source).expect("specs serialise");
+    let default = serde_json::to_value(&defaults).expect("specs serialise");
+    let record_option = given.as_object().and_then(|given| {
+        given.iter().find(|(key, value)| {
+            !["format", "path", "description", "partition"].contains(&key.as_str()) && default.get(*key) != Some(*value)
+        })
+    });
+    match record_option {
+        Some((key, _)) => Err(file
+            .error_at(&["inputs", name, key], format!("source `{name}`: `{key}` applies to record files, not to a `dataset`"))
+            .hint("a `dataset` source reads the Parquet tables of another stage or pipeline as they are: remove the option")),
+        None => Ok(()),
+    }
+}
+
 fn resolve_inputs(
     file: &PipelineFile,
     registry: Registry,
@@ -386,13 +441,14 @@ fn resolve_inputs(
         let reference = if let Some(source) = file.spec.inputs.get(name) {
             let format = source.format;
             let refusal = match kind {
+                InputKind::Datasets if format == RecordFormat::Dataset => None,
                 InputKind::Datasets if format.is_record() => Some((
                     format!("`{name}` is a record source, but this stage type reads stage outputs"),
                     format!("load it first with a `load` stage and name that stage here instead of `{name}`"),
                 )),
                 InputKind::Datasets | InputKind::Sources if !format.is_record() => Some((
                     format!("`{name}` is a `{}` source, which this stage type does not read", format.name()),
-                    "a `frames` source feeds `cpt_track`, a `control_points` source feeds `cpt_calibrate`".to_string(),
+                    "a `frames` source feeds `cpt_track`, a `control_points` source feeds `cpt_calibrate`, a `dataset` source feeds stages that read stage outputs".to_string(),
                 )),
                 InputKind::Files(formats) if !formats.contains(&format) => Some((
                     format!(
@@ -574,6 +630,27 @@ mod tests {
         assert!(err.message.contains("`keep: false`, but no stage reads it"), "{err}");
         let read = format!("{SOURCE}  l:\n    type: load\n    inputs: [rec]\n    keep: false\n  b:\n    type: baseline\n    inputs: [l]\n");
         assert!(!plan(&read).unwrap().stages["l"].keep);
+    }
+
+    #[test]
+    fn a_commands_one_stage_is_written_at_the_output_folder() {
+        let text = format!("{SOURCE}  l:\n    type: load\n    inputs: [rec]\n");
+        let file = PipelineFile::parse(Path::new("p.yaml"), text).unwrap();
+        let piped = Plan::new(file.clone(), crate::stages::registry()).unwrap();
+        assert_eq!(
+            (piped.stage_dir("l"), piped.stage_entry("l", "records/data.parquet")),
+            (Path::new("out/l").to_path_buf(), "l/records/data.parquet".to_string())
+        );
+        let command = Plan::for_command("shakeflow stage", file.spec, crate::stages::registry()).unwrap();
+        assert_eq!(
+            (command.stage_dir("l"), command.stage_entry("l", "records/data.parquet")),
+            (Path::new("out").to_path_buf(), "records/data.parquet".to_string())
+        );
+        // A command's errors name no file: there is none.
+        let mut spec = command.file.spec.clone();
+        spec.stages["l"].stage_type = "lod".into();
+        let err = Plan::for_command("shakeflow stage", spec, crate::stages::registry()).err().expect("refused");
+        assert_eq!((err.file, err.line), (None, None), "{}", err.message);
     }
 
     #[test]

@@ -174,6 +174,30 @@ impl OutputSink {
         Ok(())
     }
 
+    /// Writes a page output of one record: `<stage>/<record>/<output>` (the `diagnosis.json`
+    /// of each case of a `diagnose` over several). `record` is one plain folder name.
+    pub fn write_record_page(&self, output: &str, record: &str, bytes: &[u8]) -> anyhow::Result<()> {
+        if self.output_info(output)?.kind != OutputKind::Page {
+            bail!("stage type `{}` does not declare `{output}` as a page", self.info.name);
+        }
+        let reserved = self.info.outputs.iter().any(|o| o.name == record)
+            || [MCAP_DIR, super::ownership::STAGE_MARKER, super::lock::LOCK_FILE].contains(&record);
+        let problem = super::paths::component_problem(record)
+            .or_else(|| reserved.then(|| "the stage folder holds an entry of that name".to_string()));
+        if let Some(problem) = problem {
+            bail!("the record `{record}` cannot name a folder of stage `{}`: {problem}", self.stage_name);
+        }
+        let dir = self.root.join(record);
+        std::fs::create_dir_all(&dir).map_err(|e| anyhow!("cannot create `{}`: {e}", dir.display()))?;
+        let path = dir.join(output);
+        crate::io::atomic::write_file(&path, |w| {
+            std::io::Write::write_all(w, bytes)?;
+            Ok(())
+        })?;
+        self.hashes.lock().expect("no panics while holding the lock").insert(path, hash::hash_bytes(bytes));
+        Ok(())
+    }
+
     /// The hashes of the files written.
     pub fn into_hashes(self) -> KnownHashes {
         self.hashes.into_inner().expect("no panics while holding the lock")

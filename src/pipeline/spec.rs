@@ -96,11 +96,14 @@ pub enum RecordFormat {
     Frames,
     /// Camera control points for `cpt_calibrate`: CSV with X_mm, Y_mm, Z_mm, u_px, v_px.
     ControlPoints,
+    /// Tables another stage or pipeline wrote: a dataset folder (its `data.parquet` parts, Hive
+    /// partitions from their folders) or one Parquet file, read by stages that read stage outputs.
+    Dataset,
 }
 
 impl RecordFormat {
     /// Every format, in the order the schema lists them.
-    pub const ALL: [RecordFormat; 16] = [
+    pub const ALL: [RecordFormat; 17] = [
         RecordFormat::Delimited,
         RecordFormat::Csv,
         RecordFormat::Tsv,
@@ -117,11 +120,17 @@ impl RecordFormat {
         RecordFormat::Frames,
         RecordFormat::ControlPoints,
         RecordFormat::Case,
+        RecordFormat::Dataset,
     ];
 
     /// Accelerogram formats, which `load` reads; the others feed the stage that understands them.
     pub fn is_record(self) -> bool {
-        !matches!(self, RecordFormat::Frames | RecordFormat::ControlPoints | RecordFormat::Case)
+        !matches!(self, RecordFormat::Frames | RecordFormat::ControlPoints | RecordFormat::Case | RecordFormat::Dataset)
+    }
+
+    /// Whether a source of this format may name folders (an image sequence, a dataset).
+    pub fn names_folders(self) -> bool {
+        matches!(self, RecordFormat::Frames | RecordFormat::Dataset)
     }
 
     /// The name pipelines use (`format: control_points`).
@@ -289,6 +298,9 @@ pub struct PipelineFile {
     pub path: PathBuf,
     pub text: String,
     pub spec: PipelineSpec,
+    /// Set when no file was read: the command (`shakeflow stage`) that made `spec` in memory from
+    /// paths on its command line (relative to the current folder). Its errors name no file.
+    pub command: Option<String>,
 }
 
 impl PipelineFile {
@@ -332,13 +344,19 @@ impl PipelineFile {
                 "see `schemas/pipeline.schema.json` for the format, or `shakeflow stages` for stage types and parameters",
             )
         })?;
-        let file = PipelineFile { path: path.to_path_buf(), text, spec };
+        let file = PipelineFile { path: path.to_path_buf(), text, spec, command: None };
         if file.spec.version != FORMAT_VERSION {
             return Err(file
                 .error_at(&["version"], format!("pipeline format version {} is not supported", file.spec.version))
                 .hint(format!("this shakeflow reads `version: {FORMAT_VERSION}`")));
         }
         Ok(file)
+    }
+
+    /// A pipeline made in memory by `command` from its command line: relative paths are
+    /// relative to the current folder, and source paths name files or folders literally.
+    pub fn for_command(command: &str, spec: PipelineSpec) -> Self {
+        PipelineFile { path: PathBuf::from(command), text: String::new(), spec, command: Some(command.to_string()) }
     }
 
     /// The directory relative paths in the file are resolved against.
@@ -354,11 +372,19 @@ impl PipelineFile {
     }
 
     pub fn error_at(&self, key_path: &[&str], message: impl Into<String>) -> UserError {
-        UserError::new(message).in_file(&self.path).at(super::locate::key_position(&self.text, key_path))
+        self.located(message, super::locate::key_position(&self.text, key_path))
     }
 
     pub fn error_at_value(&self, key_path: &[&str], value: &str, message: impl Into<String>) -> UserError {
-        UserError::new(message).in_file(&self.path).at(super::locate::value_position(&self.text, key_path, value))
+        self.located(message, super::locate::value_position(&self.text, key_path, value))
+    }
+
+    /// An error at `position` of the file; a pipeline made by a command has no file to name.
+    fn located(&self, message: impl Into<String>, position: Option<(usize, usize)>) -> UserError {
+        match self.command {
+            Some(_) => UserError::new(message),
+            None => UserError::new(message).in_file(&self.path).at(position),
+        }
     }
 }
 

@@ -1,7 +1,8 @@
 //! `diagnose` (stage and `shakeflow diagnose` command): for each case folder, where the nominal
 //! toppling model and the recordings disagree, which physics explains it, and the fit before
-//! and after. Writes the contract `diagnosis.json`, the observed/baseline/model series and
-//! residuals (Parquet + MCAP) and a figure with the located window shaded.
+//! and after. Writes the contract `diagnosis.json` (at the stage folder's root for one case,
+//! `<case>/diagnosis.json` for each of several), the observed/baseline/model series and
+//! residuals (Parquet, + MCAP with `mcap: true`) and a figure with the located window shaded.
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -19,14 +20,15 @@ pub struct Diagnose;
 
 static INFO: StageInfo = StageInfo {
     name: "diagnose",
-    version: 4,
+    version: 5,
     summary: "Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt; rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted, ranked by BIC, or `unexplained`.",
     inputs: InputKind::Files(&[RecordFormat::Case]),
     outputs: &[
         OutputInfo { name: "diagnosis", description: "per case: mismatch, verdict, window_start_s, window_end_s, rmse_before, rmse_after, explanation, candidates (JSON)", kind: OutputKind::Table },
         OutputInfo { name: "accel", description: "per case: observed, baseline and model top acceleration and the residuals before/after", kind: OutputKind::TimeSeries },
         OutputInfo { name: "camera", description: "per case: observed, baseline and model rotation and the residuals before/after", kind: OutputKind::TimeSeries },
-        OutputInfo { name: "reports", description: "<case>.json (the diagnosis.json contract) and <case>.png (records, models, residuals, window shaded)", kind: OutputKind::Files },
+        OutputInfo { name: "reports", description: "<case>.png: records, models, residuals, window shaded", kind: OutputKind::Files },
+        OutputInfo { name: "diagnosis.json", description: "the contract (verdict, window, rmse before/after, candidates, explanation): at the stage folder's root for one case, in `<case>/` for each of several", kind: OutputKind::Page },
     ],
     params: &[
         ParamSpec { name: "exceedance_sigma", kind: ParamKind::Float, default: Some("4.0"), unit: "", description: "a residual beyond this many noise standard deviations counts as a disagreement (5 within 0.1 s flag a mismatch)", range: Some((2.0, 20.0)) },
@@ -35,6 +37,9 @@ static INFO: StageInfo = StageInfo {
         super::MCAP_PARAM,
     ],
 };
+
+/// The contract file held-out scorers read (`shakeflow diagnose CASE --out OUT` → `OUT/diagnosis.json`).
+pub const CONTRACT: &str = "diagnosis.json";
 
 /// The parameters `INFO` declares, typed (also `shakeflow diagnose --set`'s).
 #[derive(Debug, Deserialize, Serialize)]
@@ -82,12 +87,16 @@ impl Stage for Diagnose {
                 }
                 ctx.sink.write("accel", &part.partition, accel)?;
                 ctx.sink.write("camera", &part.partition, camera)?;
-                // `reports/<case>.json`: named by the case's partition values, as the `case` column names it.
+                // Named by the case's partition values, as the `case` column names it.
                 let name = match super::partition_values(&part.partition).replace('/', "_") {
                     n if n.is_empty() => d.case().to_string(),
                     n => n,
                 };
-                ctx.sink.write_file("reports", &format!("{name}.json"), d.json_bytes().as_bytes())?;
+                // The contract: `diagnosis.json` of the one case, or `<case>/diagnosis.json` of each.
+                match parts.len() {
+                    1 => ctx.sink.write_page(CONTRACT, d.json_bytes().as_bytes())?,
+                    _ => ctx.sink.write_record_page(CONTRACT, &name, d.json_bytes().as_bytes())?,
+                }
                 ctx.sink.write_file("reports", &format!("{name}.png"), &d.figure().map_err(anyhow::Error::msg)?)?;
                 Ok((super::partition_values(&part.partition), d))
             })

@@ -152,7 +152,9 @@ fn parse(spec: &SourceSpec, part: &InputPart) -> Result<RawRecord, UserError> {
         RecordFormat::Csv | RecordFormat::Tsv | RecordFormat::Delimited => {
             records::parse_delimited(path, &bytes, &delimited)
         }
-        RecordFormat::Frames | RecordFormat::ControlPoints | RecordFormat::Case => unreachable!("refused above"),
+        RecordFormat::Frames | RecordFormat::ControlPoints | RecordFormat::Case | RecordFormat::Dataset => {
+            unreachable!("refused above")
+        }
     }
     .map_err(user_error)
 }

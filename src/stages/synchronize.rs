@@ -85,7 +85,14 @@ impl Stage for Synchronize {
     fn companions(&self, params: &Params, primary: &InputPart, other: &super::StageInput) -> Vec<InputPart> {
         let p: SynchronizeParams = params::typed(params).expect("the planner checked the parameters (`check_params`)");
         let key = partition_value(primary, &p.join);
-        other.parts().iter().filter(|r| key.is_some() && partition_value(r, &p.join) == key).cloned().collect()
+        let matched: Vec<InputPart> =
+            other.parts().iter().filter(|r| key.is_some() && partition_value(r, &p.join) == key).cloned().collect();
+        // A target record the reference lacks fails; with every reference record its error can
+        // name the values the reference has.
+        if matched.is_empty() {
+            return other.parts().to_vec();
+        }
+        matched
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {

@@ -30,8 +30,13 @@ fn demo_cases_get_their_concealed_verdicts() {
         for key in ["mismatch", "verdict", "window", "rmse_before", "rmse_after", "candidates", "explanation"] {
             assert!(d.get(key).is_some(), "{id}: diagnosis.json lacks `{key}`");
         }
-        for file in ["accel.parquet", "camera.parquet", "diagnosis.mcap", "diagnosis.png"] {
-            assert!(dir.join(file).is_file(), "{id}: no {file}");
+        // The stage's layout beside the contract: its tables by case, a figure per case.
+        for file in [
+            format!("accel/case={id}/data.parquet"),
+            format!("camera/case={id}/data.parquet"),
+            format!("reports/{id}.png"),
+        ] {
+            assert!(out.path().join(&file).is_file(), "{id}: no {file}");
         }
         let truth = truth(id);
         let expected = truth["expected_verdict"].as_str().unwrap();
@@ -101,7 +106,10 @@ fn the_diagnose_stage_in_a_pipeline() {
     let table = shakeflow::io::parquet::read_table(&root.join("out/diagnosis/diagnosis/data.parquet")).unwrap();
     let shakeflow::table::ColumnData::Str(verdicts) = &table.column("verdict").unwrap().data else { panic!() };
     assert_eq!(verdicts, &["sensor_tilt", "mass_change"]);
-    assert!(root.join("out/diagnosis/reports/demo_02.json").is_file());
+    assert!(
+        root.join("out/diagnosis/demo_02/diagnosis.json").is_file()
+            && root.join("out/diagnosis/reports/demo_02.png").is_file()
+    );
     assert!(root.join("out/diagnosis/accel/case=demo_02/data.parquet").is_file());
     // An edited observation reruns the diagnosis.
     let observed = root.join("cases/demo_01/observed_cpt.csv");

@@ -29,8 +29,13 @@ fn rolling_demo_cases_get_their_concealed_verdicts() {
         for key in ["mismatch", "verdict", "window", "rmse_before", "rmse_after", "candidates", "explanation"] {
             assert!(d.get(key).is_some(), "{id}: diagnosis.json lacks `{key}`");
         }
-        for file in ["accel.parquet", "camera.parquet", "diagnosis.mcap", "diagnosis.png"] {
-            assert!(dir.join(file).is_file(), "{id}: no {file}");
+        // The stage's layout beside the contract: its tables by case, a figure per case.
+        for file in [
+            format!("accel/case={id}/data.parquet"),
+            format!("camera/case={id}/data.parquet"),
+            format!("reports/{id}.png"),
+        ] {
+            assert!(out.path().join(&file).is_file(), "{id}: no {file}");
         }
         let truth = truth(id);
         let expected = truth["expected_verdict"].as_str().unwrap();

@@ -27,12 +27,12 @@ use super::plan::{InputRef, Plan, PlannedStage};
 use super::progress::Reporter;
 use super::sink::{OutputSink, DATA_FILE};
 use super::sources;
-use super::spec::{OnError, RecordFormat};
+use super::spec::{OnError, RecordFormat, SourceSpec};
 use super::stage::{InputPart, OutputKind, Partition, StageContext, StageInfo, StageInput, WorkUnits};
 use super::txn::{self, Recovery, Transaction};
 use super::units::{self, Unit, GATHER};
 use crate::error::UserError;
-use crate::io::hash::{self, KnownHashes};
+use crate::io::hash;
 
 /// The `load` output the engine writes for records skipped under `on_error: skip`.
 pub const FLAGGED: &str = "flagged";
@@ -49,6 +49,9 @@ pub struct RunOptions {
     pub only: Vec<String>,
     /// After a failed unit, still run everything that does not depend on it.
     pub keep_going: bool,
+    /// Commit nothing unless every unit succeeded: the output folder stays as it was (a
+    /// command's one stage, as `shakeflow stage` always did).
+    pub all_or_nothing: bool,
 }
 
 /// What a run reruns whatever the lockfile says.
@@ -135,23 +138,7 @@ fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, User
     let mut hashed: BTreeMap<PathBuf, String> = BTreeMap::new();
     for name in used {
         let spec = &plan.file.spec.inputs[name];
-        let folders = spec.format == RecordFormat::Frames;
-        let files = sources::resolve(&base, &spec.path, &spec.partition, folders).map_err(|e| {
-            let located = plan.file.error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message));
-            match e.hint {
-                Some(h) => located.hint(h),
-                None => located,
-            }
-        })?;
-        // A case source names each case by its equipment.yaml; the case is the whole folder.
-        let files: Vec<sources::MatchedFile> = if spec.format == RecordFormat::Case {
-            files
-                .into_iter()
-                .map(|f| sources::MatchedFile { path: f.path.parent().map(Path::to_path_buf).unwrap_or(f.path), ..f })
-                .collect()
-        } else {
-            files
-        };
+        let files = source_files(plan, name, spec)?;
         let unhashed: Vec<&Path> =
             files.iter().map(|f| f.path.as_path()).filter(|p| !hashed.contains_key(*p)).collect();
         let new_hashes: Vec<String> = unhashed
@@ -168,11 +155,69 @@ fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, User
                 InputPart { partition: f.partition, path: f.path, label: relative, hash }
             })
             .collect();
-        let input =
-            StageInput::Source { name: name.to_string(), spec: spec.clone(), base_dir: base.clone(), files: parts };
+        let input = match spec.format {
+            RecordFormat::Dataset => StageInput::Dataset { name: name.to_string(), parts },
+            _ => {
+                StageInput::Source { name: name.to_string(), spec: spec.clone(), base_dir: base.clone(), files: parts }
+            }
+        };
         resolved.insert(name.to_string(), ResolvedSource { input });
     }
     Ok(resolved)
+}
+
+/// The files a source reads, with their partitions: its path matched as a pattern (a command's
+/// names one file or folder literally); a case is its folder, a dataset folder its parts.
+fn source_files(plan: &Plan, name: &str, spec: &SourceSpec) -> Result<Vec<sources::MatchedFile>, UserError> {
+    let base = plan.file.base_dir();
+    let files = match plan.file.command {
+        Some(_) => {
+            let path = if base == Path::new(".") { PathBuf::from(&spec.path) } else { base.join(&spec.path) };
+            if !(path.is_file() || spec.format.names_folders() && path.is_dir()) {
+                let what = if path.is_dir() { "is a folder, not a file" } else { "does not exist" };
+                return Err(UserError::new(format!("the input `{}` {what}", path.display())).in_file(&path));
+            }
+            let partition = spec.partition.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+            vec![sources::MatchedFile { path, partition }]
+        }
+        None => sources::resolve(&base, &spec.path, &spec.partition, spec.format.names_folders()).map_err(|e| {
+            let located = plan.file.error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message));
+            match e.hint {
+                Some(h) => located.hint(h),
+                None => located,
+            }
+        })?,
+    };
+    let mut expanded = Vec::new();
+    for file in files {
+        match spec.format {
+            // A case source names each case by its equipment.yaml; the case is the whole folder.
+            RecordFormat::Case => expanded.push(sources::MatchedFile {
+                path: file.path.parent().map(Path::to_path_buf).unwrap_or(file.path),
+                ..file
+            }),
+            RecordFormat::Dataset if file.path.is_dir() => {
+                let parts: Vec<String> = hash::list_files(&file.path)
+                    .map_err(|e| UserError::new(format!("source `{name}`: {e:#}")).in_file(&file.path))?
+                    .into_iter()
+                    .filter(|f| f == DATA_FILE || f.ends_with(&format!("/{DATA_FILE}")))
+                    .collect();
+                if parts.is_empty() {
+                    return Err(UserError::new(format!("source `{name}`: the folder holds no `{DATA_FILE}`"))
+                        .in_file(&file.path)
+                        .hint("a dataset folder is a stage's output (`<stage>/<output>`), its tables in `key=value/…/data.parquet`"));
+                }
+                for part in parts {
+                    let mut partition = file.partition.clone();
+                    partition.extend(partition_of(&part));
+                    expanded.push(sources::MatchedFile { path: file.path.join(part), partition });
+                }
+            }
+            _ => expanded.push(file),
+        }
+    }
+    expanded.sort_by(|a, b| a.path.cmp(&b.path));
+    Ok(expanded)
 }
 
 /// Why every unit of a stage is stale, whatever its inputs: its type, version, params or select changed.
@@ -358,24 +403,6 @@ fn check_select(plan: &Plan, stage: &PlannedStage, inputs: &[StageInput]) -> Res
     Ok(())
 }
 
-/// The parts of a dataset directory: each `data.parquet` with the partition its path encodes.
-pub fn dataset_parts(dir: &Path, label: &str) -> anyhow::Result<Vec<InputPart>> {
-    let files: Vec<String> = hash::list_files(dir)?.into_iter().filter(|f| f.ends_with(DATA_FILE)).collect();
-    let paths: Vec<PathBuf> = files.iter().map(|f| dir.join(f)).collect();
-    let hashes = hash::hash_files_known(&paths, &KnownHashes::new())?;
-    Ok(files
-        .iter()
-        .zip(paths)
-        .zip(hashes)
-        .map(|((relative, path), hash)| InputPart {
-            partition: partition_of(relative),
-            path,
-            label: format!("{label}/{relative}"),
-            hash,
-        })
-        .collect())
-}
-
 /// The files a cached unit wrote, where they are.
 fn cached_files(old: &UnitLock, stage_dir: &Path) -> Produced {
     old.files.iter().map(|(f, h)| (f.clone(), ProducedFile { path: stage_dir.join(f), hash: h.clone() })).collect()
@@ -512,7 +539,6 @@ fn predict(
     files: &BTreeMap<String, BTreeMap<String, String>>,
     rerun: &Rerun,
 ) -> Result<Prediction, UserError> {
-    let output_dir = plan.file.output_dir();
     let mut produced: BTreeMap<String, Produced> = BTreeMap::new();
     let mut lines = Vec::new();
     // Removed files of up-to-date `keep: false` units → (stage, unit); and, in run order, the
@@ -524,8 +550,8 @@ fn predict(
         Err(e) => UserError::new(format!("{e:#}")),
     };
     for stage in plan.stages.values() {
-        let assessed = assess_stage(plan, stage, sources, &produced, files, lock, &output_dir, rerun).map_err(error)?;
-        let stage_dir = output_dir.join(&stage.name);
+        let assessed = assess_stage(plan, stage, sources, &produced, files, lock, rerun).map_err(error)?;
+        let stage_dir = plan.stage_dir(&stage.name);
         let entry = lock.stages.get(&stage.name);
         let mut mine = Produced::new();
         let mut line = StatusLine {
@@ -603,14 +629,13 @@ fn assess_stage(
     produced: &BTreeMap<String, Produced>,
     files: &BTreeMap<String, BTreeMap<String, String>>,
     lock: &LockFile,
-    output_dir: &Path,
     rerun: &Rerun,
 ) -> anyhow::Result<AssessedStage> {
     let inputs = stage_inputs(plan, stage, sources, produced)?;
     let split = units::split(stage, &inputs, files.get(&stage.name).unwrap_or(&BTreeMap::new()))?;
     let entry = lock.stages.get(&stage.name);
     let common = stage_reasons(stage, entry);
-    let stage_dir = output_dir.join(&stage.name);
+    let stage_dir = plan.stage_dir(&stage.name);
     let forced = rerun.stages.contains(&stage.name);
     let remake = rerun.remake.get(&stage.name);
     let units = split
@@ -686,7 +711,6 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
         lock: &lock,
         sources: &sources,
         files: &files,
-        output_dir: &output_dir,
         transaction: &transaction,
         reporter,
         state: Mutex::new(RunState::default()),
@@ -711,19 +735,24 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
     if let Some(error) = fatal {
         // A stage could not be planned (a bad select, two records with one partition): what
         // finished before it is still committed below only when nothing is in doubt.
-        if state.install.is_empty() {
+        if state.install.is_empty() || options.all_or_nothing {
             transaction.abort();
             return Err(error);
         }
         commit(transaction, &state, plan, &lock)?;
         return Err(error.context("the units that finished before it were committed"));
     }
+    if options.all_or_nothing && !state.failed.is_empty() {
+        transaction.abort();
+        let reports = plan.stages.keys().filter_map(|n| state.reports.get(n).cloned()).collect();
+        return Ok(RunSummary { reports, failed: state.failed, flagged: state.flagged });
+    }
     commit(transaction, &state, plan, &lock)?;
     // Under the lease still: only the run holding the folder writes the memo. The files this run
     // wrote go in too (their hashes came from the bytes written), those written 2 s ago or more.
     for (name, entry) in &state.entries {
         for (file, hash) in entry.units.values().flat_map(|u| u.files.iter()) {
-            hash::remember(&output_dir.join(name).join(file), hash);
+            hash::remember(&plan.stage_dir(name).join(file), hash);
         }
     }
     if let Err(e) = hash::save_memo() {
@@ -765,7 +794,7 @@ fn take_output_folder(
     }
     let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
     ownership::check_pipeline(&plan.file, &lock)?;
-    ownership::check_stage_folders(&plan.file, &output_dir, plan.stages.keys().map(String::as_str), &lock)?;
+    ownership::check_stage_folders(plan, &lock)?;
     Ok((lease, lock))
 }
 
@@ -791,7 +820,7 @@ fn not_kept(
                 .units
                 .iter()
                 .filter(|(id, _)| *id != FLAGGED_UNIT)
-                .flat_map(|(_, unit)| unit.files.keys().map(|file| format!("{}/{file}", s.name)))
+                .flat_map(|(_, unit)| unit.files.keys().map(|file| plan.stage_entry(&s.name, file)))
         })
         .collect()
 }
@@ -854,7 +883,6 @@ struct RunEnv<'a> {
     lock: &'a LockFile,
     sources: &'a BTreeMap<String, ResolvedSource>,
     files: &'a BTreeMap<String, BTreeMap<String, String>>,
-    output_dir: &'a Path,
     transaction: &'a Transaction,
     reporter: &'a Reporter,
     state: Mutex<RunState>,
@@ -945,7 +973,7 @@ fn start<'s, 'a: 's>(
             let left = state.readers_left.get_mut(upstream).expect("every upstream stage has readers");
             *left -= 1;
             if *left == 0 {
-                env.memo.release(&env.transaction.new_path(upstream));
+                env.memo.release(&env.transaction.new_path(env.plan.stage_path(upstream)));
             }
         }
         for dependent in dependents.get(stage.name.as_str()).into_iter().flatten() {
@@ -1056,12 +1084,12 @@ fn fold(
     records: Vec<UnitRecord>,
     vanished: &[String],
     upstream_tainted: bool,
-    output_dir: &Path,
     staging: &Path,
 ) -> anyhow::Result<Folded> {
     let name = stage.name.as_str();
     let info = stage.stage.info();
-    let stage_dir = output_dir.join(name);
+    let stage_dir = plan.stage_dir(name);
+    let at = |file: &str| plan.stage_entry(name, file);
     let mut folded = Folded::default();
     let mut new_entry = StageLock {
         stage_type: info.name.to_string(),
@@ -1104,10 +1132,10 @@ fn fold(
                         );
                     }
                     folded.produced.insert(file.clone(), ProducedFile { path: dir.join(file), hash: hash.clone() });
-                    folded.install.insert(format!("{name}/{file}"), dir.join(file));
+                    folded.install.insert(at(file), dir.join(file));
                 }
                 for gone in old_files.into_iter().filter(|f| !files.contains_key(*f)) {
-                    folded.remove.insert(format!("{name}/{gone}"));
+                    folded.remove.insert(at(gone));
                 }
                 new_entry
                     .units
@@ -1115,7 +1143,7 @@ fn fold(
             }
             UnitOutcome::Flagged { file, reason } => {
                 for gone in old_files {
-                    folded.remove.insert(format!("{name}/{gone}"));
+                    folded.remove.insert(at(gone));
                 }
                 flagged_rows.push((record.id.clone(), file, reason.clone()));
                 folded.flagged.push(UnitProblem {
@@ -1141,7 +1169,7 @@ fn fold(
     for id in vanished {
         let old = &entry.expect("vanished units come from the lockfile").units[id];
         if folded.complete {
-            folded.remove.extend(old.files.keys().map(|gone| format!("{name}/{gone}")));
+            folded.remove.extend(old.files.keys().map(|gone| at(gone)));
         } else {
             new_entry.units.insert(id.clone(), old.clone());
         }
@@ -1155,7 +1183,7 @@ fn fold(
         let (file, hash) = flagged_table(staging, name, info, &stage.params, &flagged_rows)?;
         let old = entry.and_then(|e| e.units.get(FLAGGED_UNIT));
         if old.is_none_or(|o| o.key != hash || !stage_dir.join(&file).is_file()) {
-            folded.install.insert(format!("{name}/{file}"), staging.join(&file));
+            folded.install.insert(at(&file), staging.join(&file));
         }
         folded.produced.insert(file.clone(), ProducedFile { path: staging.join(&file), hash: hash.clone() });
         let files = BTreeMap::from([(file, hash.clone())]);
@@ -1165,7 +1193,7 @@ fn fold(
     }
     if !folded.install.is_empty() && ownership::read_marker(&stage_dir).is_none() {
         ownership::write_marker(staging, name, info.name)?;
-        folded.install.insert(format!("{name}/{}", ownership::STAGE_MARKER), staging.join(ownership::STAGE_MARKER));
+        folded.install.insert(at(ownership::STAGE_MARKER), staging.join(ownership::STAGE_MARKER));
     }
     folded.entry = Some(new_entry);
     Ok(folded)
@@ -1200,7 +1228,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
             state.tainted.insert(name.to_string());
         }
         // Downstream stages outside the selection read what is committed.
-        let stage_dir = env.output_dir.join(name);
+        let stage_dir = env.plan.stage_dir(name);
         let committed = entry.map(|e| e.units.values().flat_map(|u| cached_files(u, &stage_dir)).collect());
         state.produced.insert(name.to_string(), committed.unwrap_or_default());
         let units = entry.map_or(0, |e| e.units.len());
@@ -1210,9 +1238,8 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
         return Ok(());
     }
     let snapshot = env.state.lock().expect("no poisoned lock").produced.clone();
-    let assessed =
-        assess_stage(env.plan, stage, env.sources, &snapshot, env.files, env.lock, env.output_dir, env.rerun)?;
-    let new_dir = env.transaction.new_path(name);
+    let assessed = assess_stage(env.plan, stage, env.sources, &snapshot, env.files, env.lock, env.rerun)?;
+    let new_dir = env.transaction.new_path(env.plan.stage_path(name));
     let stale: Vec<&(Unit, String, Vec<String>)> = assessed.units.iter().filter(|(_, _, r)| !r.is_empty()).collect();
     let started = Instant::now();
     let records_in: usize = stale.iter().map(|(u, _, _)| u.inputs.iter().map(|i| i.parts().len()).sum::<usize>()).sum();
@@ -1250,7 +1277,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
             _ => {}
         }
     }
-    let folded = fold(env.plan, stage, entry, records, &assessed.vanished, upstream_tainted, env.output_dir, &new_dir)?;
+    let folded = fold(env.plan, stage, entry, records, &assessed.vanished, upstream_tainted, &new_dir)?;
     let failed = folded.failed.len();
     if !stale.is_empty() {
         let written = folded.install.len();

@@ -548,13 +548,12 @@ fn upstream_produced(
     lock: &LockFile,
     stage: &str,
 ) -> anyhow::Result<(BTreeMap<String, Produced>, bool)> {
-    let output_dir = plan.file.output_dir();
     let mut produced = BTreeMap::new();
     let mut tainted = false;
     // Only a failure upstream taints `stage`: a stage of another branch may not have finished.
     let upstream = plan.with_upstream([stage]);
     for (name, _) in plan.stages.iter().filter(|(n, _)| n.as_str() != stage && upstream.contains(n.as_str())) {
-        let stage_dir = output_dir.join(name);
+        let stage_dir = plan.stage_dir(name);
         let committed = |id: &str| -> Produced {
             lock.stages
                 .get(name)
@@ -624,7 +623,7 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let files = param_file_hashes(&plan)?;
     let (produced, upstream_tainted) = upstream_produced(run_dir, &run, &plan, &lock, stage_name)?;
     let rerun = Rerun { stages: forced_stages(&plan, &run.force), remake: run.remake.clone() };
-    let assessed = assess_stage(&plan, stage, &sources, &produced, &files, &lock, &output_dir, &rerun)?;
+    let assessed = assess_stage(&plan, stage, &sources, &produced, &files, &lock, &rerun)?;
     // A unit nobody predicted (a partition no earlier output had) goes to the last shard.
     let ours: Vec<&(crate::pipeline::units::Unit, String, Vec<String>)> = assessed
         .units
@@ -771,13 +770,13 @@ fn commit_manifests(run_dir: &Path, run: &RunFile, plan: &Plan, lease: &Lease) -
             }
         }
         let vanished: Vec<String> = vanished.into_iter().collect();
-        let staging = transaction.new_path(name);
+        let staging = transaction.new_path(plan.stage_path(name));
         let entry = lock.stages.get(name);
         // A unit the lockfile does not have cannot be cached: drop such records of shards not run.
         records.retain(|r| {
             !matches!(r.outcome, UnitOutcome::Cached) || entry.is_some_and(|e| e.units.contains_key(&r.id))
         });
-        let folded = fold(plan, stage, entry, records, &vanished, upstream_tainted, &output_dir, &staging)?;
+        let folded = fold(plan, stage, entry, records, &vanished, upstream_tainted, &staging)?;
         for (relative, from) in &folded.install {
             let to = transaction.new_path(relative);
             if *from != to {
@@ -797,7 +796,7 @@ fn commit_manifests(run_dir: &Path, run: &RunFile, plan: &Plan, lease: &Lease) -
         summary.committed_units += entry.units.len();
         new_lock.stages.insert(name.clone(), entry);
     }
-    let options = RunOptions { force: run.force.clone(), only: run.only.clone(), keep_going: run.keep_going };
+    let options = RunOptions { force: run.force.clone(), only: run.only.clone(), ..RunOptions::default() };
     for path in not_kept(plan, &selected_stages(plan, &options)?, &tainted, &new_lock.stages) {
         install.remove(&path);
         if output_dir.join(&path).exists() {
@@ -820,7 +819,7 @@ fn commit_manifests(run_dir: &Path, run: &RunFile, plan: &Plan, lease: &Lease) -
 /// `retries`: after a commit with failed units, submits the units still stale — the failed
 /// ones and what depends on them, nothing forced again — as a new run with `retries_left`.
 fn resubmit(run: &RunFile, plan: &Plan, lock: &LockFile, retries_left: u32) -> anyhow::Result<Option<RunFile>> {
-    let options = RunOptions { force: Vec::new(), only: run.only.clone(), keep_going: run.keep_going };
+    let options = RunOptions { only: run.only.clone(), keep_going: run.keep_going, ..RunOptions::default() };
     let selected = selected_stages(plan, &options)?;
     let prediction = predict(plan, lock, &resolve_sources(plan)?, &param_file_hashes(plan)?, &Rerun::default())?;
     let mut slurm = run.options.clone();
