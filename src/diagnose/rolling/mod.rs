@@ -74,6 +74,9 @@ pub struct Track {
     pub states: Vec<Vec<f64>>,
     /// When the effect began (None: the nominal cart).
     pub onset_s: Option<f64>,
+    /// The run's right-hand-side evaluations per sample (the nominal cart's: what an altered
+    /// run may cost, [`BUDGET_FACTOR`] times over).
+    pub evaluations_per_sample: f64,
 }
 
 /// Relative (and, for angles, radian) probes of the twins, largest first.
@@ -82,6 +85,11 @@ const PROBES: [f64; 4] = [1e-3, 1e-4, 1e-5, 1e-6];
 const FLAG_HORIZON_S: f64 = 5.0;
 /// How far past the disagreement's start the twins run (s).
 const TWIN_REACH_S: f64 = 2.0;
+/// An altered run may cost this many times the nominal cart's evaluations per sample (at least
+/// [`BUDGET_FLOOR`] per sample): beyond, its parameters make a stiff crawl (a locked wheel
+/// holding the cart still), judged as failing rather than waited for.
+const BUDGET_FACTOR: f64 = 50.0;
+const BUDGET_FLOOR: f64 = 300.0;
 
 impl RollingCase {
     fn excitation(&self) -> Excitation<'_> {
@@ -111,8 +119,10 @@ impl RollingCase {
             &Alteration::default(),
             None,
             self.samples() - 1,
+            None,
         )?;
         Ok(Track {
+            evaluations_per_sample: r.stats.rhs_evals as f64 / r.x_m.len().max(1) as f64,
             x_m: r.x_m,
             y_m: r.y_m,
             yaw_rad: r.yaw_rad,
@@ -149,6 +159,7 @@ impl RollingCase {
             ax_abs_mps2: vec![f64::NAN; n],
             states: Vec::new(),
             onset_s: Some(self.t0_s + k0 as f64 * self.dt_s),
+            evaluations_per_sample: 0.0,
         };
         for (to, from) in [
             (&mut track.x_m, &nominal.x_m),
@@ -162,6 +173,8 @@ impl RollingCase {
         if end <= k0 {
             return Ok(track);
         }
+        let per_sample = (BUDGET_FACTOR * nominal.evaluations_per_sample).max(BUDGET_FLOOR);
+        let budget = (nominal.evaluations_per_sample > 0.0).then(|| (per_sample * (end - k0) as f64) as usize);
         let r = simulate_altered(
             &self.cart,
             &self.friction,
@@ -170,6 +183,7 @@ impl RollingCase {
             alteration,
             Some((k0, &nominal.states[k0])),
             end,
+            budget,
         )?;
         track.x_m[k0..=end].copy_from_slice(&r.x_m);
         track.y_m[k0..=end].copy_from_slice(&r.y_m);

@@ -200,6 +200,9 @@ const RAMP_PIECES: usize = 16;
 /// A ramped alteration runs as `RAMP_PIECES` constant pieces over its ramp (at most one per
 /// sample), each entered from the one before (a captured mass shares the momentum piece by
 /// piece; a lost one leaves with its own velocity), then the full alteration.
+/// `budget` caps the right-hand-side evaluations of the whole run (an error past it): a fit
+/// tries parameters whose cart crawls through a stiff stick (a locked wheel holding it) and
+/// would otherwise take minutes to say it fits badly.
 /// Regularised friction only (an alteration has no exact stick).
 pub fn simulate_altered(
     cart: &Cart,
@@ -209,6 +212,7 @@ pub fn simulate_altered(
     alteration: &Alteration,
     start: Option<(usize, &[f64])>,
     end: usize,
+    budget: Option<usize>,
 ) -> Result<Response, String> {
     let n = excitation.ax_mps2.len();
     if friction.law != FrictionLaw::Regularised || options.lateral_slip.is_some() {
@@ -233,6 +237,7 @@ pub fn simulate_altered(
         Some((_, state)) => state.try_into().map_err(|_| format!("a cart state has 10 values, got {}", state.len()))?,
     };
     let mut response: Option<Response> = None;
+    let mut used = 0;
     for (first, last, piece) in pieces(alteration, k0, end, excitation.dt_s) {
         let model = NoSlip::altered(cart, friction, options.g_mps2, &piece)?;
         if start.is_some() || first > k0 {
@@ -246,6 +251,7 @@ pub fn simulate_altered(
         };
         let mut run = Run::new(&model, &part, friction.law, friction.eps_mps);
         run.keep_states = true;
+        run.budget = budget.map(|b| b.saturating_sub(used));
         let next = match options.method {
             Method::Adaptive { rtol, atol } => {
                 let tolerances: [f64; 10] = std::array::from_fn(|i| if i < 7 { atol } else { 10.0 * atol });
@@ -255,6 +261,7 @@ pub fn simulate_altered(
         };
         let state = next.states.last().ok_or("an altered run kept no state")?;
         y = state.as_slice().try_into().map_err(|_| "an altered run kept a malformed state".to_string())?;
+        used += next.stats.rhs_evals;
         match response.as_mut() {
             None => response = Some(next),
             Some(r) => r.continue_with(next),
@@ -318,6 +325,8 @@ struct Run<'a, const N: usize, D: Dynamics<N>> {
     energy_rest: f64,
     /// Keep the full state of every sample in the response.
     keep_states: bool,
+    /// Right-hand-side evaluations allowed (None: no limit).
+    budget: Option<usize>,
 }
 
 /// The floor inside one sample interval: linear in time.
@@ -352,6 +361,7 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
             energy_moving: 0.5 * mass * MOVING_SPEED_MPS * MOVING_SPEED_MPS,
             energy_rest: 0.5 * mass * rest_speed * rest_speed,
             keep_states: false,
+            budget: None,
         }
     }
 
@@ -471,6 +481,14 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
                     stepper.reset();
                     push(&mut response, t_end, EventKind::Rest, None, &y);
                 }
+            }
+            if let Some(budget) = self.budget.filter(|b| stepper.stats().rhs_evals > *b) {
+                return Err(format!("the run needs more than {budget} evaluations by t = {t_end:.3} s (too stiff)"));
+            }
+            if !y.iter().all(|v| v.is_finite()) {
+                return Err(format!(
+                    "the cart's state is no longer a number at t = {t_end:.3} s: the run diverged (too stiff a friction law or too large a change)"
+                ));
             }
             self.record(&mut response, k + 1, regime, &y);
         }

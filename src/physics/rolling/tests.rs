@@ -588,8 +588,9 @@ mod alterations {
         let excitation = Excitation { t0_s: 0.0, dt_s: 0.005, ax_mps2: &zeros, ay_mps2: &zeros };
         let options = Options { yaw0_rad: yaw, steer0_rad: [-yaw; 4], ..Options::default() };
         let y0 = [0.0, 0.0, yaw, -yaw, -yaw, -yaw, -yaw, 0.5, 0.0, 0.0];
-        let r = simulate_altered(&cart, &frictionless(), &excitation, &options, &alteration, Some((0, &y0)), n - 1)
-            .unwrap();
+        let r =
+            simulate_altered(&cart, &frictionless(), &excitation, &options, &alteration, Some((0, &y0)), n - 1, None)
+                .unwrap();
         let speed = |k: usize| {
             let s = &r.states[k];
             // v_corner,x = ẋ − ω r_y of corner 4, r_y = a sin θ − b cos θ.
@@ -632,6 +633,7 @@ mod alterations {
             &alteration,
             Some((0, &y0)),
             n - 1,
+            None,
         )
         .unwrap();
         let m = cart.platform_mass_kg + 4.0 * cart.wheel_mass_kg;
@@ -672,8 +674,17 @@ mod alterations {
         let zeros = vec![0.0; n];
         let excitation = Excitation { t0_s: 0.0, dt_s: dt, ax_mps2: &zeros, ay_mps2: &zeros };
         let y0 = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, v0, 0.0, 0.0];
-        simulate_altered(cart, &frictionless(), &excitation, &Options::default(), alteration, Some((0, &y0)), n - 1)
-            .unwrap()
+        simulate_altered(
+            cart,
+            &frictionless(),
+            &excitation,
+            &Options::default(),
+            alteration,
+            Some((0, &y0)),
+            n - 1,
+            None,
+        )
+        .unwrap()
     }
 
     #[test]
