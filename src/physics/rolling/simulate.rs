@@ -204,6 +204,7 @@ const RAMP_PIECES: usize = 16;
 /// tries parameters whose cart crawls through a stiff stick (a locked wheel holding it) and
 /// would otherwise take minutes to say it fits badly.
 /// Regularised friction only (an alteration has no exact stick).
+#[allow(clippy::too_many_arguments)]
 pub fn simulate_altered(
     cart: &Cart,
     friction: &Friction,
