@@ -392,6 +392,12 @@ impl<const N: usize> Stepper<N> for Dopri5<N> {
                 err += (e / sk).powi(2);
             }
             let err = (err / N as f64).sqrt();
+            if !err.is_finite() && h <= 1e-14 * t.abs().max(1.0) {
+                // Not a number even at the smallest step: the model failed here. Say so with a
+                // NaN state for the caller to refuse, rather than step on with a NaN time.
+                self.fsal = None;
+                return Advance::Reached([f64::NAN; N]);
+            }
             // Hairer's PI controller: safety 0.9, β = 0.04, step ratio within [0.2, 10].
             let fac11 = err.powf(0.17);
             if err <= 1.0 || h <= 1e-14 * t.abs().max(1.0) {

@@ -20,7 +20,7 @@ pub struct Diagnose;
 
 static INFO: StageInfo = StageInfo {
     name: "diagnose",
-    version: 5,
+    version: 6,
     summary: "Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt; rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted, ranked by BIC, or `unexplained`.",
     inputs: InputKind::Files(&[RecordFormat::Case]),
     outputs: &[
@@ -33,7 +33,7 @@ static INFO: StageInfo = StageInfo {
     params: &[
         ParamSpec { name: "exceedance_sigma", kind: ParamKind::Float, default: Some("4.0"), unit: "", description: "a residual beyond this many noise standard deviations counts as a disagreement (5 within 0.1 s flag a mismatch)", range: Some((2.0, 20.0)) },
         ParamSpec { name: "min_improvement", kind: ParamKind::Float, default: Some("3.0"), unit: "", description: "a physics is accepted only if it cuts the window's noise-normalised RMS misfit at least this many times", range: Some((1.0, 1e3)) },
-        ParamSpec { name: "max_remaining_flagged", kind: ParamKind::Float, default: Some("0.12"), unit: "", description: "... and leaves at most this fraction of the flagged samples flagged", range: Some((0.0, 1.0)) },
+        ParamSpec { name: "max_remaining_flagged", kind: ParamKind::Float, default: Some("0.12"), unit: "", description: "... and leaves at most this fraction of the flagged samples flagged (rocking cases; a rolling cart may leave 0.7 of those in the window's first 5 s)", range: Some((0.0, 1.0)) },
         super::MCAP_PARAM,
     ],
 };

@@ -172,5 +172,6 @@ fn failed(case: &RollingCase) -> Track {
         ax_abs_mps2: vec![f64::NAN; n],
         states: Vec::new(),
         onset_s: None,
+        evaluations_per_sample: 0.0,
     }
 }

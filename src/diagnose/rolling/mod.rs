@@ -18,9 +18,10 @@
 //!    cart's sensitivity makes a whole-record misfit rugged), the optima judged on the whole record.
 //!    Each run starts from the nominal cart's state where the effect begins.
 //! 5. Verdict as for rocking: the best by BIC is accepted when it beats the nominal cart's BIC,
-//!    cuts the window's noise-normalised RMS misfit at least 3× and leaves at most 12 % of the
-//!    samples flagged in the first 5 s of the window (later, a correct physics with parameters a
-//!    hair off drifts away on a sensitive cart); else `unexplained`. No disagreement: `none`.
+//!    cuts the window's noise-normalised RMS misfit at least 3× and leaves at most 70 % of the
+//!    nominal cart's flagged samples in the first 5 s of the window (later, a correct physics
+//!    with parameters a hair off drifts away on a sensitive cart); else `unexplained`. No
+//!    disagreement: `none`.
 //!
 //! Pure numerics: a [`RollingCase`] in, a [`RollingDiagnosis`] out.
 
@@ -74,14 +75,28 @@ pub struct Track {
     pub states: Vec<Vec<f64>>,
     /// When the effect began (None: the nominal cart).
     pub onset_s: Option<f64>,
+    /// The run's right-hand-side evaluations per sample (the nominal cart's: what an altered
+    /// run may cost, [`BUDGET_FACTOR`] times over).
+    pub evaluations_per_sample: f64,
 }
 
 /// Relative (and, for angles, radian) probes of the twins, largest first.
 const PROBES: [f64; 4] = [1e-3, 1e-4, 1e-5, 1e-6];
 /// The leftover disagreement of an accepted physics is counted this long after the window's start (s).
 const FLAG_HORIZON_S: f64 = 5.0;
+/// The share of the nominal cart's flagged samples in the window's first [`FLAG_HORIZON_S`] that
+/// an accepted physics may leave flagged (the rocking diagnosis's `max_remaining_flagged` is for
+/// whole records). Calibrated on the tuning seeds 101 and 102 of `prove/rolling` (round 4): the
+/// right effect left at most 0.66 of them (a compliant neighbour fitted as a near one), a wrong
+/// effect 0.76 and causes outside the library 0.99 or more.
+const MAX_LEFT_EARLY: f64 = 0.7;
 /// How far past the disagreement's start the twins run (s).
 const TWIN_REACH_S: f64 = 2.0;
+/// An altered run may cost this many times the nominal cart's evaluations per sample (at least
+/// [`BUDGET_FLOOR`] per sample): beyond, its parameters make a stiff crawl (a locked wheel
+/// holding the cart still), judged as failing rather than waited for.
+const BUDGET_FACTOR: f64 = 50.0;
+const BUDGET_FLOOR: f64 = 300.0;
 
 impl RollingCase {
     fn excitation(&self) -> Excitation<'_> {
@@ -111,8 +126,10 @@ impl RollingCase {
             &Alteration::default(),
             None,
             self.samples() - 1,
+            None,
         )?;
         Ok(Track {
+            evaluations_per_sample: r.stats.rhs_evals as f64 / r.x_m.len().max(1) as f64,
             x_m: r.x_m,
             y_m: r.y_m,
             yaw_rad: r.yaw_rad,
@@ -149,6 +166,7 @@ impl RollingCase {
             ax_abs_mps2: vec![f64::NAN; n],
             states: Vec::new(),
             onset_s: Some(self.t0_s + k0 as f64 * self.dt_s),
+            evaluations_per_sample: 0.0,
         };
         for (to, from) in [
             (&mut track.x_m, &nominal.x_m),
@@ -162,6 +180,8 @@ impl RollingCase {
         if end <= k0 {
             return Ok(track);
         }
+        let per_sample = (BUDGET_FACTOR * nominal.evaluations_per_sample).max(BUDGET_FLOOR);
+        let budget = (nominal.evaluations_per_sample > 0.0).then(|| (per_sample * (end - k0) as f64) as usize);
         let r = simulate_altered(
             &self.cart,
             &self.friction,
@@ -170,6 +190,7 @@ impl RollingCase {
             alteration,
             Some((k0, &nominal.states[k0])),
             end,
+            budget,
         )?;
         track.x_m[k0..=end].copy_from_slice(&r.x_m);
         track.y_m[k0..=end].copy_from_slice(&r.y_m);
@@ -357,7 +378,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
     // wrong one, or a cause outside the library, leaves disagreement right after the onset.
     let accepted = best.bic < candidates[0].bic
         && best.rmse * settings.min_improvement <= candidates[0].rmse
-        && best.flagged_early as f64 <= settings.max_remaining_flagged * (candidates[0].flagged_early as f64).max(1.0);
+        && best.flagged_early as f64 <= MAX_LEFT_EARLY * (candidates[0].flagged_early as f64).max(1.0);
     let (verdict, model, window) = if accepted {
         let onset = best.track.onset_s.unwrap_or(window.0);
         (best.effect, best.track.clone(), (onset.min(window.0), window.1))

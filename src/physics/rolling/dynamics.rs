@@ -23,6 +23,27 @@ pub struct Alteration {
     /// A caster (0-based) whose swivel no longer turns.
     pub jam: Option<usize>,
     pub wall: Option<Wall>,
+    /// The mass change and the brake's drag build up linearly over this time (s) from the
+    /// alteration's start (0: at once): bottles falling off one by one, a pad whose drag grows.
+    /// [`simulate_altered`](super::simulate_altered) runs it as a staircase of constant pieces.
+    pub ramp_s: f64,
+}
+
+impl Alteration {
+    /// The alteration with its mass change and brake drag at `fraction` of their full size (the
+    /// jam and the wall are not ramped).
+    pub fn scaled(&self, fraction: f64) -> Alteration {
+        Alteration {
+            mass: self.mass.map(|m| MassChange { dm_kg: fraction * m.dm_kg, ..m }),
+            brake: self.brake.map(|b| Brake { mu: fraction * b.mu, ..b }),
+            ..*self
+        }
+    }
+
+    /// Whether anything builds up over `ramp_s`.
+    pub fn ramped(&self) -> bool {
+        self.ramp_s > 0.0 && (self.mass.is_some() || self.brake.is_some())
+    }
 }
 
 /// A point mass `dm_kg` (negative: lost) at body offset `at_m` from the platform centre.
@@ -268,6 +289,9 @@ impl NoSlip {
         }
         if alteration.jam.is_some_and(|j| j > 3) {
             return Err("a jammed swivel needs a caster 0..3".into());
+        }
+        if !(alteration.ramp_s.is_finite() && alteration.ramp_s >= 0.0) {
+            return Err(format!("a ramp lasts 0 s or more, got {} s", alteration.ramp_s));
         }
         if let Some(wall) = alteration.wall {
             if wall.axis > 1 || !(wall.restitution > 0.0 && wall.restitution <= 1.0 && wall.contact_s > 0.0) {

@@ -96,6 +96,35 @@ impl Response {
     pub fn count(&self, kind: EventKind) -> usize {
         self.events.iter().filter(|e| e.kind == kind).count()
     }
+
+    /// Appends a run that starts where this one ends (its first sample, the shared one, is
+    /// dropped; its first-motion event too, which only says that the piece began moving).
+    fn continue_with(&mut self, next: Response) {
+        fn tail<T: Clone>(to: &mut Vec<T>, from: &[T]) {
+            to.extend_from_slice(from.get(1..).unwrap_or_default());
+        }
+        tail(&mut self.x_m, &next.x_m);
+        tail(&mut self.y_m, &next.y_m);
+        tail(&mut self.yaw_rad, &next.yaw_rad);
+        tail(&mut self.vx_mps, &next.vx_mps);
+        tail(&mut self.vy_mps, &next.vy_mps);
+        tail(&mut self.yaw_rate_radps, &next.yaw_rate_radps);
+        for i in 0..4 {
+            tail(&mut self.delta_rad[i], &next.delta_rad[i]);
+            tail(&mut self.roll_speed_mps[i], &next.roll_speed_mps[i]);
+            tail(&mut self.swivel_rate_radps[i], &next.swivel_rate_radps[i]);
+        }
+        tail(&mut self.ax_abs_mps2, &next.ax_abs_mps2);
+        tail(&mut self.ay_abs_mps2, &next.ay_abs_mps2);
+        tail(&mut self.kinetic_energy_j, &next.kinetic_energy_j);
+        tail(&mut self.resting, &next.resting);
+        tail(&mut self.states, &next.states);
+        self.events.extend(next.events.into_iter().filter(|e| e.kind != EventKind::Breakaway));
+        self.stats.accepted += next.stats.accepted;
+        self.stats.rejected += next.stats.rejected;
+        self.stats.rhs_evals += next.stats.rhs_evals;
+        self.stats.events += next.stats.events;
+    }
 }
 
 fn peak(values: impl Iterator<Item = f64>) -> (f64, usize) {
@@ -159,11 +188,23 @@ pub fn simulate(
     }
 }
 
+/// Constant pieces a ramped alteration ([`Alteration::ramp_s`]) is run as: each at the ramp's
+/// value at the piece's middle (the midpoint rule: the drag's impulse and the mass's history are
+/// off by O(1/pieces²) of the ramp's effect).
+const RAMP_PIECES: usize = 16;
+
 /// The no-slip cart with an [`Alteration`] from sample `start` to sample `end` (inclusive), its
 /// states kept: from the cart's initial pose at rest when `start` is None (the alteration acts
 /// from the first sample), else from `start = (k, y)`, the nominal cart's state `y` at sample k,
 /// which the alteration changes as it begins ([`NoSlip::enter`]). Outputs cover samples k..=end.
+/// A ramped alteration runs as `RAMP_PIECES` constant pieces over its ramp (at most one per
+/// sample), each entered from the one before (a captured mass shares the momentum piece by
+/// piece; a lost one leaves with its own velocity), then the full alteration.
+/// `budget` caps the right-hand-side evaluations of the whole run (an error past it): a fit
+/// tries parameters whose cart crawls through a stiff stick (a locked wheel holding it) and
+/// would otherwise take minutes to say it fits badly.
 /// Regularised friction only (an alteration has no exact stick).
+#[allow(clippy::too_many_arguments)]
 pub fn simulate_altered(
     cart: &Cart,
     friction: &Friction,
@@ -172,6 +213,7 @@ pub fn simulate_altered(
     alteration: &Alteration,
     start: Option<(usize, &[f64])>,
     end: usize,
+    budget: Option<usize>,
 ) -> Result<Response, String> {
     let n = excitation.ax_mps2.len();
     if friction.law != FrictionLaw::Regularised || options.lateral_slip.is_some() {
@@ -183,35 +225,65 @@ pub fn simulate_altered(
     }
     cart.check(false)?;
     friction.check()?;
-    let model = NoSlip::altered(cart, friction, options.g_mps2, alteration)?;
-    let y = match start {
+    // Checks the full alteration (a ramp's pieces are smaller versions of it).
+    NoSlip::altered(cart, friction, options.g_mps2, alteration)?;
+    let mut before = NoSlip::new(cart, friction, options.g_mps2);
+    let mut y = match start {
         None => {
             let mut y = [0.0; 10];
             y[2] = options.yaw0_rad;
             y[3..7].copy_from_slice(&options.steer0_rad);
             y
         }
-        Some((_, state)) => {
-            let state: [f64; 10] =
-                state.try_into().map_err(|_| format!("a cart state has 10 values, got {}", state.len()))?;
-            model.enter(&NoSlip::new(cart, friction, options.g_mps2), &state)
-        }
+        Some((_, state)) => state.try_into().map_err(|_| format!("a cart state has 10 values, got {}", state.len()))?,
     };
-    let part = Excitation {
-        t0_s: excitation.t0_s + k0 as f64 * excitation.dt_s,
-        dt_s: excitation.dt_s,
-        ax_mps2: &excitation.ax_mps2[k0..=end],
-        ay_mps2: &excitation.ay_mps2[k0..=end],
-    };
-    let mut run = Run::new(&model, &part, friction.law, friction.eps_mps);
-    run.keep_states = true;
-    match options.method {
-        Method::Adaptive { rtol, atol } => {
-            let tolerances: [f64; 10] = std::array::from_fn(|i| if i < 7 { atol } else { 10.0 * atol });
-            run.run(Dopri5::new(rtol, tolerances, excitation.dt_s), y)
+    let mut response: Option<Response> = None;
+    let mut used = 0;
+    for (first, last, piece) in pieces(alteration, k0, end, excitation.dt_s) {
+        let model = NoSlip::altered(cart, friction, options.g_mps2, &piece)?;
+        if start.is_some() || first > k0 {
+            y = model.enter(&before, &y);
         }
-        Method::Rk4 { dt_s } => run.run(Rk4::new(dt_s), y),
+        let part = Excitation {
+            t0_s: excitation.t0_s + first as f64 * excitation.dt_s,
+            dt_s: excitation.dt_s,
+            ax_mps2: &excitation.ax_mps2[first..=last],
+            ay_mps2: &excitation.ay_mps2[first..=last],
+        };
+        let mut run = Run::new(&model, &part, friction.law, friction.eps_mps);
+        run.keep_states = true;
+        run.budget = budget.map(|b| b.saturating_sub(used));
+        let next = match options.method {
+            Method::Adaptive { rtol, atol } => {
+                let tolerances: [f64; 10] = std::array::from_fn(|i| if i < 7 { atol } else { 10.0 * atol });
+                run.run(Dopri5::new(rtol, tolerances, excitation.dt_s), y)?
+            }
+            Method::Rk4 { dt_s } => run.run(Rk4::new(dt_s), y)?,
+        };
+        let state = next.states.last().ok_or("an altered run kept no state")?;
+        y = state.as_slice().try_into().map_err(|_| "an altered run kept a malformed state".to_string())?;
+        used += next.stats.rhs_evals;
+        match response.as_mut() {
+            None => response = Some(next),
+            Some(r) => r.continue_with(next),
+        }
+        before = model;
     }
+    response.ok_or_else(|| "an altered run covered no samples".to_string())
+}
+
+/// The constant pieces (first sample, last sample, alteration) of an altered run over k0..=end.
+fn pieces(alteration: &Alteration, k0: usize, end: usize, dt_s: f64) -> Vec<(usize, usize, Alteration)> {
+    if !alteration.ramped() {
+        return vec![(k0, end, *alteration)];
+    }
+    let ramp = ((alteration.ramp_s / dt_s).round() as usize).max(1);
+    let count = RAMP_PIECES.min(ramp);
+    let mut starts: Vec<(usize, Alteration)> =
+        (0..count).map(|j| (k0 + j * ramp / count, alteration.scaled((j as f64 + 0.5) / count as f64))).collect();
+    starts.push((k0 + ramp, *alteration));
+    starts.retain(|(k, _)| *k < end);
+    (0..starts.len()).map(|i| (starts[i].0, starts.get(i + 1).map_or(end, |s| s.0), starts[i].1)).collect()
 }
 
 fn dispatch<const N: usize, D: Dynamics<N>>(
@@ -254,6 +326,8 @@ struct Run<'a, const N: usize, D: Dynamics<N>> {
     energy_rest: f64,
     /// Keep the full state of every sample in the response.
     keep_states: bool,
+    /// Right-hand-side evaluations allowed (None: no limit).
+    budget: Option<usize>,
 }
 
 /// The floor inside one sample interval: linear in time.
@@ -288,6 +362,7 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
             energy_moving: 0.5 * mass * MOVING_SPEED_MPS * MOVING_SPEED_MPS,
             energy_rest: 0.5 * mass * rest_speed * rest_speed,
             keep_states: false,
+            budget: None,
         }
     }
 
@@ -407,6 +482,14 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
                     stepper.reset();
                     push(&mut response, t_end, EventKind::Rest, None, &y);
                 }
+            }
+            if let Some(budget) = self.budget.filter(|b| stepper.stats().rhs_evals > *b) {
+                return Err(format!("the run needs more than {budget} evaluations by t = {t_end:.3} s (too stiff)"));
+            }
+            if !y.iter().all(|v| v.is_finite()) {
+                return Err(format!(
+                    "the cart's state is no longer a number at t = {t_end:.3} s: the run diverged (too stiff a friction law or too large a change)"
+                ));
             }
             self.record(&mut response, k + 1, regime, &y);
         }

@@ -492,6 +492,7 @@ mod alterations {
             brake: Some(Brake { caster: 1, mu: 0.3 }),
             jam: Some(2),
             wall: None,
+            ramp_s: 0.0,
         };
         let friction = table4_friction("MC2");
         let model = altered(alteration, &friction);
@@ -587,8 +588,9 @@ mod alterations {
         let excitation = Excitation { t0_s: 0.0, dt_s: 0.005, ax_mps2: &zeros, ay_mps2: &zeros };
         let options = Options { yaw0_rad: yaw, steer0_rad: [-yaw; 4], ..Options::default() };
         let y0 = [0.0, 0.0, yaw, -yaw, -yaw, -yaw, -yaw, 0.5, 0.0, 0.0];
-        let r = simulate_altered(&cart, &frictionless(), &excitation, &options, &alteration, Some((0, &y0)), n - 1)
-            .unwrap();
+        let r =
+            simulate_altered(&cart, &frictionless(), &excitation, &options, &alteration, Some((0, &y0)), n - 1, None)
+                .unwrap();
         let speed = |k: usize| {
             let s = &r.states[k];
             // v_corner,x = ẋ − ω r_y of corner 4, r_y = a sin θ − b cos θ.
@@ -631,6 +633,7 @@ mod alterations {
             &alteration,
             Some((0, &y0)),
             n - 1,
+            None,
         )
         .unwrap();
         let m = cart.platform_mass_kg + 4.0 * cart.wheel_mass_kg;
@@ -664,5 +667,74 @@ mod alterations {
         assert!(after < 0.0 && r.x_m[n - 1] < 0.01, "the cart rebounds: {after} m/s at x = {}", r.x_m[n - 1]);
         // The integrator's tolerance and the light wheels' inertia: within 1 %.
         assert!((ratio - exact).abs() < 0.01 * exact, "rebound ratio {ratio} vs the closed form {exact}");
+    }
+
+    /// A cart moving along +X with its casters along it, frictionless and unforced, from rest pose.
+    fn straight(cart: &Cart, alteration: &Alteration, v0: f64, n: usize, dt: f64) -> Response {
+        let zeros = vec![0.0; n];
+        let excitation = Excitation { t0_s: 0.0, dt_s: dt, ax_mps2: &zeros, ay_mps2: &zeros };
+        let y0 = [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, v0, 0.0, 0.0];
+        simulate_altered(
+            cart,
+            &frictionless(),
+            &excitation,
+            &Options::default(),
+            alteration,
+            Some((0, &y0)),
+            n - 1,
+            None,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn a_mass_captured_over_a_ramp_shares_the_momentum_piece_by_piece() {
+        // Centred, frictionless, unforced, straight along X: every piece of the ramp is a
+        // perfectly inelastic capture, so the X momentum M₀₀ v is conserved across the whole ramp
+        // (v₁ = v₀ M₀₀/M₀₀' whatever the pieces), and halfway through the ramp about half the mass
+        // has been captured (the staircase's piece there holds 8.5/16 of it).
+        let cart = Cart { trail_m: 0.2, ..prototype() };
+        let (dm, ramp, v0, dt) = (30.0, 0.2, 0.5, 0.001);
+        let alteration = Alteration {
+            mass: Some(MassChange { dm_kg: dm, at_m: [0.0, 0.0] }),
+            ramp_s: ramp,
+            ..Alteration::default()
+        };
+        let r = straight(&cart, &alteration, v0, 401, dt);
+        let y = [0.0; 10];
+        let m00 = |dm: f64| {
+            let change = Alteration { mass: Some(MassChange { dm_kg: dm, at_m: [0.0, 0.0] }), ..Alteration::default() };
+            NoSlip::altered(&cart, &frictionless(), G_MPS2, &change).unwrap().mass_matrix(&y)[0][0]
+        };
+        let end = r.states.last().unwrap()[7];
+        let exact = v0 * m00(0.0) / m00(dm);
+        eprintln!("ramped capture: {v0} → {end:.9} m/s, closed form {exact:.9}");
+        assert!((end - exact).abs() < 1e-9, "{end} vs {exact}");
+        let half = r.states[(0.5 * ramp / dt).round() as usize + 1][7];
+        let (slow, fast) = (v0 * m00(0.0) / m00(0.6 * dm), v0 * m00(0.0) / m00(0.4 * dm));
+        assert!(slow < half && half < fast, "halfway: {half} m/s, not within ({slow}, {fast})");
+    }
+
+    #[test]
+    fn a_pad_whose_drag_builds_up_dissipates_the_linear_ramps_work() {
+        // Only the braked wheel has friction: the kinetic energy lost equals ∫ μ(t) N v tanh(v/ε) dt
+        // with μ(t) = μ min(1, t/T) the linear ramp (trapezoid rule on the run's own wheel speed),
+        // to the staircase's and the quadrature's error; a step would lose ~17 % more here.
+        let cart = Cart { trail_m: 0.2, ..prototype() };
+        let (mu, ramp, v0, dt, n) = (0.3, 0.2, 0.5, 0.001, 401);
+        let alteration = Alteration { brake: Some(Brake { caster: 0, mu }), ramp_s: ramp, ..Alteration::default() };
+        let r = straight(&cart, &alteration, v0, n, dt);
+        let model = NoSlip::altered(&cart, &frictionless(), G_MPS2, &alteration).unwrap();
+        let load = model.wheel_loads()[0];
+        let eps = frictionless().eps_mps;
+        let power = |k: usize| {
+            let v = r.roll_speed_mps[0][k];
+            mu * (k as f64 * dt / ramp).min(1.0) * load * v * (v / eps).tanh()
+        };
+        let work: f64 = (0..n - 1).map(|k| 0.5 * dt * (power(k) + power(k + 1))).sum();
+        let lost = r.kinetic_energy_j[0] - r.kinetic_energy_j[n - 1];
+        eprintln!("ramped brake: kinetic energy lost {lost:.5} J, the linear ramp's work {work:.5} J");
+        assert!(lost > 1.0, "the brake must do real work: {lost} J");
+        assert!((lost - work).abs() < 5e-3 * work, "lost {lost} J vs {work} J");
     }
 }

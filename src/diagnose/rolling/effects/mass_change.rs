@@ -1,7 +1,9 @@
 //! `mass_change`: at t0 a point mass dm is lost (dm < 0: it leaves with its own velocity) or
 //! gained (dm > 0: captured at rest on the floor, sharing momentum) at a body offset (dx, dy)
 //! from the platform centre: the platform's mass, yaw inertia, centre of mass and wheel loads
-//! change. Parameters: t0, dm, dx, dy.
+//! change. Parameters: t0, dm, dx, dy and the ramp: the change happens at once (0) or spreads
+//! linearly over that time (bottles falling off one by one, a load slid off), a staircase of
+//! small changes each entered as the step one is.
 //!
 //! What the records can tell apart: friction scales with the loads, so a change at the centre
 //! alters the motion only through the wheels' and casters' own inertia, which stay the same
@@ -20,6 +22,11 @@ const ONSETS: [f64; 6] = [-1.5, -1.0, -0.6, -0.3, -0.1, 0.0];
 
 /// Largest offset as a fraction of the half-length and half-width.
 const REACH: f64 = 0.9;
+/// Longest ramp (s), and the ramp the grid tries besides a step.
+const MAX_RAMP_S: f64 = 2.0;
+const GRID_RAMP_S: f64 = 0.8;
+/// Onsets tried for a gradual change (s from the window's start): it shows part-way through.
+const RAMP_ONSETS: [f64; 4] = [-1.5, -1.0, -0.6, -0.3];
 
 impl Effect for MassChange {
     fn name(&self) -> &'static str {
@@ -27,7 +34,7 @@ impl Effect for MassChange {
     }
 
     fn parameter_names(&self) -> &'static [&'static str] {
-        &["t0_s", "dm_kg", "dx_m", "dy_m"]
+        &["t0_s", "dm_kg", "dx_m", "dy_m", "ramp_s"]
     }
 
     fn bounds(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<(f64, f64)> {
@@ -37,25 +44,31 @@ impl Effect for MassChange {
             (-0.6 * m, 1.0 * m),
             (-REACH * a, REACH * a),
             (-REACH * b, REACH * b),
+            (0.0, MAX_RAMP_S),
         ]
     }
 
     fn grid(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<Vec<f64>> {
         let (m, a, b) = (case.cart.platform_mass_kg, 0.5 * case.cart.length_m, 0.5 * case.cart.width_m);
         let offsets = [(0.0, 0.0), (0.5, 0.5), (-0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)];
-        product(&[onsets_at(case, window, &ONSETS), vec![-0.35 * m, -0.15 * m, 0.3 * m]])
+        let steps = product(&[onsets_at(case, window, &ONSETS), vec![-0.35 * m, -0.15 * m, 0.3 * m], vec![0.0]]);
+        let ramps = product(&[onsets_at(case, window, &RAMP_ONSETS), vec![-0.35 * m, -0.15 * m], vec![GRID_RAMP_S]]);
+        steps
             .into_iter()
-            .flat_map(|p| offsets.iter().map(move |(x, y)| vec![p[0], p[1], x * a, y * b]))
+            .chain(ramps)
+            .flat_map(|p| offsets.iter().map(move |(x, y)| vec![p[0], p[1], x * a, y * b, p[2]]))
             .collect()
     }
 
     fn alteration(&self, _: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {
-        Ok((Alteration { mass: Some(Change { dm_kg: p[1], at_m: [p[2], p[3]] }), ..Alteration::default() }, p[0]))
+        let mass = Some(Change { dm_kg: p[1], at_m: [p[2], p[3]] });
+        Ok((Alteration { mass, ramp_s: p[4], ..Alteration::default() }, p[0]))
     }
 
     fn explain(&self, case: &RollingCase, _: &Track, p: &[f64]) -> String {
         format!(
-            "at {:.2} s {:.1} kg ({:.0} % of the platform) is {} at ({:+.2} m, {:+.2} m) from the platform centre (body axes), moving the centre of mass to ({:+.3} m, {:+.3} m)",
+            "{} {:.2} s {:.1} kg ({:.0} % of the platform) is {} at ({:+.2} m, {:+.2} m) from the platform centre (body axes), moving the centre of mass to ({:+.3} m, {:+.3} m)",
+            if p[4] > 0.0 { format!("over {:.2} s from", p[4]) } else { "at".to_string() },
             p[0],
             p[1].abs(),
             100.0 * p[1].abs() / case.cart.platform_mass_kg,
