@@ -590,24 +590,35 @@ fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String
             bail!("`{}` is given twice as an input", path.display());
         }
     }
-    let stage_spec = crate::pipeline::spec::StageSpec {
-        stage_type: name.to_string(),
+    let spec = command_spec(name, sources, params, output);
+    let plan = Plan::for_command("shakeflow stage", spec, stages::registry())?;
+    Ok(run_command_plan(&plan, output)?.0)
+}
+
+/// The pipeline of a command: `sources` read by one stage of type `stage_type` (named after
+/// it), written at `output`.
+fn command_spec(
+    stage_type: &str,
+    sources: indexmap::IndexMap<String, SourceSpec>,
+    params: BTreeMap<String, serde_yaml::Value>,
+    output: &Path,
+) -> crate::pipeline::spec::PipelineSpec {
+    let stage = crate::pipeline::spec::StageSpec {
+        stage_type: stage_type.to_string(),
         description: None,
         inputs: sources.keys().cloned().collect(),
         params,
         select: BTreeMap::new(),
         keep: true,
     };
-    let spec = crate::pipeline::spec::PipelineSpec {
+    crate::pipeline::spec::PipelineSpec {
         version: crate::pipeline::spec::FORMAT_VERSION,
         description: None,
         output_dir: output.display().to_string(),
         inputs: sources,
-        stages: indexmap::IndexMap::from([(name.to_string(), stage_spec)]),
+        stages: indexmap::IndexMap::from([(stage_type.to_string(), stage)]),
         executor: None,
-    };
-    let plan = Plan::for_command("shakeflow stage", spec, stages::registry())?;
-    Ok(run_command_plan(&plan, output)?.0)
+    }
 }
 
 /// Runs the one stage of a command's plan all or nothing: a failed unit leaves `output` as it
@@ -765,22 +776,7 @@ fn diagnose_cases(cases: &[PathBuf], out: &Path, set: &[String]) -> anyhow::Resu
             "partition": {"case": name}});
         sources.insert(dir.display().to_string(), serde_json::from_value(spec)?);
     }
-    let stage = crate::pipeline::spec::StageSpec {
-        stage_type: stages::Stage::info(&stages::diagnose::Diagnose).name.to_string(),
-        description: None,
-        inputs: sources.keys().cloned().collect(),
-        params,
-        select: BTreeMap::new(),
-        keep: true,
-    };
-    let spec = crate::pipeline::spec::PipelineSpec {
-        version: crate::pipeline::spec::FORMAT_VERSION,
-        description: None,
-        output_dir: out.display().to_string(),
-        inputs: sources,
-        stages: indexmap::IndexMap::from([(stage.stage_type.clone(), stage)]),
-        executor: None,
-    };
+    let spec = command_spec(stages::Stage::info(&stages::diagnose::Diagnose).name, sources, params, out);
     let plan = Plan::for_command("shakeflow diagnose", spec, stages::registry())?;
     let (status, succeeded) = run_command_plan(&plan, out)?;
     if succeeded {

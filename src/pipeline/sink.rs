@@ -151,12 +151,7 @@ impl OutputSink {
         let dir = self.root.join(output);
         std::fs::create_dir_all(&dir).map_err(|e| anyhow!("cannot create `{}`: {e}", dir.display()))?;
         let path = dir.join(name);
-        crate::io::atomic::write_file(&path, |w| {
-            std::io::Write::write_all(w, bytes)?;
-            Ok(())
-        })?;
-        self.hashes.lock().expect("no panics while holding the lock").insert(path, hash::hash_bytes(bytes));
-        Ok(())
+        self.write_hashed(path, bytes)
     }
 
     /// Writes a page output: the one file `<stage>/<output>` (an `index.html`).
@@ -166,6 +161,11 @@ impl OutputSink {
         }
         std::fs::create_dir_all(&self.root).map_err(|e| anyhow!("cannot create `{}`: {e}", self.root.display()))?;
         let path = self.root.join(output);
+        self.write_hashed(path, bytes)
+    }
+
+    /// Writes `bytes` to `path` (temp file and rename) and records its hash.
+    fn write_hashed(&self, path: PathBuf, bytes: &[u8]) -> anyhow::Result<()> {
         crate::io::atomic::write_file(&path, |w| {
             std::io::Write::write_all(w, bytes)?;
             Ok(())
@@ -190,12 +190,7 @@ impl OutputSink {
         let dir = self.root.join(record);
         std::fs::create_dir_all(&dir).map_err(|e| anyhow!("cannot create `{}`: {e}", dir.display()))?;
         let path = dir.join(output);
-        crate::io::atomic::write_file(&path, |w| {
-            std::io::Write::write_all(w, bytes)?;
-            Ok(())
-        })?;
-        self.hashes.lock().expect("no panics while holding the lock").insert(path, hash::hash_bytes(bytes));
-        Ok(())
+        self.write_hashed(path, bytes)
     }
 
     /// The hashes of the files written.
