@@ -605,7 +605,8 @@ fn predict(
         }
     }
     for line in &mut lines {
-        for (id, why) in remake.get(&line.name).into_iter().flatten() {
+        let Some(remade) = remake.get(&line.name) else { continue };
+        for (id, why) in remade {
             line.stale.push(UnitStatus { id: id.clone(), reasons: vec![why.clone()] });
         }
         let order: BTreeMap<&str, usize> = line.ids.iter().enumerate().map(|(i, id)| (id.as_str(), i)).collect();
@@ -694,7 +695,6 @@ fn selected_stages(plan: &Plan, options: &RunOptions) -> Result<BTreeSet<String>
 
 pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Result<RunSummary> {
     let selected = selected_stages(plan, options)?;
-    let output_dir = plan.file.output_dir();
     let sources = resolve_sources(plan)?;
     let files = param_file_hashes(plan)?;
     let (lease, lock) = take_output_folder(plan, &sources, reporter)?;
@@ -726,12 +726,7 @@ pub fn run(plan: &Plan, options: &RunOptions, reporter: &Reporter) -> anyhow::Re
             return Err(e);
         }
     };
-    for path in not_kept(plan, &selected, &state.tainted, &state.entries) {
-        state.install.remove(&path);
-        if output_dir.join(&path).exists() {
-            state.remove.insert(path);
-        }
-    }
+    leave_out_not_kept(plan, &selected, &state.tainted, &state.entries, &mut state.install, &mut state.remove);
     if let Some(error) = fatal {
         // A stage could not be planned (a bad select, two records with one partition): what
         // finished before it is still committed below only when nothing is in doubt.
@@ -798,17 +793,21 @@ fn take_output_folder(
     Ok((lease, lock))
 }
 
-/// The files of `keep: false` stages this commit leaves out (paths relative to the output
-/// folder): those of every such stage that ran in full, as did every stage reading it (cached
-/// counts: it is up to date with them). Their lockfile entries stay, hashes and all.
-fn not_kept(
+/// Takes the files of `keep: false` stages out of a commit's `install` and puts those on disk in
+/// its `remove` (paths relative to the output folder): the files of every such stage that ran in
+/// full, as did every stage reading it (cached counts: it is up to date with them). Their
+/// lockfile entries stay, hashes and all.
+fn leave_out_not_kept(
     plan: &Plan,
     selected: &BTreeSet<String>,
     tainted: &BTreeSet<String>,
     entries: &BTreeMap<String, StageLock>,
-) -> Vec<String> {
+    install: &mut BTreeSet<String>,
+    remove: &mut BTreeSet<String>,
+) {
     let done = |name: &str| selected.contains(name) && !tainted.contains(name);
-    plan.stages
+    let not_kept = plan
+        .stages
         .values()
         .filter(|s| !s.keep && done(&s.name))
         .filter(|s| {
@@ -821,8 +820,14 @@ fn not_kept(
                 .iter()
                 .filter(|(id, _)| *id != FLAGGED_UNIT)
                 .flat_map(|(_, unit)| unit.files.keys().map(|file| plan.stage_entry(&s.name, file)))
-        })
-        .collect()
+        });
+    let output_dir = plan.file.output_dir();
+    for path in not_kept {
+        install.remove(&path);
+        if output_dir.join(&path).exists() {
+            remove.insert(path);
+        }
+    }
 }
 
 fn commit(transaction: Transaction, state: &RunState, plan: &Plan, lock: &LockFile) -> anyhow::Result<()> {

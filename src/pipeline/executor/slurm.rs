@@ -33,9 +33,9 @@ use anyhow::{anyhow, bail, Context};
 use serde::{Deserialize, Serialize};
 
 use super::{
-    assess_stage, execute, fold, forced_stages, not_kept, param_file_hashes, predict, resolve_sources, selected_stages,
-    upstream_stages, Prediction, Produced, ProducedFile, Rerun, RunOptions, RunSummary, UnitOutcome, UnitProblem,
-    UnitRecord,
+    assess_stage, execute, fold, forced_stages, leave_out_not_kept, param_file_hashes, predict, resolve_sources,
+    selected_stages, upstream_stages, Prediction, Produced, ProducedFile, Rerun, RunOptions, RunSummary, UnitOutcome,
+    UnitProblem, UnitRecord,
 };
 use crate::error::UserError;
 use crate::pipeline::lease::{Lease, STATE_DIR};
@@ -797,12 +797,8 @@ fn commit_manifests(run_dir: &Path, run: &RunFile, plan: &Plan, lease: &Lease) -
         new_lock.stages.insert(name.clone(), entry);
     }
     let options = RunOptions { force: run.force.clone(), only: run.only.clone(), ..RunOptions::default() };
-    for path in not_kept(plan, &selected_stages(plan, &options)?, &tainted, &new_lock.stages) {
-        install.remove(&path);
-        if output_dir.join(&path).exists() {
-            remove.insert(path);
-        }
-    }
+    let selected = selected_stages(plan, &options)?;
+    leave_out_not_kept(plan, &selected, &tainted, &new_lock.stages, &mut install, &mut remove);
     let install: Vec<String> = install.into_iter().collect();
     let remove: Vec<String> = remove.into_iter().filter(|r| !install.contains(r)).collect();
     transaction.commit(&install, &remove, Some(&new_lock))?;
