@@ -547,6 +547,7 @@ fn upstream_produced(
     plan: &Plan,
     lock: &LockFile,
     stage: &str,
+    shard: usize,
 ) -> anyhow::Result<(BTreeMap<String, Produced>, bool)> {
     let mut produced = BTreeMap::new();
     let mut tainted = false;
@@ -571,13 +572,18 @@ fn upstream_produced(
                 }
             }
             Some(shards) => {
-                for (shard, ids) in shards.iter().enumerate() {
-                    let path = run_dir.join("manifests").join(name).join(format!("{shard}.json"));
+                // Aligned shards (`aftercorr`): this task's units read its own upstream shard
+                // only; the others may still be running, and their state is not this task's.
+                let own = aligned(plan, run, stage, name).then_some(shard);
+                for (index, ids) in shards.iter().enumerate() {
+                    let counts = own.is_none_or(|own| own == index);
+                    let path = run_dir.join("manifests").join(name).join(format!("{index}.json"));
                     let Ok(bytes) = std::fs::read(&path) else {
-                        // Not submitted (all cached) or not finished: what is committed stands.
-                        let submitted = run.submitted(name, shard);
-                        tainted |= submitted;
-                        if !submitted {
+                        // Not submitted (all cached) or not finished: what is committed stands
+                        // (so its records are not taken for gone).
+                        let submitted = run.submitted(name, index);
+                        tainted |= submitted && counts;
+                        if !submitted || !counts {
                             for id in ids {
                                 files.extend(committed(id));
                             }
@@ -585,7 +591,7 @@ fn upstream_produced(
                         continue;
                     };
                     let manifest: Manifest = serde_json::from_slice(&bytes)?;
-                    tainted |= manifest.upstream_tainted;
+                    tainted |= manifest.upstream_tainted && counts;
                     for record in manifest.records {
                         match record.outcome {
                             UnitOutcome::Cached => files.extend(committed(&record.id)),
@@ -594,7 +600,7 @@ fn upstream_produced(
                                     .into_iter()
                                     .map(|(f, hash)| (f.clone(), ProducedFile { path: dir.join(&f), hash })),
                             ),
-                            UnitOutcome::Failed { .. } => tainted = true,
+                            UnitOutcome::Failed { .. } => tainted |= counts,
                             UnitOutcome::Flagged { .. } => {}
                         }
                     }
@@ -621,7 +627,7 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
     let sources = resolve_sources(&plan)?;
     let files = param_file_hashes(&plan)?;
-    let (produced, upstream_tainted) = upstream_produced(run_dir, &run, &plan, &lock, stage_name)?;
+    let (produced, upstream_tainted) = upstream_produced(run_dir, &run, &plan, &lock, stage_name, shard)?;
     let rerun = Rerun { stages: forced_stages(&plan, &run.force), remake: run.remake.clone() };
     let assessed = assess_stage(&plan, stage, &sources, &produced, &files, &lock, &rerun)?;
     // A unit nobody predicted (a partition no earlier output had) goes to the last shard.
