@@ -130,6 +130,12 @@ def conceal(rng, effect, unit, ax, ay, base):
                    formulation="step")
         if not gain and rng.random() < 0.4:
             alt.update(formulation="gradual", ramp_s=round(float(rng.uniform(0.2, 1.5)), 3))
+        # A change that moves the centre of mass past a wheel's support line tips the cart: the
+        # four-support loads (cart.py) would go negative, which no real cart shows. Redraw.
+        m_after = unit["platform_mass_kg"] + alt["dm_kg"]
+        cx, cy = alt["dm_kg"] * alt["dx_m"] / m_after, alt["dm_kg"] * alt["dy_m"] / m_after
+        if min(1.0 + cx * sx / a + cy * sy / b for sx in (1, -1) for sy in (1, -1)) <= 0.0:
+            return None
     elif effect == "caster_brake":
         alt = dict(effect=effect, t0_s=t0, wheel=int(rng.integers(4)), formulation="locked",
                    mu_drag=round(float(rng.uniform(0.05, 1.2)), 4))

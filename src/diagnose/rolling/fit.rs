@@ -3,6 +3,15 @@
 //! the window's start, Nelder–Mead (argmin) from the best grid points over growing horizons, in
 //! coordinates scaled to the ranges with the discrete parameters (a caster, a side) held, and
 //! every optimum judged on the whole record.
+//!
+//! A fit spends a bounded number of the cart's right-hand-side evaluations, counted in runs of
+//! the record's length at the nominal cart's cost per sample, at most [`UNIT_PER_SAMPLE`]
+//! evaluations per sample (a cart that crawls through stiff sticking costs more, and is fitted
+//! within the same absolute bound): [`GRID_RUNS`] shared by a grid's points, at least
+//! [`GRID_POINT_RUNS`] each (a point runs over a short horizon), [`SEARCH_RUNS`] for each start's searches, spent in their order, and [`JUDGE_RUNS`]
+//! for each optimum's whole-record run. A run past its allowance fails. A case whose parameters
+//! make stiff runs is so fitted in bounded time, and the same on every machine: the allowance
+//! is counted, never timed.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -20,6 +29,36 @@ const STARTS: usize = 2;
 const GRID_HORIZON: f64 = 1.0;
 const HORIZONS: [f64; 2] = [1.5, 4.0];
 const MAX_ITERATIONS: u64 = 30;
+/// What a grid may spend, shared by its points, each of which may spend at least
+/// [`GRID_POINT_RUNS`] (a grid point spans a few seconds of a record of tens); what each
+/// start's searches and each optimum's whole-record run may spend; in runs of the record's length.
+const GRID_RUNS: f64 = 40.0;
+const GRID_POINT_RUNS: f64 = 0.3;
+const SEARCH_RUNS: f64 = 20.0;
+const JUDGE_RUNS: f64 = 10.0;
+/// The most a run of the record's length is counted at, per sample: the nominal cart of the
+/// study's units costs 10 to 20 on a record that moves it (Dopri5 at the default tolerances).
+const UNIT_PER_SAMPLE: f64 = 25.0;
+
+/// Right-hand-side evaluations a part of the fit may still spend. One allowance is spent by
+/// one sequence of runs (a grid point, a start's searches), so what it allows is deterministic.
+struct Allowance(AtomicUsize);
+
+impl Allowance {
+    fn new(case: &RollingCase, nominal: &Track, runs: f64) -> Allowance {
+        let samples = case.samples() as f64;
+        let run = (nominal.evaluations as f64).min(UNIT_PER_SAMPLE * samples);
+        Allowance(AtomicUsize::new((runs * run) as usize))
+    }
+
+    fn left(&self) -> usize {
+        self.0.load(Ordering::Relaxed)
+    }
+
+    fn spend(&self, evaluations: usize) {
+        self.0.store(self.left().saturating_sub(evaluations), Ordering::Relaxed);
+    }
+}
 
 pub struct Fit {
     pub params: Vec<f64>,
@@ -37,14 +76,21 @@ struct Objective<'a> {
 }
 
 impl Objective<'_> {
-    fn track(&self, params: &[f64], until: f64) -> Option<Track> {
+    /// The effect's run until `until`, within `allowance` (None: failed, or nothing left).
+    fn track(&self, params: &[f64], until: f64, allowance: &Allowance) -> Option<Track> {
+        let left = allowance.left();
+        if left == 0 {
+            return None;
+        }
         self.evaluations.fetch_add(1, Ordering::Relaxed);
         let (alteration, onset) = self.effect.alteration(self.case, self.nominal, params).ok()?;
-        self.case.altered(self.nominal, &alteration, onset, until).ok()
+        let run = self.case.altered(self.nominal, &alteration, onset, until, Some(left));
+        allowance.spend(run.as_ref().map_or_else(|(_, spent)| *spent, |t| t.evaluations));
+        run.ok()
     }
 
-    fn chi2(&self, params: &[f64], until: f64) -> f64 {
-        self.track(params, until)
+    fn chi2(&self, params: &[f64], until: f64, allowance: &Allowance) -> f64 {
+        self.track(params, until, allowance)
             .map_or(f64::INFINITY, |t| self.evidence.misfit_between(&t, f64::NEG_INFINITY, until).chi2)
     }
 }
@@ -56,6 +102,7 @@ struct Scaled<'a> {
     continuous: &'a [usize],
     template: &'a [f64],
     until: f64,
+    allowance: &'a Allowance,
 }
 
 impl Scaled<'_> {
@@ -75,7 +122,7 @@ impl CostFunction for Scaled<'_> {
 
     fn cost(&self, u: &Vec<f64>) -> Result<f64, Error> {
         let outside: f64 = u.iter().map(|v| (v - v.clamp(0.0, 1.0)).abs()).sum();
-        Ok(self.objective.chi2(&self.params(u), self.until) * (1.0 + outside))
+        Ok(self.objective.chi2(&self.params(u), self.until, self.allowance) * (1.0 + outside))
     }
 }
 
@@ -85,11 +132,12 @@ fn search(
     continuous: &[usize],
     start: &[f64],
     until: f64,
+    allowance: &Allowance,
 ) -> Vec<f64> {
     if continuous.is_empty() {
         return start.to_vec();
     }
-    let problem = Scaled { objective, bounds, continuous, template: start, until };
+    let problem = Scaled { objective, bounds, continuous, template: start, until, allowance };
     let u0: Vec<f64> = continuous
         .iter()
         .map(|&i| {
@@ -107,7 +155,7 @@ fn search(
         v[d] += if v[d] > 0.5 { -0.05 } else { 0.05 };
         simplex.push(v);
     }
-    let start_cost = objective.chi2(start, until);
+    let start_cost = objective.chi2(start, until, allowance);
     let Ok(solver) = NelderMead::new(simplex).with_sd_tolerance(1e-6 * start_cost.max(1.0)) else {
         return start.to_vec();
     };
@@ -118,7 +166,7 @@ fn search(
         .and_then(|r| Some((r.state().get_best_cost(), r.state().get_best_param()?.clone())));
     match found {
         Some((cost, u)) if cost < start_cost => {
-            Scaled { objective, bounds, continuous, template: start, until }.params(&u)
+            Scaled { objective, bounds, continuous, template: start, until, allowance }.params(&u)
         }
         _ => start.to_vec(),
     }
@@ -131,17 +179,21 @@ pub fn fit(effect: &dyn Effect, case: &RollingCase, nominal: &Track, evidence: &
     let discrete = effect.discrete();
     let continuous: Vec<usize> = (0..bounds.len()).filter(|&i| !discrete.get(i).copied().unwrap_or(false)).collect();
     let first = window.0 + GRID_HORIZON;
-    let scored: Vec<(f64, Vec<f64>)> =
-        effect.grid(case, nominal, window).into_par_iter().map(|p| (objective.chi2(&p, first), p)).collect();
+    let grid = effect.grid(case, nominal, window);
+    let per_point = (GRID_RUNS / grid.len().max(1) as f64).max(GRID_POINT_RUNS);
+    let scored: Vec<(f64, Vec<f64>)> = grid
+        .into_par_iter()
+        .map(|p| (objective.chi2(&p, first, &Allowance::new(case, nominal, per_point)), p))
+        .collect();
     let mut order: Vec<usize> = (0..scored.len()).collect();
     order.sort_by(|&a, &b| scored[a].0.total_cmp(&scored[b].0).then(a.cmp(&b)));
     let starts: Vec<Vec<f64>> = order.iter().take(STARTS).map(|&i| scored[i].1.clone()).collect();
     let optima: Vec<Vec<f64>> = starts
         .into_par_iter()
         .flat_map_iter(|start| {
-            let mut params = start;
+            let (mut params, allowance) = (start, Allowance::new(case, nominal, SEARCH_RUNS));
             for h in HORIZONS {
-                params = search(&objective, &bounds, &continuous, &params, window.0 + h);
+                params = search(&objective, &bounds, &continuous, &params, window.0 + h, &allowance);
             }
             std::iter::once(params)
         })
@@ -150,7 +202,7 @@ pub fn fit(effect: &dyn Effect, case: &RollingCase, nominal: &Track, evidence: &
     let judged: Vec<(f64, Vec<f64>, Track)> = optima
         .into_par_iter()
         .filter_map(|params| {
-            let track = objective.track(&params, end)?;
+            let track = objective.track(&params, end, &Allowance::new(case, nominal, JUDGE_RUNS))?;
             Some((evidence.misfit(&track).chi2, params, track))
         })
         .collect();
@@ -172,6 +224,6 @@ fn failed(case: &RollingCase) -> Track {
         ax_abs_mps2: vec![f64::NAN; n],
         states: Vec::new(),
         onset_s: None,
-        evaluations_per_sample: 0.0,
+        evaluations: 0,
     }
 }

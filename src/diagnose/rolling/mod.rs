@@ -13,15 +13,21 @@
 //!    (to 1e-6) while the records reject the twin before they reject the nominal cart (the data
 //!    then know the cart better than the probe). If even that twin parts from the nominal cart
 //!    before the disagreement begins, the verdict is `unexplained`, "not predictable past t = …".
-//! 4. Every effect is fitted: its parameters on a grid judged over the first 1.5 s past the
+//! 4. Every effect is fitted: its parameters on a grid judged over the first second past the
 //!    window's start, then Nelder–Mead from the best grid points over growing horizons (the
 //!    cart's sensitivity makes a whole-record misfit rugged), the optima judged on the whole record.
-//!    Each run starts from the nominal cart's state where the effect begins.
-//! 5. Verdict as for rocking: the best by BIC is accepted when it beats the nominal cart's BIC,
-//!    cuts the window's noise-normalised RMS misfit at least 3× and leaves at most 70 % of the
-//!    nominal cart's flagged samples in the first 5 s of the window (later, a correct physics
-//!    with parameters a hair off drifts away on a sensitive cart); else `unexplained`. No
-//!    disagreement: `none`.
+//!    Each run starts from the nominal cart's state where the effect begins, and every part of a
+//!    fit has a counted allowance of the cart's evaluations (`fit`), so a case whose trial
+//!    parameters make stiff runs ends in bounded time, identically on every machine.
+//! 5. Verdict: the effect with the lowest BIC among those that pass three tests is accepted:
+//!    it beats the nominal cart's BIC; it cuts the window's noise-normalised misfit beyond the
+//!    noise (√(RMS² − 1)) at least 3×, judged where the nominal cart is predictable (from the window's start to where its
+//!    twins part, if they part inside the window: past that no hypothesis is told right or wrong
+//!    by how far it drifts); and it leaves at most 70 % of the nominal cart's flagged samples in
+//!    the first 5 s of the window (later, a correct physics with parameters a hair off drifts
+//!    away on a sensitive cart). A fit with a lower BIC that fails a test does not hide one that
+//!    passes; the explanation names it and says which test it failed. None passes:
+//!    `unexplained`. No disagreement: `none`.
 //!
 //! Pure numerics: a [`RollingCase`] in, a [`RollingDiagnosis`] out.
 
@@ -32,7 +38,7 @@ mod fit;
 use rayon::prelude::*;
 
 use super::{Observed, Settings};
-use crate::physics::rolling::{simulate_altered, Alteration, Cart, Excitation, Friction, Options};
+use crate::physics::rolling::{simulate_altered, Alteration, Cart, Excitation, Friction, NoSlip, Options};
 use evidence::{Evidence, Misfit};
 
 /// The camera's view of the platform: centre displacement from its start and absolute yaw.
@@ -75,9 +81,9 @@ pub struct Track {
     pub states: Vec<Vec<f64>>,
     /// When the effect began (None: the nominal cart).
     pub onset_s: Option<f64>,
-    /// The run's right-hand-side evaluations per sample (the nominal cart's: what an altered
-    /// run may cost, [`BUDGET_FACTOR`] times over).
-    pub evaluations_per_sample: f64,
+    /// The run's right-hand-side evaluations (an altered run's: from its onset; the nominal
+    /// cart's, per sample: what an altered run may cost, [`BUDGET_FACTOR`] times over).
+    pub evaluations: usize,
 }
 
 /// Relative (and, for angles, radian) probes of the twins, largest first.
@@ -90,8 +96,8 @@ const FLAG_HORIZON_S: f64 = 5.0;
 /// right effect left at most 0.66 of them (a compliant neighbour fitted as a near one), a wrong
 /// effect 0.76 and causes outside the library 0.99 or more.
 const MAX_LEFT_EARLY: f64 = 0.7;
-/// How far past the disagreement's start the twins run (s).
-const TWIN_REACH_S: f64 = 2.0;
+/// The shortest span (s) over which the misfit is judged where the nominal cart is predictable.
+const MIN_JUDGED_S: f64 = 0.5;
 /// An altered run may cost this many times the nominal cart's evaluations per sample (at least
 /// [`BUDGET_FLOOR`] per sample): beyond, its parameters make a stiff crawl (a locked wheel
 /// holding the cart still), judged as failing rather than waited for.
@@ -129,7 +135,7 @@ impl RollingCase {
             None,
         )?;
         Ok(Track {
-            evaluations_per_sample: r.stats.rhs_evals as f64 / r.x_m.len().max(1) as f64,
+            evaluations: r.stats.rhs_evals,
             x_m: r.x_m,
             y_m: r.y_m,
             yaw_rad: r.yaw_rad,
@@ -148,14 +154,17 @@ impl RollingCase {
     }
 
     /// The cart with `alteration` from `onset_s` on (the nominal cart's state there) until
-    /// `until_s`; the nominal cart before.
+    /// `until_s`; the nominal cart before. The run may spend at most `allowance` right-hand-side
+    /// evaluations besides its own cap ([`BUDGET_FACTOR`]); past either it fails, and
+    /// `Err((message, evaluations spent))` says what it cost.
     pub fn altered(
         &self,
         nominal: &Track,
         alteration: &Alteration,
         onset_s: f64,
         until_s: f64,
-    ) -> Result<Track, String> {
+        allowance: Option<usize>,
+    ) -> Result<Track, (String, usize)> {
         let n = self.samples();
         let k0 = self.index(onset_s).min(n - 2);
         let end = (((until_s - self.t0_s) / self.dt_s).ceil().max(0.0) as usize).min(n - 1);
@@ -166,7 +175,7 @@ impl RollingCase {
             ax_abs_mps2: vec![f64::NAN; n],
             states: Vec::new(),
             onset_s: Some(self.t0_s + k0 as f64 * self.dt_s),
-            evaluations_per_sample: 0.0,
+            evaluations: 0,
         };
         for (to, from) in [
             (&mut track.x_m, &nominal.x_m),
@@ -180,8 +189,14 @@ impl RollingCase {
         if end <= k0 {
             return Ok(track);
         }
-        let per_sample = (BUDGET_FACTOR * nominal.evaluations_per_sample).max(BUDGET_FLOOR);
-        let budget = (nominal.evaluations_per_sample > 0.0).then(|| (per_sample * (end - k0) as f64) as usize);
+        // Parameters no cart can have (a centre of mass past a wheel) cost nothing to refuse.
+        NoSlip::altered(&self.cart, &self.friction, self.options.g_mps2, alteration).map_err(|e| (e, 0))?;
+        let per_sample = (BUDGET_FACTOR * nominal.evaluations as f64 / n as f64).max(BUDGET_FLOOR);
+        let cap = (nominal.evaluations > 0).then(|| (per_sample * (end - k0) as f64) as usize);
+        let budget = match (cap, allowance) {
+            (Some(c), Some(a)) => Some(c.min(a)),
+            (c, a) => c.or(a),
+        };
         let r = simulate_altered(
             &self.cart,
             &self.friction,
@@ -191,7 +206,9 @@ impl RollingCase {
             Some((k0, &nominal.states[k0])),
             end,
             budget,
-        )?;
+        )
+        .map_err(|e| (e, budget.unwrap_or(0)))?;
+        track.evaluations = r.stats.rhs_evals;
         track.x_m[k0..=end].copy_from_slice(&r.x_m);
         track.y_m[k0..=end].copy_from_slice(&r.y_m);
         track.yaw_rad[k0..=end].copy_from_slice(&r.yaw_rad);
@@ -223,6 +240,8 @@ pub struct Candidate {
     pub params: Vec<(&'static str, f64)>,
     pub misfit: Misfit,
     pub rmse: f64,
+    /// The window's misfit where the nominal cart is predictable (what the 3× test judges).
+    pub rmse_judged: f64,
     pub bic: f64,
     pub score: f64,
     pub flagged: usize,
@@ -231,6 +250,17 @@ pub struct Candidate {
     pub evaluations: usize,
     pub sentence: String,
     pub track: Track,
+}
+
+impl Candidate {
+    /// How many times smaller this candidate's misfit beyond the sensors' noise is than `base`'s,
+    /// where the nominal cart is predictable: √(RMS² − 1) (an RMS of 1 is pure noise), so that
+    /// a physics that leaves only noise counts as a full cut even when the disagreement was
+    /// barely above it (RMS 1.4 to 1.0 is 0.98 to 0: explained; RMS 30 to 10 is 3×).
+    pub fn cut_from(&self, base: &Candidate) -> f64 {
+        let excess = |rmse: f64| (rmse * rmse - 1.0).max(0.0).sqrt();
+        excess(base.rmse_judged) / excess(self.rmse_judged).max(1e-12)
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -266,15 +296,18 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
     let evidence = Evidence::new(case, settings.exceedance_sigma);
     let baseline = case.nominal()?;
     let window = evidence.window(&baseline);
-    // Twins only where there is something to explain, each run until shortly after the
-    // disagreement begins (what matters is whether they part before it).
+    // Twins only where there is something to explain, each run to the record's end: whether
+    // they part before the disagreement decides if anything is blamed; where they part after it
+    // bounds what the misfit test can judge.
     let (mut predictable_until_s, mut probe) = (None, 0.0);
     if let Some(w) = window {
-        let until = (w.0 + TWIN_REACH_S).min(case.end_s());
+        let until = case.end_s();
         let nominal = &baseline;
         for &p in &PROBES {
             let twin_case = case.twin(p);
-            let twin = twin_case.altered(&twin_case.nominal_start()?, &Alteration::default(), case.t0_s, until)?;
+            let twin = twin_case
+                .altered(&twin_case.nominal_start()?, &Alteration::default(), case.t0_s, until, None)
+                .map_err(|(e, _)| e)?;
             probe = p;
             predictable_until_s = evidence.parting(nominal, &twin).filter(|t| *t <= until);
             // The largest probe whose twin the records do not reject before the nominal cart.
@@ -284,10 +317,17 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
         }
     }
     let base_misfit = evidence.misfit(&baseline);
+    // The misfit test is judged where the nominal cart is predictable: past that its twins part
+    // from it, and no hypothesis is told right or wrong by how far it drifts there.
+    let judged = window.map(|w| match predictable_until_s {
+        Some(p) if p > w.0 + MIN_JUDGED_S && p < w.1 => (w.0, p),
+        _ => w,
+    });
     let baseline_candidate = |window: Option<(f64, f64)>| Candidate {
         effect: "none",
         params: Vec::new(),
         rmse: evidence.window_rmse(&baseline, window),
+        rmse_judged: evidence.window_rmse(&baseline, judged),
         bic: base_misfit.chi2,
         score: 0.0,
         flagged: evidence.flagged(&baseline),
@@ -353,6 +393,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
                 params: effect.parameter_names().iter().copied().zip(fit.params.iter().copied()).collect(),
                 bic: fit.misfit.chi2 + effect.parameter_names().len() as f64 * n.ln(),
                 rmse: evidence.window_rmse(&fit.track, Some(window)),
+                rmse_judged: evidence.window_rmse(&fit.track, judged),
                 score: 0.0,
                 flagged: evidence.flagged(&fit.track),
                 flagged_early: evidence.flagged_between(&fit.track, window.0, window.0 + FLAG_HORIZON_S),
@@ -372,38 +413,55 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
         c.score = if total > 0.0 { w / total } else { 0.0 };
     }
     candidates[1..].sort_by(|a, b| a.bic.total_cmp(&b.bic));
-    let best = &candidates[1];
     // Disagreement left is counted over the first seconds after the window's start only: a
     // correct physics with parameters a hair off drifts away late (the cart is sensitive), a
     // wrong one, or a cause outside the library, leaves disagreement right after the onset.
-    let accepted = best.bic < candidates[0].bic
-        && best.rmse * settings.min_improvement <= candidates[0].rmse
-        && best.flagged_early as f64 <= MAX_LEFT_EARLY * (candidates[0].flagged_early as f64).max(1.0);
-    let (verdict, model, window) = if accepted {
-        let onset = best.track.onset_s.unwrap_or(window.0);
-        (best.effect, best.track.clone(), (onset.min(window.0), window.1))
-    } else {
-        ("unexplained", baseline.clone(), window)
+    let passes = |c: &Candidate, base: &Candidate| {
+        c.bic < base.bic
+            && c.cut_from(base) >= settings.min_improvement
+            && c.flagged_early as f64 <= MAX_LEFT_EARLY * (base.flagged_early as f64).max(1.0)
+    };
+    // The best by BIC that passes: a better-scoring fit that leaves the disagreement in place
+    // is not an explanation, and must not hide one that removes it.
+    let accepted = (1..candidates.len()).find(|&i| passes(&candidates[i], &candidates[0]));
+    let passed_over: Vec<Candidate> = accepted.map_or_else(Vec::new, |i| candidates[1..i].to_vec());
+    if let Some(i) = accepted {
+        candidates[1..=i].rotate_right(1);
+    }
+    let (verdict, model, window) = match accepted {
+        Some(_) => {
+            let best = &candidates[1];
+            let onset = best.track.onset_s.unwrap_or(window.0);
+            (best.effect, best.track.clone(), (onset.min(window.0), window.1))
+        }
+        None => ("unexplained", baseline.clone(), window),
     };
     for c in &mut candidates {
         c.rmse = evidence.window_rmse(&c.track, Some(window));
     }
+    let accepted = accepted.is_some();
     let rmse_after = if accepted { candidates[1].rmse } else { candidates[0].rmse };
-    let text = explain(case, &evidence, window, &candidates, accepted, settings, predictable_until_s);
+    let judged = judged.filter(|j| j.1 < window.1);
+    let text =
+        explain(case, &evidence, window, judged, &candidates, accepted, &passed_over, settings, predictable_until_s);
     Ok(done(verdict, Some(window), candidates, model, text, rmse_after))
 }
 
+#[allow(clippy::too_many_arguments)]
 fn explain(
     case: &RollingCase,
     evidence: &Evidence,
     window: (f64, f64),
+    judged: Option<(f64, f64)>,
     candidates: &[Candidate],
     accepted: bool,
+    passed_over: &[Candidate],
     settings: &Settings,
     predictable_until_s: Option<f64>,
 ) -> String {
     let base = &candidates[0];
     let best = &candidates[1];
+    let name = |c: &Candidate| c.effect.replace('_', " ");
     let mut text = format!(
         "From {:.2} s to {:.2} s the records of {} disagree with the nominal 4WMC cart: its noise-normalised RMS misfit there is {:.1} (1 would be pure sensor noise), {}. The nominal cart is predictable {} (twins with slightly moved initial angles and friction stay within the noise).",
         window.0,
@@ -413,24 +471,77 @@ fn explain(
         evidence.describe_disagreement(&base.track, window),
         predictable_until_s.map_or("to the end of the record".to_string(), |t| format!("until {t:.2} s"))
     );
+    let judged_clause = |c: &Candidate| {
+        judged.map_or(String::new(), |j| {
+            format!(
+                "; where the nominal cart is predictable ({:.2} s to {:.2} s, what the {}× test judges), from {:.1} to {:.1}",
+                j.0, j.1, settings.min_improvement, base.rmse_judged, c.rmse_judged
+            )
+        })
+    };
+    let beyond_noise = |c: &Candidate| {
+        let plain = base.rmse_judged / c.rmse_judged.max(1e-12);
+        if c.cut_from(base) >= settings.min_improvement && plain < settings.min_improvement {
+            format!(
+                "; it leaves sensor noise only: the misfit beyond the noise, √(RMS² − 1), is {:.0}× smaller",
+                c.cut_from(base).min(1e6)
+            )
+        } else {
+            String::new()
+        }
+    };
     if accepted {
         text.push_str(&format!(
-            " The best explanation is {}: {}. It brings the misfit in that window to {:.1} ({:.0} times smaller) and is preferred by BIC over {} by {:.0}.",
-            best.effect.replace('_', " "),
+            " The best explanation is {}: {}. It brings the misfit in that window to {:.1} ({:.1} times smaller{}{}).",
+            name(best),
             best.sentence,
             best.rmse,
             base.rmse / best.rmse.max(1e-12),
-            candidates.get(2).map_or("the nominal cart".to_string(), |r| r.effect.replace('_', " ")),
-            candidates.get(2).map_or(base.bic - best.bic, |r| r.bic - best.bic),
+            judged_clause(best),
+            beyond_noise(best),
         ));
+        if passed_over.is_empty() {
+            let (next, margin) = candidates
+                .get(2)
+                .map_or(("the nominal cart".to_string(), base.bic - best.bic), |r| (name(r), r.bic - best.bic));
+            text.push_str(&format!(" It is preferred by BIC over {next} by {margin:.0}."));
+        } else {
+            let names: Vec<String> = passed_over.iter().map(name).collect();
+            let mut joined = names.join(" and ");
+            joined[..1].make_ascii_uppercase();
+            text.push_str(&format!(
+                " {joined} {} with a lower BIC, but {}; of the effects that remove the disagreement, this one has the lowest BIC.",
+                if passed_over.len() == 1 { "fits" } else { "fit" },
+                passed_over.iter().map(|c| shortfall(c, base, settings)).collect::<Vec<_>>().join("; "),
+            ));
+        }
     } else {
         text.push_str(&format!(
-            " None of the library's effects explains it: the best, {} ({}), leaves a misfit of {:.1} in that window (accepting a physics needs it {}× smaller than the nominal cart's and no lasting disagreement left). Look for what the library does not model: a sensor's timing or gain, a tilting floor, a neighbour that moves.",
-            best.effect.replace('_', " "),
+            " None of the library's effects explains it: the best, {} ({}), leaves a misfit of {:.1} in that window{} (accepting a physics needs its misfit beyond the noise {}× smaller than the nominal cart's where the cart is predictable, and no lasting disagreement left). Look for what the library does not model: a sensor's timing or gain, a tilting floor, a neighbour that moves.",
+            name(best),
             best.sentence,
             best.rmse,
+            judged_clause(best),
             settings.min_improvement
         ));
     }
     text
+}
+
+/// Why a candidate that fits with a lower BIC than the verdict's was not accepted.
+fn shortfall(c: &Candidate, base: &Candidate, settings: &Settings) -> String {
+    let name = c.effect.replace('_', " ");
+    if c.cut_from(base) < settings.min_improvement {
+        format!(
+            "{name} cuts the misfit beyond the noise only {:.1}× ({}× needed)",
+            c.cut_from(base),
+            settings.min_improvement
+        )
+    } else {
+        format!(
+            "{name} leaves {:.0} % of the nominal cart's disagreement in the window's first {FLAG_HORIZON_S:.0} s (at most {:.0} % allowed)",
+            100.0 * c.flagged_early as f64 / (base.flagged_early as f64).max(1.0),
+            100.0 * MAX_LEFT_EARLY
+        )
+    }
 }

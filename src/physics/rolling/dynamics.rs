@@ -20,8 +20,8 @@ use super::{Cart, Friction, LateralSlip, PIVOT_SIGNS};
 pub struct Alteration {
     pub mass: Option<MassChange>,
     pub brake: Option<Brake>,
-    /// A caster (0-based) whose swivel no longer turns.
-    pub jam: Option<usize>,
+    /// A caster whose swivel no longer turns, or turns only against a lock's friction.
+    pub jam: Option<Jam>,
     pub wall: Option<Wall>,
     /// The mass change and the brake's drag build up linearly over this time (s) from the
     /// alteration's start (0: at once): bottles falling off one by one, a pad whose drag grows.
@@ -53,7 +53,31 @@ pub struct MassChange {
     pub at_m: [f64; 2],
 }
 
-/// A locked wheel (caster 0-based): it slides along its heading with friction μ N tanh(v/ε).
+/// A jammed swivel (caster 0-based): rigid (`mu` None: δ̇ ≡ 0, a constraint on the platform's
+/// motion) or a friction lock (`mu` Some(μ): a swivel torque μ N ρ tanh(δ̇/[`JAM_EPS_RADPS`]) in
+/// place of the swivel's own friction, which holds the caster until the platform's pull on it
+/// exceeds μ N ρ, then lets it slip: a bent or fouled swivel rather than a seized one).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Jam {
+    pub caster: usize,
+    pub mu: Option<f64>,
+}
+
+/// A friction lock's regularisation (rad/s): stiff enough to hold, finite so that it can slip
+/// (the swivel's own ε, `friction_eps_swivel`, is as small as 1e-3 rad/s and would make every
+/// fitted lock a stiff run).
+pub const JAM_EPS_RADPS: f64 = 0.02;
+
+/// The least regularisation of a locked wheel's drag (m/s). A wheel that rolls crosses zero
+/// speed only at reversals; a locked one drags through every reversal, and at the rolling law's
+/// ε (1e-4 m/s in the study's tables) each crossing is a stiff stretch that costs an explicit
+/// integrator some 40 times the nominal cart's work. At 2e-3 m/s a held wheel creeps at most
+/// 2 mm/s under a pull just short of μ N, about the camera's noise per second, and the run costs
+/// about what the nominal one does.
+pub const BRAKE_EPS_MPS: f64 = 2e-3;
+
+/// A locked wheel (caster 0-based): it slides along its heading with friction μ N tanh(v/ε),
+/// ε at least [`BRAKE_EPS_MPS`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Brake {
     pub caster: usize,
@@ -249,7 +273,7 @@ impl NoSlip {
     /// changes the platform's mass, yaw inertia about its centre, centre of mass and the wheel
     /// loads (a rigid platform on four equal supports: Nᵢ = m_w g + W/4 (1 + c_x sᵢₓ/a + c_y sᵢᵧ/b));
     /// one wheel locked (it drags with μ Nᵢ and no longer spins); one swivel jammed (δ̇ⱼ ≡ 0, a
-    /// constraint on ν); a wall struck by the platform's corners.
+    /// constraint on ν, or held by a friction lock); a wall struck by the platform's corners.
     pub fn altered(cart: &Cart, friction: &Friction, g_mps2: f64, alteration: &Alteration) -> Result<Self, String> {
         let mut model = NoSlip::new(cart, friction, g_mps2);
         model.alteration = *alteration;
@@ -287,8 +311,13 @@ impl NoSlip {
             }
             model.k_roll[brake.caster] = dv.wheel_mass_kg;
         }
-        if alteration.jam.is_some_and(|j| j > 3) {
-            return Err("a jammed swivel needs a caster 0..3".into());
+        if let Some(jam) = alteration.jam {
+            if jam.caster > 3 || jam.mu.is_some_and(|mu| !(mu.is_finite() && mu > 0.0)) {
+                return Err(format!(
+                    "a jammed swivel needs a caster 0..3 and a lock's μ > 0, got {} and {:?}",
+                    jam.caster, jam.mu
+                ));
+            }
         }
         if !(alteration.ramp_s.is_finite() && alteration.ramp_s >= 0.0) {
             return Err(format!("a ramp lasts 0 s or more, got {} s", alteration.ramp_s));
@@ -310,12 +339,26 @@ impl NoSlip {
         let (roll, torque) = self.friction.roll_and_swivel(load, self.derived.swivel_arm_m, roll_speed, swivel_rate);
         let roll = match self.alteration.brake {
             Some(b) if b.caster == i => {
-                friction_force(&super::Stribeck::coulomb(b.mu), load, roll_speed, roll_speed / self.friction.eps_mps)
+                let eps = self.friction.eps_mps.max(BRAKE_EPS_MPS);
+                friction_force(&super::Stribeck::coulomb(b.mu), load, roll_speed, roll_speed / eps)
             }
             _ => roll,
         };
-        // A jammed swivel's torque is the constraint's reaction, not friction.
-        (roll, if self.alteration.jam == Some(i) { 0.0 } else { torque })
+        let torque = match self.alteration.jam {
+            // A rigid jam's torque is the constraint's reaction, not friction.
+            Some(Jam { caster, mu: None }) if caster == i => 0.0,
+            Some(Jam { caster, mu: Some(mu) }) if caster == i => {
+                let rho = self.derived.swivel_arm_m;
+                rho * friction_force(
+                    &super::Stribeck::coulomb(mu),
+                    load,
+                    rho * swivel_rate,
+                    swivel_rate / JAM_EPS_RADPS,
+                )
+            }
+            _ => torque,
+        };
+        (roll, torque)
     }
 
     /// The normal load of each wheel.
@@ -328,9 +371,9 @@ impl NoSlip {
         self.assemble(y, [0.0; 2]).0
     }
 
-    /// The jammed swivel's constraint row c (cᵀν = δ̇ⱼ) and ċᵀν.
+    /// The rigidly jammed swivel's constraint row c (cᵀν = δ̇ⱼ) and ċᵀν.
     fn jam_row(&self, y: &[f64; 10]) -> Option<([f64; 3], f64)> {
-        let j = self.alteration.jam?;
+        let j = self.alteration.jam.filter(|j| j.mu.is_none())?.caster;
         let d = self.derived.trail_m;
         let f = frames(&self.derived, y[2], &y[3..7])[j];
         let nu = [y[7], y[8], y[9]];
@@ -341,8 +384,9 @@ impl NoSlip {
 
     /// The state just after the alteration begins, from the nominal cart's state: a captured
     /// mass (dm > 0, at rest on the floor) shares the generalised momentum (ν⁺ = M⁺⁻¹ M⁻ ν⁻); a
-    /// lost one leaves with its own velocity (ν unchanged); a jamming swivel stops at once, with
-    /// the least kinetic energy change (ν projected onto cᵀν = 0 in the metric of M).
+    /// lost one leaves with its own velocity (ν unchanged); a rigidly jamming swivel stops at
+    /// once, with the least kinetic energy change (ν projected onto cᵀν = 0 in the metric of M;
+    /// a friction lock acts through its torque, with no impulse).
     pub fn enter(&self, before: &NoSlip, y: &[f64; 10]) -> [f64; 10] {
         let mut out = *y;
         let nu = [y[7], y[8], y[9]];
@@ -453,7 +497,7 @@ impl Dynamics<10> for NoSlip {
             let lambda = -(dot3(&c, &acc) + c_dot_nu) / dot3(&c, &minv_c);
             acc = std::array::from_fn(|i| acc[i] + lambda * minv_c[i]);
             // The jammed caster turns with the platform only.
-            delta_dot[self.alteration.jam.expect("a jam row")] = 0.0;
+            delta_dot[self.alteration.jam.expect("a jam row").caster] = 0.0;
         }
         [y[7], y[8], y[9], delta_dot[0], delta_dot[1], delta_dot[2], delta_dot[3], acc[0], acc[1], acc[2]]
     }

@@ -31,7 +31,7 @@ mod simulate;
 #[cfg(test)]
 mod tests;
 
-pub use dynamics::{Alteration, Brake, Dynamics, MassChange, NoSlip, Power, Slip, Wall};
+pub use dynamics::{Alteration, Brake, Dynamics, Jam, MassChange, NoSlip, Power, Slip, Wall, JAM_EPS_RADPS};
 pub use simulate::{simulate, simulate_altered, Event, EventKind, Excitation, Response};
 
 /// Body-frame signs of the caster pivots (±a, ±b), in wheel order 1..4.

@@ -473,7 +473,7 @@ fn lateral_slip_converges_to_the_no_slip_model_and_covers_zero_trail() {
 /// or a closed form.
 mod alterations {
     use super::*;
-    use crate::physics::rolling::{Alteration, Brake, MassChange, Wall};
+    use crate::physics::rolling::{Alteration, Brake, Jam, MassChange, Wall};
 
     fn altered(alteration: Alteration, friction: &Friction) -> NoSlip {
         let mut cart = prototype();
@@ -490,7 +490,7 @@ mod alterations {
         let alteration = Alteration {
             mass: Some(MassChange { dm_kg: -15.0, at_m: [0.3, -0.1] }),
             brake: Some(Brake { caster: 1, mu: 0.3 }),
-            jam: Some(2),
+            jam: Some(Jam { caster: 2, mu: None }),
             wall: None,
             ramp_s: 0.0,
         };
@@ -506,6 +506,37 @@ mod alterations {
         let y = integrate(|_, y| model.rhs(y, [0.5, -0.3]), y0, 2.0, 1e-11);
         assert!((y[5] - y0[5]).abs() < 1e-12, "jammed δ₃ moved: {} → {}", y0[5], y[5]);
         assert!((y[3] - y0[3]).abs() > 1e-3, "a free caster should turn: {} → {}", y0[3], y[3]);
+    }
+
+    #[test]
+    fn a_friction_lock_holds_like_a_rigid_jam_below_its_strength_and_frees_the_caster_when_weak() {
+        // Two limits of the friction lock, each against an independent model: a lock far stronger
+        // than the platform's pull on the caster behaves as the rigid constraint (the caster
+        // turns with the platform only, the platform moves as with the rigid jam), and a lock
+        // of negligible strength on a cart without friction lets the caster swivel freely.
+        let friction = table4_friction("MC2");
+        let jam = |mu| Alteration { jam: Some(Jam { caster: 2, mu }), ..Alteration::default() };
+        let (rigid, strong) = (altered(jam(None), &friction), altered(jam(Some(50.0)), &friction));
+        let nominal = altered(Alteration::default(), &friction);
+        let y0 = [0.0, 0.0, 0.2, 0.4, -0.5, 1.0, 2.0, 0.3, -0.2, 0.4];
+        let floor = [0.5, -0.3];
+        let run = |m: &NoSlip| integrate(|_, y| m.rhs(y, floor), m.enter(&nominal, &y0), 1.0, 1e-9);
+        let (yr, ys) = (run(&rigid), run(&strong));
+        // The strong lock starts from the nominal state (no impulse): it stops the caster over a
+        // few ms, so the platform's state differs from the rigid jam's by that transient only.
+        let platform = (0..3).map(|i| (ys[i] - yr[i]).abs()).fold(0.0, f64::max);
+        assert!(platform < 2e-3, "strong lock vs rigid jam: platform pose differs by {platform}");
+        // The caster was swivelling at the lock's start and stops within the transient (0.018 rad
+        // here); a sign error would spin it up instead.
+        assert!((ys[5] - y0[5]).abs() < 0.03, "a strong lock let δ₃ move {} → {}", y0[5], ys[5]);
+        // On a cart without friction, a lock that weak is the free swivel.
+        let free = altered(Alteration::default(), &frictionless());
+        let weak = altered(jam(Some(1e-6)), &frictionless());
+        let yw = integrate(|_, y| weak.rhs(y, floor), y0, 1.0, 1e-9);
+        let yn = integrate(|_, y| free.rhs(y, floor), y0, 1.0, 1e-9);
+        assert!((yn[5] - y0[5]).abs() > 0.1, "the nominal caster should swivel: {} → {}", y0[5], yn[5]);
+        let caster = (yw[5] - yn[5]).abs();
+        assert!(caster < 0.02 * (yn[5] - y0[5]).abs(), "weak lock vs nominal: δ₃ differs by {caster} rad");
     }
 
     #[test]

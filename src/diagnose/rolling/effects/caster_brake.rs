@@ -9,9 +9,12 @@ use crate::physics::rolling::{Alteration, Brake};
 
 pub struct CasterBrake;
 
-/// Onsets tried (s from the window's start): a locked wheel shows within a few samples, a pad
+/// Onsets tried (s from the window's start): a locked wheel shows within a few samples while
+/// the cart moves, a second or more later if it locks while the cart stands nearly still; a pad
 /// whose drag builds up over some tenths of a second shows once the drag is strong.
-const ONSETS: [f64; 6] = [-0.4, -0.2, -0.1, -0.05, -0.02, 0.0];
+const ONSETS: [f64; 8] = [-1.3, -0.8, -0.4, -0.2, -0.1, -0.05, -0.02, 0.0];
+/// How long before the window's start a wheel may have locked (s).
+const EARLIEST_S: f64 = 1.5;
 /// Longest ramp (s), and the ramp the grid tries besides a lock.
 const MAX_RAMP_S: f64 = 0.8;
 const GRID_RAMP_S: f64 = 0.25;
@@ -32,7 +35,7 @@ impl Effect for CasterBrake {
     }
 
     fn bounds(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<(f64, f64)> {
-        vec![(0.0, 3.0), onset_bounds(case, window, 1.0, 0.1), (0.02, 1.0), (0.0, MAX_RAMP_S)]
+        vec![(0.0, 3.0), onset_bounds(case, window, EARLIEST_S, 0.1), (0.02, 1.0), (0.0, MAX_RAMP_S)]
     }
 
     fn grid(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<Vec<f64>> {

@@ -17,16 +17,32 @@ use crate::physics::rolling::{Alteration, MassChange as Change};
 pub struct MassChange;
 
 /// Onsets tried (s from the window's start): a large or far off-centre change shows at once
-/// (the accelerometer sees the wheel loads jump), a small or centred one a second or more later.
-const ONSETS: [f64; 6] = [-1.5, -1.0, -0.6, -0.3, -0.1, 0.0];
-
+/// (the accelerometer sees the wheel loads jump), a small, centred or gradual one seconds later.
+const ONSETS: [f64; 7] = [-3.0, -2.0, -1.2, -0.6, -0.3, -0.1, 0.0];
+/// How long before the window's start a change may begin (s): a gradual loss near the centre
+/// has shown up to 3.7 s after it began.
+const EARLIEST_S: f64 = 4.0;
 /// Largest offset as a fraction of the half-length and half-width.
-const REACH: f64 = 0.9;
-/// Longest ramp (s), and the ramp the grid tries besides a step.
+const REACH: f64 = 0.95;
+/// Offsets the grid tries, as fractions of the half-length and half-width: the centre, and the
+/// four quadrants half-way and near the edge (dm trades off against the offset, but a start in
+/// the wrong quadrant or at half the offset is a local optimum the search does not leave).
+const OFFSETS: [(f64, f64); 9] = [
+    (0.0, 0.0),
+    (0.5, 0.5),
+    (-0.5, 0.5),
+    (-0.5, -0.5),
+    (0.5, -0.5),
+    (0.85, 0.85),
+    (-0.85, 0.85),
+    (-0.85, -0.85),
+    (0.85, -0.85),
+];
+/// Longest ramp (s), and the ramps the grid tries besides a step.
 const MAX_RAMP_S: f64 = 2.0;
-const GRID_RAMP_S: f64 = 0.8;
+const GRID_RAMPS_S: [f64; 2] = [0.6, 1.2];
 /// Onsets tried for a gradual change (s from the window's start): it shows part-way through.
-const RAMP_ONSETS: [f64; 4] = [-1.5, -1.0, -0.6, -0.3];
+const RAMP_ONSETS: [f64; 5] = [-3.0, -2.0, -1.2, -0.6, -0.3];
 
 impl Effect for MassChange {
     fn name(&self) -> &'static str {
@@ -40,8 +56,8 @@ impl Effect for MassChange {
     fn bounds(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<(f64, f64)> {
         let (m, a, b) = (case.cart.platform_mass_kg, 0.5 * case.cart.length_m, 0.5 * case.cart.width_m);
         vec![
-            onset_bounds(case, window, 2.0, 0.1),
-            (-0.6 * m, 1.0 * m),
+            onset_bounds(case, window, EARLIEST_S, 0.1),
+            (-0.7 * m, 1.0 * m),
             (-REACH * a, REACH * a),
             (-REACH * b, REACH * b),
             (0.0, MAX_RAMP_S),
@@ -50,13 +66,13 @@ impl Effect for MassChange {
 
     fn grid(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<Vec<f64>> {
         let (m, a, b) = (case.cart.platform_mass_kg, 0.5 * case.cart.length_m, 0.5 * case.cart.width_m);
-        let offsets = [(0.0, 0.0), (0.5, 0.5), (-0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)];
-        let steps = product(&[onsets_at(case, window, &ONSETS), vec![-0.35 * m, -0.15 * m, 0.3 * m], vec![0.0]]);
-        let ramps = product(&[onsets_at(case, window, &RAMP_ONSETS), vec![-0.35 * m, -0.15 * m], vec![GRID_RAMP_S]]);
+        let steps =
+            product(&[onsets_at(case, window, &ONSETS), vec![-0.4 * m, -0.15 * m, 0.2 * m, 0.5 * m], vec![0.0]]);
+        let ramps = product(&[onsets_at(case, window, &RAMP_ONSETS), vec![-0.4 * m, -0.15 * m], GRID_RAMPS_S.to_vec()]);
         steps
             .into_iter()
             .chain(ramps)
-            .flat_map(|p| offsets.iter().map(move |(x, y)| vec![p[0], p[1], x * a, y * b, p[2]]))
+            .flat_map(|p| OFFSETS.iter().map(move |(x, y)| vec![p[0], p[1], x * a, y * b, p[2]]))
             .collect()
     }
 
