@@ -1,7 +1,9 @@
 //! Diagnosis cases in the demo archive: a unit of the study on a floor of the archive, recorded
 //! by a top accelerometer (200 Hz, σ 0.02 m/s²) and a camera (θ at 30 Hz, σ 0.002 rad, one
 //! dropout), with one effect concealed — the study's own stories where it told one (WSU1 lost
-//! its water bottles in FB-4 and fell onto PS1 in FB-5; the beds' ~3 Hz frames). Made with
+//! its water bottles in FB-4 and fell onto PS1 in FB-5; the beds' ~3 Hz frames) — and two
+//! rolling units on unlocked casters (`model: rolling`: MC2 losing shelves and bottles in FB-5,
+//! PS1 carrying the fallen WSU1 in FB-5; the platform's displacement and yaw at 30 Hz). Made with
 //! shakeflow's models, so they show the diagnosis at work; `make prove` checks it on cases from
 //! an independent generator. `cases/truth/` says what was concealed; the tool never reads it.
 
@@ -95,15 +97,16 @@ const PLANS: [Plan; 5] = [
 
 /// Files of the cases, relative to the archive.
 pub fn file_names() -> Vec<String> {
+    let ids: Vec<&str> = PLANS.iter().map(|p| p.id).chain(ROLLING_PLANS.iter().map(|p| p.id)).collect();
     let mut out = Vec::new();
-    for p in &PLANS {
+    for id in &ids {
         for name in
             [crate::io::case::EQUIPMENT, crate::io::case::FLOOR, crate::io::case::ACCEL, crate::io::case::CAMERA]
         {
-            out.push(format!("{CASES_DIR}/{}/{name}", p.id));
+            out.push(format!("{CASES_DIR}/{id}/{name}"));
         }
     }
-    out.extend(PLANS.iter().map(|p| format!("{CASES_DIR}/truth/{}.yaml", p.id)));
+    out.extend(ids.iter().map(|id| format!("{CASES_DIR}/truth/{id}.yaml")));
     out
 }
 
@@ -115,6 +118,12 @@ pub fn case_files(floor: impl Fn(&str, u8) -> (Vec<f64>, Vec<f64>)) -> Result<Ve
     for plan in &PLANS {
         let (ax, az) = floor(plan.test, plan.floor);
         let (files, truth) = make_case(plan, &ax, &az)?;
+        cases.extend(files);
+        truths.push((format!("{CASES_DIR}/truth/{}.yaml", plan.id), truth.into_bytes()));
+    }
+    for plan in &ROLLING_PLANS {
+        let (ax, _) = floor(plan.test, plan.floor);
+        let (files, truth) = rolling_case(plan, &ax)?;
         cases.extend(files);
         truths.push((format!("{CASES_DIR}/truth/{}.yaml", plan.id), truth.into_bytes()));
     }
@@ -243,4 +252,160 @@ fn tilted(r: &Response, g: f64) -> Vec<f64> {
             r.sensor_ax_mps2[k] * cos - (r.sensor_az_mps2[k] + g) * sin
         })
         .collect()
+}
+
+/// The study's two rolling stories, as rolling cases (`model: rolling`, the contract of
+/// ../shared/cases/rolling_demo): a unit on unlocked casters (Table 4) whose mass changes off
+/// its centre while it rolls. The shake table moves E-W only: the floor's Y record is zero.
+struct RollingPlan {
+    id: &'static str,
+    unit: &'static str,
+    test: &'static str,
+    floor: u8,
+    /// The mass lost (< 0) or gained, and where on the platform (body axes, m).
+    dm_kg: f64,
+    at_m: [f64; 2],
+    /// Over how long the mass goes (s; 0: at once).
+    ramp_s: f64,
+    story: &'static str,
+}
+
+const ROLLING_PLANS: [RollingPlan; 2] = [
+    RollingPlan {
+        id: "MC2_FB-5",
+        unit: "MC2",
+        test: "FB-5",
+        floor: 4,
+        dm_kg: -50.0,
+        at_m: [0.25, 0.38],
+        ramp_s: 0.4,
+        story: "the metal cart strikes the bed beside it and loses shelves and water bottles from one corner over 0.4 s (the study's FB-5)",
+    },
+    RollingPlan {
+        id: "PS1_FB-5",
+        unit: "PS1",
+        test: "FB-5",
+        floor: 5,
+        dm_kg: 43.6,
+        at_m: [0.6, 0.2],
+        ramp_s: 0.0,
+        story: "the wire shelving WSU1 (43.6 kg) falls onto the stretcher and rides on it off its centre (the study's FB-5)",
+    },
+];
+/// The mass changes this long after the cart has first moved 3 cm.
+const ROLLING_ONSET_AFTER_S: f64 = 1.0;
+/// How much of the test a rolling case keeps (s).
+const ROLLING_RECORD_S: f64 = 30.0;
+const CAMERA_NOISE_M: f64 = 0.0015;
+
+fn rolling_case(plan: &RollingPlan, ax: &[f64]) -> Result<(Vec<(String, Vec<u8>)>, String), String> {
+    use crate::diagnose::rolling::RollingCase;
+    use crate::physics::rolling::{self as rolling, Alteration, FrictionLaw, MassChange as Change};
+    let table = rolling::preset(plan.unit).ok_or("unknown rolling unit")?;
+    let cart = table.cart(rolling::Cart::default_trail_m(table.wheel_diameter_m), rolling::DEFAULT_SWIVEL_ARM_M);
+    let friction = table.friction(rolling::DEFAULT_FRICTION_EPS_MPS, FrictionLaw::Regularised);
+    let (yaw0_rad, steer0_rad) = table.initial_pose();
+    let options = rolling::Options { yaw0_rad, steer0_rad, ..rolling::Options::default() };
+    // The floor as floor.csv prints it, so that the tool reads back exactly what moved the cart.
+    // The first ROLLING_RECORD_S of the test: the strong motion and some seconds after.
+    let kept = ax.len().min((ROLLING_RECORD_S * FS_HZ) as usize + 1);
+    let ax: Vec<f64> = ax[..kept].iter().map(|v| (v * 1e6).round() / 1e6).collect();
+    let n = ax.len();
+    let case = RollingCase {
+        name: plan.id.into(),
+        cart,
+        friction,
+        options,
+        t0_s: 0.0,
+        dt_s: 1.0 / FS_HZ,
+        floor_ax_mps2: ax.clone(),
+        floor_ay_mps2: vec![0.0; n],
+        accel: None,
+        camera: None,
+        accel_noise_mps2: ACCEL_NOISE_MPS2,
+        camera_noise_m: CAMERA_NOISE_M,
+        camera_noise_rad: CAMERA_NOISE_RAD,
+    };
+    let nominal = case.nominal()?;
+    let moved = (0..n)
+        .find(|&k| nominal.x_m[k].hypot(nominal.y_m[k]) > 0.03)
+        .ok_or_else(|| format!("{}: the cart never moves 3 cm in {}", plan.id, plan.test))?;
+    let t0 = moved as f64 / FS_HZ + ROLLING_ONSET_AFTER_S;
+    let mass = Some(Change { dm_kg: plan.dm_kg, at_m: plan.at_m });
+    let change = Alteration { mass, ramp_s: plan.ramp_s, ..Alteration::default() };
+    let truth = case.altered(&nominal, &change, t0, case.end_s(), None).map_err(|(e, _)| e)?;
+    let mut rng = SplitMix64::new(seed_from_label(&format!("case:{}", plan.id)));
+    let mut floor_csv = String::from("time_s,ax_mps2,ay_mps2\n");
+    let mut accel_csv = String::from("time_s,top_ax_mps2\n");
+    for (k, a) in ax.iter().enumerate() {
+        let t = k as f64 / FS_HZ;
+        let _ = writeln!(floor_csv, "{t:.3},{a:.6},0.000000");
+        let _ = writeln!(accel_csv, "{t:.3},{:.5}", truth.ax_abs_mps2[k] + ACCEL_NOISE_MPS2 * rng.normal());
+    }
+    // The camera: platform-centre displacement and yaw at 30 Hz, with one dropout of 8 frames.
+    let duration = (n - 1) as f64 / FS_HZ;
+    let dropout = rng.uniform(0.2, 0.8) * duration;
+    let mut camera_csv = String::from("time_s,x_m,y_m,yaw_rad\n");
+    let mut j = 0;
+    while (j as f64) / CAMERA_HZ <= duration {
+        let t = j as f64 / CAMERA_HZ;
+        let x = t * FS_HZ;
+        let k = (x.floor() as usize).min(n - 2);
+        let w = x - k as f64;
+        let at = |s: &[f64]| s[k] * (1.0 - w) + s[k + 1] * w;
+        let (px, py, yaw) = (
+            at(&truth.x_m) + CAMERA_NOISE_M * rng.normal(),
+            at(&truth.y_m) + CAMERA_NOISE_M * rng.normal(),
+            at(&truth.yaw_rad) + CAMERA_NOISE_RAD * rng.normal(),
+        );
+        if (dropout..dropout + 8.0 / CAMERA_HZ).contains(&t) {
+            let _ = writeln!(camera_csv, "{t:.6},nan,nan,nan");
+        } else {
+            let _ = writeln!(camera_csv, "{t:.6},{px:.6},{py:.6},{yaw:.6}");
+        }
+        j += 1;
+    }
+    let steer = table.steer0_deg.map(|d| format!("{d}")).join(", ");
+    let equipment = format!(
+        "model: rolling\nname: {unit}\ndescription: {unit} on four unlocked swivel casters ({test}, floor {floor}); synthetic demo case\nlength_m: {l}\nwidth_m: {w}\nplatform_mass_kg: {m}\nwheel_diameter_m: {dw}\nwheel_width_m: {ww}\nwheel_mass_kg: {mw}\nyaw0_deg: {yaw0}\nsteer0_deg: [{steer}]\nmu_s_roll: {msr}\nmu_s_swivel: {mss}\nmu_k_roll: {mkr}\nmu_k_swivel: {mks}\nbeta_spm: {beta}\ngamma_n: {gamma}\np: {p}\ntrail_m: {trail}\nswivel_arm_m: {arm}\nfriction_eps: {eps}\nfriction_eps_swivel: {eps_sw}\ng_mps2: {g}\nsensors:\n  camera:\n    file: observed_cpt.csv\n    rate_hz: {CAMERA_HZ}\n    quantities: platform-centre displacement x_m, y_m from its start (floor frame) and absolute yaw_rad\n    noise_sd_m: {CAMERA_NOISE_M}\n    noise_sd_rad: {CAMERA_NOISE_RAD}\n  accelerometer:\n    file: observed_accel.csv\n    rate_hz: {FS_HZ}\n    position: platform centre\n    quantity: X component of the platform centre's absolute acceleration, m/s^2\n    noise_sd_mps2: {ACCEL_NOISE_MPS2}\nconventions:\n  frame: as ../shared/cases/rolling_demo (floor-attached, non-rotating; X = E-W, the table's axis)\n",
+        unit = plan.unit,
+        test = plan.test,
+        floor = plan.floor,
+        l = cart.length_m,
+        w = cart.width_m,
+        m = cart.platform_mass_kg,
+        dw = cart.wheel_diameter_m,
+        ww = cart.wheel_width_m,
+        mw = cart.wheel_mass_kg,
+        yaw0 = table.yaw0_deg,
+        msr = table.mu_s_roll,
+        mss = table.mu_s_swivel,
+        mkr = table.mu_k_roll,
+        mks = table.mu_k_swivel,
+        beta = table.beta_spm,
+        gamma = table.gamma_n,
+        p = table.p,
+        trail = cart.trail_m,
+        arm = cart.swivel_arm_m,
+        eps = friction.eps_mps,
+        eps_sw = friction.eps_swivel_radps,
+        g = options.g_mps2,
+    );
+    let dir = format!("{CASES_DIR}/{}", plan.id);
+    let files = vec![
+        (format!("{dir}/{}", crate::io::case::EQUIPMENT), equipment.into_bytes()),
+        (format!("{dir}/{}", crate::io::case::FLOOR), floor_csv.into_bytes()),
+        (format!("{dir}/{}", crate::io::case::ACCEL), accel_csv.into_bytes()),
+        (format!("{dir}/{}", crate::io::case::CAMERA), camera_csv.into_bytes()),
+    ];
+    let truth_yaml = format!(
+        "case_id: {id}\nstory: {story}\nmodel: rolling\neffect: mass_change\nexpected_verdict: mass_change\nonset_s: {t0:.3}\nparameters:\n  t0_s: {t0:.3}\n  dm_kg: {dm}\n  dx_m: {dx}\n  dy_m: {dy}\n  ramp_s: {ramp}\nmade_by: shakeflow's own models (src/demo/cases.rs); make prove-rolling uses an independent generator\n",
+        id = plan.id,
+        story = plan.story,
+        dm = plan.dm_kg,
+        dx = plan.at_m[0],
+        dy = plan.at_m[1],
+        ramp = plan.ramp_s,
+    );
+    Ok((files, truth_yaml))
 }

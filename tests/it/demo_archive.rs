@@ -127,7 +127,7 @@ fn layout_headers_rows_and_manifest() {
     expected_top.sort();
     assert_eq!(listing(dir), expected_top);
     let cases = listing(&dir.join(shakeflow::demo::cases::CASES_DIR));
-    assert_eq!(cases, ["PB1_FB-3", "PS2_FB-2", "PS2_FB-3", "WSU1_FB-4", "WSU1_FB-5", "truth"]);
+    assert_eq!(cases, ["MC2_FB-5", "PB1_FB-3", "PS1_FB-5", "PS2_FB-2", "PS2_FB-3", "WSU1_FB-4", "WSU1_FB-5", "truth"]);
     for case in &cases[..cases.len() - 1] {
         let files = listing(&dir.join(shakeflow::demo::cases::CASES_DIR).join(case));
         assert_eq!(files, ["equipment.yaml", "floor.csv", "observed_accel.csv", "observed_cpt.csv"], "{case}");

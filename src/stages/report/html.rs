@@ -416,7 +416,7 @@ fn figures_per_motion<'a>(h: &mut String, unit: &str, figures: impl Iterator<Ite
 
 fn diagnosis(h: &mut String, cases: &[Case]) {
     h.push_str("<section id=\"diagnosis\">\n<h2>Diagnosis</h2>\n");
-    h.push_str("<p class=\"note\">Where the toppling model and each case's records disagree, which physics explains it, and the noise-normalised misfit before and after (1 is sensor noise).</p>\n");
+    h.push_str("<p class=\"note\">Where the toppling model (the rolling cart, for units on casters) and each case's records disagree, which physics explains it, and the noise-normalised misfit before and after (1 is sensor noise).</p>\n");
     h.push_str(
         "<table><tr><th>case</th><th>verdict</th><th>window [s]</th><th>misfit before</th><th>after</th></tr>\n",
     );
