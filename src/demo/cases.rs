@@ -196,23 +196,14 @@ fn make_case(plan: &Plan, ax: &[f64], az: &[f64]) -> Result<(Vec<(String, Vec<u8
         let _ = writeln!(accel_csv, "{t:.3},{:.5}", top[k] + ACCEL_NOISE_MPS2 * rng.normal());
     }
     // The camera: θ at 30 Hz, with one dropout of a second.
-    let duration = (n - 1) as f64 / FS_HZ;
-    let dropout = rng.uniform(0.2, 0.8) * duration;
-    let mut camera_csv = String::from("time_s,theta_rad\n");
-    let mut j = 0;
-    while (j as f64) / CAMERA_HZ <= duration {
-        let t = j as f64 / CAMERA_HZ;
-        let x = t * FS_HZ;
-        let k = (x.floor() as usize).min(n - 2);
-        let w = x - k as f64;
+    let camera_csv = camera_csv("time_s,theta_rad\n", n, 1.0, &mut rng, |t, k, w, dropped, rng| {
         let theta = truth.theta_rad[k] * (1.0 - w) + truth.theta_rad[k + 1] * w + CAMERA_NOISE_RAD * rng.normal();
-        if (dropout..dropout + 1.0).contains(&t) {
-            let _ = writeln!(camera_csv, "{t:.4},");
+        if dropped {
+            format!("{t:.4},\n")
         } else {
-            let _ = writeln!(camera_csv, "{t:.4},{theta:.6}");
+            format!("{t:.4},{theta:.6}\n")
         }
-        j += 1;
-    }
+    });
     let Shape::Rectangular { b_m, h_m, f } = shape else { return Err("the demo cases are rectangles".into()) };
     let equipment = format!(
         "name: {unit}\ndescription: {what} ({test}, floor {floor}); synthetic demo case\nshape: rectangular\nB_m: {b_m}\nH_m: {h_m}\nf: {f}\nmass_kg: {mass}\ng_mps2: 9.81\nsensors:\n  accelerometer:\n    file: observed_accel.csv\n    position: top centre (x=0, height H)\n    rate_hz: {FS_HZ}\n    noise_sd_mps2: {ACCEL_NOISE_MPS2}\n  camera:\n    file: observed_cpt.csv\n    quantity: rotation theta, rad\n    rate_hz: {CAMERA_HZ}\n    noise_sd_rad: {CAMERA_NOISE_RAD}\nconventions: theta > 0 = rotation about the +x corner, top moving toward +x\n",
@@ -252,6 +243,31 @@ fn tilted(r: &Response, g: f64) -> Vec<f64> {
             r.sensor_ax_mps2[k] * cos - (r.sensor_az_mps2[k] + g) * sin
         })
         .collect()
+}
+
+/// A camera's CSV at `CAMERA_HZ` over a record of `n` floor samples, with one dropout of
+/// `dropout_s` somewhere in the record's middle 60 %: `line(t, k, w, dropped, rng)` writes the
+/// frame at time t (between floor samples k and k + 1, weight w on k + 1), drawing its noise even
+/// when the frame is dropped, so that the noise of every frame is the same with or without one.
+fn camera_csv(
+    header: &str,
+    n: usize,
+    dropout_s: f64,
+    rng: &mut SplitMix64,
+    mut line: impl FnMut(f64, usize, f64, bool, &mut SplitMix64) -> String,
+) -> String {
+    let duration = (n - 1) as f64 / FS_HZ;
+    let dropout = rng.uniform(0.2, 0.8) * duration;
+    let mut csv = String::from(header);
+    let mut j = 0;
+    while (j as f64) / CAMERA_HZ <= duration {
+        let t = j as f64 / CAMERA_HZ;
+        let x = t * FS_HZ;
+        let k = (x.floor() as usize).min(n - 2);
+        csv.push_str(&line(t, k, x - k as f64, (dropout..dropout + dropout_s).contains(&t), rng));
+        j += 1;
+    }
+    csv
 }
 
 /// The study's two rolling stories, as rolling cases (`model: rolling`, the contract of
@@ -343,28 +359,20 @@ fn rolling_case(plan: &RollingPlan, ax: &[f64]) -> Result<(Vec<(String, Vec<u8>)
         let _ = writeln!(accel_csv, "{t:.3},{:.5}", truth.ax_abs_mps2[k] + ACCEL_NOISE_MPS2 * rng.normal());
     }
     // The camera: platform-centre displacement and yaw at 30 Hz, with one dropout of 8 frames.
-    let duration = (n - 1) as f64 / FS_HZ;
-    let dropout = rng.uniform(0.2, 0.8) * duration;
-    let mut camera_csv = String::from("time_s,x_m,y_m,yaw_rad\n");
-    let mut j = 0;
-    while (j as f64) / CAMERA_HZ <= duration {
-        let t = j as f64 / CAMERA_HZ;
-        let x = t * FS_HZ;
-        let k = (x.floor() as usize).min(n - 2);
-        let w = x - k as f64;
+    let header = "time_s,x_m,y_m,yaw_rad\n";
+    let camera_csv = camera_csv(header, n, 8.0 / CAMERA_HZ, &mut rng, |t, k, w, dropped, rng| {
         let at = |s: &[f64]| s[k] * (1.0 - w) + s[k + 1] * w;
         let (px, py, yaw) = (
             at(&truth.x_m) + CAMERA_NOISE_M * rng.normal(),
             at(&truth.y_m) + CAMERA_NOISE_M * rng.normal(),
             at(&truth.yaw_rad) + CAMERA_NOISE_RAD * rng.normal(),
         );
-        if (dropout..dropout + 8.0 / CAMERA_HZ).contains(&t) {
-            let _ = writeln!(camera_csv, "{t:.6},nan,nan,nan");
+        if dropped {
+            format!("{t:.6},nan,nan,nan\n")
         } else {
-            let _ = writeln!(camera_csv, "{t:.6},{px:.6},{py:.6},{yaw:.6}");
+            format!("{t:.6},{px:.6},{py:.6},{yaw:.6}\n")
         }
-        j += 1;
-    }
+    });
     let steer = table.steer0_deg.map(|d| format!("{d}")).join(", ");
     let equipment = format!(
         "model: rolling\nname: {unit}\ndescription: {unit} on four unlocked swivel casters ({test}, floor {floor}); synthetic demo case\nlength_m: {l}\nwidth_m: {w}\nplatform_mass_kg: {m}\nwheel_diameter_m: {dw}\nwheel_width_m: {ww}\nwheel_mass_kg: {mw}\nyaw0_deg: {yaw0}\nsteer0_deg: [{steer}]\nmu_s_roll: {msr}\nmu_s_swivel: {mss}\nmu_k_roll: {mkr}\nmu_k_swivel: {mks}\nbeta_spm: {beta}\ngamma_n: {gamma}\np: {p}\ntrail_m: {trail}\nswivel_arm_m: {arm}\nfriction_eps: {eps}\nfriction_eps_swivel: {eps_sw}\ng_mps2: {g}\nsensors:\n  camera:\n    file: observed_cpt.csv\n    rate_hz: {CAMERA_HZ}\n    quantities: platform-centre displacement x_m, y_m from its start (floor frame) and absolute yaw_rad\n    noise_sd_m: {CAMERA_NOISE_M}\n    noise_sd_rad: {CAMERA_NOISE_RAD}\n  accelerometer:\n    file: observed_accel.csv\n    rate_hz: {FS_HZ}\n    position: platform centre\n    quantity: X component of the platform centre's absolute acceleration, m/s^2\n    noise_sd_mps2: {ACCEL_NOISE_MPS2}\nconventions:\n  frame: as ../shared/cases/rolling_demo (floor-attached, non-rotating; X = E-W, the table's axis)\n",
