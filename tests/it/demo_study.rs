@@ -121,8 +121,8 @@ fn demo_pipeline_recovers_the_archive_truth() {
     }
 }
 
-/// Every demo case gets the verdict its truth names (cases/truth/, never read by the tool); where a
-/// physics is named, the window starts within 0.5 s of the concealed onset. The rolling cases
+/// Every demo case gets the verdict its truth names (cases/truth/, never read by the tool); where
+/// the truth dates the onset (the rolling cases), the window starts within 0.5 s of it. The rolling cases
 /// are the study's own stories: PS1 carrying the fallen WSU1 is diagnosed; MC2 losing its load
 /// is not (MC2's casters stick and slip, and mass changes near the concealed one, found by the
 /// fit, cut its misfit less than threefold), so for it the diagnosis may decline (`unexplained`)

@@ -38,7 +38,7 @@ mod fit;
 use rayon::prelude::*;
 
 use super::{Observed, Settings};
-use crate::physics::rolling::{simulate_altered, Alteration, Cart, Excitation, Friction, NoSlip, Options};
+use crate::physics::rolling::{simulate_altered, Alteration, Cart, Excitation, Friction, Options};
 use evidence::{Evidence, Misfit};
 
 /// The camera's view of the platform: centre displacement from its start and absolute yaw.
@@ -81,8 +81,8 @@ pub struct Track {
     pub states: Vec<Vec<f64>>,
     /// When the effect began (None: the nominal cart).
     pub onset_s: Option<f64>,
-    /// The run's right-hand-side evaluations (an altered run's: from its onset; the nominal
-    /// cart's, per sample: what an altered run may cost, [`BUDGET_FACTOR`] times over).
+    /// The run's right-hand-side evaluations, in all (an altered run's: from its onset). The
+    /// nominal cart's, per sample, is what an altered run may cost [`BUDGET_FACTOR`] times over.
     pub evaluations: usize,
 }
 
@@ -133,7 +133,8 @@ impl RollingCase {
             None,
             self.samples() - 1,
             None,
-        )?;
+        )
+        .map_err(|(e, _)| e)?;
         Ok(Track {
             evaluations: r.stats.rhs_evals,
             x_m: r.x_m,
@@ -189,8 +190,6 @@ impl RollingCase {
         if end <= k0 {
             return Ok(track);
         }
-        // Parameters no cart can have (a centre of mass past a wheel) cost nothing to refuse.
-        NoSlip::altered(&self.cart, &self.friction, self.options.g_mps2, alteration).map_err(|e| (e, 0))?;
         let per_sample = (BUDGET_FACTOR * nominal.evaluations as f64 / n as f64).max(BUDGET_FLOOR);
         let cap = (nominal.evaluations > 0).then(|| (per_sample * (end - k0) as f64) as usize);
         let budget = match (cap, allowance) {
@@ -206,8 +205,7 @@ impl RollingCase {
             Some((k0, &nominal.states[k0])),
             end,
             budget,
-        )
-        .map_err(|e| (e, budget.unwrap_or(0)))?;
+        )?;
         track.evaluations = r.stats.rhs_evals;
         track.x_m[k0..=end].copy_from_slice(&r.x_m);
         track.y_m[k0..=end].copy_from_slice(&r.y_m);
@@ -258,8 +256,19 @@ impl Candidate {
     /// a physics that leaves only noise counts as a full cut even when the disagreement was
     /// barely above it (RMS 1.4 to 1.0 is 0.98 to 0: explained; RMS 30 to 10 is 3×).
     pub fn cut_from(&self, base: &Candidate) -> f64 {
-        let excess = |rmse: f64| (rmse * rmse - 1.0).max(0.0).sqrt();
-        excess(base.rmse_judged) / excess(self.rmse_judged).max(1e-12)
+        cut_beyond_noise(base.rmse_judged, self.rmse_judged)
+    }
+}
+
+/// How many times smaller the noise-normalised misfit beyond the noise, √(RMS² − 1), is after
+/// than before (0 when there was nothing beyond the noise to cut).
+fn cut_beyond_noise(before: f64, after: f64) -> f64 {
+    let excess = |rmse: f64| (rmse * rmse - 1.0).max(0.0).sqrt();
+    let (b, a) = (excess(before), excess(after));
+    if b == 0.0 {
+        0.0
+    } else {
+        b / a.max(1e-12)
     }
 }
 
@@ -320,7 +329,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
     // The misfit test is judged where the nominal cart is predictable: past that its twins part
     // from it, and no hypothesis is told right or wrong by how far it drifts there.
     let judged = window.map(|w| match predictable_until_s {
-        Some(p) if p > w.0 + MIN_JUDGED_S && p < w.1 => (w.0, p),
+        Some(p) if p < w.1 => (w.0, p.max(w.0 + MIN_JUDGED_S).min(w.1)),
         _ => w,
     });
     let baseline_candidate = |window: Option<(f64, f64)>| Candidate {
@@ -543,5 +552,25 @@ fn shortfall(c: &Candidate, base: &Candidate, settings: &Settings) -> String {
             100.0 * c.flagged_early as f64 / (base.flagged_early as f64).max(1.0),
             100.0 * MAX_LEFT_EARLY
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::cut_beyond_noise;
+
+    #[test]
+    fn the_cut_beyond_noise_counts_only_what_exceeds_the_noise() {
+        // A large misfit: the plain ratio, nearly (√(30² − 1)/√(10² − 1) = 3.013).
+        assert!((cut_beyond_noise(30.0, 10.0) - 899f64.sqrt() / 99f64.sqrt()).abs() < 1e-12);
+        // A weak disagreement brought to noise is explained, though its RMS falls 1.4×.
+        assert!(cut_beyond_noise(1.4, 1.0) > 1e6);
+        // Brought only part of the way: √(1.4² − 1) / √(1.2² − 1) = 0.980 / 0.663 = 1.48.
+        assert!((cut_beyond_noise(1.4, 1.2) - 0.96f64.sqrt() / 0.44f64.sqrt()).abs() < 1e-12);
+        // Nothing beyond the noise before: nothing to cut, never a pass.
+        assert_eq!(cut_beyond_noise(1.0, 0.9), 0.0);
+        assert_eq!(cut_beyond_noise(0.8, 0.8), 0.0);
+        // A failed run's misfit (1e6, what a non-finite residual counts as) cuts nothing.
+        assert!(cut_beyond_noise(50.0, 1e6) < 1e-3);
     }
 }

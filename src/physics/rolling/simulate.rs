@@ -214,19 +214,20 @@ pub fn simulate_altered(
     start: Option<(usize, &[f64])>,
     end: usize,
     budget: Option<usize>,
-) -> Result<Response, String> {
+) -> Result<Response, (String, usize)> {
     let n = excitation.ax_mps2.len();
+    let refused = |e: String| (e, 0);
     if friction.law != FrictionLaw::Regularised || options.lateral_slip.is_some() {
-        return Err("an altered cart runs the no-slip model with regularised friction only".into());
+        return Err(refused("an altered cart runs the no-slip model with regularised friction only".into()));
     }
     let k0 = start.map_or(0, |s| s.0);
     if !(k0 < end && end < n) || excitation.ay_mps2.len() != n {
-        return Err(format!("cannot simulate samples {k0}..={end} of a {n}-sample floor record"));
+        return Err(refused(format!("cannot simulate samples {k0}..={end} of a {n}-sample floor record")));
     }
-    cart.check(false)?;
-    friction.check()?;
+    cart.check(false).map_err(refused)?;
+    friction.check().map_err(refused)?;
     // Checks the full alteration (a ramp's pieces are smaller versions of it).
-    NoSlip::altered(cart, friction, options.g_mps2, alteration)?;
+    NoSlip::altered(cart, friction, options.g_mps2, alteration).map_err(refused)?;
     let mut before = NoSlip::new(cart, friction, options.g_mps2);
     let mut y = match start {
         None => {
@@ -235,12 +236,14 @@ pub fn simulate_altered(
             y[3..7].copy_from_slice(&options.steer0_rad);
             y
         }
-        Some((_, state)) => state.try_into().map_err(|_| format!("a cart state has 10 values, got {}", state.len()))?,
+        Some((_, state)) => {
+            state.try_into().map_err(|_| refused(format!("a cart state has 10 values, got {}", state.len())))?
+        }
     };
     let mut response: Option<Response> = None;
     let mut used = 0;
     for (first, last, piece) in pieces(alteration, k0, end, excitation.dt_s) {
-        let model = NoSlip::altered(cart, friction, options.g_mps2, &piece)?;
+        let model = NoSlip::altered(cart, friction, options.g_mps2, &piece).map_err(|e| (e, used))?;
         if start.is_some() || first > k0 {
             y = model.enter(&before, &y);
         }
@@ -256,12 +259,13 @@ pub fn simulate_altered(
         let next = match options.method {
             Method::Adaptive { rtol, atol } => {
                 let tolerances: [f64; 10] = std::array::from_fn(|i| if i < 7 { atol } else { 10.0 * atol });
-                run.run(Dopri5::new(rtol, tolerances, excitation.dt_s), y)?
+                run.run(Dopri5::new(rtol, tolerances, excitation.dt_s), y)
             }
-            Method::Rk4 { dt_s } => run.run(Rk4::new(dt_s), y)?,
-        };
-        let state = next.states.last().ok_or("an altered run kept no state")?;
-        y = state.as_slice().try_into().map_err(|_| "an altered run kept a malformed state".to_string())?;
+            Method::Rk4 { dt_s } => run.run(Rk4::new(dt_s), y),
+        }
+        .map_err(|e| (e, used + run.spent.get()))?;
+        let state = next.states.last().ok_or(("an altered run kept no state".to_string(), used))?;
+        y = state.as_slice().try_into().map_err(|_| ("an altered run kept a malformed state".to_string(), used))?;
         used += next.stats.rhs_evals;
         match response.as_mut() {
             None => response = Some(next),
@@ -269,7 +273,7 @@ pub fn simulate_altered(
         }
         before = model;
     }
-    response.ok_or_else(|| "an altered run covered no samples".to_string())
+    response.ok_or_else(|| ("an altered run covered no samples".to_string(), used))
 }
 
 /// The constant pieces (first sample, last sample, alteration) of an altered run over k0..=end.
@@ -328,6 +332,8 @@ struct Run<'a, const N: usize, D: Dynamics<N>> {
     keep_states: bool,
     /// Right-hand-side evaluations allowed (None: no limit).
     budget: Option<usize>,
+    /// The evaluations a run that failed had spent when it stopped.
+    spent: std::cell::Cell<usize>,
 }
 
 /// The floor inside one sample interval: linear in time.
@@ -363,6 +369,7 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
             energy_rest: 0.5 * mass * rest_speed * rest_speed,
             keep_states: false,
             budget: None,
+            spent: std::cell::Cell::new(0),
         }
     }
 
@@ -377,7 +384,7 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
         }
     }
 
-    fn run<S: Stepper<N>>(self, mut stepper: S, mut y: [f64; N]) -> Result<Response, String> {
+    fn run<S: Stepper<N>>(&self, mut stepper: S, mut y: [f64; N]) -> Result<Response, String> {
         let exc = self.excitation;
         let n = exc.ax_mps2.len();
         let dt = exc.dt_s;
@@ -410,6 +417,7 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
             while t < t_end {
                 transitions += 1;
                 if transitions > MAX_TRANSITIONS_PER_SAMPLE {
+                    self.spent.set(stepper.stats().rhs_evals);
                     return Err(format!(
                         "more than {MAX_TRANSITIONS_PER_SAMPLE} events within the sample at t = {t:.4} s: the run does not settle (raise friction_eps)"
                     ));
@@ -484,9 +492,11 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
                 }
             }
             if let Some(budget) = self.budget.filter(|b| stepper.stats().rhs_evals > *b) {
+                self.spent.set(stepper.stats().rhs_evals);
                 return Err(format!("the run needs more than {budget} evaluations by t = {t_end:.3} s (too stiff)"));
             }
             if !y.iter().all(|v| v.is_finite()) {
+                self.spent.set(stepper.stats().rhs_evals);
                 return Err(format!(
                     "the cart's state is no longer a number at t = {t_end:.3} s: the run diverged (too stiff a friction law or too large a change)"
                 ));
