@@ -216,13 +216,7 @@ fn make_case(plan: &Plan, ax: &[f64], az: &[f64]) -> Result<(Vec<(String, Vec<u8
         test = plan.test,
         floor = plan.floor,
     );
-    let dir = format!("{CASES_DIR}/{}", plan.id);
-    let files = vec![
-        (format!("{dir}/{}", crate::io::case::EQUIPMENT), equipment.into_bytes()),
-        (format!("{dir}/{}", crate::io::case::FLOOR), floor_csv.into_bytes()),
-        (format!("{dir}/{}", crate::io::case::ACCEL), accel_csv.into_bytes()),
-        (format!("{dir}/{}", crate::io::case::CAMERA), camera_csv.into_bytes()),
-    ];
+    let files = case_folder(plan.id, [equipment, floor_csv, accel_csv, camera_csv]);
     let overturn = truth.overturn.map_or("null".to_string(), |(t, s)| format!("{{time_s: {t:.4}, side: {s}}}"));
     let truth_yaml = format!(
         "case_id: {id}\nstory: {story}\neffect: {effect}\nexpected_verdict: {effect}\nparameters:{params}\nfirst_uplift_s: {uplift}\noverturn: {overturn}\nmade_by: shakeflow's own models (src/demo/cases.rs); make prove uses an independent generator\n",
@@ -242,6 +236,15 @@ fn tilted(r: &Response, g: f64) -> Vec<f64> {
             let (sin, cos) = r.theta_rad[k].sin_cos();
             r.sensor_ax_mps2[k] * cos - (r.sensor_az_mps2[k] + g) * sin
         })
+        .collect()
+}
+
+/// A case folder's four files (equipment, floor, accelerometer, camera), relative to the archive.
+fn case_folder(id: &str, [equipment, floor, accel, camera]: [String; 4]) -> Vec<(String, Vec<u8>)> {
+    use crate::io::case::{ACCEL, CAMERA, EQUIPMENT, FLOOR};
+    [(EQUIPMENT, equipment), (FLOOR, floor), (ACCEL, accel), (CAMERA, camera)]
+        .into_iter()
+        .map(|(name, text)| (format!("{CASES_DIR}/{id}/{name}"), text.into_bytes()))
         .collect()
 }
 
@@ -399,13 +402,7 @@ fn rolling_case(plan: &RollingPlan, ax: &[f64]) -> Result<(Vec<(String, Vec<u8>)
         eps_sw = friction.eps_swivel_radps,
         g = options.g_mps2,
     );
-    let dir = format!("{CASES_DIR}/{}", plan.id);
-    let files = vec![
-        (format!("{dir}/{}", crate::io::case::EQUIPMENT), equipment.into_bytes()),
-        (format!("{dir}/{}", crate::io::case::FLOOR), floor_csv.into_bytes()),
-        (format!("{dir}/{}", crate::io::case::ACCEL), accel_csv.into_bytes()),
-        (format!("{dir}/{}", crate::io::case::CAMERA), camera_csv.into_bytes()),
-    ];
+    let files = case_folder(plan.id, [equipment, floor_csv, accel_csv, camera_csv]);
     let truth_yaml = format!(
         "case_id: {id}\nstory: {story}\nmodel: rolling\neffect: mass_change\nexpected_verdict: mass_change\nonset_s: {t0:.3}\nparameters:\n  t0_s: {t0:.3}\n  dm_kg: {dm}\n  dx_m: {dx}\n  dy_m: {dy}\n  ramp_s: {ramp}\nmade_by: shakeflow's own models (src/demo/cases.rs); make prove-rolling uses an independent generator\n",
         id = plan.id,
