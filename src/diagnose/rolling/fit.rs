@@ -8,10 +8,11 @@
 //! the record's length at the nominal cart's cost per sample, at most [`UNIT_PER_SAMPLE`]
 //! evaluations per sample (a cart that crawls through stiff sticking costs more, and is fitted
 //! within the same absolute bound): [`GRID_RUNS`] shared by a grid's points, at least
-//! [`GRID_POINT_RUNS`] each (a point runs over a short horizon), [`SEARCH_RUNS`] for each start's searches, spent in their order, and [`JUDGE_RUNS`]
-//! for each optimum's whole-record run. A run past its allowance fails. A case whose parameters
-//! make stiff runs is so fitted in bounded time, and the same on every machine: the allowance
-//! is counted, never timed.
+//! [`GRID_POINT_RUNS`] each (a point runs over a short horizon), [`SEARCH_RUNS`] for each
+//! start's searches, spent in their order, and [`JUDGE_RUNS`] for each optimum's whole-record
+//! run. A run past its allowance fails; one that fails otherwise is charged what it spent. A
+//! case whose parameters make stiff runs is so fitted in bounded time, and the same on every
+//! machine: the allowance is counted, never timed.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
