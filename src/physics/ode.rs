@@ -64,6 +64,10 @@ pub struct Dopri5<const N: usize> {
     /// call starts from exactly that point.
     fsal: Option<(f64, [f64; N], [f64; N])>,
     stats: Stats,
+    /// Evaluations past which a step is not tried (None: no limit): a problem so stiff that its
+    /// steps shrink to the floor of the time's resolution crawls otherwise for hours inside one
+    /// call, between its caller's checks. The call then returns a NaN state for it to refuse.
+    max_evals: Option<usize>,
 }
 
 // Dormand–Prince coefficients (Hairer's DOPRI5).
@@ -316,7 +320,12 @@ fn locate_root(g: impl Fn(f64) -> f64, mut a: f64, mut ga: f64, mut b: f64, mut 
 impl<const N: usize> Dopri5<N> {
     pub fn new(rtol: f64, atol: [f64; N], h_max: f64) -> Self {
         assert!(rtol > 0.0 && atol.iter().all(|&a| a > 0.0), "tolerances must be positive");
-        Dopri5 { rtol, atol, h_max, h: 0.0, facold: 1e-4, fsal: None, stats: Stats::default() }
+        Dopri5 { rtol, atol, h_max, h: 0.0, facold: 1e-4, fsal: None, stats: Stats::default(), max_evals: None }
+    }
+
+    /// The same stepper giving up past `max_evals` right-hand-side evaluations in all.
+    pub fn with_max_evals(self, max_evals: Option<usize>) -> Self {
+        Dopri5 { max_evals, ..self }
     }
 
     /// Hairer's initial step guess (HNW I, §II.4), bounded by the interval and `h_max`.
@@ -364,6 +373,10 @@ impl<const N: usize> Stepper<N> for Dopri5<N> {
         let mut first_step = true;
         let mut h = self.h.min(self.h_max);
         loop {
+            if self.max_evals.is_some_and(|m| self.stats.rhs_evals > m) {
+                self.fsal = None;
+                return Advance::Reached([f64::NAN; N]);
+            }
             let remaining = t1 - t;
             // Land exactly on t1 rather than leave a sliver of an interval.
             let proposed = h;
@@ -543,6 +556,24 @@ mod tests {
         let Advance::Reached(_) = loose.advance(&oscillator, 0.0, [1.0, 0.0], 10.0, &no_events) else { panic!() };
         let ratio = solver.stats().accepted as f64 / loose.stats().accepted as f64;
         assert!((6.0..15.0).contains(&ratio), "steps {:?} vs {:?}: ratio {ratio}", solver.stats(), loose.stats());
+    }
+
+    #[test]
+    fn a_stepper_past_its_evaluations_gives_up_inside_the_call() {
+        // A stiff decay (λ = −1e9) at an explicit method's stability limit: steps of ~3e-9 s, so
+        // 1 s would take some 2e9 evaluations. Limited to 10 000, one call stops after at most
+        // one more step (7 evaluations) and says so with a NaN state; unlimited, it would crawl.
+        let stiff = |_: f64, y: &[f64; 1]| [-1e9 * (y[0] - 1.0)];
+        let none = |_: f64, _: &[f64; 1]| -> [f64; 0] { [] };
+        let mut solver = Dopri5::new(1e-6, [1e-9], 1.0).with_max_evals(Some(10_000));
+        let Advance::Reached(y) = solver.advance(&stiff, 0.0, [0.0], 1.0, &none) else { panic!("no event expected") };
+        assert!(y[0].is_nan(), "gave {y:?}");
+        let spent = solver.stats().rhs_evals;
+        assert!((10_000..=10_007).contains(&spent), "{spent} evaluations");
+        // Within its limit the same stepper is the plain one.
+        let mut limited = Dopri5::new(1e-10, [1e-12; 2], 1.0).with_max_evals(Some(1_000_000));
+        let Advance::Reached(y) = limited.advance(&oscillator, 0.0, [1.0, 0.0], 10.0, &no_events) else { panic!() };
+        assert!((y[0] - 10f64.cos()).abs() < 1e-8);
     }
 
     #[test]

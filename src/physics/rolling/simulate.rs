@@ -259,7 +259,7 @@ pub fn simulate_altered(
         let next = match options.method {
             Method::Adaptive { rtol, atol } => {
                 let tolerances: [f64; 10] = std::array::from_fn(|i| if i < 7 { atol } else { 10.0 * atol });
-                run.run(Dopri5::new(rtol, tolerances, excitation.dt_s), y)
+                run.run(Dopri5::new(rtol, tolerances, excitation.dt_s).with_max_evals(run.budget), y)
             }
             Method::Rk4 { dt_s } => run.run(Rk4::new(dt_s), y),
         }
