@@ -95,6 +95,12 @@ impl Evidence {
         }
     }
 
+    /// Whether `p` predicts what the accelerometer read at `s` (see [`Track::accel_unseen`]).
+    fn accel_seen(p: &Track, s: &Sample) -> bool {
+        let unseen = |k: usize| p.accel_unseen.get(k).copied().unwrap_or(false);
+        !(unseen(s.k) || (s.w > 0.0 && unseen(s.k + 1)))
+    }
+
     fn accel_z(&self, p: &Track, s: &Sample) -> f64 {
         (s.value[0] - at(&p.ax_abs_mps2, s)) / self.accel_sigma
     }
@@ -107,7 +113,7 @@ impl Evidence {
     /// Every compared normalised residual with its time, in time order per sensor.
     fn residuals<'a>(&'a self, p: &'a Track, from: f64, until: f64) -> impl Iterator<Item = f64> + 'a {
         let keep = move |s: &&Sample| s.valid && s.t >= from && s.t <= until;
-        let accel = self.accel.iter().filter(keep).map(|s| self.accel_z(p, s));
+        let accel = self.accel.iter().filter(keep).filter(|s| Self::accel_seen(p, s)).map(|s| self.accel_z(p, s));
         let camera = self.camera.iter().filter(keep).flat_map(|s| self.camera_z(p, s));
         accel.chain(camera)
     }
@@ -140,7 +146,7 @@ impl Evidence {
         let accel: Vec<f64> = self
             .accel
             .iter()
-            .filter(|s| s.valid && !(self.accel_z(p, s).abs() <= self.exceedance_sigma))
+            .filter(|s| s.valid && Self::accel_seen(p, s) && !(self.accel_z(p, s).abs() <= self.exceedance_sigma))
             .map(|s| s.t)
             .collect();
         let camera: Vec<f64> = self
@@ -219,8 +225,13 @@ impl Evidence {
             position = position.max((z[0] * self.camera_sigma[0]).hypot(z[1] * self.camera_sigma[1]));
             yaw = yaw.max((z[2] * self.camera_sigma[2]).abs());
         }
-        let accel =
-            self.accel.iter().filter(inside).map(|s| (self.accel_z(p, s) * self.accel_sigma).abs()).fold(0.0, f64::max);
+        let accel = self
+            .accel
+            .iter()
+            .filter(inside)
+            .filter(|s| Self::accel_seen(p, s))
+            .map(|s| (self.accel_z(p, s) * self.accel_sigma).abs())
+            .fold(0.0, f64::max);
         format!("the camera by up to {position:.3} m and {yaw:.3} rad and the accelerometer by up to {accel:.2} m/s^2")
     }
 
@@ -230,7 +241,7 @@ impl Evidence {
             .iter()
             .map(|s| {
                 let predicted = at(&p.ax_abs_mps2, s);
-                let residual = if s.valid { s.value[0] - predicted } else { f64::NAN };
+                let residual = if s.valid && Self::accel_seen(p, s) { s.value[0] - predicted } else { f64::NAN };
                 (s.t, s.value[0], predicted, residual)
             })
             .collect()

@@ -1,7 +1,8 @@
 //! Fitting a rolling effect's few parameters: the strategy of the rocking fit ([`crate::diagnose::fit`])
 //! for a cart whose runs start where the effect begins: a grid judged over a short horizon past
 //! the window's start, Nelder–Mead (argmin) from the best grid points over growing horizons, in
-//! coordinates scaled to the ranges with the discrete parameters (a caster, a side) held, and
+//! coordinates scaled to the ranges with the discrete parameters (a caster, a side) held, as is a
+//! step's ramp (a step is searched as a step, a gradual change from the grid's ramps), and
 //! every optimum judged on the whole record.
 //!
 //! A fit spends a bounded number of the cart's right-hand-side evaluations, counted in runs of
@@ -24,8 +25,9 @@ use super::effects::Effect;
 use super::evidence::{Evidence, Misfit};
 use super::{RollingCase, Track};
 
-/// Grid points a local search starts from.
-const STARTS: usize = 2;
+/// Grid points a local search starts from (the best; and the best of a family, a step or a
+/// gradual change, that none of them is in).
+const STARTS: usize = 3;
 /// Horizon past the window's start (s) of the grid, then of the successive searches.
 const GRID_HORIZON: f64 = 1.0;
 const HORIZONS: [f64; 2] = [1.5, 4.0];
@@ -87,7 +89,9 @@ impl Objective<'_> {
         let (alteration, onset) = self.effect.alteration(self.case, self.nominal, params).ok()?;
         let run = self.case.altered(self.nominal, &alteration, onset, until, Some(left));
         allowance.spend(run.as_ref().map_or_else(|(_, spent)| *spent, |t| t.evaluations));
-        run.ok()
+        let mut track = run.ok()?;
+        track.accel_unseen = self.effect.accel_unseen(self.case, self.nominal, params, &track);
+        Some(track)
     }
 
     fn chi2(&self, params: &[f64], until: f64, allowance: &Allowance) -> f64 {
@@ -188,13 +192,22 @@ pub fn fit(effect: &dyn Effect, case: &RollingCase, nominal: &Track, evidence: &
         .collect();
     let mut order: Vec<usize> = (0..scored.len()).collect();
     order.sort_by(|&a, &b| scored[a].0.total_cmp(&scored[b].0).then(a.cmp(&b)));
-    let starts: Vec<Vec<f64>> = order.iter().take(STARTS).map(|&i| scored[i].1.clone()).collect();
+    // The best grid points, and the best of a family (a step, a gradual change) they all miss.
+    let family = |p: &[f64]| effect.held_at_zero().map(|i| p[i] == 0.0);
+    let mut picked: Vec<usize> = order.iter().copied().take(STARTS).collect();
+    if let Some(&i) = order.iter().find(|&&i| picked.iter().all(|&j| family(&scored[j].1) != family(&scored[i].1))) {
+        picked.push(i);
+    }
+    let starts: Vec<Vec<f64>> = picked.iter().map(|&i| scored[i].1.clone()).collect();
     let optima: Vec<Vec<f64>> = starts
         .into_par_iter()
         .flat_map_iter(|start| {
+            // A step is searched as a step: its ramp stays at zero.
+            let held = effect.held_at_zero().filter(|&i| start[i] == 0.0);
+            let free: Vec<usize> = continuous.iter().copied().filter(|&i| Some(i) != held).collect();
             let (mut params, allowance) = (start, Allowance::new(case, nominal, SEARCH_RUNS));
             for h in HORIZONS {
-                params = search(&objective, &bounds, &continuous, &params, window.0 + h, &allowance);
+                params = search(&objective, &bounds, &free, &params, window.0 + h, &allowance);
             }
             std::iter::once(params)
         })
@@ -226,5 +239,6 @@ fn failed(case: &RollingCase) -> Track {
         states: Vec::new(),
         onset_s: None,
         evaluations: 0,
+        accel_unseen: Vec::new(),
     }
 }

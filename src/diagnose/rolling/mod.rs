@@ -84,6 +84,10 @@ pub struct Track {
     /// The run's right-hand-side evaluations, in all (an altered run's: from its onset). The
     /// nominal cart's, per sample, is what an altered run may cost [`BUDGET_FACTOR`] times over.
     pub evaluations: usize,
+    /// Floor samples where this model cannot say what the accelerometer read (empty: none):
+    /// around a contact shorter than the sampling interval allows to resolve, whose reading
+    /// depends on the sensor's anti-alias filter and sampling phase, which no case describes.
+    pub accel_unseen: Vec<bool>,
 }
 
 /// Relative (and, for angles, radian) probes of the twins, largest first.
@@ -143,6 +147,7 @@ impl RollingCase {
             ax_abs_mps2: r.ax_abs_mps2,
             states: r.states,
             onset_s: None,
+            accel_unseen: Vec::new(),
         })
     }
 
@@ -177,6 +182,7 @@ impl RollingCase {
             states: Vec::new(),
             onset_s: Some(self.t0_s + k0 as f64 * self.dt_s),
             evaluations: 0,
+            accel_unseen: Vec::new(),
         };
         for (to, from) in [
             (&mut track.x_m, &nominal.x_m),

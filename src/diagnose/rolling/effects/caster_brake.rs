@@ -34,6 +34,10 @@ impl Effect for CasterBrake {
         &[true, false, false, false]
     }
 
+    fn held_at_zero(&self) -> Option<usize> {
+        Some(3)
+    }
+
     fn bounds(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<(f64, f64)> {
         vec![(0.0, 3.0), onset_bounds(case, window, EARLIEST_S, 0.1), (0.02, 1.0), (0.0, MAX_RAMP_S)]
     }

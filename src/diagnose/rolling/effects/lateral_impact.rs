@@ -15,6 +15,10 @@ pub struct LateralImpact;
 
 /// Contact durations (s) the grid tries: a stiff frame; a compliant neighbour.
 const WALL_S: f64 = 0.02;
+/// A wall's contact shorter than this many floor samples is not resolved by the accelerometer:
+/// what it reads around it is the impulse through its anti-alias filter at its sampling phase
+/// (a spike, or nothing between two samples), which no case describes, so it is not judged there.
+const RESOLVED_SAMPLES: f64 = 5.0;
 const NEIGHBOUR_S: [f64; 2] = [0.05, 0.15];
 
 /// (axis, side) of side index 0..3: +X, −X, +Y, −Y.
@@ -84,6 +88,28 @@ impl Effect for LateralImpact {
         Ok((Alteration { wall: Some(wall), ..Alteration::default() }, onset))
     }
 
+    /// A stiff wall's contacts: every sample interval in which a corner may touch the wall (it
+    /// is past it, or within the interval's travel and a millimetre of it), widened by a sample
+    /// on each side for the sensor's filter.
+    fn accel_unseen(&self, case: &RollingCase, nominal: &Track, p: &[f64], track: &Track) -> Vec<bool> {
+        if p[4] >= 0.5 || p[3] >= RESOLVED_SAMPLES * case.dt_s {
+            return Vec::new();
+        }
+        let (axis, sign) = side(p[0]);
+        let (position, _) = wall_for(case, nominal, axis, sign, p[1]);
+        let n = track.x_m.len();
+        let k0 = track.onset_s.map_or(0, |t| case.index(t));
+        let depth = |k: usize| reach(case, track, axis, sign, k) - sign * position;
+        let mut unseen = vec![false; n];
+        for k in k0..n.saturating_sub(1) {
+            let (a, b) = (depth(k), depth(k + 1));
+            if a.max(b) > -((b - a).abs() + 1e-3) {
+                unseen[k.saturating_sub(1)..(k + 3).min(n)].iter_mut().for_each(|u| *u = true);
+            }
+        }
+        unseen
+    }
+
     fn explain(&self, case: &RollingCase, nominal: &Track, p: &[f64]) -> String {
         let (axis, sign) = side(p[0]);
         let (position, onset) = wall_for(case, nominal, axis, sign, p[1]);
@@ -98,5 +124,74 @@ impl Effect for LateralImpact {
             p[2],
             1e3 * p[3]
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::rolling::evidence::Evidence;
+    use crate::diagnose::Observed;
+    use crate::physics::rolling::{self as rolling, FrictionLaw, Options};
+
+    /// MC2 pushed along +X for 0.8 s by a 2 m/s^2 floor pulse, then coasting for 2.2 s.
+    fn pushed_cart() -> (RollingCase, Track) {
+        let table = rolling::preset("MC2").expect("MC2 is a preset");
+        let dt = 0.005;
+        let ax: Vec<f64> = (0..601).map(|k| if (k as f64) * dt < 0.8 { -2.0 } else { 0.0 }).collect();
+        let case = RollingCase {
+            name: "pushed".into(),
+            cart: table.cart(rolling::Cart::default_trail_m(table.wheel_diameter_m), rolling::DEFAULT_SWIVEL_ARM_M),
+            friction: table.friction(rolling::DEFAULT_FRICTION_EPS_MPS, FrictionLaw::Regularised),
+            options: Options { yaw0_rad: 0.0, steer0_rad: [0.0; 4], ..Options::default() },
+            t0_s: 0.0,
+            dt_s: dt,
+            floor_ay_mps2: vec![0.0; ax.len()],
+            floor_ax_mps2: ax,
+            accel: None,
+            camera: None,
+            accel_noise_mps2: 0.02,
+            camera_noise_m: 0.0015,
+            camera_noise_rad: 0.002,
+        };
+        let nominal = case.nominal().expect("the nominal cart runs");
+        (case, nominal)
+    }
+
+    #[test]
+    fn a_stiff_walls_contact_is_not_judged_on_the_accelerometer_and_a_neighbours_is() {
+        let (mut case, nominal) = pushed_cart();
+        let gain = reach(&case, &nominal, 0, 1.0, 600) - reach(&case, &nominal, 0, 1.0, 0);
+        assert!(gain > 0.05, "the push moves the cart {gain:.3} m along +X");
+        // A stiff frame (10 ms, e = 0.5) where the nominal cart's corner is at 1.5 s.
+        let wall = [0.0, 1.5, 0.5, 0.01, 0.0];
+        let (alteration, onset) = LateralImpact.alteration(&case, &nominal, &wall).unwrap();
+        let mut track = case.altered(&nominal, &alteration, onset, case.end_s(), None).unwrap();
+        let unseen = LateralImpact.accel_unseen(&case, &nominal, &wall, &track);
+        let (position, _) = wall_for(&case, &nominal, 0, 1.0, 1.5);
+        let past: Vec<usize> = (0..601).filter(|&k| reach(&case, &track, 0, 1.0, k) > position).collect();
+        assert!(!past.is_empty(), "a corner passes the wall at some sample");
+        assert!(past.iter().all(|&k| unseen[k]), "every sample in contact is unseen");
+        let count = unseen.iter().filter(|u| **u).count();
+        assert!(count <= past.len() + 12, "{count} unseen samples for {} in contact", past.len());
+        assert!(!unseen[..past[0] - 3].iter().any(|u| *u), "nothing is unseen well before the contact");
+        // The records: what the walled cart read, and the same with a spike of 50 m/s^2 (what a
+        // sensor may show of the impulse) at the contact. The two misfit the model alike.
+        let time_s: Vec<f64> = (0..601).map(|k| k as f64 * case.dt_s).collect();
+        let mut spiked = track.ax_abs_mps2.clone();
+        spiked[past[0]] += 50.0;
+        let misfit = |case: &mut RollingCase, value: Vec<f64>, track: &Track| {
+            case.accel = Some(Observed { time_s: time_s.clone(), value });
+            Evidence::new(case, 4.0).misfit(track).chi2
+        };
+        track.accel_unseen = unseen;
+        let plain = misfit(&mut case, track.ax_abs_mps2.clone(), &track);
+        assert_eq!(plain, misfit(&mut case, spiked.clone(), &track));
+        // A compliant neighbour's contact lasts tenths of a second: the accelerometer sees it,
+        // and judges it.
+        let neighbour = [0.0, 1.5, 0.5, 0.15, 1.0];
+        assert!(LateralImpact.accel_unseen(&case, &nominal, &neighbour, &track).is_empty());
+        track.accel_unseen = Vec::new();
+        assert!(misfit(&mut case, spiked, &track) > plain + 1e6);
     }
 }

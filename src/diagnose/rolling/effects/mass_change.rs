@@ -1,9 +1,13 @@
 //! `mass_change`: at t0 a point mass dm is lost (dm < 0: it leaves with its own velocity) or
 //! gained (dm > 0: captured at rest on the floor, sharing momentum) at a body offset (dx, dy)
 //! from the platform centre: the platform's mass, yaw inertia, centre of mass and wheel loads
-//! change. Parameters: t0, dm, dx, dy and the ramp: the change happens at once (0) or spreads
-//! linearly over that time (bottles falling off one by one, a load slid off), a staircase of
-//! small changes each entered as the step one is.
+//! change. Parameters: t0, dm, its moments dm·dx and dm·dy about the platform centre, and the
+//! ramp: the change happens at once (0) or spreads linearly over that time (bottles falling off
+//! one by one, a load slid off), a staircase of small changes each entered as the step one is.
+//!
+//! The moments, not the offsets, are fitted: the wheel loads, which steer the cart, are linear
+//! in (dm, dm·dx, dm·dy), so the misfit's long valley along dm·dx = const (a larger mass nearer
+//! the centre) lies along an axis the search can follow. The explanation gives the offsets.
 //!
 //! What the records can tell apart: friction scales with the loads, so a change at the centre
 //! alters the motion only through the wheels' and casters' own inertia, which stay the same
@@ -50,7 +54,11 @@ impl Effect for MassChange {
     }
 
     fn parameter_names(&self) -> &'static [&'static str] {
-        &["t0_s", "dm_kg", "dx_m", "dy_m", "ramp_s"]
+        &["t0_s", "dm_kg", "moment_x_kgm", "moment_y_kgm", "ramp_s"]
+    }
+
+    fn held_at_zero(&self) -> Option<usize> {
+        Some(4)
     }
 
     fn bounds(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<(f64, f64)> {
@@ -58,8 +66,8 @@ impl Effect for MassChange {
         vec![
             onset_bounds(case, window, EARLIEST_S, 0.1),
             (-0.7 * m, 1.0 * m),
-            (-REACH * a, REACH * a),
-            (-REACH * b, REACH * b),
+            (-REACH * a * m, REACH * a * m),
+            (-REACH * b * m, REACH * b * m),
             (0.0, MAX_RAMP_S),
         ]
     }
@@ -72,16 +80,24 @@ impl Effect for MassChange {
         steps
             .into_iter()
             .chain(ramps)
-            .flat_map(|p| OFFSETS.iter().map(move |(x, y)| vec![p[0], p[1], x * a, y * b, p[2]]))
+            .flat_map(|p| OFFSETS.iter().map(move |(x, y)| vec![p[0], p[1], p[1] * x * a, p[1] * y * b, p[2]]))
             .collect()
     }
 
-    fn alteration(&self, _: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {
-        let mass = Some(Change { dm_kg: p[1], at_m: [p[2], p[3]] });
+    fn alteration(&self, case: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {
+        let at_m = offset(p);
+        if at_m[0].abs() > REACH * 0.5 * case.cart.length_m || at_m[1].abs() > REACH * 0.5 * case.cart.width_m {
+            return Err(format!(
+                "{:.1} kg cannot have moments of ({:.1}, {:.1}) kg m on the platform",
+                p[1], p[2], p[3]
+            ));
+        }
+        let mass = Some(Change { dm_kg: p[1], at_m });
         Ok((Alteration { mass, ramp_s: p[4], ..Alteration::default() }, p[0]))
     }
 
     fn explain(&self, case: &RollingCase, _: &Track, p: &[f64]) -> String {
+        let [dx, dy] = offset(p);
         format!(
             "{} {:.2} s {:.1} kg ({:.0} % of the platform) is {} at ({:+.2} m, {:+.2} m) from the platform centre (body axes), moving the centre of mass to ({:+.3} m, {:+.3} m)",
             if p[4] > 0.0 { format!("over {:.2} s from", p[4]) } else { "at".to_string() },
@@ -89,10 +105,20 @@ impl Effect for MassChange {
             p[1].abs(),
             100.0 * p[1].abs() / case.cart.platform_mass_kg,
             if p[1] < 0.0 { "lost" } else { "added" },
-            p[2],
-            p[3],
-            p[1] * p[2] / (case.cart.platform_mass_kg + p[1]),
-            p[1] * p[3] / (case.cart.platform_mass_kg + p[1]),
+            dx,
+            dy,
+            p[2] / (case.cart.platform_mass_kg + p[1]),
+            p[3] / (case.cart.platform_mass_kg + p[1]),
         )
+    }
+}
+
+/// The change's offset (dx, dy) from the platform centre (m) from its mass and moments: the
+/// centre when no mass changes.
+fn offset(p: &[f64]) -> [f64; 2] {
+    if p[1] == 0.0 {
+        [0.0, 0.0]
+    } else {
+        [p[2] / p[1], p[3] / p[1]]
     }
 }

@@ -23,12 +23,22 @@ pub trait Effect: Sync {
     fn discrete(&self) -> &'static [bool] {
         &[]
     }
+    /// A parameter that a search holds at zero when it starts there: a ramp, so that a step is
+    /// searched as a step (and a gradual change, started from the grid's ramps, as one).
+    fn held_at_zero(&self) -> Option<usize> {
+        None
+    }
     /// Plausible ranges, given the case, the nominal cart and where the mismatch was found.
     fn bounds(&self, case: &RollingCase, nominal: &Track, window: (f64, f64)) -> Vec<(f64, f64)>;
     /// Starting points covering the ranges.
     fn grid(&self, case: &RollingCase, nominal: &Track, window: (f64, f64)) -> Vec<Vec<f64>>;
     /// The physics, and the time it begins.
     fn alteration(&self, case: &RollingCase, nominal: &Track, params: &[f64]) -> Result<(Alteration, f64), String>;
+    /// Floor samples of `track` (this effect's run) whose accelerometer reading the effect
+    /// cannot predict (see [`Track::accel_unseen`]); empty: every one.
+    fn accel_unseen(&self, _case: &RollingCase, _nominal: &Track, _params: &[f64], _track: &Track) -> Vec<bool> {
+        Vec::new()
+    }
     /// One clause for the explanation, with the fitted values in engineering terms.
     fn explain(&self, case: &RollingCase, nominal: &Track, params: &[f64]) -> String;
 }
