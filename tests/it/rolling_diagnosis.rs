@@ -55,6 +55,18 @@ fn rolling_demo_cases_get_their_concealed_verdicts() {
         if expected != "unexplained" {
             assert!((start - onset).abs() < 0.5, "{id}: window starts at {start}, onset {onset}");
             assert!(after <= before / 3.0, "{id}: rmse {before} → {after}");
+            // The 3× test can be recomputed from the file: the judged span, and each candidate's
+            // misfit there; beyond the noise, √(RMS² − 1), the named physics cuts it 3× or more.
+            let judged = &d["judged"];
+            let (from, to) = (judged["start_s"].as_f64().unwrap(), judged["end_s"].as_f64().unwrap());
+            assert!(from < to && to <= d["window"]["end_s"].as_f64().unwrap() + 1e-9, "{id}: judged {judged}");
+            let judged_rmse = |effect: &str| {
+                let c = d["candidates"].as_array().unwrap().iter().find(|c| c["effect"] == effect).unwrap();
+                c["rmse_judged"].as_f64().unwrap_or_else(|| panic!("{id}: {effect} has no rmse_judged"))
+            };
+            let excess = |rmse: f64| (rmse * rmse - 1.0).max(0.0).sqrt();
+            let cut = excess(judged_rmse("none")) / excess(judged_rmse(expected)).max(1e-12);
+            assert!(cut >= 3.0, "{id}: the judged misfit beyond the noise falls only {cut:.2}×");
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));

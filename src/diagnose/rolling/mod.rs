@@ -293,6 +293,9 @@ pub struct RollingDiagnosis {
     pub predictable_until_s: Option<f64>,
     /// The twins' probe that decided it (0: no twins, nothing to explain).
     pub probe: f64,
+    /// The span the 3× test judged: the window's start to where the twins part, at least
+    /// [`MIN_JUDGED_S`] (None: no window, or nothing was fitted).
+    pub judged: Option<(f64, f64)>,
     pub accel_noise_mps2: f64,
     pub camera_noise_m: f64,
     pub camera_noise_rad: f64,
@@ -364,6 +367,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
         window,
         rmse_before: candidates[0].rmse,
         rmse_after,
+        judged: judged.filter(|_| candidates.len() > 1),
         candidates,
         explanation,
         predictable_until_s,
