@@ -20,7 +20,7 @@ pub struct Diagnose;
 
 static INFO: StageInfo = StageInfo {
     name: "diagnose",
-    version: 8,
+    version: 9,
     summary: "Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt; rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted, ranked by BIC, or `unexplained`.",
     inputs: InputKind::Files(&[RecordFormat::Case]),
     outputs: &[
@@ -448,7 +448,7 @@ pub fn rolling_json(d: &RollingDiagnosis) -> Value {
         "window": d.window.map(|(a, b)| json!({"start_s": a, "end_s": b})),
         "rmse_before": d.rmse_before,
         "rmse_after": d.rmse_after,
-        "rmse_definition": "sqrt(mean(((observed - predicted) / noise_sd)^2)) over the camera's x, y, yaw and the accelerometer's samples inside the window (the whole record when there is none); 1 is pure sensor noise",
+        "rmse_definition": "sqrt(mean(((observed - predicted) / noise_sd)^2)) over the camera's x, y, yaw and the accelerometer's samples inside the window (the whole record when there is none); an accelerometer sample a model cannot speak for (around a stiff wall's contact) counts as 1; 1 is pure sensor noise",
         "noise": {"accel_mps2": d.accel_noise_mps2, "camera_m": d.camera_noise_m, "camera_rad": d.camera_noise_rad},
         "predictable_until_s": d.predictable_until_s,
         "twin_probe": d.probe,

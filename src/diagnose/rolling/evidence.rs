@@ -113,7 +113,10 @@ impl Evidence {
     /// Every compared normalised residual with its time, in time order per sensor.
     fn residuals<'a>(&'a self, p: &'a Track, from: f64, until: f64) -> impl Iterator<Item = f64> + 'a {
         let keep = move |s: &&Sample| s.valid && s.t >= from && s.t <= until;
-        let accel = self.accel.iter().filter(keep).filter(|s| Self::accel_seen(p, s)).map(|s| self.accel_z(p, s));
+        // A sample the prediction cannot speak for counts as noise (z = 1, its expected square):
+        // neither a penalty nor a gain against predictions that judge it.
+        let accel =
+            self.accel.iter().filter(keep).map(|s| if Self::accel_seen(p, s) { self.accel_z(p, s) } else { 1.0 });
         let camera = self.camera.iter().filter(keep).flat_map(|s| self.camera_z(p, s));
         accel.chain(camera)
     }

@@ -87,6 +87,7 @@ pub struct Track {
     /// Floor samples where this model cannot say what the accelerometer read (empty: none):
     /// around a contact shorter than the sampling interval allows to resolve, whose reading
     /// depends on the sensor's anti-alias filter and sampling phase, which no case describes.
+    /// The evidence counts each as a noise residual (z = 1).
     pub accel_unseen: Vec<bool>,
 }
 
@@ -293,8 +294,8 @@ pub struct RollingDiagnosis {
     pub predictable_until_s: Option<f64>,
     /// The twins' probe that decided it (0: no twins, nothing to explain).
     pub probe: f64,
-    /// The span the 3× test judged: the window's start to where the twins part, at least
-    /// [`MIN_JUDGED_S`] (None: no window, or nothing was fitted).
+    /// The span the 3× test judges: the window's start to where the twins part, at least
+    /// [`MIN_JUDGED_S`], within the window (None: no window).
     pub judged: Option<(f64, f64)>,
     pub accel_noise_mps2: f64,
     pub camera_noise_m: f64,
@@ -367,7 +368,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
         window,
         rmse_before: candidates[0].rmse,
         rmse_after,
-        judged: judged.filter(|_| candidates.len() > 1),
+        judged,
         candidates,
         explanation,
         predictable_until_s,

@@ -19,6 +19,10 @@ const WALL_S: f64 = 0.02;
 /// what it reads around it is the impulse through its anti-alias filter at its sampling phase
 /// (a spike, or nothing between two samples), which no case describes, so it is not judged there.
 const RESOLVED_SAMPLES: f64 = 5.0;
+/// The most samples in a row a stiff wall leaves unjudged: its impact is over within the
+/// [`RESOLVED_SAMPLES`] its contact is shorter than (plus the sensor's filter on each side); a
+/// corner that stays at the wall past that rests on it, which the accelerometer resolves.
+const UNSEEN_RUN: usize = 2 * RESOLVED_SAMPLES as usize + 2;
 const NEIGHBOUR_S: [f64; 2] = [0.05, 0.15];
 
 /// (axis, side) of side index 0..3: +X, −X, +Y, −Y.
@@ -90,7 +94,8 @@ impl Effect for LateralImpact {
 
     /// A stiff wall's contacts: every sample interval in which a corner may touch the wall (it
     /// is past it, or within the interval's travel and a millimetre of it), widened by a sample
-    /// on each side for the sensor's filter.
+    /// on each side for the sensor's filter, at most [`UNSEEN_RUN`] samples in a row. (The
+    /// evidence counts each unseen sample as noise, so hiding samples earns a fit nothing.)
     fn accel_unseen(&self, case: &RollingCase, nominal: &Track, p: &[f64], track: &Track) -> Vec<bool> {
         if p[4] >= 0.5 || p[3] >= RESOLVED_SAMPLES * case.dt_s {
             return Vec::new();
@@ -106,6 +111,11 @@ impl Effect for LateralImpact {
             if a.max(b) > -((b - a).abs() + 1e-3) {
                 unseen[k.saturating_sub(1)..(k + 3).min(n)].iter_mut().for_each(|u| *u = true);
             }
+        }
+        let mut run = 0;
+        for u in &mut unseen {
+            run = if *u { run + 1 } else { 0 };
+            *u &= run <= UNSEEN_RUN;
         }
         unseen
     }
@@ -134,11 +144,11 @@ mod tests {
     use crate::diagnose::Observed;
     use crate::physics::rolling::{self as rolling, FrictionLaw, Options};
 
-    /// MC2 pushed along +X for 0.8 s by a 2 m/s^2 floor pulse, then coasting for 2.2 s.
-    fn pushed_cart() -> (RollingCase, Track) {
+    /// MC2 pushed along +X for `push_s` by a 2 m/s^2 floor acceleration, then coasting, for 3 s.
+    fn pushed_cart(push_s: f64) -> (RollingCase, Track) {
         let table = rolling::preset("MC2").expect("MC2 is a preset");
         let dt = 0.005;
-        let ax: Vec<f64> = (0..601).map(|k| if (k as f64) * dt < 0.8 { -2.0 } else { 0.0 }).collect();
+        let ax: Vec<f64> = (0..601).map(|k| if (k as f64) * dt < push_s { -2.0 } else { 0.0 }).collect();
         let case = RollingCase {
             name: "pushed".into(),
             cart: table.cart(rolling::Cart::default_trail_m(table.wheel_diameter_m), rolling::DEFAULT_SWIVEL_ARM_M),
@@ -160,7 +170,7 @@ mod tests {
 
     #[test]
     fn a_stiff_walls_contact_is_not_judged_on_the_accelerometer_and_a_neighbours_is() {
-        let (mut case, nominal) = pushed_cart();
+        let (mut case, nominal) = pushed_cart(0.8);
         let gain = reach(&case, &nominal, 0, 1.0, 600) - reach(&case, &nominal, 0, 1.0, 0);
         assert!(gain > 0.05, "the push moves the cart {gain:.3} m along +X");
         // A stiff frame (10 ms, e = 0.5) where the nominal cart's corner is at 1.5 s.
@@ -187,11 +197,30 @@ mod tests {
         track.accel_unseen = unseen;
         let plain = misfit(&mut case, track.ax_abs_mps2.clone(), &track);
         assert_eq!(plain, misfit(&mut case, spiked.clone(), &track));
+        // Against its own readings the walled cart misfits only where it is unseen, each sample
+        // counted as noise (z = 1): hiding a sample earns a fit nothing.
+        assert_eq!(plain, count as f64);
         // A compliant neighbour's contact lasts tenths of a second: the accelerometer sees it,
         // and judges it.
         let neighbour = [0.0, 1.5, 0.5, 0.15, 1.0];
         assert!(LateralImpact.accel_unseen(&case, &nominal, &neighbour, &track).is_empty());
         track.accel_unseen = Vec::new();
         assert!(misfit(&mut case, spiked, &track) > plain + 1e6);
+    }
+
+    #[test]
+    fn a_corner_resting_on_a_stiff_wall_is_judged_past_its_impact() {
+        // Pushed all along and nearly plastic (e = 0.05): after the impact the floor presses the
+        // corner on the wall, within a millimetre of it; only the impact's samples go unjudged.
+        let (case, nominal) = pushed_cart(3.0);
+        let wall = [0.0, 1.0, 0.05, 0.01, 0.0];
+        let (alteration, onset) = LateralImpact.alteration(&case, &nominal, &wall).unwrap();
+        let track = case.altered(&nominal, &alteration, onset, case.end_s(), None).unwrap();
+        let (position, _) = wall_for(&case, &nominal, 0, 1.0, 1.0);
+        let near = (0..601).filter(|&k| reach(&case, &track, 0, 1.0, k) > position - 1e-3).count();
+        assert!(near > 2 * UNSEEN_RUN, "the corner rests at the wall for {near} samples");
+        let unseen = LateralImpact.accel_unseen(&case, &nominal, &wall, &track);
+        let longest = unseen.split(|u| !*u).map(<[bool]>::len).max().unwrap_or(0);
+        assert!((1..=UNSEEN_RUN).contains(&longest), "{longest} unseen samples in a row");
     }
 }

@@ -86,6 +86,9 @@ impl Effect for MassChange {
 
     fn alteration(&self, case: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {
         let at_m = offset(p);
+        if p[1] == 0.0 && (p[2] != 0.0 || p[3] != 0.0) {
+            return Err(format!("no mass cannot have moments of ({:.1}, {:.1}) kg m", p[2], p[3]));
+        }
         if at_m[0].abs() > REACH * 0.5 * case.cart.length_m || at_m[1].abs() > REACH * 0.5 * case.cart.width_m {
             return Err(format!(
                 "{:.1} kg cannot have moments of ({:.1}, {:.1}) kg m on the platform",
