@@ -263,7 +263,7 @@ pub fn simulate_altered(
             }
             Method::Rk4 { dt_s } => run.run(Rk4::new(dt_s), y),
         }
-        .map_err(|e| (e, used + run.spent.get()))?;
+        .map_err(|(e, spent)| (e, used + spent))?;
         let state = next.states.last().ok_or(("an altered run kept no state".to_string(), used))?;
         y = state.as_slice().try_into().map_err(|_| ("an altered run kept a malformed state".to_string(), used))?;
         used += next.stats.rhs_evals;
@@ -307,6 +307,7 @@ fn dispatch<const N: usize, D: Dynamics<N>>(
         }
         Method::Rk4 { dt_s } => run.run(Rk4::new(dt_s), y0),
     }
+    .map_err(|(e, _)| e)
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -332,8 +333,6 @@ struct Run<'a, const N: usize, D: Dynamics<N>> {
     keep_states: bool,
     /// Right-hand-side evaluations allowed (None: no limit).
     budget: Option<usize>,
-    /// The evaluations a run that failed had spent when it stopped.
-    spent: std::cell::Cell<usize>,
 }
 
 /// The floor inside one sample interval: linear in time.
@@ -369,7 +368,6 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
             energy_rest: 0.5 * mass * rest_speed * rest_speed,
             keep_states: false,
             budget: None,
-            spent: std::cell::Cell::new(0),
         }
     }
 
@@ -384,7 +382,8 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
         }
     }
 
-    fn run<S: Stepper<N>>(&self, mut stepper: S, mut y: [f64; N]) -> Result<Response, String> {
+    /// The run, or why it failed with the evaluations it had spent.
+    fn run<S: Stepper<N>>(&self, mut stepper: S, mut y: [f64; N]) -> Result<Response, (String, usize)> {
         let exc = self.excitation;
         let n = exc.ax_mps2.len();
         let dt = exc.dt_s;
@@ -417,9 +416,11 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
             while t < t_end {
                 transitions += 1;
                 if transitions > MAX_TRANSITIONS_PER_SAMPLE {
-                    self.spent.set(stepper.stats().rhs_evals);
-                    return Err(format!(
-                        "more than {MAX_TRANSITIONS_PER_SAMPLE} events within the sample at t = {t:.4} s: the run does not settle (raise friction_eps)"
+                    return Err((
+                        format!(
+                            "more than {MAX_TRANSITIONS_PER_SAMPLE} events within the sample at t = {t:.4} s: the run does not settle (raise friction_eps)"
+                        ),
+                        stepper.stats().rhs_evals,
                     ));
                 }
                 match regime {
@@ -492,13 +493,17 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
                 }
             }
             if let Some(budget) = self.budget.filter(|b| stepper.stats().rhs_evals > *b) {
-                self.spent.set(stepper.stats().rhs_evals);
-                return Err(format!("the run needs more than {budget} evaluations by t = {t_end:.3} s (too stiff)"));
+                return Err((
+                    format!("the run needs more than {budget} evaluations by t = {t_end:.3} s (too stiff)"),
+                    stepper.stats().rhs_evals,
+                ));
             }
             if !y.iter().all(|v| v.is_finite()) {
-                self.spent.set(stepper.stats().rhs_evals);
-                return Err(format!(
-                    "the cart's state is no longer a number at t = {t_end:.3} s: the run diverged (too stiff a friction law or too large a change)"
+                return Err((
+                    format!(
+                        "the cart's state is no longer a number at t = {t_end:.3} s: the run diverged (too stiff a friction law or too large a change)"
+                    ),
+                    stepper.stats().rhs_evals,
                 ));
             }
             self.record(&mut response, k + 1, regime, &y);
