@@ -15,7 +15,9 @@
 //!    before the disagreement begins, the verdict is `unexplained`, "not predictable past t = …".
 //! 4. Every effect is fitted: its parameters on a grid judged over the first second past the
 //!    window's start, then Nelder–Mead from the best grid points over growing horizons (the
-//!    cart's sensitivity makes a whole-record misfit rugged), the optima judged on the whole record.
+//!    cart's sensitivity makes a whole-record misfit rugged), the optima judged on the whole
+//!    record, and the best refined over the span where the nominal cart is predictable (some
+//!    effects show their size only seconds later: a pad's drag once the wheel slides).
 //!    Each run starts from the nominal cart's state where the effect begins, and every part of a
 //!    fit has a counted allowance of the cart's evaluations (`fit`), so a case whose trial
 //!    parameters make stiff runs ends in bounded time, identically on every machine.
@@ -407,7 +409,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
     let fitted: Vec<Candidate> = effects::library()
         .par_iter()
         .map(|effect| {
-            let fit = fit::fit(*effect, case, &baseline, &evidence, window);
+            let fit = fit::fit(*effect, case, &baseline, &evidence, window, judged.map_or(window.1, |j| j.1));
             Candidate {
                 effect: effect.name(),
                 params: effect.parameter_names().iter().copied().zip(fit.params.iter().copied()).collect(),
