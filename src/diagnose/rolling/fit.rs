@@ -24,7 +24,7 @@ use rayon::prelude::*;
 
 use super::effects::Effect;
 use super::evidence::{Evidence, Misfit};
-use super::{RollingCase, Track};
+use super::{RollingCase, Track, FLAG_HORIZON_S, MAX_LEFT_EARLY};
 
 /// Grid points a local search starts from (the best; and the best of a family, a step or a
 /// gradual change, that none of them is in).
@@ -180,6 +180,27 @@ fn search(
     }
 }
 
+/// The grid points (indices into `scored`, the grid with its misfits) searches start from: the
+/// [`STARTS`] best; the best of a family (a step, a gradual change) they all miss; and the best
+/// of each value of a parameter searched apart (a caster) that none of them has. Best first.
+fn starts(effect: &dyn Effect, scored: &[(f64, Vec<f64>)]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..scored.len()).collect();
+    order.sort_by(|&a, &b| scored[a].0.total_cmp(&scored[b].0).then(a.cmp(&b)));
+    let family = |p: &[f64]| effect.held_at_zero().map(|i| p[i] == 0.0);
+    let mut picked: Vec<usize> = order.iter().copied().take(STARTS).collect();
+    if let Some(&i) = order.iter().find(|&&i| picked.iter().all(|&j| family(&scored[j].1) != family(&scored[i].1))) {
+        picked.push(i);
+    }
+    if let Some(k) = effect.searched_apart() {
+        for &i in &order {
+            if picked.iter().all(|&j| scored[j].1[k] != scored[i].1[k]) {
+                picked.push(i);
+            }
+        }
+    }
+    picked
+}
+
 pub fn fit(
     effect: &dyn Effect,
     case: &RollingCase,
@@ -200,14 +221,7 @@ pub fn fit(
         .into_par_iter()
         .map(|p| (objective.chi2(&p, first, &Allowance::new(case, nominal, per_point)), p))
         .collect();
-    let mut order: Vec<usize> = (0..scored.len()).collect();
-    order.sort_by(|&a, &b| scored[a].0.total_cmp(&scored[b].0).then(a.cmp(&b)));
-    // The best grid points, and the best of a family (a step, a gradual change) they all miss.
-    let family = |p: &[f64]| effect.held_at_zero().map(|i| p[i] == 0.0);
-    let mut picked: Vec<usize> = order.iter().copied().take(STARTS).collect();
-    if let Some(&i) = order.iter().find(|&&i| picked.iter().all(|&j| family(&scored[j].1) != family(&scored[i].1))) {
-        picked.push(i);
-    }
+    let picked = starts(effect, &scored);
     let starts: Vec<Vec<f64>> = picked.iter().map(|&i| scored[i].1.clone()).collect();
     // What a search from `p` moves: a step is searched as a step, its ramp staying at zero.
     let free = |p: &[f64]| -> Vec<usize> {
@@ -234,17 +248,23 @@ pub fn fit(
         })
         .collect();
     let (chi2, params, track) = judged.into_iter().reduce(|a, b| if b.0 < a.0 { b } else { a }).unwrap_or_else(|| {
-        let params = order.first().map_or_else(|| vec![0.0; bounds.len()], |&i| scored[i].1.clone());
+        let params = picked.first().map_or_else(|| vec![0.0; bounds.len()], |&i| scored[i].1.clone());
         (f64::INFINITY, params, failed(case))
     });
     // The best optimum, refined over all the records the nominal cart is predictable on: some
     // effects show their size only seconds past the last horizon (a pad's drag once the cart
-    // moves fast enough to slide the wheel). Kept if it fits the whole record better.
+    // moves fast enough to slide the wheel). Kept if it fits the whole record better and leaves
+    // no more disagreement right after the window's start than acceptance allows, or than
+    // before: a later fit bought with a worse start must not turn a pass into a failure.
     let (params, track) = if chi2.is_finite() && refine_until > window.0 + HORIZONS[HORIZONS.len() - 1] {
+        let early = |t: &Track| evidence.flagged_between(t, window.0, window.0 + FLAG_HORIZON_S);
+        let allowed = (MAX_LEFT_EARLY * early(nominal).max(1) as f64) as usize;
         let allowance = Allowance::new(case, nominal, REFINE_RUNS);
         let refined = search(&objective, &bounds, &free(&params), &params, refine_until, &allowance);
         match objective.track(&refined, end, &Allowance::new(case, nominal, JUDGE_RUNS)) {
-            Some(better) if evidence.misfit(&better).chi2 < chi2 => (refined, better),
+            Some(better) if evidence.misfit(&better).chi2 < chi2 && early(&better) <= early(&track).max(allowed) => {
+                (refined, better)
+            }
             _ => (params, track),
         }
     } else {
@@ -271,7 +291,7 @@ fn failed(case: &RollingCase) -> Track {
 
 #[cfg(test)]
 mod tests {
-    use super::{fit, HORIZONS};
+    use super::{fit, starts, HORIZONS};
     use crate::diagnose::rolling::cut_beyond_noise;
     use crate::diagnose::rolling::effects::{library, Effect};
     use crate::diagnose::rolling::evidence::Evidence;
@@ -327,6 +347,33 @@ mod tests {
             yaw_rad: pick(&braked.yaw_rad, case.camera_noise_rad),
         });
         case
+    }
+
+    #[test]
+    fn searches_start_from_the_best_grid_points_a_missed_family_and_every_caster() {
+        // A brake's grid points (caster, t0, μ, ramp) with their misfits: the three best all
+        // lock caster 1 at once.
+        let scored: Vec<(f64, Vec<f64>)> = [
+            (9.0, [3.0, 1.0, 0.2, 0.0]),
+            (1.0, [0.0, 1.0, 0.2, 0.0]),
+            (5.0, [1.0, 1.0, 0.2, 0.0]),
+            (2.0, [0.0, 1.1, 0.2, 0.0]),
+            (7.0, [1.0, 1.1, 0.2, 0.0]),
+            (3.0, [0.0, 1.2, 0.5, 0.0]),
+            (6.0, [2.0, 1.0, 0.2, 0.25]),
+            (4.0, [0.0, 1.0, 0.2, 0.25]),
+            (8.0, [3.0, 1.0, 0.5, 0.0]),
+        ]
+        .into_iter()
+        .map(|(c, p)| (c, p.to_vec()))
+        .collect();
+        // The three best, the best gradual pad, then the best of casters 2, 3 and 4.
+        assert_eq!(starts(brake(), &scored), vec![1, 3, 5, 7, 2, 6, 8]);
+        // A mass change has no caster: the three best and the best of the other family.
+        let mass = *library().iter().find(|e| e.name() == "mass_change").unwrap();
+        let scored: Vec<(f64, Vec<f64>)> =
+            scored.into_iter().map(|(c, p)| (c, vec![p[1], -10.0, 0.0, 0.0, p[3]])).collect();
+        assert_eq!(starts(mass, &scored), vec![1, 3, 5, 7]);
     }
 
     #[test]

@@ -34,6 +34,10 @@ impl Effect for CasterBrake {
         &[true, false, false, false]
     }
 
+    fn searched_apart(&self) -> Option<usize> {
+        Some(0)
+    }
+
     fn held_at_zero(&self) -> Option<usize> {
         Some(3)
     }

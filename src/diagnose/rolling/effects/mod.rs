@@ -28,6 +28,11 @@ pub trait Effect: Sync {
     fn held_at_zero(&self) -> Option<usize> {
         None
     }
+    /// A discrete parameter each of whose values gets a search from its best grid point (a
+    /// caster: a brake or a jam on another caster can fit the grid's first second better).
+    fn searched_apart(&self) -> Option<usize> {
+        None
+    }
     /// Plausible ranges, given the case, the nominal cart and where the mismatch was found.
     fn bounds(&self, case: &RollingCase, nominal: &Track, window: (f64, f64)) -> Vec<(f64, f64)>;
     /// Starting points covering the ranges.

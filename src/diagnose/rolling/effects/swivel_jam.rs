@@ -30,6 +30,10 @@ impl Effect for SwivelJam {
         &[true, false, true, false]
     }
 
+    fn searched_apart(&self) -> Option<usize> {
+        Some(0)
+    }
+
     fn bounds(&self, case: &RollingCase, _: &Track, window: (f64, f64)) -> Vec<(f64, f64)> {
         vec![(0.0, 3.0), onset_bounds(case, window, 1.0, 0.1), (0.0, 1.0), MU_RANGE]
     }
