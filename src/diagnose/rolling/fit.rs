@@ -295,9 +295,9 @@ mod tests {
     use crate::diagnose::rolling::cut_beyond_noise;
     use crate::diagnose::rolling::effects::{library, Effect};
     use crate::diagnose::rolling::evidence::Evidence;
-    use crate::diagnose::rolling::{Camera, RollingCase};
+    use crate::diagnose::rolling::{test_cart, Camera, RollingCase};
     use crate::diagnose::Observed;
-    use crate::physics::rolling::{self as rolling, FrictionLaw, Options};
+    use crate::physics::rolling::Options;
     use crate::signal::synthetic_motion::SplitMix64 as Rng;
 
     fn brake() -> &'static dyn Effect {
@@ -308,7 +308,6 @@ mod tests {
     /// (4 m/s^2), whose caster 1 wheel locks at 1 s and drags with μ = 0.45; the records are that
     /// cart's own with the sensors' noise (seeded).
     fn dragging_cart() -> RollingCase {
-        let table = rolling::preset("MC2").expect("MC2 is a preset");
         let (dt, n) = (0.005, 2000);
         let ax: Vec<f64> = (0..n)
             .map(|k| {
@@ -316,21 +315,9 @@ mod tests {
                 (if t < 6.0 { 0.47 } else { 4.0 }) * (2.0 * std::f64::consts::PI * 0.8 * t).sin()
             })
             .collect();
-        let mut case = RollingCase {
-            name: "dragging".into(),
-            cart: table.cart(rolling::Cart::default_trail_m(table.wheel_diameter_m), rolling::DEFAULT_SWIVEL_ARM_M),
-            friction: table.friction(rolling::DEFAULT_FRICTION_EPS_MPS, FrictionLaw::Regularised),
-            options: Options { yaw0_rad: 0.2, steer0_rad: [0.3, -0.2, 0.1, 0.4], ..Options::default() },
-            t0_s: 0.0,
-            dt_s: dt,
-            floor_ay_mps2: ax.iter().map(|a| 0.3 * a).collect(),
-            floor_ax_mps2: ax,
-            accel: None,
-            camera: None,
-            accel_noise_mps2: 0.02,
-            camera_noise_m: 0.0015,
-            camera_noise_rad: 0.002,
-        };
+        let options = Options { yaw0_rad: 0.2, steer0_rad: [0.3, -0.2, 0.1, 0.4], ..Options::default() };
+        let ay = ax.iter().map(|a| 0.3 * a).collect();
+        let mut case = test_cart("dragging", ax, ay, options);
         let nominal = case.nominal().expect("the nominal cart runs");
         let (alteration, onset) = brake().alteration(&case, &nominal, &[0.0, 1.0, 0.45, 0.0]).unwrap();
         let braked = case.altered(&nominal, &alteration, onset, case.end_s(), None).expect("the braked cart runs");

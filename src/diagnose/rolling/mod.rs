@@ -240,6 +240,29 @@ impl RollingCase {
     }
 }
 
+/// The tests' cart: the study's MC2 on a floor sampled at 200 Hz from t = 0, with the demo
+/// cases' sensor noise and no records yet.
+#[cfg(test)]
+pub(crate) fn test_cart(name: &str, floor_ax_mps2: Vec<f64>, floor_ay_mps2: Vec<f64>, options: Options) -> RollingCase {
+    use crate::physics::rolling::{self as rolling, FrictionLaw};
+    let table = rolling::preset("MC2").expect("MC2 is a preset");
+    RollingCase {
+        name: name.into(),
+        cart: table.cart(Cart::default_trail_m(table.wheel_diameter_m), rolling::DEFAULT_SWIVEL_ARM_M),
+        friction: table.friction(rolling::DEFAULT_FRICTION_EPS_MPS, FrictionLaw::Regularised),
+        options,
+        t0_s: 0.0,
+        dt_s: 0.005,
+        floor_ax_mps2,
+        floor_ay_mps2,
+        accel: None,
+        camera: None,
+        accel_noise_mps2: 0.02,
+        camera_noise_m: 0.0015,
+        camera_noise_rad: 0.002,
+    }
+}
+
 /// One fitted hypothesis.
 #[derive(Debug, Clone)]
 pub struct Candidate {

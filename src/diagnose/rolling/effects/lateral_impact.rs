@@ -141,29 +141,16 @@ impl Effect for LateralImpact {
 mod tests {
     use super::*;
     use crate::diagnose::rolling::evidence::Evidence;
+    use crate::diagnose::rolling::test_cart;
     use crate::diagnose::Observed;
-    use crate::physics::rolling::{self as rolling, FrictionLaw, Options};
+    use crate::physics::rolling::Options;
 
     /// MC2 pushed along +X for `push_s` by a 2 m/s^2 floor acceleration, then coasting, for 3 s.
     fn pushed_cart(push_s: f64) -> (RollingCase, Track) {
-        let table = rolling::preset("MC2").expect("MC2 is a preset");
         let dt = 0.005;
         let ax: Vec<f64> = (0..601).map(|k| if (k as f64) * dt < push_s { -2.0 } else { 0.0 }).collect();
-        let case = RollingCase {
-            name: "pushed".into(),
-            cart: table.cart(rolling::Cart::default_trail_m(table.wheel_diameter_m), rolling::DEFAULT_SWIVEL_ARM_M),
-            friction: table.friction(rolling::DEFAULT_FRICTION_EPS_MPS, FrictionLaw::Regularised),
-            options: Options { yaw0_rad: 0.0, steer0_rad: [0.0; 4], ..Options::default() },
-            t0_s: 0.0,
-            dt_s: dt,
-            floor_ay_mps2: vec![0.0; ax.len()],
-            floor_ax_mps2: ax,
-            accel: None,
-            camera: None,
-            accel_noise_mps2: 0.02,
-            camera_noise_m: 0.0015,
-            camera_noise_rad: 0.002,
-        };
+        let options = Options { yaw0_rad: 0.0, steer0_rad: [0.0; 4], ..Options::default() };
+        let case = test_cart("pushed", ax, vec![0.0; 601], options);
         let nominal = case.nominal().expect("the nominal cart runs");
         (case, nominal)
     }
