@@ -24,7 +24,7 @@ use rayon::prelude::*;
 
 use super::effects::Effect;
 use super::evidence::{Evidence, Misfit};
-use super::{RollingCase, Track, FLAG_HORIZON_S, MAX_LEFT_EARLY};
+use super::{early_within_allowance, flagged_early, RollingCase, Track};
 
 /// Grid points a local search starts from (the best; and the best of a family, a step or a
 /// gradual change, that none of them is in).
@@ -257,12 +257,18 @@ pub fn fit(
     // no more disagreement right after the window's start than acceptance allows, or than
     // before: a later fit bought with a worse start must not turn a pass into a failure.
     let (params, track) = if chi2.is_finite() && refine_until > window.0 + HORIZONS[HORIZONS.len() - 1] {
-        let early = |t: &Track| evidence.flagged_between(t, window.0, window.0 + FLAG_HORIZON_S);
-        let allowed = (MAX_LEFT_EARLY * early(nominal).max(1) as f64) as usize;
+        let early = |t: &Track| flagged_early(evidence, t, window);
         let allowance = Allowance::new(case, nominal, REFINE_RUNS);
         let refined = search(&objective, &bounds, &free(&params), &params, refine_until, &allowance);
-        match objective.track(&refined, end, &Allowance::new(case, nominal, JUDGE_RUNS)) {
-            Some(better) if evidence.misfit(&better).chi2 < chi2 && early(&better) <= early(&track).max(allowed) => {
+        // A search that found nothing better returns its start: no run to judge.
+        let better = (refined != params)
+            .then(|| objective.track(&refined, end, &Allowance::new(case, nominal, JUDGE_RUNS)))
+            .flatten();
+        match better {
+            Some(better)
+                if evidence.misfit(&better).chi2 < chi2
+                    && (early(&better) <= early(&track) || early_within_allowance(early(&better), early(nominal))) =>
+            {
                 (refined, better)
             }
             _ => (params, track),

@@ -263,6 +263,18 @@ pub(crate) fn test_cart(name: &str, floor_ax_mps2: Vec<f64>, floor_ay_mps2: Vec<
     }
 }
 
+/// The disagreement `track` leaves right after the window's start: its flagged samples in the
+/// window's first [`FLAG_HORIZON_S`].
+fn flagged_early(evidence: &Evidence, track: &Track, window: (f64, f64)) -> usize {
+    evidence.flagged_between(track, window.0, window.0 + FLAG_HORIZON_S)
+}
+
+/// Whether a physics leaving `left` of the nominal cart's `nominal` early flagged samples leaves
+/// no more than acceptance allows ([`MAX_LEFT_EARLY`]).
+fn early_within_allowance(left: usize, nominal: usize) -> bool {
+    left as f64 <= MAX_LEFT_EARLY * (nominal as f64).max(1.0)
+}
+
 /// One fitted hypothesis.
 #[derive(Debug, Clone)]
 pub struct Candidate {
@@ -375,7 +387,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
         bic: base_misfit.chi2,
         score: 0.0,
         flagged: evidence.flagged(&baseline),
-        flagged_early: window.map_or(0, |w| evidence.flagged_between(&baseline, w.0, w.0 + FLAG_HORIZON_S)),
+        flagged_early: window.map_or(0, |w| flagged_early(&evidence, &baseline, w)),
         misfit: base_misfit,
         evaluations: 1,
         sentence: "the nominal 4WMC cart as the equipment file describes it".into(),
@@ -441,7 +453,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
                 rmse_judged: evidence.window_rmse(&fit.track, judged),
                 score: 0.0,
                 flagged: evidence.flagged(&fit.track),
-                flagged_early: evidence.flagged_between(&fit.track, window.0, window.0 + FLAG_HORIZON_S),
+                flagged_early: flagged_early(&evidence, &fit.track, window),
                 sentence: effect.explain(case, &baseline, &fit.params),
                 misfit: fit.misfit,
                 evaluations: fit.evaluations,
@@ -464,7 +476,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
     let passes = |c: &Candidate, base: &Candidate| {
         c.bic < base.bic
             && c.cut_from(base) >= settings.min_improvement
-            && c.flagged_early as f64 <= MAX_LEFT_EARLY * (base.flagged_early as f64).max(1.0)
+            && early_within_allowance(c.flagged_early, base.flagged_early)
     };
     // The best by BIC that passes: a better-scoring fit that leaves the disagreement in place
     // is not an explanation, and must not hide one that removes it.
