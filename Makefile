@@ -19,11 +19,12 @@ VENV_PY := $(VENV)/bin/python
 PY_STAMP := $(VENV)/.requirements-$(shell cksum < tests/reference/requirements.txt | cut -d' ' -f1)
 BIN := $(CARGO_TARGET_DIR)/release/shakeflow
 
-.PHONY: all demo test bench bench-scale prove prove-rolling prove-check release schema fmt lint clean help rolling-findings fuzz
+.PHONY: all demo test wheel wheel-dev bench bench-scale prove prove-rolling prove-check release schema fmt lint clean help rolling-findings fuzz
 
 help:
 	@echo "make demo    build (release) and run the demo study: runs/demo-archive -> runs/demo"
 	@echo "make test    build and run the whole test suite (installs the Python references it needs)"
+	@echo "make wheel   the PyPI wheel (manylinux2014, baseline x86-64, zig) and sdist in dist/ (docs/packaging.md)"
 	@echo "make bench   the demo study's artifact footprint vs its raw archive; load+baseline and the whole demo study vs numpy/scipy/pyarrow scripts; the rocking and rolling models vs scipy and RK4; CPT matching and 1080p tracking vs OpenCV"
 	@echo "make bench-scale  the per-record stages over a generated archive of TESTS=200 tests, local and on the test Slurm; no-op rerun"
 	@echo "make prove   fresh concealed-effect cases (prove/generate_cases.py) scored against shakeflow diagnose"
@@ -57,13 +58,30 @@ $(PY_STAMP): tests/reference/requirements.txt
 # once for both commands, not once per profile (docs/benchmarks.md, cold start).
 # The Slurm tests run against a single-node Slurm started here and stopped after (by pid, also when
 # tests fail; left running if it already ran). Without root it cannot start: those tests then fail, saying so.
-test: $(PY_STAMP)
+test: $(PY_STAMP) wheel-dev
 	sh tests/system/install-r.sh
 	sh tests/system/chromium.sh
 	@was_running=$$(tests/system/slurm.sh status >/dev/null 2>&1 && echo yes); \
 	tests/system/slurm.sh start || echo "make test: the test Slurm did not start; the Slurm tests will fail"; \
-	SHAKEFLOW_PYTHON=$(VENV_PY) $(CARGO) test --release --locked --no-fail-fast; status=$$?; \
+	SHAKEFLOW_PYTHON=$(VENV_PY) SHAKEFLOW_WHEEL=$$(ls $(DEV_WHEELS)/shakeflow-*.whl) \
+	  $(CARGO) test --release --locked --no-fail-fast; status=$$?; \
 	[ -n "$$was_running" ] || tests/system/slurm.sh stop; exit $$status
+
+# The wheel the tests install (tests/it/wheel.rs): maturin over the same release build the tests
+# use, so it costs a relink, not a rebuild.
+DEV_WHEELS := $(CARGO_TARGET_DIR)/wheels-dev
+wheel-dev: $(PY_STAMP)
+	rm -rf $(DEV_WHEELS)
+	$(VENV_PY) -m maturin build --release --locked --quiet --out $(DEV_WHEELS)
+
+# The release wheel and sdist (docs/packaging.md): manylinux2014 through zig, baseline x86-64, in
+# a target folder of their own.
+WHEEL_TARGET_DIR ?= $(HOME)/.cache/shakeflow-wheel-target
+wheel: $(PY_STAMP)
+	$(VENV_PY) -m pip install --quiet --disable-pip-version-check "ziglang>=0.13"
+	CARGO_TARGET_DIR=$(WHEEL_TARGET_DIR) CARGO_TARGET_X86_64_UNKNOWN_LINUX_GNU_RUSTFLAGS="-C target-cpu=x86-64" \
+	  $(VENV_PY) -m maturin build --release --locked --zig --compatibility manylinux2014 --out dist
+	$(VENV_PY) -m maturin sdist --out dist
 
 bench: release $(PY_STAMP)
 	$(BIN) demo-archive runs/demo-archive

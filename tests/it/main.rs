@@ -53,4 +53,5 @@ mod toppling_robustness;
 mod toppling_stages;
 mod validate_all;
 mod welch_scipy;
+mod wheel;
 mod work_units;
