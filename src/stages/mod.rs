@@ -232,4 +232,24 @@ mod tests {
             }
         }
     }
+
+    /// docs/stages.md has a row for every stage type, naming each of its outputs, and README
+    /// names every stage type: a stage added or renamed shows up in the docs, or this fails.
+    #[test]
+    fn every_stage_and_output_is_in_the_docs() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let table = std::fs::read_to_string(root.join("docs/stages.md")).unwrap();
+        let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+        for stage in registry().0 {
+            let info = stage.info();
+            let row = table
+                .lines()
+                .find(|l| l.starts_with(&format!("| `{}` |", info.name)))
+                .unwrap_or_else(|| panic!("docs/stages.md has no row for `{}`", info.name));
+            for output in info.outputs {
+                assert!(row.contains(&format!("`{}`", output.name)), "docs/stages.md: `{}` lacks its output `{}`", info.name, output.name);
+            }
+            assert!(readme.contains(&format!("`{}`", info.name)), "README.md does not name the stage `{}`", info.name);
+        }
+    }
 }
