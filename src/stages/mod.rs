@@ -247,7 +247,12 @@ mod tests {
                 .find(|l| l.starts_with(&format!("| `{}` |", info.name)))
                 .unwrap_or_else(|| panic!("docs/stages.md has no row for `{}`", info.name));
             for output in info.outputs {
-                assert!(row.contains(&format!("`{}`", output.name)), "docs/stages.md: `{}` lacks its output `{}`", info.name, output.name);
+                assert!(
+                    row.contains(&format!("`{}`", output.name)),
+                    "docs/stages.md: `{}` lacks its output `{}`",
+                    info.name,
+                    output.name
+                );
             }
             assert!(readme.contains(&format!("`{}`", info.name)), "README.md does not name the stage `{}`", info.name);
         }

@@ -119,16 +119,6 @@ fn an_export_reads_the_same_in_pyarrow_duckdb_polars_and_r() {
     assert_eq!(text, std::fs::read_to_string(root.join("exports/again.csv")).unwrap());
 }
 
-/// The fenced block of `language` under README's "Python and R" section.
-fn readme_snippet(language: &str) -> String {
-    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
-    let section = readme.split("## Python and R").nth(1).expect("README.md has a `## Python and R` section");
-    let fence = format!("```{language}\n");
-    let start = section.find(&fence).unwrap_or_else(|| panic!("no ```{language} block under `## Python and R`"));
-    let block = &section[start + fence.len()..];
-    block[..block.find("```").unwrap()].to_string()
-}
-
 #[test]
 fn the_readme_python_and_r_snippets_run_as_written() {
     let dir = project();
@@ -136,10 +126,10 @@ fn the_readme_python_and_r_snippets_run_as_written() {
     // The snippets read exports/summary.csv: here, the load output stands in for the summary.
     let out = shakeflow(&["export", "out/load/records", "--out", "exports/summary.csv"], root);
     assert!(out.status.success(), "{}", stderr(&out));
-    std::fs::write(root.join("snippet.R"), readme_snippet("r")).unwrap();
+    std::fs::write(root.join("snippet.R"), readme_block("## Python and R", "r")).unwrap();
     let r = run_r(&root.join("snippet.R"), &[], root);
     assert!(r.contains("m/s^2"), "the R snippet shows the units:\n{r}");
-    std::fs::write(root.join("snippet.py"), readme_snippet("python")).unwrap();
+    std::fs::write(root.join("snippet.py"), readme_block("## Python and R", "python")).unwrap();
     let out = Command::new(python()).arg("snippet.py").current_dir(root).output().unwrap();
     assert!(out.status.success(), "README's Python snippet failed:\n{}", String::from_utf8_lossy(&out.stderr));
     assert!(String::from_utf8_lossy(&out.stdout).contains("m/s^2"), "{}", String::from_utf8_lossy(&out.stdout));

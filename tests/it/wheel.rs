@@ -4,7 +4,7 @@
 //! written with the installed `shakeflow`; `python -m shakeflow` runs the same binary.
 //! examples/quickstart.ipynb runs top to bottom in that venv's PATH (nbclient), so it never rots.
 
-use crate::common::{python, write_daq_csv};
+use crate::common::{python, readme_block, write_daq_csv};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::Instant;
@@ -22,7 +22,10 @@ fn wheel() -> PathBuf {
 fn path_without_rust(venv: &Path) -> String {
     let path = format!("{}:/usr/local/bin:/usr/bin:/bin", venv.join("bin").display());
     for dir in path.split(':').skip(1) {
-        assert!(!Path::new(dir).join("cargo").exists(), "{dir} has cargo: the wheel test must run without Rust on PATH");
+        assert!(
+            !Path::new(dir).join("cargo").exists(),
+            "{dir} has cargo: the wheel test must run without Rust on PATH"
+        );
     }
     path
 }
@@ -40,7 +43,8 @@ fn run(cmd: &mut Command) -> Output {
 
 /// A fresh venv (the reference interpreter's base Python, no packages) with only the wheel installed.
 fn venv_with_wheel(dir: &Path) -> PathBuf {
-    let base = String::from_utf8(run(Command::new(python()).args(["-c", "import sys; print(sys.base_prefix)"])).stdout).unwrap();
+    let base = String::from_utf8(run(Command::new(python()).args(["-c", "import sys; print(sys.base_prefix)"])).stdout)
+        .unwrap();
     let base_python = Path::new(base.trim()).join("bin/python3");
     let venv = dir.join("venv");
     run(Command::new(&base_python).args(["-m", "venv", "--without-pip"]).arg(&venv));
@@ -50,17 +54,6 @@ fn venv_with_wheel(dir: &Path) -> PathBuf {
         .arg(&venv)
         .arg(wheel()));
     venv
-}
-
-/// The README section's fenced block of `language`.
-fn readme_block(section: &str, language: &str) -> String {
-    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
-    let body = readme.split(section).nth(1).unwrap_or_else(|| panic!("README.md has a `{section}` section"));
-    let body = &body[..body.find("\n## ").unwrap_or(body.len())];
-    let fence = format!("```{language}\n");
-    let start = body.find(&fence).unwrap_or_else(|| panic!("no ```{language} block under `{section}`"));
-    let block = &body[start + fence.len()..];
-    block[..block.find("```").unwrap()].to_string()
 }
 
 #[test]
@@ -95,7 +88,10 @@ fn the_wheel_installs_without_rust_and_runs_the_readme_example() {
     eprintln!("wheel installed in {installed:.1?}; README example done {:.1?} after the start", started.elapsed());
 
     // `python -m shakeflow` is the same binary.
-    let version = run(Command::new(venv.join("bin/python")).args(["-m", "shakeflow", "--version"]).env_clear().env("PATH", &path));
+    let version = run(Command::new(venv.join("bin/python"))
+        .args(["-m", "shakeflow", "--version"])
+        .env_clear()
+        .env("PATH", &path));
     assert!(String::from_utf8_lossy(&version.stdout).starts_with("shakeflow "), "{version:?}");
 }
 

@@ -57,6 +57,18 @@ pub fn run_python(script: &Path, args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
+/// The fenced block of `language` under README.md's `section` heading (e.g. "## Python and R"):
+/// tests run README's snippets as written.
+pub fn readme_block(section: &str, language: &str) -> String {
+    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
+    let body = readme.split(section).nth(1).unwrap_or_else(|| panic!("README.md has a `{section}` section"));
+    let body = &body[..body.find("\n## ").unwrap_or(body.len())];
+    let fence = format!("```{language}\n");
+    let start = body.find(&fence).unwrap_or_else(|| panic!("no ```{language} block under `{section}`"));
+    let block = &body[start + fence.len()..];
+    block[..block.find("```").unwrap()].to_string()
+}
+
 pub fn reference_script(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/reference").join(name)
 }
