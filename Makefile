@@ -74,12 +74,12 @@ wheel-dev: $(PY_STAMP)
 	rm -rf $(DEV_WHEELS)
 	$(VENV_PY) -m maturin build --release --locked --quiet --out $(DEV_WHEELS)
 
-# The release wheel and sdist (docs/packaging.md): manylinux2014 through zig, baseline x86-64, in
-# a target folder of their own.
+# The release wheel and sdist (docs/packaging.md): manylinux2014 through zig (maturin finds it
+# through the venv's python, hence the PATH), baseline x86-64, in a target folder of their own.
 WHEEL_TARGET_DIR ?= $(HOME)/.cache/shakeflow-wheel-target
 wheel: $(PY_STAMP)
 	$(VENV_PY) -m pip install --quiet --disable-pip-version-check "ziglang>=0.13"
-	CARGO_TARGET_DIR=$(WHEEL_TARGET_DIR) CARGO_TARGET_X86_64_UNKNOWN_LINUX_GNU_RUSTFLAGS="-C target-cpu=x86-64" \
+	PATH=$(VENV)/bin:$$PATH CARGO_TARGET_DIR=$(WHEEL_TARGET_DIR) CARGO_TARGET_X86_64_UNKNOWN_LINUX_GNU_RUSTFLAGS="-C target-cpu=x86-64" \
 	  $(VENV_PY) -m maturin build --release --locked --zig --compatibility manylinux2014 --out dist
 	$(VENV_PY) -m maturin sdist --out dist
 
