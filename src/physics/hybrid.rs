@@ -72,34 +72,30 @@ pub enum Course<T, E> {
     Integrate(E),
 }
 
+/// Where the driver stands inside sample interval `k`: at time `t`, the phase ending by `limit`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Now {
+    pub k: usize,
+    pub t: f64,
+    pub limit: f64,
+}
+
 /// A hybrid model driven by [`drive`]: its regime and everything it records live in the model.
 pub trait Hybrid<const N: usize, const M: usize> {
     type Transition: Copy;
-    type Equations<'a>: Equations<N, M, Transition = Self::Transition>
-    where
-        Self: 'a;
+    type Equations: Equations<N, M, Transition = Self::Transition>;
     type Error;
 
-    /// Transitions allowed within one sample interval before the run is declared stuck.
-    const MAX_TRANSITIONS_PER_SAMPLE: usize;
-
-    fn clock(&self) -> Clock;
     /// Where the current phase must end within an interval ending at `t_end` (a scheduled change).
     fn limit(&self, t: f64, t_end: f64) -> f64 {
         let _ = t;
         t_end
     }
-    /// The regime's course from `t` (state `y`) to `limit` over sample interval `k`.
-    fn course(
-        &mut self,
-        k: usize,
-        t: f64,
-        y: &[f64; N],
-        limit: f64,
-    ) -> Result<Course<Self::Transition, Self::Equations<'_>>, Self::Error>;
-    /// Applies a transition at time `t` in sample interval k: `y` is the state there, `immediate` says the event fired
-    /// at the very start of the integration (the trajectory could not leave its boundary).
-    /// Returns the state after it.
+    /// The regime's course from `now` (state `y`) to its limit.
+    fn course(&mut self, now: Now, y: &[f64; N]) -> Result<Course<Self::Transition, Self::Equations>, Self::Error>;
+    /// Applies a transition at time `t` in sample interval k: `y` is the state there,
+    /// `immediate` says the event fired at the very start of the integration (the trajectory
+    /// could not leave its boundary). Returns the state after it.
     fn apply(&mut self, k: usize, transition: Self::Transition, t: f64, y: [f64; N], immediate: bool) -> [f64; N];
     /// A transition due at the end of sample interval k, after its integration (none by default).
     fn settle(&mut self, k: usize, t_end: f64, y: &[f64; N]) -> Option<Self::Transition> {
@@ -111,16 +107,20 @@ pub trait Hybrid<const N: usize, const M: usize> {
         let _ = (t_end, y, stats);
         Ok(())
     }
-    /// The error of a run that switched more than [`Hybrid::MAX_TRANSITIONS_PER_SAMPLE`] times
-    /// within the interval containing `t`.
+    /// The error of a run that switched more than its limit of times within the interval
+    /// containing `t`.
     fn chatter(&self, t: f64, stats: &Stats) -> Self::Error;
     /// Records sample k with state `y`.
     fn record(&mut self, k: usize, y: &[f64; N]);
 }
 
-/// Runs the model over its clock from state `y` (sample 0) and returns the stepper's work.
+/// Runs the model over the samples of `clock` from state `y` (sample 0) and returns the
+/// stepper's work. More than `max_transitions` transitions within one sample interval are the
+/// model's chatter error.
 pub fn drive<const N: usize, const M: usize, H, S>(
     model: &mut H,
+    clock: Clock,
+    max_transitions: usize,
     mut y: [f64; N],
     mut stepper: S,
 ) -> Result<Stats, H::Error>
@@ -128,7 +128,6 @@ where
     H: Hybrid<N, M>,
     S: Stepper<N>,
 {
-    let clock = model.clock();
     model.record(0, &y);
     for k in 0..clock.samples - 1 {
         let t_end = clock.time(k + 1);
@@ -136,11 +135,11 @@ where
         let mut transitions = 0;
         while t < t_end {
             transitions += 1;
-            if transitions > H::MAX_TRANSITIONS_PER_SAMPLE {
+            if transitions > max_transitions {
                 return Err(model.chatter(t, &stepper.stats()));
             }
             let limit = model.limit(t, t_end);
-            let (at, transition, state, immediate) = match model.course(k, t, &y, limit)? {
+            let (at, transition, state, immediate) = match model.course(Now { k, t, limit }, &y)? {
                 Course::Hold => {
                     t = limit;
                     continue;

@@ -15,10 +15,10 @@
 //! As γ → ∞ (μ → 0) the base no longer feels the block and the model is the prescribed-base one.
 
 use super::{
-    initial_side, sensor_acceleration, Block, EventKind, Excitation, IsolatedBase, Options, Response,
+    chatter, initial_side, sensor_acceleration, Block, EventKind, Excitation, IsolatedBase, Options, Response,
     MAX_TRANSITIONS_PER_SAMPLE,
 };
-use crate::physics::hybrid::{self, rebounds, Clock, Course, Equations, Hybrid, Segment};
+use crate::physics::hybrid::{self, rebounds, Course, Equations, Hybrid, Now, Segment};
 use crate::physics::ode::{Stats, Stepper};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -29,6 +29,7 @@ enum Regime {
 }
 
 /// The coupled equations with the quantities they need.
+#[derive(Clone, Copy)]
 struct System<'a> {
     block: &'a Block,
     /// ω_b² and 2ξω_b.
@@ -94,7 +95,7 @@ const ROCKING_EVENTS: [Transition; 2] = [Transition::Impact, Transition::Overtur
 
 /// One regime's equations over one floor segment.
 struct Phase<'a> {
-    system: &'a System<'a>,
+    system: System<'a>,
     regime: Regime,
     seg: Segment<2>,
 }
@@ -151,7 +152,7 @@ pub(super) fn simulate<S: Stepper<4>>(
         regime: initial_side(y[0], y[1]).map_or(Regime::Rest, |side| Regime::Rocking { side }),
         response: Response::with_capacity(excitation.horizontal_mps2.len(), false),
     };
-    let stats = hybrid::drive(&mut coupled, y, stepper)?;
+    let stats = hybrid::drive(&mut coupled, excitation.clock(), MAX_TRANSITIONS_PER_SAMPLE, y, stepper)?;
     coupled.response.stats = stats;
     Ok(coupled.response)
 }
@@ -168,21 +169,13 @@ struct Coupled<'a> {
     response: Response,
 }
 
-impl Hybrid<4, 2> for Coupled<'_> {
+impl<'a> Hybrid<4, 2> for Coupled<'a> {
     type Transition = Transition;
-    type Equations<'b>
-        = Phase<'b>
-    where
-        Self: 'b;
+    type Equations = Phase<'a>;
     type Error = String;
 
-    const MAX_TRANSITIONS_PER_SAMPLE: usize = MAX_TRANSITIONS_PER_SAMPLE;
-
-    fn clock(&self) -> Clock {
-        self.excitation.clock()
-    }
-
-    fn course(&mut self, k: usize, t: f64, y: &[f64; 4], _: f64) -> Result<Course<Transition, Phase<'_>>, String> {
+    fn course(&mut self, now: Now, y: &[f64; 4]) -> Result<Course<Transition, Phase<'a>>, String> {
+        let (k, t) = (now.k, now.t);
         let seg = self.excitation.segment(k);
         if self.regime == Regime::Rest {
             let now = self.system.uplift_margins(&seg, t, y);
@@ -199,7 +192,7 @@ impl Hybrid<4, 2> for Coupled<'_> {
                 return Ok(Course::Switch { at: t, transition: Transition::UpliftNow(side) });
             }
         }
-        Ok(Course::Integrate(Phase { system: &self.system, regime: self.regime, seg }))
+        Ok(Course::Integrate(Phase { system: self.system, regime: self.regime, seg }))
     }
 
     fn apply(&mut self, _: usize, transition: Transition, t: f64, y: [f64; 4], immediate: bool) -> [f64; 4] {
@@ -241,10 +234,7 @@ impl Hybrid<4, 2> for Coupled<'_> {
     }
 
     fn chatter(&self, t: f64, _: &Stats) -> String {
-        format!(
-            "impact chatter near t = {t:.4} s did not settle; raise `rest_amplitude_rad` (now {})",
-            self.options.rest_amplitude_rad
-        )
+        chatter("impact", t, self.options.rest_amplitude_rad)
     }
 
     fn record(&mut self, k: usize, y: &[f64; 4]) {

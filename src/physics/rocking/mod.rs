@@ -426,6 +426,11 @@ fn initial_side(theta: f64, theta_dot: f64) -> Option<i8> {
     }
 }
 
+/// The error of a run whose `what` (impacts, stick-slip) kept switching near `t`.
+fn chatter(what: &str, t: f64, rest_amplitude_rad: f64) -> String {
+    format!("{what} chatter near t = {t:.4} s did not settle; raise `rest_amplitude_rad` (now {rest_amplitude_rad})")
+}
+
 /// The most negative of `margins` (a condition that no longer holds), if any is negative.
 fn most_negative(margins: &[f64]) -> Option<usize> {
     (0..margins.len()).filter(|&i| margins[i] < 0.0).min_by(|&a, &b| margins[a].total_cmp(&margins[b]))

@@ -4,11 +4,11 @@
 //! docs of `rocking` give the equations).
 
 use super::{
-    initial_side, sensor_acceleration, Block, EventKind, Excitation, MassChange, Options, Response,
+    chatter, initial_side, sensor_acceleration, Block, EventKind, Excitation, MassChange, Options, Response,
     MAX_TRANSITIONS_PER_SAMPLE,
 };
-use crate::physics::hybrid::{self, rebounds, Clock, Course, Equations, Hybrid, Segment};
-use crate::physics::ode::Stepper;
+use crate::physics::hybrid::{self, rebounds, Course, Equations, Hybrid, Now, Segment};
+use crate::physics::ode::{Stats, Stepper};
 
 /// The anchorage in the quantities the equations use.
 #[derive(Clone, Copy, Debug)]
@@ -80,8 +80,8 @@ fn heel_uplift(block: &Block, side: f64, theta: f64) -> f64 {
 }
 
 /// The rocking equations on one side, over one floor segment, with the heel anchor's state.
-struct RockingOnSide<'a> {
-    block: &'a Block,
+struct RockingOnSide {
+    block: Block,
     side: f64,
     seg: Segment<2>,
     anchor: Option<(AnchorLaw, AnchorState)>,
@@ -89,9 +89,9 @@ struct RockingOnSide<'a> {
     wall_rad: Option<f64>,
 }
 
-impl RockingOnSide<'_> {
+impl RockingOnSide {
     fn theta_ddot(&self, t: f64, y: &[f64; 2]) -> f64 {
-        let b = self.block;
+        let b = &self.block;
         let [ax, av] = self.seg.at(t);
         let (sin, cos) = (self.side * b.alpha_rad - y[0]).sin_cos();
         let mut acc = -(b.r_m / b.i0_per_kg) * ((b.g_mps2 + av) * sin + ax * cos);
@@ -110,7 +110,7 @@ impl RockingOnSide<'_> {
     }
 }
 
-impl Equations<2, 6> for RockingOnSide<'_> {
+impl Equations<2, 6> for RockingOnSide {
     type Transition = Transition;
 
     fn rhs(&self, t: f64, y: &[f64; 2]) -> [f64; 2] {
@@ -123,7 +123,7 @@ impl Equations<2, 6> for RockingOnSide<'_> {
         let s = self.side;
         let mut g = [s * y[0], self.block.lie_angle_rad - s * y[0], 1.0, 1.0, 1.0, 1.0];
         if let Some((law, state)) = self.anchor {
-            let uplift = heel_uplift(self.block, s, y[0]);
+            let uplift = heel_uplift(&self.block, s, y[0]);
             match state {
                 AnchorState::Elastic { plastic_m } => g[2] = law.yield_m - (uplift - plastic_m),
                 AnchorState::Plastic => {
@@ -207,7 +207,7 @@ pub(super) fn simulate<S: Stepper<2>>(
         anchors: [AnchorState::Elastic { plastic_m: 0.0 }; 2],
         response,
     };
-    let stats = hybrid::drive(&mut model, y, stepper)?;
+    let stats = hybrid::drive(&mut model, excitation.clock(), MAX_TRANSITIONS_PER_SAMPLE, y, stepper)?;
     model.response.stats = stats;
     Ok(model.response)
 }
@@ -231,9 +231,9 @@ impl Toppling<'_> {
         self.excitation.clock().segment(k, |j| [self.base_ax[j], self.excitation.vertical(j)])
     }
 
-    fn on_side(&self, side: i8, seg: Segment<2>) -> RockingOnSide<'_> {
+    fn on_side(&self, side: i8, seg: Segment<2>) -> RockingOnSide {
         RockingOnSide {
-            block: &self.block,
+            block: self.block,
             side: f64::from(side),
             seg,
             anchor: self.anchor.map(|law| (law, self.anchors[heel(side)])),
@@ -289,17 +289,8 @@ fn heel(side: i8) -> usize {
 
 impl Hybrid<2, 6> for Toppling<'_> {
     type Transition = Transition;
-    type Equations<'b>
-        = RockingOnSide<'b>
-    where
-        Self: 'b;
+    type Equations = RockingOnSide;
     type Error = String;
-
-    const MAX_TRANSITIONS_PER_SAMPLE: usize = MAX_TRANSITIONS_PER_SAMPLE;
-
-    fn clock(&self) -> Clock {
-        self.excitation.clock()
-    }
 
     /// A mass change splits the interval: the phase ends there and the block changes.
     fn limit(&self, t: f64, t_end: f64) -> f64 {
@@ -309,13 +300,8 @@ impl Hybrid<2, 6> for Toppling<'_> {
         }
     }
 
-    fn course(
-        &mut self,
-        k: usize,
-        t: f64,
-        y: &[f64; 2],
-        limit: f64,
-    ) -> Result<Course<Transition, RockingOnSide<'_>>, String> {
+    fn course(&mut self, now: Now, y: &[f64; 2]) -> Result<Course<Transition, RockingOnSide>, String> {
+        let Now { k, t, limit } = now;
         if t >= limit {
             return Ok(Course::Switch { at: t, transition: Transition::MassChange });
         }
@@ -386,11 +372,8 @@ impl Hybrid<2, 6> for Toppling<'_> {
         }
     }
 
-    fn chatter(&self, t: f64, _: &crate::physics::ode::Stats) -> String {
-        format!(
-            "impact chatter near t = {t:.4} s did not settle; raise `rest_amplitude_rad` (now {})",
-            self.options.rest_amplitude_rad
-        )
+    fn chatter(&self, t: f64, _: &Stats) -> String {
+        chatter("impact", t, self.options.rest_amplitude_rad)
     }
 
     fn record(&mut self, k: usize, y: &[f64; 2]) {

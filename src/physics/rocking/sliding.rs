@@ -25,10 +25,10 @@
 //! Free flight (N < 0) is outside the model and refused with the time.
 
 use super::{
-    initial_side, most_negative, sensor_acceleration, Block, EventKind, Excitation, Friction, Options, Response,
-    MAX_TRANSITIONS_PER_SAMPLE,
+    chatter, initial_side, most_negative, sensor_acceleration, Block, EventKind, Excitation, Friction, Options,
+    Response, MAX_TRANSITIONS_PER_SAMPLE,
 };
-use crate::physics::hybrid::{self, rebounds, Clock, Course, Equations, Hybrid, Segment};
+use crate::physics::hybrid::{self, rebounds, Course, Equations, Hybrid, Now, Segment};
 use crate::physics::ode::{Stats, Stepper};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -51,6 +51,7 @@ enum Regime {
 }
 
 /// The equations, per unit mass. State: [θ, θ̇, u, u̇].
+#[derive(Clone, Copy)]
 struct Model<'a> {
     block: &'a Block,
     friction: Friction,
@@ -200,7 +201,7 @@ const UNUSED: f64 = 1.0;
 
 /// One regime's equations over one floor segment.
 struct Phase<'a> {
-    model: &'a Model<'a>,
+    model: Model<'a>,
     regime: Regime,
     seg: Segment<2>,
 }
@@ -213,7 +214,7 @@ impl Equations<4, 4> for Phase<'_> {
     }
 
     fn events(&self, t: f64, state: &[f64; 4]) -> [f64; 4] {
-        let (model, seg) = (self.model, &self.seg);
+        let (model, seg) = (&self.model, &self.seg);
         let lie = model.block.lie_angle_rad;
         match self.regime {
             Regime::Stick => model.stick_margins(seg, t),
@@ -266,7 +267,7 @@ pub(super) fn simulate<S: Stepper<4>>(
         regime: initial_side(y[0], y[1]).map_or(Regime::Stick, |side| Regime::Rock { side }),
         response: Response::with_capacity(excitation.horizontal_mps2.len(), true),
     };
-    let stats = hybrid::drive(&mut sliding, y, stepper)?;
+    let stats = hybrid::drive(&mut sliding, excitation.clock(), MAX_TRANSITIONS_PER_SAMPLE, y, stepper)?;
     sliding.response.stats = stats;
     Ok(sliding.response)
 }
@@ -333,21 +334,13 @@ impl Sliding<'_> {
     }
 }
 
-impl Hybrid<4, 4> for Sliding<'_> {
+impl<'a> Hybrid<4, 4> for Sliding<'a> {
     type Transition = Transition;
-    type Equations<'b>
-        = Phase<'b>
-    where
-        Self: 'b;
+    type Equations = Phase<'a>;
     type Error = String;
 
-    const MAX_TRANSITIONS_PER_SAMPLE: usize = MAX_TRANSITIONS_PER_SAMPLE;
-
-    fn clock(&self) -> Clock {
-        self.excitation.clock()
-    }
-
-    fn course(&mut self, k: usize, t: f64, y: &[f64; 4], _: f64) -> Result<Course<Transition, Phase<'_>>, String> {
+    fn course(&mut self, now: Now, y: &[f64; 4]) -> Result<Course<Transition, Phase<'a>>, String> {
+        let (k, t) = (now.k, now.t);
         let seg = self.excitation.segment(k);
         if let Some(transition) = self.at_once(&seg, t, y) {
             return Ok(Course::Switch { at: t, transition });
@@ -364,7 +357,7 @@ impl Hybrid<4, 4> for Sliding<'_> {
         }
         Ok(match self.regime {
             Regime::Overturned => Course::Hold,
-            regime => Course::Integrate(Phase { model: &self.model, regime, seg }),
+            regime => Course::Integrate(Phase { model: self.model, regime, seg }),
         })
     }
 
@@ -417,10 +410,7 @@ impl Hybrid<4, 4> for Sliding<'_> {
     }
 
     fn chatter(&self, t: f64, _: &Stats) -> String {
-        format!(
-            "impact or stick-slip chatter near t = {t:.4} s did not settle; raise `rest_amplitude_rad` (now {})",
-            self.options.rest_amplitude_rad
-        )
+        chatter("impact or stick-slip", t, self.options.rest_amplitude_rad)
     }
 
     fn record(&mut self, k: usize, y: &[f64; 4]) {

@@ -8,7 +8,7 @@ use std::f64::consts::PI;
 use super::dynamics::{Alteration, Dynamics, NoSlip, Slip};
 use super::holding::HoldingSet;
 use super::{Cart, Friction, FrictionLaw, Method, Options};
-use crate::physics::hybrid::{self, Clock, Course, Equations, Hybrid, Segment};
+use crate::physics::hybrid::{self, Clock, Course, Equations, Hybrid, Now, Segment};
 use crate::physics::ode::{Dopri5, Either, Rk4, Stats, Stepper};
 
 /// Floor acceleration sampled at a constant step, two horizontal components (floor X, Y).
@@ -449,25 +449,11 @@ impl<const N: usize, D: Dynamics<N>> Rolling<'_, '_, N, D> {
 
 impl<'r, 'a, const N: usize, D: Dynamics<N>> Hybrid<N, EVENTS> for Rolling<'r, 'a, N, D> {
     type Transition = Transition;
-    type Equations<'b>
-        = Moving<'r, 'a, N, D>
-    where
-        Self: 'b;
+    type Equations = Moving<'r, 'a, N, D>;
     type Error = (String, usize);
 
-    const MAX_TRANSITIONS_PER_SAMPLE: usize = MAX_TRANSITIONS_PER_SAMPLE;
-
-    fn clock(&self) -> Clock {
-        self.run.clock()
-    }
-
-    fn course(
-        &mut self,
-        k: usize,
-        t: f64,
-        y: &[f64; N],
-        limit: f64,
-    ) -> Result<Course<Transition, Moving<'r, 'a, N, D>>, (String, usize)> {
+    fn course(&mut self, now: Now, y: &[f64; N]) -> Result<Course<Transition, Self::Equations>, (String, usize)> {
+        let Now { k, t, limit } = now;
         let run = self.run;
         let seg = run.segment(k);
         Ok(match self.regime {
@@ -601,7 +587,7 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
                 rolling.response.log(t0, EventKind::Breakaway, None, &y);
             }
         }
-        let stats = hybrid::drive(&mut rolling, y, stepper)?;
+        let stats = hybrid::drive(&mut rolling, self.clock(), MAX_TRANSITIONS_PER_SAMPLE, y, stepper)?;
         rolling.response.stats = stats;
         Ok(rolling.response)
     }
