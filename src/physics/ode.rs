@@ -529,6 +529,40 @@ impl<const N: usize> Stepper<N> for Rk4 {
     }
 }
 
+/// Either stepper, chosen at run time (a model's `Method`): one driver instance serves both.
+#[derive(Debug, Clone)]
+pub enum Either<const N: usize> {
+    Dopri5(Dopri5<N>),
+    Rk4(Rk4),
+}
+
+impl<const N: usize> Stepper<N> for Either<N> {
+    fn advance<F, G, const M: usize>(&mut self, f: &F, t0: f64, y0: [f64; N], t1: f64, g: &G) -> Advance<N>
+    where
+        F: Fn(f64, &[f64; N]) -> [f64; N],
+        G: Fn(f64, &[f64; N]) -> [f64; M],
+    {
+        match self {
+            Either::Dopri5(s) => s.advance(f, t0, y0, t1, g),
+            Either::Rk4(s) => s.advance(f, t0, y0, t1, g),
+        }
+    }
+
+    fn reset(&mut self) {
+        match self {
+            Either::Dopri5(s) => s.reset(),
+            Either::Rk4(s) => Stepper::<N>::reset(s),
+        }
+    }
+
+    fn stats(&self) -> Stats {
+        match self {
+            Either::Dopri5(s) => s.stats(),
+            Either::Rk4(s) => Stepper::<N>::stats(s),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -54,7 +54,7 @@
 //!    std is ≈ 0.8 × the reported value (slightly conservative).
 //!
 //! # Errors
-//! `Err(String)` for empty or too short (< 4 samples) inputs, non-finite values, constant
+//! `Err(LagError)` for empty or too short (< 4 samples) inputs, non-finite values, constant
 //! signals, invalid `fs`, a negative/non-finite `max_lag_s`, or `max_lag_s·fs` not smaller
 //! than the shorter record (the lag range would be larger than the records).
 //! `max_lag_s = None` searches `|lag| ≤ (min(n_r, n_g)/2)/fs` (at least half of the shorter
@@ -87,9 +87,37 @@ pub enum Refinement {
     Parabolic,
 }
 
+/// Why a lag cannot be estimated.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LagError {
+    #[error("sampling rate must be finite and > 0, got {0}")]
+    SampleRate(f64),
+    #[error("{0} is empty")]
+    Empty(&'static str),
+    #[error("{name} has {samples} samples; at least 4 are needed")]
+    TooShort { name: &'static str, samples: usize },
+    #[error("{name} has a non-finite value at sample {index}")]
+    NotFinite { name: &'static str, index: usize },
+    #[error("{0} is constant")]
+    Constant(&'static str),
+    #[error("max_lag_s must be finite and >= 0, got {0}")]
+    MaxLag(f64),
+    #[error("lag range ±{max_lag_s} s ({lags} samples) is not smaller than the shorter record ({shorter} samples = {shorter_s} s)")]
+    LagRange { max_lag_s: f64, lags: f64, shorter: usize, shorter_s: f64 },
+    #[error("records do not overlap at the estimated lag")]
+    NoOverlap,
+    #[error("a record is zero over the overlap at the estimated lag")]
+    ZeroOverlap,
+}
+
 /// Estimate the lag of `target` relative to `reference` (both at rate `fs`).
 /// See the module documentation for the method, conventions and errors.
-pub fn estimate_lag(reference: &[f64], target: &[f64], fs: f64, max_lag_s: Option<f64>) -> Result<LagEstimate, String> {
+pub fn estimate_lag(
+    reference: &[f64],
+    target: &[f64],
+    fs: f64,
+    max_lag_s: Option<f64>,
+) -> Result<LagEstimate, LagError> {
     estimate_lag_with(reference, target, fs, max_lag_s, Refinement::BandLimitedNewton)
 }
 
@@ -101,22 +129,22 @@ pub fn shift(x: &[f64], fs: f64, lag_s: f64) -> Vec<f64> {
     sample_grid(&[x], fs, lag_s, x.len()).pop().expect("one channel in, one out")
 }
 
-fn check_signal(name: &str, x: &[f64]) -> Result<Vec<f64>, String> {
+fn check_signal(name: &'static str, x: &[f64]) -> Result<Vec<f64>, LagError> {
     if x.is_empty() {
-        return Err(format!("{name} is empty"));
+        return Err(LagError::Empty(name));
     }
     if x.len() < 4 {
-        return Err(format!("{name} has {} samples; at least 4 are needed", x.len()));
+        return Err(LagError::TooShort { name, samples: x.len() });
     }
     if let Some(i) = x.iter().position(|v| !v.is_finite()) {
-        return Err(format!("{name} has a non-finite value at sample {i}"));
+        return Err(LagError::NotFinite { name, index: i });
     }
     let mean = x.iter().sum::<f64>() / x.len() as f64;
     let y: Vec<f64> = x.iter().map(|v| v - mean).collect();
     let scale = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let dev = y.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     if dev == 0.0 || dev <= 1e-12 * scale {
-        return Err(format!("{name} is constant"));
+        return Err(LagError::Constant(name));
     }
     Ok(y)
 }
@@ -208,9 +236,9 @@ pub fn estimate_lag_with(
     fs: f64,
     max_lag_s: Option<f64>,
     refinement: Refinement,
-) -> Result<LagEstimate, String> {
+) -> Result<LagEstimate, LagError> {
     if !(fs.is_finite() && fs > 0.0) {
-        return Err(format!("sampling rate must be finite and > 0, got {fs}"));
+        return Err(LagError::SampleRate(fs));
     }
     let r = check_signal("reference", reference)?;
     let g = check_signal("target", target)?;
@@ -219,14 +247,11 @@ pub fn estimate_lag_with(
     let m_max: usize = match max_lag_s {
         Some(v) => {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("max_lag_s must be finite and >= 0, got {v}"));
+                return Err(LagError::MaxLag(v));
             }
             let m = (v * fs + 1e-9).floor();
             if m >= nmin as f64 {
-                return Err(format!(
-                    "lag range ±{v} s ({m} samples) is not smaller than the shorter record ({nmin} samples = {} s)",
-                    nmin as f64 / fs
-                ));
+                return Err(LagError::LagRange { max_lag_s: v, lags: m, shorter: nmin, shorter_s: nmin as f64 / fs });
             }
             m as usize
         }
@@ -350,7 +375,7 @@ pub fn estimate_lag_with(
     let j0 = ((tau - 1e-9).ceil().max(0.0)) as usize;
     let j1f = ((nr - 1) as f64 + tau + 1e-9).floor().min((ng - 1) as f64);
     if j1f < j0 as f64 + 1.0 {
-        return Err("records do not overlap at the estimated lag".to_string());
+        return Err(LagError::NoOverlap);
     }
     let j1 = j1f as usize;
     let nov = j1 - j0 + 1;
@@ -361,7 +386,7 @@ pub fn estimate_lag_with(
     let sgg: f64 = gv.iter().map(|a| a * a).sum();
     let srr: f64 = rsv.iter().map(|a| a * a).sum();
     if sgg == 0.0 || srr == 0.0 {
-        return Err("a record is zero over the overlap at the estimated lag".to_string());
+        return Err(LagError::ZeroOverlap);
     }
     let correlation = (sgr / (sgg * srr).sqrt()).clamp(-1.0, 1.0);
 
@@ -572,16 +597,16 @@ mod tests {
     #[test]
     fn errors_are_reported() {
         let x: Vec<f64> = (0..100).map(|i| (i as f64 * 0.37).sin()).collect();
-        assert!(estimate_lag(&[], &x, 100.0, None).unwrap_err().contains("empty"));
-        assert!(estimate_lag(&x, &[], 100.0, None).unwrap_err().contains("empty"));
-        assert!(estimate_lag(&x, &[2.5; 100], 100.0, None).unwrap_err().contains("constant"));
-        assert!(estimate_lag(&[1.0; 50], &x, 100.0, None).unwrap_err().contains("constant"));
-        assert!(estimate_lag(&x, &x, 100.0, Some(1.0)).unwrap_err().contains("lag range"));
+        assert!(estimate_lag(&[], &x, 100.0, None).unwrap_err().to_string().contains("empty"));
+        assert!(estimate_lag(&x, &[], 100.0, None).unwrap_err().to_string().contains("empty"));
+        assert!(estimate_lag(&x, &[2.5; 100], 100.0, None).unwrap_err().to_string().contains("constant"));
+        assert!(estimate_lag(&[1.0; 50], &x, 100.0, None).unwrap_err().to_string().contains("constant"));
+        assert!(estimate_lag(&x, &x, 100.0, Some(1.0)).unwrap_err().to_string().contains("lag range"));
         assert!(estimate_lag(&x, &x, 100.0, Some(-1.0)).is_err());
         assert!(estimate_lag(&x, &x, 0.0, None).is_err());
         let mut y = x.clone();
         y[7] = f64::NAN;
-        assert!(estimate_lag(&x, &y, 100.0, None).unwrap_err().contains("non-finite"));
+        assert!(estimate_lag(&x, &y, 100.0, None).unwrap_err().to_string().contains("non-finite"));
         assert!(estimate_lag(&x, &x, 100.0, Some(0.5)).is_ok());
     }
 

@@ -140,6 +140,15 @@ pub struct TopplingEvent {
     pub explanation: String,
 }
 
+/// Why a time column cannot carry an analysis.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum TimeBaseError {
+    #[error("time is not nondecreasing or has fewer than two finite values")]
+    NotNondecreasing,
+    #[error("no positive time step")]
+    NoPositiveStep,
+}
+
 /// A record's time column prepared once for all of its channels: gaps filled, median step.
 pub struct TimeBase<'a> {
     time_s: &'a [f64],
@@ -149,9 +158,9 @@ pub struct TimeBase<'a> {
 
 impl<'a> TimeBase<'a> {
     /// Err: why no channel on this time column can be analysed.
-    pub fn new(time_s: &'a [f64]) -> Result<TimeBase<'a>, String> {
-        let filled = fill_time(time_s).ok_or("time is not nondecreasing or has fewer than two finite values")?;
-        let dt = median_step(&filled).ok_or("no positive time step")?;
+    pub fn new(time_s: &'a [f64]) -> Result<TimeBase<'a>, TimeBaseError> {
+        let filled = fill_time(time_s).ok_or(TimeBaseError::NotNondecreasing)?;
+        let dt = median_step(&filled).ok_or(TimeBaseError::NoPositiveStep)?;
         Ok(TimeBase { time_s, filled, dt })
     }
 }
@@ -189,7 +198,7 @@ pub fn detect_toppling(
     }
     match TimeBase::new(time_s) {
         Ok(base) => detect_toppling_on(&base, top_ax_mps2, floor_vertical_mps2, opts),
-        Err(why) => not_analysed(why),
+        Err(why) => not_analysed(why.to_string()),
     }
 }
 

@@ -198,30 +198,30 @@ struct Engine {
 }
 
 impl Engine {
-    fn new(n: usize, fs: f64, opts: &WelchOptions) -> Result<Self, String> {
+    fn new(n: usize, fs: f64, opts: &WelchOptions) -> Result<Self, SpectrumError> {
         if !(fs.is_finite() && fs > 0.0) {
-            return Err(format!("sample rate must be finite and > 0, got {fs}"));
+            return Err(SpectrumError::SampleRate(fs));
         }
         let nperseg = opts.segment_len;
         if nperseg < 2 {
-            return Err(format!("segment_len must be >= 2, got {nperseg}"));
+            return Err(SpectrumError::SegmentLen(nperseg));
         }
         if opts.overlap >= nperseg {
-            return Err(format!("overlap ({}) must be smaller than segment_len ({nperseg})", opts.overlap));
+            return Err(SpectrumError::Overlap { overlap: opts.overlap, segment_len: nperseg });
         }
         let nfft = opts.nfft();
         if nfft < nperseg {
-            return Err(format!("nfft ({nfft}) must be >= segment_len ({nperseg})"));
+            return Err(SpectrumError::Nfft { nfft, segment_len: nperseg });
         }
         if n < nperseg {
-            return Err(format!("input has {n} samples, fewer than one segment ({nperseg} samples)"));
+            return Err(SpectrumError::FewerThanOneSegment { samples: n, segment_len: nperseg });
         }
         let step = nperseg - opts.overlap;
         let nseg = (n - opts.overlap) / step;
         let win = window_samples(opts.window, nperseg);
         let energy: f64 = win.iter().map(|w| w * w).sum();
         if !(energy > 0.0) {
-            return Err("window has zero energy".to_string());
+            return Err(SpectrumError::ZeroWindow);
         }
         let fft = FftPlanner::<f64>::new().plan_fft_forward(nfft);
         let scratch = vec![Complex64::new(0.0, 0.0); fft.get_inplace_scratch_len()];
@@ -345,9 +345,30 @@ impl Engine {
     }
 }
 
-fn check_finite(name: &str, v: &[f64]) -> Result<(), String> {
+/// Why a spectrum cannot be estimated (the messages name the offending option or input).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SpectrumError {
+    #[error("sample rate must be finite and > 0, got {0}")]
+    SampleRate(f64),
+    #[error("segment_len must be >= 2, got {0}")]
+    SegmentLen(usize),
+    #[error("overlap ({overlap}) must be smaller than segment_len ({segment_len})")]
+    Overlap { overlap: usize, segment_len: usize },
+    #[error("nfft ({nfft}) must be >= segment_len ({segment_len})")]
+    Nfft { nfft: usize, segment_len: usize },
+    #[error("input has {samples} samples, fewer than one segment ({segment_len} samples)")]
+    FewerThanOneSegment { samples: usize, segment_len: usize },
+    #[error("window has zero energy")]
+    ZeroWindow,
+    #[error("{name}[{index}] is not finite ({value})")]
+    NotFinite { name: &'static str, index: usize, value: f64 },
+    #[error("x and y must have the same length ({x} != {y})")]
+    LengthMismatch { x: usize, y: usize },
+}
+
+fn check_finite(name: &'static str, v: &[f64]) -> Result<(), SpectrumError> {
     match v.iter().position(|s| !s.is_finite()) {
-        Some(i) => Err(format!("{name}[{i}] is not finite ({})", v[i])),
+        Some(i) => Err(SpectrumError::NotFinite { name, index: i, value: v[i] }),
         None => Ok(()),
     }
 }
@@ -358,9 +379,9 @@ fn cross_spectra(
     y: &[f64],
     fs: f64,
     opts: &WelchOptions,
-) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>, Vec<Complex64>, usize), String> {
+) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>, Vec<Complex64>, usize), SpectrumError> {
     if x.len() != y.len() {
-        return Err(format!("x and y must have the same length ({} != {})", x.len(), y.len()));
+        return Err(SpectrumError::LengthMismatch { x: x.len(), y: y.len() });
     }
     check_finite("x", x)?;
     check_finite("y", y)?;
@@ -391,14 +412,14 @@ fn cross_spectra(
 ///
 /// Errors on mismatched lengths, non-finite samples, `n < segment_len`,
 /// `overlap >= segment_len`, `nfft < segment_len`, `segment_len < 2`, bad `fs`.
-pub fn csd(x: &[f64], y: &[f64], fs: f64, opts: &WelchOptions) -> Result<(Vec<f64>, Vec<Complex64>), String> {
+pub fn csd(x: &[f64], y: &[f64], fs: f64, opts: &WelchOptions) -> Result<(Vec<f64>, Vec<Complex64>), SpectrumError> {
     let (f, _, _, pxy, _) = cross_spectra(x, y, fs, opts)?;
     Ok((f, pxy))
 }
 
 /// Power spectral density, `scipy.signal.welch(x, fs, ...)` with the same
 /// conventions as [`csd`]. Two segments share each complex FFT.
-pub fn welch(x: &[f64], fs: f64, opts: &WelchOptions) -> Result<(Vec<f64>, Vec<f64>), String> {
+pub fn welch(x: &[f64], fs: f64, opts: &WelchOptions) -> Result<(Vec<f64>, Vec<f64>), SpectrumError> {
     check_finite("x", x)?;
     let mut eng = Engine::new(x.len(), fs, opts)?;
     let nf = eng.nfreq;
@@ -419,7 +440,12 @@ pub fn welch(x: &[f64], fs: f64, opts: &WelchOptions) -> Result<(Vec<f64>, Vec<f
 
 /// Transfer function from input `x` to output `y` (MATLAB `tfestimate`,
 /// both estimators) plus coherence, from a single pass over the data.
-pub fn transfer_function(x: &[f64], y: &[f64], fs: f64, opts: &WelchOptions) -> Result<TransferFunction, String> {
+pub fn transfer_function(
+    x: &[f64],
+    y: &[f64],
+    fs: f64,
+    opts: &WelchOptions,
+) -> Result<TransferFunction, SpectrumError> {
     let (freqs_hz, pxx, pyy, pxy, segments) = cross_spectra(x, y, fs, opts)?;
     let n = freqs_hz.len();
     let mut h1 = Vec::with_capacity(n);

@@ -209,7 +209,7 @@ fn align(
         Some(lag) => (lag, 0.0, None, "known"),
         None => {
             let sync = resampler.resample(values[sync_position]);
-            let e = estimate_lag(reference, &sync, fs, Some(p.max_lag_s))?;
+            let e = estimate_lag(reference, &sync, fs, Some(p.max_lag_s)).map_err(|e| e.to_string())?;
             (e.lag_s, e.uncertainty_s, Some(e.correlation), "estimated")
         }
     };

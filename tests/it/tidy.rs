@@ -112,3 +112,197 @@ fn top_level_modules_form_no_cycle() {
     }
     assert!(cycles.is_empty(), "import cycles between top-level modules:\n{}", cycles.join("\n"));
 }
+
+/// The crate's root folder.
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The top-level modules a production file or folder below `src/` names, outside its own.
+fn uses_of(path: &Path) -> BTreeMap<String, BTreeSet<String>> {
+    let src = root().join("src");
+    let mut files = Vec::new();
+    if path.is_dir() {
+        rust_files(path, &mut files);
+    } else {
+        files.push(path.to_path_buf());
+    }
+    let mut uses: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for file in files {
+        let relative = file.strip_prefix(&src).unwrap().to_string_lossy().replace('\\', "/");
+        let own = relative.split('/').next().unwrap().trim_end_matches(".rs").to_string();
+        let Some(code) = production_code(&file) else { continue };
+        for (i, _) in code.match_indices("crate::") {
+            let used: String = code[i + 7..].chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
+            if !used.is_empty() && used != own {
+                uses.entry(used).or_default().insert(relative.clone());
+            }
+        }
+    }
+    uses
+}
+
+/// The backticked words of a Markdown table cell.
+fn backticked(cell: &str) -> Vec<String> {
+    cell.split('`').skip(1).step_by(2).map(str::to_string).collect()
+}
+
+#[test]
+fn every_module_is_on_the_map_and_keeps_out_of_what_it_may_not_import() {
+    let text = std::fs::read_to_string(root().join("ARCHITECTURE.md")).unwrap();
+    let map = &text[text.find("## Code map").expect("ARCHITECTURE.md has a code map")..];
+    let map = &map[..map[3..].find("\n## ").map_or(map.len(), |i| i + 3)];
+    let mut problems = Vec::new();
+    let mut mapped = BTreeSet::new();
+    for row in map.lines().filter(|l| l.starts_with("| `")) {
+        let cells: Vec<&str> = row.split(" | ").collect();
+        let forbidden: Vec<String> = cells
+            .get(2)
+            .map(|c| c.trim_end_matches('|').trim())
+            .into_iter()
+            .flat_map(|c| {
+                let mut words = backticked(c);
+                if c.starts_with("numerics") || c.contains(", numerics") {
+                    words.extend(NUMERICS.iter().map(|s| s.to_string()));
+                }
+                words
+            })
+            .collect();
+        for path in backticked(cells[0].trim_start_matches("| ")) {
+            let full = root().join(&path);
+            if !full.exists() {
+                problems.push(format!("the code map names {path}, which does not exist"));
+                continue;
+            }
+            if let Some(module) = path.strip_prefix("src/") {
+                mapped.insert(module.split('/').next().unwrap().trim_end_matches(".rs").to_string());
+                for (used, files) in uses_of(&full) {
+                    if forbidden.contains(&used) {
+                        problems.push(format!("{path} may not import {used}, but {files:?} do"));
+                    }
+                }
+            }
+        }
+    }
+    for entry in std::fs::read_dir(root().join("src")).unwrap() {
+        let name = entry.unwrap().file_name().to_string_lossy().trim_end_matches(".rs").to_string();
+        if name != "lib" && !mapped.contains(&name) {
+            problems.push(format!("src/{name} is not on the code map of ARCHITECTURE.md"));
+        }
+    }
+    assert!(problems.is_empty(), "ARCHITECTURE.md's code map is out of date:\n{}", problems.join("\n"));
+}
+
+/// Functions of a file longer than `limit` lines, as rustfmt lays them out (a `fn` line and the
+/// first `}` at its indentation).
+fn long_functions(path: &Path, limit: usize) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let mut long = Vec::new();
+    for (i, line) in lines.iter().enumerate() {
+        let body = line.trim_start();
+        let indent = &line[..line.len() - body.len()];
+        let signature = ["fn ", "pub fn ", "pub(super) fn ", "pub(crate) fn "].iter().any(|p| body.starts_with(p));
+        if !signature || line.trim_end().ends_with(';') {
+            continue;
+        }
+        let close = format!("{indent}}}");
+        if line.trim_end().ends_with('}') {
+            continue;
+        }
+        if let Some(end) = lines[i..].iter().position(|l| *l == close) {
+            if end + 1 > limit {
+                long.push(format!("{}:{} ({} lines)", path.display(), i + 1, end + 1));
+            }
+        }
+    }
+    long
+}
+
+#[test]
+fn hybrid_models_share_one_driver() {
+    let physics = root().join("src/physics");
+    let mut files = Vec::new();
+    rust_files(&physics, &mut files);
+    let mut problems = Vec::new();
+    for file in &files {
+        let name = file.strip_prefix(&physics).unwrap().to_string_lossy().replace('\\', "/");
+        let Some(code) = production_code(file) else { continue };
+        // Only the driver (and the integrators themselves) step an integrator.
+        if name != "hybrid.rs" && name != "ode.rs" && code.contains(".advance(") {
+            problems.push(format!("physics/{name} steps an integrator itself: go through physics::hybrid::drive"));
+        }
+        if code.contains("match index") {
+            problems.push(format!("physics/{name} matches event indices: map them to transitions"));
+        }
+        problems.extend(long_functions(file, 120).into_iter().map(|f| format!("over 120 lines: {f}")));
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
+
+/// The text of every Rust file below `dir`, joined.
+fn all_source(dir: &Path) -> String {
+    let mut files = Vec::new();
+    rust_files(dir, &mut files);
+    files.iter().map(|f| std::fs::read_to_string(f).unwrap()).collect::<Vec<_>>().join("\n")
+}
+
+fn defines_fn(source: &str, name: &str) -> bool {
+    source.match_indices(&format!("fn {name}")).any(|(i, m)| {
+        let next = source[i + m.len()..].chars().next();
+        matches!(next, Some('(' | '<'))
+    })
+}
+
+fn has_word(source: &str, word: &str) -> bool {
+    source.match_indices(word).any(|(i, _)| {
+        let before = source[..i].chars().next_back();
+        let after = source[i + word.len()..].chars().next();
+        let ident = |c: Option<char>| c.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_');
+        !ident(before) && !ident(after)
+    })
+}
+
+/// CONTRIBUTING.md's walkthroughs name files, functions, types and tests: each must exist.
+#[test]
+fn contributing_names_what_exists() {
+    let text = std::fs::read_to_string(root().join("CONTRIBUTING.md")).unwrap();
+    let code = all_source(&root().join("src")) + &all_source(&root().join("tests"));
+    let mut problems = Vec::new();
+    let mut checked = 0;
+    for token in text.split('`').skip(1).step_by(2) {
+        if token.contains('<') || token.contains(' ') {
+            continue;
+        }
+        if ["src/", "tests/", "schemas/"].iter().any(|p| token.starts_with(p)) {
+            checked += 1;
+            if !root().join(token).exists() {
+                problems.push(format!("{token} does not exist"));
+            }
+            continue;
+        }
+        let is_ident = |s: &str| s.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == ':');
+        if let Some(name) = token.strip_suffix("()").filter(|s| is_ident(s)) {
+            let name = name.rsplit([':', '.']).next().unwrap();
+            checked += 1;
+            if !defines_fn(&code, name) {
+                problems.push(format!("no function `{name}` (named as `{token}`)"));
+            }
+        } else if is_ident(token) && token.starts_with(|c: char| c.is_ascii_uppercase()) {
+            checked += 1;
+            for segment in token.split("::") {
+                if !has_word(&code, segment) {
+                    problems.push(format!("no `{segment}` in the source (named as `{token}`)"));
+                }
+            }
+        } else if is_ident(token) && token.rsplit("::").next().unwrap().matches('_').count() >= 2 {
+            let name = token.rsplit("::").next().unwrap();
+            checked += 1;
+            if !defines_fn(&code, name) {
+                problems.push(format!("no test or function `{name}` (named as `{token}`)"));
+            }
+        }
+    }
+    assert!(checked > 40, "only {checked} names checked: has CONTRIBUTING.md lost its walkthroughs?");
+    assert!(problems.is_empty(), "CONTRIBUTING.md names what is gone:\n{}", problems.join("\n"));
+}

@@ -15,10 +15,11 @@
 //! As γ → ∞ (μ → 0) the base no longer feels the block and the model is the prescribed-base one.
 
 use super::{
-    sensor_acceleration, Block, Event, EventKind, Excitation, IsolatedBase, Options, Response, Segment,
+    chatter, initial_side, sensor_acceleration, Block, EventKind, Excitation, IsolatedBase, Options, Response,
     MAX_TRANSITIONS_PER_SAMPLE,
 };
-use crate::physics::ode::{Advance, Stepper};
+use crate::physics::hybrid::{self, rebounds, Course, Equations, Hybrid, Now, Segment};
+use crate::physics::ode::{Stats, Stepper};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Regime {
@@ -28,6 +29,7 @@ enum Regime {
 }
 
 /// The coupled equations with the quantities they need.
+#[derive(Clone, Copy)]
 struct System<'a> {
     block: &'a Block,
     /// ω_b² and 2ξω_b.
@@ -56,8 +58,8 @@ impl System<'_> {
         (rhs_block - d * base, base)
     }
 
-    fn rhs(&self, regime: Regime, seg: &Segment, t: f64, y: &[f64; 4]) -> [f64; 4] {
-        let (ag, av) = seg.at(t);
+    fn rhs(&self, regime: Regime, seg: &Segment<2>, t: f64, y: &[f64; 4]) -> [f64; 4] {
+        let [ag, av] = seg.at(t);
         match regime {
             Regime::Rocking { side } => {
                 let (theta_ddot, base) = self.rocking(side, y, av);
@@ -68,11 +70,61 @@ impl System<'_> {
     }
 
     /// Positive while the block stays at rest: uplift toward +x, toward −x.
-    fn uplift_margins(&self, seg: &Segment, t: f64, y: &[f64; 4]) -> [f64; 2] {
-        let (_, av) = seg.at(t);
+    fn uplift_margins(&self, seg: &Segment<2>, t: f64, y: &[f64; 4]) -> [f64; 2] {
+        let [_, av] = seg.at(t);
         let hold = (self.block.g_mps2 + av) * self.block.alpha_rad.tan();
         let base = self.base_at_rest(y);
         [hold + base, hold - base]
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Transition {
+    /// The base already accelerates past the uplift threshold: the block uplifts at once.
+    UpliftNow(i8),
+    /// The base's acceleration reaches the uplift threshold toward this side.
+    Uplift(i8),
+    /// θ back to 0: rebound onto the other corner, or rest; the system's momentum is kept.
+    Impact,
+    Overturn,
+}
+
+/// What the event functions of each integrated regime stand for ([`Phase::events`]).
+const REST_EVENTS: [Transition; 2] = [Transition::Uplift(1), Transition::Uplift(-1)];
+const ROCKING_EVENTS: [Transition; 2] = [Transition::Impact, Transition::Overturn];
+
+/// One regime's equations over one floor segment.
+struct Phase<'a> {
+    system: System<'a>,
+    regime: Regime,
+    seg: Segment<2>,
+}
+
+impl Equations<4, 2> for Phase<'_> {
+    type Transition = Transition;
+
+    fn rhs(&self, t: f64, y: &[f64; 4]) -> [f64; 4] {
+        self.system.rhs(self.regime, &self.seg, t, y)
+    }
+
+    fn events(&self, t: f64, state: &[f64; 4]) -> [f64; 2] {
+        match self.regime {
+            Regime::Rest => self.system.uplift_margins(&self.seg, t, state),
+            Regime::Rocking { side } => {
+                let s = f64::from(side);
+                [s * state[0], self.system.block.lie_angle_rad - s * state[0]]
+            }
+            // The base carries the lying block on: nothing ends that (positive, never fires).
+            Regime::Overturned => [1.0; 2],
+        }
+    }
+
+    fn transition(&self, index: usize) -> Transition {
+        match self.regime {
+            Regime::Rest => REST_EVENTS[index],
+            Regime::Rocking { .. } => ROCKING_EVENTS[index],
+            Regime::Overturned => unreachable!("a lying block has no events"),
+        }
     }
 }
 
@@ -82,48 +134,116 @@ pub(super) fn simulate<S: Stepper<4>>(
     options: &Options,
     iso: &IsolatedBase,
     mass_ratio: f64,
-    mut stepper: S,
+    stepper: S,
 ) -> Result<Response, String> {
-    let n = excitation.horizontal_mps2.len();
-    let dt = excitation.dt_s;
-    let vertical = |k: usize| excitation.vertical_mps2.map_or(0.0, |v| v[k]);
     let omega = std::f64::consts::TAU / iso.period_s;
     let system = System { block, k: omega * omega, c: 2.0 * iso.damping_ratio * omega, mu: 1.0 / (1.0 + mass_ratio) };
     let restitution = options
         .restitution
         .unwrap_or(1.0 - 2.0 * block.half_base_m.powi(2) / (block.i0_per_kg - system.mu * block.cm_height_m.powi(2)));
-    let rest_speed_squared = 2.0 * block.p_radps.powi(2) * block.alpha_rad.sin() * options.rest_amplitude_rad;
-    let sensor_height = options.sensor_height_m.unwrap_or(block.height_m);
-    let segment = |k: usize| {
-        let k1 = (k + 1).min(n - 1);
-        let h = excitation.horizontal_mps2;
-        Segment {
-            t0: excitation.t0_s + k as f64 * dt,
-            ax0: h[k],
-            ax_rate: (h[k1] - h[k]) / dt,
-            av0: vertical(k),
-            av_rate: (vertical(k1) - vertical(k)) / dt,
+    let y = [options.initial_theta_rad, options.initial_theta_dot_radps, 0.0, 0.0];
+    let mut coupled = Coupled {
+        system,
+        excitation,
+        options,
+        restitution,
+        rest_speed_squared: block.rest_speed_squared(options.rest_amplitude_rad),
+        sensor_height: options.sensor_height_m.unwrap_or(block.height_m),
+        regime: initial_side(y[0], y[1]).map_or(Regime::Rest, |side| Regime::Rocking { side }),
+        response: Response::with_capacity(excitation.horizontal_mps2.len(), false),
+    };
+    let stats = hybrid::drive(&mut coupled, excitation.clock(), MAX_TRANSITIONS_PER_SAMPLE, y, stepper)?;
+    coupled.response.stats = stats;
+    Ok(coupled.response)
+}
+
+/// The coupled system's state between transitions, and what it records.
+struct Coupled<'a> {
+    system: System<'a>,
+    excitation: &'a Excitation<'a>,
+    options: &'a Options,
+    restitution: f64,
+    rest_speed_squared: f64,
+    sensor_height: f64,
+    regime: Regime,
+    response: Response,
+}
+
+impl<'a> Hybrid<4, 2> for Coupled<'a> {
+    type Transition = Transition;
+    type Equations = Phase<'a>;
+    type Error = String;
+
+    fn course(&mut self, now: Now, y: &[f64; 4]) -> Result<Course<Transition, Phase<'a>>, String> {
+        let (k, t) = (now.k, now.t);
+        let seg = self.excitation.segment(k);
+        if self.regime == Regime::Rest {
+            let now = self.system.uplift_margins(&seg, t, y);
+            // A base accelerating toward −x (margin 0 spent) throws the block onto its +x
+            // corner, and the other way round.
+            let side_now = if now[0] <= 0.0 && now[0] <= now[1] {
+                Some(1)
+            } else if now[1] <= 0.0 {
+                Some(-1)
+            } else {
+                None
+            };
+            if let Some(side) = side_now {
+                return Ok(Course::Switch { at: t, transition: Transition::UpliftNow(side) });
+            }
         }
-    };
-    let mut response = Response {
-        theta_rad: Vec::with_capacity(n),
-        theta_dot_radps: Vec::with_capacity(n),
-        theta_ddot_radps2: Vec::with_capacity(n),
-        top_ax_mps2: Vec::with_capacity(n),
-        sensor_ax_mps2: Vec::with_capacity(n),
-        sensor_az_mps2: Vec::with_capacity(n),
-        base_ax_mps2: Vec::with_capacity(n),
-        slip_m: Vec::new(),
-        events: Vec::new(),
-        overturn: None,
-        stats: Default::default(),
-    };
-    let record = |response: &mut Response, k: usize, regime: Regime, y: &[f64; 4]| {
-        let av = vertical(k);
-        let (theta_ddot, base, sensor) = match regime {
+        Ok(Course::Integrate(Phase { system: self.system, regime: self.regime, seg }))
+    }
+
+    fn apply(&mut self, _: usize, transition: Transition, t: f64, y: [f64; 4], immediate: bool) -> [f64; 4] {
+        let block = self.system.block;
+        match (transition, self.regime) {
+            (Transition::UpliftNow(side), _) => {
+                self.regime = Regime::Rocking { side };
+                self.response.log(t, EventKind::Uplift, side, 0.0, 0.0);
+                y
+            }
+            (Transition::Uplift(side), _) => {
+                self.regime = Regime::Rocking { side };
+                self.response.log(t, EventKind::Uplift, side, 0.0, 0.0);
+                [0.0, 0.0, y[2], y[3]]
+            }
+            (Transition::Impact, Regime::Rocking { side }) => {
+                let before = y[1];
+                let mut after = self.restitution * before;
+                if rebounds(after, immediate, self.rest_speed_squared) {
+                    self.regime = Regime::Rocking { side: -side };
+                    self.response.log(t, EventKind::Impact, -side, before, after);
+                } else {
+                    after = 0.0;
+                    self.regime = Regime::Rest;
+                    self.response.log(t, EventKind::Rest, 0, before, 0.0);
+                }
+                // The system's horizontal momentum is conserved through the impact.
+                [0.0, after, y[2], y[3] - self.system.mu * block.cm_height_m * (after - before)]
+            }
+            (Transition::Overturn, Regime::Rocking { side }) => {
+                // The block lies on the base, which carries it on as a rigid mass.
+                self.regime = Regime::Overturned;
+                self.response.overturn = Some((t, side));
+                self.response.log(t, EventKind::Overturn, side, y[1], 0.0);
+                [f64::from(side) * block.lie_angle_rad, 0.0, y[2], y[3]]
+            }
+            (_, regime) => unreachable!("{transition:?} in {regime:?}"),
+        }
+    }
+
+    fn chatter(&self, t: f64, _: &Stats) -> String {
+        chatter("impact", t, self.options.rest_amplitude_rad)
+    }
+
+    fn record(&mut self, k: usize, y: &[f64; 4]) {
+        let (system, block) = (&self.system, self.system.block);
+        let av = self.excitation.vertical(k);
+        let (theta_ddot, base, sensor) = match self.regime {
             Regime::Rocking { side } => {
                 let (theta_ddot, base) = system.rocking(side, y, av);
-                let sensor = sensor_acceleration(block, side, [y[0], y[1], theta_ddot], sensor_height, base, av);
+                let sensor = sensor_acceleration(block, side, [y[0], y[1], theta_ddot], self.sensor_height, base, av);
                 (theta_ddot, base, sensor)
             }
             Regime::Rest | Regime::Overturned => {
@@ -131,118 +251,9 @@ pub(super) fn simulate<S: Stepper<4>>(
                 (0.0, base, (base, av))
             }
         };
-        response.theta_rad.push(y[0]);
-        response.theta_dot_radps.push(y[1]);
-        response.theta_ddot_radps2.push(theta_ddot);
-        response.top_ax_mps2.push(if regime == Regime::Overturned { av } else { sensor.0 });
-        response.sensor_ax_mps2.push(sensor.0);
-        response.sensor_az_mps2.push(sensor.1);
-        response.base_ax_mps2.push(base);
-    };
-    let push = |response: &mut Response, time_s: f64, kind: EventKind, side: i8, before: f64, after: f64| {
-        response.events.push(Event { time_s, kind, side, theta_dot_before: before, theta_dot_after: after });
-    };
-    let mut y = [options.initial_theta_rad, options.initial_theta_dot_radps, 0.0, 0.0];
-    let mut regime = match (y[0], y[1]) {
-        (th, _) if th != 0.0 => Regime::Rocking { side: th.signum() as i8 },
-        (_, w) if w != 0.0 => Regime::Rocking { side: w.signum() as i8 },
-        _ => Regime::Rest,
-    };
-    record(&mut response, 0, regime, &y);
-    for k in 0..n - 1 {
-        let seg = segment(k);
-        let t_end = excitation.t0_s + (k + 1) as f64 * dt;
-        let mut t = seg.t0;
-        let mut transitions = 0;
-        while t < t_end {
-            transitions += 1;
-            if transitions > MAX_TRANSITIONS_PER_SAMPLE {
-                return Err(format!(
-                    "impact chatter near t = {t:.4} s did not settle; raise `rest_amplitude_rad` (now {})",
-                    options.rest_amplitude_rad
-                ));
-            }
-            let f = |time: f64, state: &[f64; 4]| system.rhs(regime, &seg, time, state);
-            match regime {
-                Regime::Overturned => match stepper.advance(&f, t, y, t_end, &|_, _| [0.0f64; 0]) {
-                    Advance::Reached(y1) | Advance::Event { y: y1, .. } => {
-                        y = y1;
-                        t = t_end;
-                    }
-                },
-                Regime::Rest => {
-                    let now = system.uplift_margins(&seg, t, &y);
-                    // A base accelerating toward −x (margin 0 spent) throws the block onto its
-                    // +x corner, and the other way round.
-                    let side_now = if now[0] <= 0.0 && now[0] <= now[1] {
-                        Some(1)
-                    } else if now[1] <= 0.0 {
-                        Some(-1)
-                    } else {
-                        None
-                    };
-                    if let Some(side) = side_now {
-                        regime = Regime::Rocking { side };
-                        stepper.reset();
-                        push(&mut response, t, EventKind::Uplift, side, 0.0, 0.0);
-                        continue;
-                    }
-                    match stepper.advance(&f, t, y, t_end, &|time, state| system.uplift_margins(&seg, time, state)) {
-                        Advance::Reached(y1) => {
-                            y = y1;
-                            t = t_end;
-                        }
-                        Advance::Event { index, t: te, y: ye } => {
-                            let side = if index == 0 { 1 } else { -1 };
-                            y = [0.0, 0.0, ye[2], ye[3]];
-                            t = te;
-                            regime = Regime::Rocking { side };
-                            stepper.reset();
-                            push(&mut response, te, EventKind::Uplift, side, 0.0, 0.0);
-                        }
-                    }
-                }
-                Regime::Rocking { side } => {
-                    let s = f64::from(side);
-                    let events = |_: f64, state: &[f64; 4]| [s * state[0], block.lie_angle_rad - s * state[0]];
-                    match stepper.advance(&f, t, y, t_end, &events) {
-                        Advance::Reached(y1) => {
-                            y = y1;
-                            t = t_end;
-                        }
-                        Advance::Event { index, t: te, y: ye } => {
-                            let immediate = te <= t;
-                            t = te;
-                            stepper.reset();
-                            if index == 0 {
-                                let before = ye[1];
-                                let mut after = restitution * before;
-                                if immediate || after * after < rest_speed_squared {
-                                    after = 0.0;
-                                    regime = Regime::Rest;
-                                    push(&mut response, te, EventKind::Rest, 0, before, 0.0);
-                                } else {
-                                    regime = Regime::Rocking { side: -side };
-                                    push(&mut response, te, EventKind::Impact, -side, before, after);
-                                }
-                                // The system's horizontal momentum is conserved through the impact.
-                                y = [0.0, after, ye[2], ye[3] - system.mu * block.cm_height_m * (after - before)];
-                            } else {
-                                // The block lies on the base, which carries it on as a rigid mass.
-                                regime = Regime::Overturned;
-                                y = [s * block.lie_angle_rad, 0.0, ye[2], ye[3]];
-                                response.overturn = Some((te, side));
-                                push(&mut response, te, EventKind::Overturn, side, ye[1], 0.0);
-                            }
-                        }
-                    }
-                }
-            }
-        }
-        record(&mut response, k + 1, regime, &y);
+        self.response.record_motion([y[0], y[1]], theta_ddot, sensor, self.regime == Regime::Overturned, av);
+        self.response.base_ax_mps2.push(base);
     }
-    response.stats = stepper.stats();
-    Ok(response)
 }
 
 #[cfg(test)]

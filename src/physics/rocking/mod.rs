@@ -25,10 +25,12 @@
 //!
 //! The model is mass-independent (only I₀/m enters); the mass is kept for reports.
 
-use crate::physics::ode::{Advance, Dopri5, Rk4, Stats, Stepper};
+use crate::physics::hybrid::{Clock, Segment};
+use crate::physics::ode::{Dopri5, Either, Rk4, Stats};
 use crate::physics::sdof::Sdof;
 
 mod coupled;
+mod rigid;
 mod sliding;
 
 /// Geometry as the cases' `equipment.yaml` states it.
@@ -358,101 +360,80 @@ pub struct Excitation<'a> {
     pub vertical_mps2: Option<&'a [f64]>,
 }
 
-/// The floor inside one sample interval: linear in time.
-#[derive(Clone, Copy, Debug)]
-struct Segment {
-    t0: f64,
-    ax0: f64,
-    ax_rate: f64,
-    av0: f64,
-    av_rate: f64,
-}
+impl Excitation<'_> {
+    fn clock(&self) -> Clock {
+        Clock { t0_s: self.t0_s, dt_s: self.dt_s, samples: self.horizontal_mps2.len() }
+    }
 
-impl Segment {
-    fn at(&self, t: f64) -> (f64, f64) {
-        let s = t - self.t0;
-        (self.ax0 + self.ax_rate * s, self.av0 + self.av_rate * s)
+    fn vertical(&self, k: usize) -> f64 {
+        self.vertical_mps2.map_or(0.0, |v| v[k])
+    }
+
+    /// The floor over sample interval k, horizontal then vertical.
+    fn segment(&self, k: usize) -> Segment<2> {
+        self.clock().segment(k, |j| [self.horizontal_mps2[j], self.vertical(j)])
     }
 }
 
-/// The anchorage in the quantities the equations use.
-#[derive(Clone, Copy, Debug)]
-struct AnchorLaw {
-    /// F/W.
-    strength_ratio: f64,
-    /// Heel uplift at which an anchor loaded from slack yields.
-    yield_m: f64,
-    /// Total elongation at fracture.
-    fracture_m: f64,
-}
-
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum AnchorState {
-    /// Elastic in tension, slack below this permanent elongation.
-    Elastic {
-        plastic_m: f64,
-    },
-    /// Yielding at the full strength while the heel keeps rising.
-    Plastic,
-    Fractured,
-}
-
-/// The rocking equations on one side, over one floor segment, with the heel anchor's state.
-struct RockingOnSide<'a> {
-    block: &'a Block,
-    side: f64,
-    seg: Segment,
-    anchor: Option<(AnchorLaw, AnchorState)>,
-    /// The obstacle's angle when it stands on this side.
-    wall_rad: Option<f64>,
-}
-
-impl RockingOnSide<'_> {
-    /// Heel uplift = elongation of the heel anchor.
-    fn heel_uplift(&self, theta: f64) -> f64 {
-        2.0 * self.block.half_base_m * (self.side * theta).max(0.0).sin()
-    }
-
-    fn theta_ddot(&self, t: f64, y: &[f64; 2]) -> f64 {
-        let b = self.block;
-        let (ax, av) = self.seg.at(t);
-        let (sin, cos) = (self.side * b.alpha_rad - y[0]).sin_cos();
-        let mut acc = -(b.r_m / b.i0_per_kg) * ((b.g_mps2 + av) * sin + ax * cos);
-        if let Some((law, state)) = self.anchor {
-            let force_ratio = match state {
-                AnchorState::Elastic { plastic_m } => {
-                    law.strength_ratio * ((self.heel_uplift(y[0]) - plastic_m) / law.yield_m).clamp(0.0, 1.0)
-                }
-                AnchorState::Plastic => law.strength_ratio,
-                AnchorState::Fractured => 0.0,
-            };
-            // The anchor pulls the heel down, a lever 2b·cos θ from the pivot.
-            acc -= self.side * force_ratio * b.g_mps2 * 2.0 * b.half_base_m * y[0].cos() / b.i0_per_kg;
+impl Response {
+    /// An empty response for `n` samples; `slip` keeps room for the base's slip.
+    fn with_capacity(n: usize, slip: bool) -> Self {
+        Response {
+            theta_rad: Vec::with_capacity(n),
+            theta_dot_radps: Vec::with_capacity(n),
+            theta_ddot_radps2: Vec::with_capacity(n),
+            top_ax_mps2: Vec::with_capacity(n),
+            sensor_ax_mps2: Vec::with_capacity(n),
+            sensor_az_mps2: Vec::with_capacity(n),
+            base_ax_mps2: Vec::with_capacity(n),
+            slip_m: if slip { Vec::with_capacity(n) } else { Vec::new() },
+            events: Vec::new(),
+            overturn: None,
+            stats: Stats::default(),
         }
-        acc
     }
 
-    /// Event functions, positive while nothing happens: 0 impact (θ back to 0), 1 overturn,
-    /// 2 the heel anchor yields, 3 the yielding anchor unloads, 4 it fractures, 5 the obstacle.
-    fn events(&self, y: &[f64; 2]) -> [f64; 6] {
-        let s = self.side;
-        let mut g = [s * y[0], self.block.lie_angle_rad - s * y[0], 1.0, 1.0, 1.0, 1.0];
-        if let Some((law, state)) = self.anchor {
-            let uplift = self.heel_uplift(y[0]);
-            match state {
-                AnchorState::Elastic { plastic_m } => g[2] = law.yield_m - (uplift - plastic_m),
-                AnchorState::Plastic => {
-                    g[3] = s * y[1];
-                    g[4] = law.fracture_m - uplift;
-                }
-                AnchorState::Fractured => {}
-            }
-        }
-        if let Some(angle) = self.wall_rad {
-            g[5] = angle - s * y[0];
-        }
-        g
+    fn log(&mut self, time_s: f64, kind: EventKind, side: i8, before: f64, after: f64) {
+        self.events.push(Event { time_s, kind, side, theta_dot_before: before, theta_dot_after: after });
     }
+
+    /// Records the block's motion at one sample: θ, θ̇, θ̈ and the sensor's acceleration; an
+    /// overturned block's top sensor reads the vertical floor `av`.
+    fn record_motion(&mut self, y: [f64; 2], theta_ddot: f64, sensor: (f64, f64), overturned: bool, av: f64) {
+        self.theta_rad.push(y[0]);
+        self.theta_dot_radps.push(y[1]);
+        self.theta_ddot_radps2.push(theta_ddot);
+        self.top_ax_mps2.push(if overturned { av } else { sensor.0 });
+        self.sensor_ax_mps2.push(sensor.0);
+        self.sensor_az_mps2.push(sensor.1);
+    }
+}
+
+impl Block {
+    /// Free rocking from θ = 0 at speed w rises to w²/(2p² sin α) (small angles): the squared
+    /// rebound speed below which a block rocks less than `rest_amplitude_rad` and is at rest.
+    fn rest_speed_squared(&self, rest_amplitude_rad: f64) -> f64 {
+        2.0 * self.p_radps.powi(2) * self.alpha_rad.sin() * rest_amplitude_rad
+    }
+}
+
+/// The side a block starting at (θ, θ̇) rocks on, None when it starts at rest.
+fn initial_side(theta: f64, theta_dot: f64) -> Option<i8> {
+    match (theta, theta_dot) {
+        (th, _) if th != 0.0 => Some(th.signum() as i8),
+        (_, w) if w != 0.0 => Some(w.signum() as i8),
+        _ => None,
+    }
+}
+
+/// The error of a run whose `what` (impacts, stick-slip) kept switching near `t`.
+fn chatter(what: &str, t: f64, rest_amplitude_rad: f64) -> String {
+    format!("{what} chatter near t = {t:.4} s did not settle; raise `rest_amplitude_rad` (now {rest_amplitude_rad})")
+}
+
+/// The most negative of `margins` (a condition that no longer holds), if any is negative.
+fn most_negative(margins: &[f64]) -> Option<usize> {
+    (0..margins.len()).filter(|&i| margins[i] < 0.0).min_by(|&a, &b| margins[a].total_cmp(&margins[b]))
 }
 
 /// Absolute acceleration (horizontal, vertical) of a sensor at height h on the block's centre
@@ -468,34 +449,56 @@ fn sensor_acceleration(block: &Block, side: i8, motion: [f64; 3], h: f64, ax: f6
     (ax + ax_rel, av + az_rel)
 }
 
-/// The first time in [t, t_end] at which the floor uplifts a block at rest, and the side.
-fn uplift_time(block: &Block, seg: &Segment, t: f64, t_end: f64) -> Option<(f64, i8)> {
-    let tan = block.alpha_rad.tan();
-    // φ_s > 0 uplifts toward side s; linear in time inside the segment.
-    let phi = |time: f64, s: f64| {
-        let (ax, av) = seg.at(time);
-        -s * ax - (block.g_mps2 + av) * tan
-    };
-    [1i8, -1]
-        .into_iter()
-        .filter_map(|side| first_positive(|time| phi(time, f64::from(side)), t, t_end).map(|tu| (tu, side)))
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-}
-
-/// The first time in [t, t_end] at which a function linear in time turns positive.
-fn first_positive(f: impl Fn(f64) -> f64, t: f64, t_end: f64) -> Option<f64> {
-    let (f0, f1) = (f(t), f(t_end));
-    if f0 > 0.0 {
-        Some(t)
-    } else if f1 > 0.0 {
-        Some((t + f0 / (f0 - f1) * (t_end - t)).clamp(t, t_end))
-    } else {
-        None
+/// The stepper `method` asks for, with absolute tolerances `scale` × `atol_rad` per state.
+fn stepper<const N: usize>(method: Method, scale: [f64; N], dt_s: f64) -> Either<N> {
+    match method {
+        Method::Adaptive { rtol, atol_rad } => {
+            Either::Dopri5(Dopri5::new(rtol, std::array::from_fn(|i| atol_rad * scale[i]), dt_s))
+        }
+        Method::Rk4 { dt_s } => Either::Rk4(Rk4::new(dt_s)),
     }
 }
 
 /// Simulates the block under the floor motion; outputs are on the input time base.
 pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -> Result<Response, String> {
+    check_floor(block, excitation)?;
+    let dt = excitation.dt_s;
+    if let Some(e) = options.restitution {
+        if !(0.0..=1.0).contains(&e) {
+            return Err(format!("the coefficient of restitution must be within 0..1, got {e}"));
+        }
+    }
+    if let Some(f) = options.friction {
+        check_friction(&f, options)?;
+        // Slip and slip velocity to the same absolute tolerance (m, m/s).
+        let p = block.p_radps;
+        return sliding::simulate(block, excitation, options, f, stepper(options.method, [1.0, p, 1.0, p], dt));
+    }
+    if let Some(o) = options.obstacle {
+        if !(o.side.abs() == 1
+            && o.angle_rad > 0.0
+            && o.angle_rad < block.lie_angle_rad
+            && (0.0..=1.0).contains(&o.restitution))
+        {
+            return Err(format!("the obstacle needs side ±1, an angle between 0 and the lying angle and a restitution in 0..1, got {o:?}"));
+        }
+    }
+    let base_ax = match options.isolated_base {
+        Some(iso) => {
+            if let Some(ratio) = check_isolated_base(&iso, options)? {
+                // Base displacement and velocity to the same absolute tolerance (m, m/s).
+                let scale = [1.0, block.p_radps, 1.0, 1.0];
+                return coupled::simulate(block, excitation, options, &iso, ratio, stepper(options.method, scale, dt));
+            }
+            Sdof::new(1.0 / iso.period_s, iso.damping_ratio).absolute_acceleration(excitation.horizontal_mps2, dt)
+        }
+        None => excitation.horizontal_mps2.to_vec(),
+    };
+    rigid::simulate(block, excitation, &base_ax, options, stepper(options.method, [1.0, block.p_radps], dt))
+}
+
+/// Refuses a floor record the models cannot run on.
+fn check_floor(block: &Block, excitation: &Excitation<'_>) -> Result<(), String> {
     let n = excitation.horizontal_mps2.len();
     let dt = excitation.dt_s;
     if n < 2 {
@@ -509,9 +512,8 @@ pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -
             return Err(format!("horizontal and vertical records differ in length ({n} vs {})", v.len()));
         }
     }
-    let vertical = |k: usize| excitation.vertical_mps2.map_or(0.0, |v| v[k]);
     for k in 0..n {
-        let (ax, av) = (excitation.horizontal_mps2[k], vertical(k));
+        let (ax, av) = (excitation.horizontal_mps2[k], excitation.vertical(k));
         if !ax.is_finite() || !av.is_finite() {
             return Err(format!("sample {k} (t = {} s) is not a finite number", excitation.t0_s + k as f64 * dt));
         }
@@ -522,341 +524,57 @@ pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -
             ));
         }
     }
-    if let Some(e) = options.restitution {
-        if !(0.0..=1.0).contains(&e) {
-            return Err(format!("the coefficient of restitution must be within 0..1, got {e}"));
-        }
-    }
-    if let Some(f) = options.friction {
-        if !(f.static_mu.is_finite() && f.kinetic_mu > 0.0 && f.kinetic_mu <= f.static_mu) {
-            return Err(format!(
-                "friction needs 0 < μ_k ≤ μ_s (finite), got μ_s = {}, μ_k = {}",
-                f.static_mu, f.kinetic_mu
-            ));
-        }
-        let other = [
-            (options.anchorage.is_some(), "anchorage"),
-            (options.isolated_base.is_some(), "an isolated base"),
-            (options.obstacle.is_some(), "an obstacle"),
-            (options.mass_change.is_some(), "a mass change"),
-        ];
-        if let Some((_, what)) = other.iter().find(|(given, _)| *given) {
-            return Err(format!("the sliding block (friction) does not combine with {what}"));
-        }
-        return match options.method {
-            Method::Adaptive { rtol, atol_rad } => sliding::simulate(
-                block,
-                excitation,
-                options,
-                f,
-                // Slip and slip velocity to the same absolute tolerance (m, m/s).
-                Dopri5::new(rtol, [atol_rad, atol_rad * block.p_radps, atol_rad, atol_rad * block.p_radps], dt),
-            ),
-            Method::Rk4 { dt_s } => sliding::simulate(block, excitation, options, f, Rk4::new(dt_s)),
-        };
-    }
-    if let Some(o) = options.obstacle {
-        if !(o.side.abs() == 1
-            && o.angle_rad > 0.0
-            && o.angle_rad < block.lie_angle_rad
-            && (0.0..=1.0).contains(&o.restitution))
-        {
-            return Err(format!("the obstacle needs side ±1, an angle between 0 and the lying angle and a restitution in 0..1, got {o:?}"));
-        }
-    }
-    let base_ax = match options.isolated_base {
-        Some(iso) => {
-            if !(iso.period_s > 0.0 && (0.0..1.0).contains(&iso.damping_ratio)) {
-                return Err(format!(
-                    "the isolated base needs a positive period and a damping ratio in [0, 1), got T_b = {} s, ξ = {}",
-                    iso.period_s, iso.damping_ratio
-                ));
-            }
-            if let Some(ratio) = iso.mass_ratio {
-                if !(ratio.is_finite() && ratio > 0.0) {
-                    return Err(format!("the base's mass ratio m_b/m must be a positive number, got {ratio}"));
-                }
-                let other = [
-                    (options.anchorage.is_some(), "anchorage"),
-                    (options.obstacle.is_some(), "an obstacle"),
-                    (options.mass_change.is_some(), "a mass change"),
-                ];
-                if let Some((_, what)) = other.iter().find(|(given, _)| *given) {
-                    return Err(format!(
-                        "the coupled isolated base (a base mass ratio) does not combine with {what}; leave the mass ratio out for a prescribed base motion"
-                    ));
-                }
-                return match options.method {
-                    Method::Adaptive { rtol, atol_rad } => coupled::simulate(
-                        block,
-                        excitation,
-                        options,
-                        &iso,
-                        ratio,
-                        // Base displacement and velocity to the same absolute tolerance (m, m/s).
-                        Dopri5::new(rtol, [atol_rad, atol_rad * block.p_radps, atol_rad, atol_rad], dt),
-                    ),
-                    Method::Rk4 { dt_s } => coupled::simulate(block, excitation, options, &iso, ratio, Rk4::new(dt_s)),
-                };
-            }
-            Sdof::new(1.0 / iso.period_s, iso.damping_ratio).absolute_acceleration(excitation.horizontal_mps2, dt)
-        }
-        None => excitation.horizontal_mps2.to_vec(),
-    };
-    let anchor = match options.anchorage {
-        Some(a) => {
-            if !(a.strength_ratio > 0.0 && a.ductility >= 1.0 && a.yield_rotation_rad > 0.0) {
-                return Err(format!(
-                    "the anchorage needs F/W > 0, ductility ≥ 1 and a positive yield rotation, got {a:?}"
-                ));
-            }
-            let yield_m = 2.0 * block.half_base_m * a.yield_rotation_rad.sin();
-            Some(AnchorLaw { strength_ratio: a.strength_ratio, yield_m, fracture_m: a.ductility * yield_m })
-        }
-        None => None,
-    };
-    let setup = Setup { excitation, base_ax: &base_ax, options, anchor };
-    match options.method {
-        Method::Adaptive { rtol, atol_rad } => {
-            setup.run(block, Dopri5::new(rtol, [atol_rad, atol_rad * block.p_radps], dt))
-        }
-        Method::Rk4 { dt_s } => setup.run(block, Rk4::new(dt_s)),
-    }
+    Ok(())
 }
 
-struct Setup<'a> {
-    excitation: &'a Excitation<'a>,
-    base_ax: &'a [f64],
-    options: &'a Options,
-    anchor: Option<AnchorLaw>,
+/// Refuses friction coefficients out of order and what the sliding block does not combine with.
+fn check_friction(f: &Friction, options: &Options) -> Result<(), String> {
+    if !(f.static_mu.is_finite() && f.kinetic_mu > 0.0 && f.kinetic_mu <= f.static_mu) {
+        return Err(format!(
+            "friction needs 0 < μ_k ≤ μ_s (finite), got μ_s = {}, μ_k = {}",
+            f.static_mu, f.kinetic_mu
+        ));
+    }
+    let other = [
+        (options.anchorage.is_some(), "anchorage"),
+        (options.isolated_base.is_some(), "an isolated base"),
+        (options.obstacle.is_some(), "an obstacle"),
+        (options.mass_change.is_some(), "a mass change"),
+    ];
+    if let Some((_, what)) = other.iter().find(|(given, _)| *given) {
+        return Err(format!("the sliding block (friction) does not combine with {what}"));
+    }
+    Ok(())
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
-enum Regime {
-    Rest,
-    Rocking {
-        side: i8,
-    },
-    /// Held against the obstacle.
-    Leaning {
-        side: i8,
-    },
-    Overturned,
+/// Checks the isolated base; returns its mass ratio when the base is coupled to the block.
+fn check_isolated_base(iso: &IsolatedBase, options: &Options) -> Result<Option<f64>, String> {
+    if !(iso.period_s > 0.0 && (0.0..1.0).contains(&iso.damping_ratio)) {
+        return Err(format!(
+            "the isolated base needs a positive period and a damping ratio in [0, 1), got T_b = {} s, ξ = {}",
+            iso.period_s, iso.damping_ratio
+        ));
+    }
+    let Some(ratio) = iso.mass_ratio else { return Ok(None) };
+    if !(ratio.is_finite() && ratio > 0.0) {
+        return Err(format!("the base's mass ratio m_b/m must be a positive number, got {ratio}"));
+    }
+    let other = [
+        (options.anchorage.is_some(), "anchorage"),
+        (options.obstacle.is_some(), "an obstacle"),
+        (options.mass_change.is_some(), "a mass change"),
+    ];
+    if let Some((_, what)) = other.iter().find(|(given, _)| *given) {
+        return Err(format!(
+            "the coupled isolated base (a base mass ratio) does not combine with {what}; leave the mass ratio out for a prescribed base motion"
+        ));
+    }
+    Ok(Some(ratio))
 }
 
 /// Impacts and regime changes allowed within one sample interval before the run is declared
 /// stuck (impact chatter that the rest criterion should have ended).
 const MAX_TRANSITIONS_PER_SAMPLE: usize = 10_000;
-
-impl Setup<'_> {
-    fn on_side<'b>(&self, block: &'b Block, side: i8, seg: Segment, anchors: &[AnchorState; 2]) -> RockingOnSide<'b> {
-        RockingOnSide {
-            block,
-            side: f64::from(side),
-            seg,
-            anchor: self.anchor.map(|law| (law, anchors[usize::from(side < 0)])),
-            wall_rad: self.options.obstacle.filter(|o| o.side == side).map(|o| o.angle_rad),
-        }
-    }
-
-    fn run<S: Stepper<2>>(&self, initial_block: &Block, mut stepper: S) -> Result<Response, String> {
-        let exc = self.excitation;
-        let options = self.options;
-        let n = self.base_ax.len();
-        let dt = exc.dt_s;
-        let vertical = |k: usize| exc.vertical_mps2.map_or(0.0, |v| v[k]);
-        let mut block = *initial_block;
-        let mut pending_change = options.mass_change;
-        let mut response = Response {
-            theta_rad: Vec::with_capacity(n),
-            theta_dot_radps: Vec::with_capacity(n),
-            theta_ddot_radps2: Vec::with_capacity(n),
-            top_ax_mps2: Vec::with_capacity(n),
-            sensor_ax_mps2: Vec::with_capacity(n),
-            sensor_az_mps2: Vec::with_capacity(n),
-            base_ax_mps2: self.base_ax.to_vec(),
-            slip_m: Vec::new(),
-            events: Vec::new(),
-            overturn: None,
-            stats: Stats::default(),
-        };
-        let mut y = [options.initial_theta_rad, options.initial_theta_dot_radps];
-        let mut regime = match (y[0], y[1]) {
-            (th, _) if th != 0.0 => Regime::Rocking { side: th.signum() as i8 },
-            (_, w) if w != 0.0 => Regime::Rocking { side: w.signum() as i8 },
-            _ => Regime::Rest,
-        };
-        // Anchor at the −x corner (heel when pivoting on +x) and at the +x corner.
-        let mut anchors = [AnchorState::Elastic { plastic_m: 0.0 }; 2];
-        let heel = |side: i8| usize::from(side < 0);
-        let segment = |k: usize| {
-            let k1 = (k + 1).min(n - 1);
-            Segment {
-                t0: exc.t0_s + k as f64 * dt,
-                ax0: self.base_ax[k],
-                ax_rate: (self.base_ax[k1] - self.base_ax[k]) / dt,
-                av0: vertical(k),
-                av_rate: (vertical(k1) - vertical(k)) / dt,
-            }
-        };
-        let record = |response: &mut Response,
-                      block: &Block,
-                      k: usize,
-                      regime: Regime,
-                      y: [f64; 2],
-                      anchors: &[AnchorState; 2]| {
-            let (ax, av) = (self.base_ax[k], vertical(k));
-            let (theta_ddot, sensor) = match regime {
-                Regime::Rest | Regime::Leaning { .. } | Regime::Overturned => (0.0, (ax, av)),
-                Regime::Rocking { side } => {
-                    let model = self.on_side(block, side, segment(k), anchors);
-                    let acc = model.theta_ddot(exc.t0_s + k as f64 * dt, &y);
-                    let h = options.sensor_height_m.unwrap_or(block.height_m);
-                    (acc, sensor_acceleration(block, side, [y[0], y[1], acc], h, ax, av))
-                }
-            };
-            response.theta_rad.push(y[0]);
-            response.theta_dot_radps.push(y[1]);
-            response.theta_ddot_radps2.push(theta_ddot);
-            response.top_ax_mps2.push(if regime == Regime::Overturned { av } else { sensor.0 });
-            response.sensor_ax_mps2.push(sensor.0);
-            response.sensor_az_mps2.push(sensor.1);
-        };
-        record(&mut response, &block, 0, regime, y, &anchors);
-        let push = |response: &mut Response, time_s: f64, kind: EventKind, side: i8, before: f64, after: f64| {
-            response.events.push(Event { time_s, kind, side, theta_dot_before: before, theta_dot_after: after });
-        };
-        for k in 0..n - 1 {
-            let seg = segment(k);
-            let t_end = exc.t0_s + (k + 1) as f64 * dt;
-            let mut t = seg.t0;
-            let mut transitions = 0;
-            while t < t_end {
-                transitions += 1;
-                if transitions > MAX_TRANSITIONS_PER_SAMPLE {
-                    return Err(format!(
-                        "impact chatter near t = {t:.4} s did not settle; raise `rest_amplitude_rad` (now {})",
-                        options.rest_amplitude_rad
-                    ));
-                }
-                // A mass change splits the interval: the phase ends there and the block changes.
-                let limit = match pending_change {
-                    Some(change) if change.time_s < t_end => change.time_s.max(t),
-                    _ => t_end,
-                };
-                if t >= limit {
-                    let change = pending_change.take().expect("the limit came from a pending change");
-                    block = change.after;
-                    stepper.reset();
-                    push(&mut response, t, EventKind::MassChange, 0, y[1], y[1]);
-                    continue;
-                }
-                // Free rocking from θ = 0 at speed w rises to w²/(2p² sin α) (small angles).
-                let rest_speed_squared =
-                    2.0 * block.p_radps.powi(2) * block.alpha_rad.sin() * options.rest_amplitude_rad;
-                let restitution = options.restitution.unwrap_or(block.restitution_eq24);
-                match regime {
-                    Regime::Overturned => t = limit,
-                    Regime::Rest => match uplift_time(&block, &seg, t, limit) {
-                        Some((tu, side)) => {
-                            regime = Regime::Rocking { side };
-                            y = [0.0, 0.0];
-                            t = tu;
-                            stepper.reset();
-                            push(&mut response, tu, EventKind::Uplift, side, 0.0, 0.0);
-                        }
-                        None => t = limit,
-                    },
-                    Regime::Leaning { side } => {
-                        // Held at the obstacle until the equations pull the block away from it:
-                        // θ̈ at fixed θ is linear in the floor, so the release is a linear root.
-                        let model = self.on_side(&block, side, seg, &anchors);
-                        let away = |time: f64| -f64::from(side) * model.theta_ddot(time, &y);
-                        match first_positive(away, t, limit) {
-                            Some(tr) => {
-                                regime = Regime::Rocking { side };
-                                t = tr;
-                                stepper.reset();
-                                push(&mut response, tr, EventKind::WallRelease, side, 0.0, 0.0);
-                            }
-                            None => t = limit,
-                        }
-                    }
-                    Regime::Rocking { side } => {
-                        let model = self.on_side(&block, side, seg, &anchors);
-                        let outcome =
-                            stepper.advance(&|t, y: &[f64; 2]| [y[1], model.theta_ddot(t, y)], t, y, limit, &|_, y| {
-                                model.events(y)
-                            });
-                        match outcome {
-                            Advance::Reached(y1) => {
-                                y = y1;
-                                t = limit;
-                            }
-                            Advance::Event { index, t: te, y: ye } => {
-                                let immediate = te <= t;
-                                t = te;
-                                y = ye;
-                                stepper.reset();
-                                match index {
-                                    0 => {
-                                        let before = ye[1];
-                                        let after = restitution * before;
-                                        if immediate || after * after < rest_speed_squared {
-                                            // The rebound cannot lift the block: it sits down.
-                                            regime = Regime::Rest;
-                                            y = [0.0, 0.0];
-                                            push(&mut response, te, EventKind::Rest, 0, before, 0.0);
-                                        } else {
-                                            regime = Regime::Rocking { side: -side };
-                                            y = [0.0, after];
-                                            push(&mut response, te, EventKind::Impact, -side, before, after);
-                                        }
-                                    }
-                                    1 => {
-                                        regime = Regime::Overturned;
-                                        y = [f64::from(side) * block.lie_angle_rad, 0.0];
-                                        response.overturn = Some((te, side));
-                                        push(&mut response, te, EventKind::Overturn, side, ye[1], 0.0);
-                                    }
-                                    2 => {
-                                        anchors[heel(side)] = AnchorState::Plastic;
-                                        push(&mut response, te, EventKind::AnchorYield, side, ye[1], ye[1]);
-                                    }
-                                    3 => {
-                                        let law = self.anchor.expect("only anchored blocks unload anchors");
-                                        let uplift = model.heel_uplift(ye[0]);
-                                        anchors[heel(side)] = AnchorState::Elastic { plastic_m: uplift - law.yield_m };
-                                    }
-                                    4 => {
-                                        anchors[heel(side)] = AnchorState::Fractured;
-                                        push(&mut response, te, EventKind::AnchorFracture, side, ye[1], ye[1]);
-                                    }
-                                    _ => {
-                                        let wall = options.obstacle.expect("only obstacles stop the rotation");
-                                        let before = ye[1];
-                                        let after = -wall.restitution * before;
-                                        y = [f64::from(side) * wall.angle_rad, after];
-                                        if immediate || after * after < rest_speed_squared {
-                                            regime = Regime::Leaning { side };
-                                            y[1] = 0.0;
-                                            push(&mut response, te, EventKind::WallLean, side, before, 0.0);
-                                        } else {
-                                            push(&mut response, te, EventKind::WallImpact, side, before, after);
-                                        }
-                                    }
-                                }
-                            }
-                        }
-                    }
-                }
-            }
-            record(&mut response, &block, k + 1, regime, y, &anchors);
-        }
-        response.stats = stepper.stats();
-        Ok(response)
-    }
-}
 
 #[cfg(test)]
 mod tests {

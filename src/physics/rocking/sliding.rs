@@ -25,10 +25,11 @@
 //! Free flight (N < 0) is outside the model and refused with the time.
 
 use super::{
-    sensor_acceleration, Block, Event, EventKind, Excitation, Friction, Options, Response, Segment,
-    MAX_TRANSITIONS_PER_SAMPLE,
+    chatter, initial_side, most_negative, sensor_acceleration, Block, EventKind, Excitation, Friction, Options,
+    Response, MAX_TRANSITIONS_PER_SAMPLE,
 };
-use crate::physics::ode::{Advance, Stepper};
+use crate::physics::hybrid::{self, rebounds, Course, Equations, Hybrid, Now, Segment};
+use crate::physics::ode::{Stats, Stepper};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Regime {
@@ -50,6 +51,7 @@ enum Regime {
 }
 
 /// The equations, per unit mass. State: [θ, θ̇, u, u̇].
+#[derive(Clone, Copy)]
 struct Model<'a> {
     block: &'a Block,
     friction: Friction,
@@ -89,8 +91,8 @@ impl Model<'_> {
         (theta_ddot, r2 - c * theta_ddot)
     }
 
-    fn rhs(&self, regime: Regime, seg: &Segment, t: f64, y: &[f64; 4]) -> [f64; 4] {
-        let (ag, av) = seg.at(t);
+    fn rhs(&self, regime: Regime, seg: &Segment<2>, t: f64, y: &[f64; 4]) -> [f64; 4] {
+        let [ag, av] = seg.at(t);
         match regime {
             Regime::Stick | Regime::Overturned => [0.0; 4],
             Regime::Slide { dir } => {
@@ -106,8 +108,8 @@ impl Model<'_> {
 
     /// Positive while the block sticks at rest: uplift toward +x, toward −x; slip toward −x
     /// (the floor pulls harder toward +x than static friction holds), toward +x.
-    fn stick_margins(&self, seg: &Segment, t: f64) -> [f64; 4] {
-        let (ag, av) = seg.at(t);
+    fn stick_margins(&self, seg: &Segment<2>, t: f64) -> [f64; 4] {
+        let [ag, av] = seg.at(t);
         let g = self.block.g_mps2 + av;
         let hold = g * self.block.alpha_rad.tan();
         let grip = self.friction.static_mu * g;
@@ -116,17 +118,17 @@ impl Model<'_> {
 
     /// Uncoupled friction only: positive while the floor's acceleration cannot uplift the block
     /// (toward +x, toward −x), whether it sticks or slides (Eq. 20/21).
-    fn uplift_margins(&self, seg: &Segment, t: f64) -> [f64; 2] {
+    fn uplift_margins(&self, seg: &Segment<2>, t: f64) -> [f64; 2] {
         let m = self.stick_margins(seg, t);
         [m[0], m[1]]
     }
 
     /// Positive while the rocking pivot sticks: μ_s N ∓ F (slip toward −x, toward +x).
-    fn grip_margins(&self, side: i8, seg: &Segment, t: f64, y: &[f64; 4]) -> [f64; 2] {
+    fn grip_margins(&self, side: i8, seg: &Segment<2>, t: f64, y: &[f64; 4]) -> [f64; 2] {
         if !self.friction.coupled {
             return [f64::INFINITY; 2];
         }
-        let (ag, av) = seg.at(t);
+        let [ag, av] = seg.at(t);
         let theta_ddot = self.rocking(side, y, ag, av);
         let (f, n) = self.contact(side, y, theta_ddot, ag, av);
         let grip = self.friction.static_mu * n;
@@ -143,14 +145,106 @@ fn slip_direction(f: f64) -> i8 {
     }
 }
 
-/// What ends a stick when its margin `index` (of [`Model::stick_margins`]) is spent: the new
-/// regime, its event and the event's side (pivot side or slip direction).
-fn leave_stick(index: usize) -> (Regime, EventKind, i8) {
-    match index {
-        0 => (Regime::Rock { side: 1 }, EventKind::Uplift, 1),
-        1 => (Regime::Rock { side: -1 }, EventKind::Uplift, -1),
-        2 => (Regime::Slide { dir: -1 }, EventKind::SlideStart, -1),
-        _ => (Regime::Slide { dir: 1 }, EventKind::SlideStart, 1),
+/// A way out of a stick: the new regime, its event and the event's side (pivot side or slip
+/// direction).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Exit {
+    to: Regime,
+    kind: EventKind,
+    side: i8,
+}
+
+/// The exits of a stick, in the order of [`Model::stick_margins`]: uplift onto +x, onto −x;
+/// slip toward −x, toward +x.
+const STICK_EXITS: [Exit; 4] = [
+    Exit { to: Regime::Rock { side: 1 }, kind: EventKind::Uplift, side: 1 },
+    Exit { to: Regime::Rock { side: -1 }, kind: EventKind::Uplift, side: -1 },
+    Exit { to: Regime::Slide { dir: -1 }, kind: EventKind::SlideStart, side: -1 },
+    Exit { to: Regime::Slide { dir: 1 }, kind: EventKind::SlideStart, side: 1 },
+];
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Transition {
+    /// The stick ends.
+    Leave(Exit),
+    /// The floor uplifts a sliding block (uncoupled friction): rocking on a stuck pivot, the
+    /// slide's velocity dropped.
+    Uplift(Exit),
+    /// The slide stops.
+    Stop,
+    /// Kinetic friction beyond tan α tips the sliding block onto its leading corner.
+    Tip,
+    /// The rocking pivot starts to slip toward this direction.
+    Slip(i8),
+    /// The sliding pivot stops slipping.
+    Grip,
+    /// θ back to 0: rebound onto the other corner, or flat.
+    Impact,
+    Overturn,
+}
+
+/// What the event functions of each integrated regime stand for, in their order ([`Phase`]).
+const STICK_EVENTS: [Transition; 4] = [
+    Transition::Leave(STICK_EXITS[0]),
+    Transition::Leave(STICK_EXITS[1]),
+    Transition::Leave(STICK_EXITS[2]),
+    Transition::Leave(STICK_EXITS[3]),
+];
+const SLIDE_EVENTS: [Transition; 3] =
+    [Transition::Stop, Transition::Uplift(STICK_EXITS[0]), Transition::Uplift(STICK_EXITS[1])];
+const ROCK_EVENTS: [Transition; 4] =
+    [Transition::Impact, Transition::Overturn, Transition::Slip(-1), Transition::Slip(1)];
+const SLIDE_ROCK_EVENTS: [Transition; 3] = [Transition::Impact, Transition::Overturn, Transition::Grip];
+
+/// An event slot a regime does not use: positive, so it never fires.
+const UNUSED: f64 = 1.0;
+
+/// One regime's equations over one floor segment.
+struct Phase<'a> {
+    model: Model<'a>,
+    regime: Regime,
+    seg: Segment<2>,
+}
+
+impl Equations<4, 4> for Phase<'_> {
+    type Transition = Transition;
+
+    fn rhs(&self, t: f64, y: &[f64; 4]) -> [f64; 4] {
+        self.model.rhs(self.regime, &self.seg, t, y)
+    }
+
+    fn events(&self, t: f64, state: &[f64; 4]) -> [f64; 4] {
+        let (model, seg) = (&self.model, &self.seg);
+        let lie = model.block.lie_angle_rad;
+        match self.regime {
+            Regime::Stick => model.stick_margins(seg, t),
+            Regime::Slide { dir } => {
+                // Uncoupled friction: the floor's acceleration uplifts a sliding block too.
+                let u = if model.friction.coupled { [f64::INFINITY; 2] } else { model.uplift_margins(seg, t) };
+                [f64::from(dir) * state[3], u[0], u[1], UNUSED]
+            }
+            Regime::Rock { side } => {
+                let s = f64::from(side);
+                let grip = model.grip_margins(side, seg, t, state);
+                [s * state[0], lie - s * state[0], grip[0], grip[1]]
+            }
+            Regime::SlideRock { side, dir } => {
+                let s = f64::from(side);
+                [s * state[0], lie - s * state[0], f64::from(dir) * state[3], UNUSED]
+            }
+            Regime::Overturned => [UNUSED; 4],
+        }
+    }
+
+    fn transition(&self, index: usize) -> Transition {
+        let table: &[Transition] = match self.regime {
+            Regime::Stick => &STICK_EVENTS,
+            Regime::Slide { .. } => &SLIDE_EVENTS,
+            Regime::Rock { .. } => &ROCK_EVENTS,
+            Regime::SlideRock { .. } => &SLIDE_ROCK_EVENTS,
+            Regime::Overturned => &[],
+        };
+        table[index]
     }
 }
 
@@ -159,45 +253,172 @@ pub(super) fn simulate<S: Stepper<4>>(
     excitation: &Excitation<'_>,
     options: &Options,
     friction: Friction,
-    mut stepper: S,
+    stepper: S,
 ) -> Result<Response, String> {
-    let n = excitation.horizontal_mps2.len();
-    let dt = excitation.dt_s;
-    let vertical = |k: usize| excitation.vertical_mps2.map_or(0.0, |v| v[k]);
-    let model = Model { block, friction };
-    let restitution = options.restitution.unwrap_or(block.restitution_eq24);
-    let rest_speed_squared = 2.0 * block.p_radps.powi(2) * block.alpha_rad.sin() * options.rest_amplitude_rad;
-    let tips_while_sliding = friction.coupled && friction.kinetic_mu > block.alpha_rad.tan();
-    let sensor_height = options.sensor_height_m.unwrap_or(block.height_m);
-    let segment = |k: usize| {
-        let k1 = (k + 1).min(n - 1);
-        let h = excitation.horizontal_mps2;
-        Segment {
-            t0: excitation.t0_s + k as f64 * dt,
-            ax0: h[k],
-            ax_rate: (h[k1] - h[k]) / dt,
-            av0: vertical(k),
-            av_rate: (vertical(k1) - vertical(k)) / dt,
+    let y = [options.initial_theta_rad, options.initial_theta_dot_radps, 0.0, 0.0];
+    let mut sliding = Sliding {
+        model: Model { block, friction },
+        excitation,
+        options,
+        restitution: options.restitution.unwrap_or(block.restitution_eq24),
+        rest_speed_squared: block.rest_speed_squared(options.rest_amplitude_rad),
+        tips_while_sliding: friction.coupled && friction.kinetic_mu > block.alpha_rad.tan(),
+        sensor_height: options.sensor_height_m.unwrap_or(block.height_m),
+        regime: initial_side(y[0], y[1]).map_or(Regime::Stick, |side| Regime::Rock { side }),
+        response: Response::with_capacity(excitation.horizontal_mps2.len(), true),
+    };
+    let stats = hybrid::drive(&mut sliding, excitation.clock(), MAX_TRANSITIONS_PER_SAMPLE, y, stepper)?;
+    sliding.response.stats = stats;
+    Ok(sliding.response)
+}
+
+/// The sliding block's state between transitions, and what it records.
+struct Sliding<'a> {
+    model: Model<'a>,
+    excitation: &'a Excitation<'a>,
+    options: &'a Options,
+    restitution: f64,
+    rest_speed_squared: f64,
+    tips_while_sliding: bool,
+    sensor_height: f64,
+    regime: Regime,
+    response: Response,
+}
+
+impl Sliding<'_> {
+    /// A decision at the current instant, before integrating: a regime whose own condition is
+    /// already violated gives way at once.
+    fn at_once(&self, seg: &Segment<2>, t: f64, y: &[f64; 4]) -> Option<Transition> {
+        let model = &self.model;
+        match self.regime {
+            Regime::Stick => most_negative(&model.stick_margins(seg, t)).map(|i| Transition::Leave(STICK_EXITS[i])),
+            Regime::Slide { .. } if !model.friction.coupled => {
+                most_negative(&model.uplift_margins(seg, t)).map(|i| Transition::Uplift(STICK_EXITS[i]))
+            }
+            Regime::Slide { .. } if self.tips_while_sliding => Some(Transition::Tip),
+            Regime::Rock { side } => {
+                let m = model.grip_margins(side, seg, t, y);
+                (m[0] < 0.0 || m[1] < 0.0).then(|| {
+                    let [ag, av] = seg.at(t);
+                    let (f, _) = model.contact(side, y, model.rocking(side, y, ag, av), ag, av);
+                    Transition::Slip(slip_direction(f))
+                })
+            }
+            _ => None,
         }
-    };
-    let mut response = Response {
-        theta_rad: Vec::with_capacity(n),
-        theta_dot_radps: Vec::with_capacity(n),
-        theta_ddot_radps2: Vec::with_capacity(n),
-        top_ax_mps2: Vec::with_capacity(n),
-        sensor_ax_mps2: Vec::with_capacity(n),
-        sensor_az_mps2: Vec::with_capacity(n),
-        base_ax_mps2: Vec::with_capacity(n),
-        slip_m: Vec::with_capacity(n),
-        events: Vec::new(),
-        overturn: None,
-        stats: Default::default(),
-    };
-    let record = |response: &mut Response, k: usize, regime: Regime, y: &[f64; 4]| {
-        let (ag, av) = (excitation.horizontal_mps2[k], vertical(k));
+    }
+
+    /// θ back to 0 at speed `before`: the block rebounds onto the other corner, or lies flat
+    /// (still slipping if it was).
+    fn impact(&mut self, t: f64, y: [f64; 4], immediate: bool) -> [f64; 4] {
+        let before = y[1];
+        let after = self.restitution * before;
+        let (side, dir) = match self.regime {
+            Regime::SlideRock { side, dir } => (side, Some(dir)),
+            Regime::Rock { side } => (side, None),
+            _ => unreachable!("only a rocking block impacts"),
+        };
+        let mut y = [0.0, after, y[2], dir.map_or(0.0, |_| y[3])];
+        if rebounds(after, immediate, self.rest_speed_squared) {
+            self.regime = match dir {
+                Some(dir) => Regime::SlideRock { side: -side, dir },
+                None => Regime::Rock { side: -side },
+            };
+            self.response.log(t, EventKind::Impact, -side, before, after);
+        } else {
+            y[1] = 0.0;
+            self.regime = dir.map_or(Regime::Stick, |dir| Regime::Slide { dir });
+            self.response.log(t, EventKind::Rest, 0, before, 0.0);
+        }
+        y
+    }
+}
+
+impl<'a> Hybrid<4, 4> for Sliding<'a> {
+    type Transition = Transition;
+    type Equations = Phase<'a>;
+    type Error = String;
+
+    fn course(&mut self, now: Now, y: &[f64; 4]) -> Result<Course<Transition, Phase<'a>>, String> {
+        let (k, t) = (now.k, now.t);
+        let seg = self.excitation.segment(k);
+        if let Some(transition) = self.at_once(&seg, t, y) {
+            return Ok(Course::Switch { at: t, transition });
+        }
+        if let Regime::SlideRock { side, dir } = self.regime {
+            let [ag, av] = seg.at(t);
+            let (theta_ddot, w) = self.model.slide_rocking(side, dir, y, ag, av);
+            let (_, normal) = self.model.contact(side, y, theta_ddot, ag + w, av);
+            if normal < 0.0 {
+                return Err(format!(
+                    "at t = {t:.4} s the block would leave the floor (free flight), which the sliding model does not cover"
+                ));
+            }
+        }
+        Ok(match self.regime {
+            Regime::Overturned => Course::Hold,
+            regime => Course::Integrate(Phase { model: self.model, regime, seg }),
+        })
+    }
+
+    fn apply(&mut self, _: usize, transition: Transition, t: f64, y: [f64; 4], immediate: bool) -> [f64; 4] {
+        let regime = self.regime;
+        let (side, s) = match regime {
+            Regime::Rock { side } | Regime::SlideRock { side, .. } => (side, f64::from(side)),
+            _ => (0, 0.0),
+        };
+        match transition {
+            Transition::Leave(exit) | Transition::Uplift(exit) => {
+                self.regime = exit.to;
+                self.response.log(t, exit.kind, exit.side, 0.0, 0.0);
+                match transition {
+                    Transition::Uplift(_) => [0.0, 0.0, y[2], 0.0],
+                    _ => y,
+                }
+            }
+            Transition::Stop => {
+                self.regime = Regime::Stick;
+                self.response.log(t, EventKind::Stick, 0, 0.0, 0.0);
+                [0.0, 0.0, y[2], 0.0]
+            }
+            Transition::Tip => {
+                let Regime::Slide { dir } = regime else { unreachable!("only a sliding block tips") };
+                self.regime = Regime::SlideRock { side: dir, dir };
+                self.response.log(t, EventKind::Uplift, dir, 0.0, 0.0);
+                y
+            }
+            Transition::Slip(dir) => {
+                self.regime = Regime::SlideRock { side, dir };
+                self.response.log(t, EventKind::SlideStart, dir, y[1], y[1]);
+                y
+            }
+            Transition::Grip => {
+                // The slip stops; the decision at the next instant lets it slide back if static
+                // friction cannot hold the pivot.
+                self.regime = Regime::Rock { side };
+                self.response.log(t, EventKind::Stick, 0, y[1], y[1]);
+                [y[0], y[1], y[2], 0.0]
+            }
+            Transition::Impact => self.impact(t, y, immediate),
+            Transition::Overturn => {
+                self.regime = Regime::Overturned;
+                self.response.overturn = Some((t, side));
+                self.response.log(t, EventKind::Overturn, side, y[1], 0.0);
+                [s * self.model.block.lie_angle_rad, 0.0, y[2], 0.0]
+            }
+        }
+    }
+
+    fn chatter(&self, t: f64, _: &Stats) -> String {
+        chatter("impact or stick-slip", t, self.options.rest_amplitude_rad)
+    }
+
+    fn record(&mut self, k: usize, y: &[f64; 4]) {
+        let (model, regime) = (&self.model, self.regime);
+        let (ag, av) = (self.excitation.horizontal_mps2[k], self.excitation.vertical(k));
         let (theta_ddot, base) = match regime {
             Regime::Stick | Regime::Overturned => (0.0, ag),
-            Regime::Slide { dir } => (0.0, -f64::from(dir) * friction.kinetic_mu * (block.g_mps2 + av)),
+            Regime::Slide { dir } => (0.0, -f64::from(dir) * model.friction.kinetic_mu * (model.block.g_mps2 + av)),
             Regime::Rock { side } => (model.rocking(side, y, ag, av), ag),
             Regime::SlideRock { side, dir } => {
                 let (theta_ddot, w) = model.slide_rocking(side, dir, y, ag, av);
@@ -206,250 +427,14 @@ pub(super) fn simulate<S: Stepper<4>>(
         };
         let sensor = match regime {
             Regime::Rock { side } | Regime::SlideRock { side, .. } => {
-                sensor_acceleration(block, side, [y[0], y[1], theta_ddot], sensor_height, base, av)
+                sensor_acceleration(model.block, side, [y[0], y[1], theta_ddot], self.sensor_height, base, av)
             }
             _ => (base, av),
         };
-        response.theta_rad.push(y[0]);
-        response.theta_dot_radps.push(y[1]);
-        response.theta_ddot_radps2.push(theta_ddot);
-        response.top_ax_mps2.push(if regime == Regime::Overturned { av } else { sensor.0 });
-        response.sensor_ax_mps2.push(sensor.0);
-        response.sensor_az_mps2.push(sensor.1);
-        response.base_ax_mps2.push(base);
-        response.slip_m.push(y[2]);
-    };
-    let push = |response: &mut Response, time_s: f64, kind: EventKind, side: i8, before: f64, after: f64| {
-        response.events.push(Event { time_s, kind, side, theta_dot_before: before, theta_dot_after: after });
-    };
-    let mut y = [options.initial_theta_rad, options.initial_theta_dot_radps, 0.0, 0.0];
-    let mut regime = match (y[0], y[1]) {
-        (th, _) if th != 0.0 => Regime::Rock { side: th.signum() as i8 },
-        (_, w) if w != 0.0 => Regime::Rock { side: w.signum() as i8 },
-        _ => Regime::Stick,
-    };
-    record(&mut response, 0, regime, &y);
-    for k in 0..n - 1 {
-        let seg = segment(k);
-        let t_end = excitation.t0_s + (k + 1) as f64 * dt;
-        let mut t = seg.t0;
-        let mut transitions = 0;
-        while t < t_end {
-            transitions += 1;
-            if transitions > MAX_TRANSITIONS_PER_SAMPLE {
-                return Err(format!(
-                    "impact or stick-slip chatter near t = {t:.4} s did not settle; raise `rest_amplitude_rad` (now {})",
-                    options.rest_amplitude_rad
-                ));
-            }
-            // Decisions at the current instant, before integrating: a regime whose own condition
-            // is already violated gives way at once.
-            match regime {
-                Regime::Stick => {
-                    let m = model.stick_margins(&seg, t);
-                    if let Some(i) = (0..4).filter(|&i| m[i] < 0.0).min_by(|&a, &b| m[a].total_cmp(&m[b])) {
-                        let (next, kind, side) = leave_stick(i);
-                        regime = next;
-                        push(&mut response, t, kind, side, 0.0, 0.0);
-                        stepper.reset();
-                        continue;
-                    }
-                }
-                Regime::Slide { .. } if !friction.coupled => {
-                    let m = model.uplift_margins(&seg, t);
-                    if let Some(i) = (0..2).filter(|&i| m[i] < 0.0).min_by(|&a, &b| m[a].total_cmp(&m[b])) {
-                        let (next, kind, side) = leave_stick(i);
-                        regime = next;
-                        y = [0.0, 0.0, y[2], 0.0];
-                        push(&mut response, t, kind, side, 0.0, 0.0);
-                        stepper.reset();
-                        continue;
-                    }
-                }
-                Regime::Slide { dir } if tips_while_sliding => {
-                    // Kinetic friction beyond tan α tips a sliding block onto its leading corner.
-                    regime = Regime::SlideRock { side: dir, dir };
-                    push(&mut response, t, EventKind::Uplift, dir, 0.0, 0.0);
-                    stepper.reset();
-                    continue;
-                }
-                Regime::Rock { side } => {
-                    let m = model.grip_margins(side, &seg, t, &y);
-                    if m[0] < 0.0 || m[1] < 0.0 {
-                        let (ag, av) = seg.at(t);
-                        let (f, _) = model.contact(side, &y, model.rocking(side, &y, ag, av), ag, av);
-                        let dir = slip_direction(f);
-                        regime = Regime::SlideRock { side, dir };
-                        push(&mut response, t, EventKind::SlideStart, dir, y[1], y[1]);
-                        stepper.reset();
-                        continue;
-                    }
-                }
-                _ => {}
-            }
-            if let Regime::SlideRock { side, dir } = regime {
-                let (ag, av) = seg.at(t);
-                let (theta_ddot, w) = model.slide_rocking(side, dir, &y, ag, av);
-                let (_, normal) = model.contact(side, &y, theta_ddot, ag + w, av);
-                if normal < 0.0 {
-                    return Err(format!(
-                        "at t = {t:.4} s the block would leave the floor (free flight), which the sliding model does not cover"
-                    ));
-                }
-            }
-            let f = |time: f64, state: &[f64; 4]| model.rhs(regime, &seg, time, state);
-            match regime {
-                Regime::Overturned => {
-                    t = t_end;
-                }
-                Regime::Stick => match stepper.advance(&f, t, y, t_end, &|time, _| model.stick_margins(&seg, time)) {
-                    Advance::Reached(y1) => {
-                        y = y1;
-                        t = t_end;
-                    }
-                    Advance::Event { index, t: te, y: ye } => {
-                        y = ye;
-                        t = te;
-                        stepper.reset();
-                        let (next, kind, side) = leave_stick(index);
-                        regime = next;
-                        push(&mut response, te, kind, side, 0.0, 0.0);
-                    }
-                },
-                Regime::Slide { dir } => {
-                    let d = f64::from(dir);
-                    // Uncoupled friction: the floor's acceleration uplifts a sliding block too.
-                    let uplift = |time: f64| {
-                        if friction.coupled {
-                            [f64::INFINITY; 2]
-                        } else {
-                            model.uplift_margins(&seg, time)
-                        }
-                    };
-                    let events = |time: f64, state: &[f64; 4]| {
-                        let u = uplift(time);
-                        [d * state[3], u[0], u[1]]
-                    };
-                    match stepper.advance(&f, t, y, t_end, &events) {
-                        Advance::Reached(y1) => {
-                            y = y1;
-                            t = t_end;
-                        }
-                        Advance::Event { index: 0, t: te, y: ye } => {
-                            y = [0.0, 0.0, ye[2], 0.0];
-                            t = te;
-                            regime = Regime::Stick;
-                            stepper.reset();
-                            push(&mut response, te, EventKind::Stick, 0, 0.0, 0.0);
-                        }
-                        Advance::Event { index, t: te, y: ye } => {
-                            // Rocking takes over on a stuck pivot; the slide's velocity is dropped.
-                            y = [0.0, 0.0, ye[2], 0.0];
-                            t = te;
-                            let (next, kind, side) = leave_stick(index - 1);
-                            regime = next;
-                            stepper.reset();
-                            push(&mut response, te, kind, side, 0.0, 0.0);
-                        }
-                    }
-                }
-                Regime::Rock { side } => {
-                    let s = f64::from(side);
-                    let events = |time: f64, state: &[f64; 4]| {
-                        let grip = model.grip_margins(side, &seg, time, state);
-                        [s * state[0], block.lie_angle_rad - s * state[0], grip[0], grip[1]]
-                    };
-                    match stepper.advance(&f, t, y, t_end, &events) {
-                        Advance::Reached(y1) => {
-                            y = y1;
-                            t = t_end;
-                        }
-                        Advance::Event { index, t: te, y: ye } => {
-                            let immediate = te <= t;
-                            t = te;
-                            y = ye;
-                            stepper.reset();
-                            match index {
-                                0 => {
-                                    let before = ye[1];
-                                    let after = restitution * before;
-                                    y = [0.0, after, ye[2], 0.0];
-                                    if immediate || after * after < rest_speed_squared {
-                                        y[1] = 0.0;
-                                        regime = Regime::Stick;
-                                        push(&mut response, te, EventKind::Rest, 0, before, 0.0);
-                                    } else {
-                                        regime = Regime::Rock { side: -side };
-                                        push(&mut response, te, EventKind::Impact, -side, before, after);
-                                    }
-                                }
-                                1 => {
-                                    regime = Regime::Overturned;
-                                    y = [s * block.lie_angle_rad, 0.0, ye[2], 0.0];
-                                    response.overturn = Some((te, side));
-                                    push(&mut response, te, EventKind::Overturn, side, ye[1], 0.0);
-                                }
-                                _ => {
-                                    let dir = if index == 2 { -1 } else { 1 };
-                                    regime = Regime::SlideRock { side, dir };
-                                    push(&mut response, te, EventKind::SlideStart, dir, ye[1], ye[1]);
-                                }
-                            }
-                        }
-                    }
-                }
-                Regime::SlideRock { side, dir } => {
-                    let (s, d) = (f64::from(side), f64::from(dir));
-                    let events =
-                        |_: f64, state: &[f64; 4]| [s * state[0], block.lie_angle_rad - s * state[0], d * state[3]];
-                    match stepper.advance(&f, t, y, t_end, &events) {
-                        Advance::Reached(y1) => {
-                            y = y1;
-                            t = t_end;
-                        }
-                        Advance::Event { index, t: te, y: ye } => {
-                            let immediate = te <= t;
-                            t = te;
-                            y = ye;
-                            stepper.reset();
-                            match index {
-                                0 => {
-                                    let before = ye[1];
-                                    let after = restitution * before;
-                                    y = [0.0, after, ye[2], ye[3]];
-                                    if immediate || after * after < rest_speed_squared {
-                                        // Flat again, still slipping.
-                                        y[1] = 0.0;
-                                        regime = Regime::Slide { dir };
-                                        push(&mut response, te, EventKind::Rest, 0, before, 0.0);
-                                    } else {
-                                        regime = Regime::SlideRock { side: -side, dir };
-                                        push(&mut response, te, EventKind::Impact, -side, before, after);
-                                    }
-                                }
-                                1 => {
-                                    regime = Regime::Overturned;
-                                    y = [s * block.lie_angle_rad, 0.0, ye[2], 0.0];
-                                    response.overturn = Some((te, side));
-                                    push(&mut response, te, EventKind::Overturn, side, ye[1], 0.0);
-                                }
-                                _ => {
-                                    // The slip stops; the decision at the top of the loop lets it
-                                    // slide back if static friction cannot hold the pivot.
-                                    y[3] = 0.0;
-                                    regime = Regime::Rock { side };
-                                    push(&mut response, te, EventKind::Stick, 0, ye[1], ye[1]);
-                                }
-                            }
-                        }
-                    }
-                }
-            }
-        }
-        record(&mut response, k + 1, regime, &y);
+        self.response.record_motion([y[0], y[1]], theta_ddot, sensor, regime == Regime::Overturned, av);
+        self.response.base_ax_mps2.push(base);
+        self.response.slip_m.push(y[2]);
     }
-    response.stats = stepper.stats();
-    Ok(response)
 }
 
 #[cfg(test)]

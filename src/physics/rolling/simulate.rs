@@ -1,14 +1,15 @@
-//! The simulation driver: the floor is sampled data, linear between samples, and the model
-//! advances one sample interval at a time with the shared steppers (`physics::ode`), so every
-//! output lands on the input time base. Events are located on the steppers' dense output:
-//! caster flips, the first motion, and (exact stick) the moment the cart slows enough to stick.
+//! The cart as a hybrid model run by the shared driver (`physics::hybrid`): its regimes (exact
+//! rest, moving), its transitions (caster flips, the first motion, and with exact stick the
+//! moment the cart slows enough to stick or the floor breaks it away) and what it records at each
+//! sample; the floor is linear between samples, so every output lands on the input time base.
 
 use std::f64::consts::PI;
 
 use super::dynamics::{Alteration, Dynamics, NoSlip, Slip};
 use super::holding::HoldingSet;
 use super::{Cart, Friction, FrictionLaw, Method, Options};
-use crate::physics::ode::{Advance, Dopri5, Rk4, Stats, Stepper};
+use crate::physics::hybrid::{self, Clock, Course, Equations, Hybrid, Now, Segment};
+use crate::physics::ode::{Dopri5, Either, Rk4, Stats, Stepper};
 
 /// Floor acceleration sampled at a constant step, two horizontal components (floor X, Y).
 #[derive(Clone, Copy, Debug)]
@@ -124,6 +125,12 @@ impl Response {
         self.stats.rejected += next.stats.rejected;
         self.stats.rhs_evals += next.stats.rhs_evals;
         self.stats.events += next.stats.events;
+    }
+}
+
+impl Response {
+    fn log<const N: usize>(&mut self, time_s: f64, kind: EventKind, caster: Option<usize>, y: &[f64; N]) {
+        self.events.push(Event { time_s, kind, caster, pose: std::array::from_fn(|i| y[i]) });
     }
 }
 
@@ -256,14 +263,8 @@ pub fn simulate_altered(
         let mut run = Run::new(&model, &part, friction.law, friction.eps_mps);
         run.keep_states = true;
         run.budget = budget.map(|b| b.saturating_sub(used));
-        let next = match options.method {
-            Method::Adaptive { rtol, atol } => {
-                let tolerances: [f64; 10] = std::array::from_fn(|i| if i < 7 { atol } else { 10.0 * atol });
-                run.run(Dopri5::new(rtol, tolerances, excitation.dt_s).with_max_evals(run.budget), y)
-            }
-            Method::Rk4 { dt_s } => run.run(Rk4::new(dt_s), y),
-        }
-        .map_err(|(e, spent)| (e, used + spent))?;
+        let next =
+            run.run(stepper(options.method, excitation.dt_s, run.budget), y).map_err(|(e, spent)| (e, used + spent))?;
         let state = next.states.last().ok_or(("an altered run kept no state".to_string(), used))?;
         y = state.as_slice().try_into().map_err(|_| ("an altered run kept a malformed state".to_string(), used))?;
         used += next.stats.rhs_evals;
@@ -297,17 +298,20 @@ fn dispatch<const N: usize, D: Dynamics<N>>(
     friction: &Friction,
     method: Method,
 ) -> Result<Response, String> {
-    let (law, eps_mps) = (friction.law, friction.eps_mps);
-    let run = Run::new(model, excitation, law, eps_mps);
+    let run = Run::new(model, excitation, friction.law, friction.eps_mps);
+    run.run(stepper(method, excitation.dt_s, None), y0).map_err(|(e, _)| e)
+}
+
+/// The stepper `method` asks for, giving up past `budget` evaluations (adaptive only).
+fn stepper<const N: usize>(method: Method, dt_s: f64, budget: Option<usize>) -> Either<N> {
     match method {
         Method::Adaptive { rtol, atol } => {
             // Positions and angles to `atol`, velocities to 10·atol per second.
             let tolerances: [f64; N] = std::array::from_fn(|i| if i < 7 { atol } else { 10.0 * atol });
-            run.run(Dopri5::new(rtol, tolerances, excitation.dt_s), y0)
+            Either::Dopri5(Dopri5::new(rtol, tolerances, dt_s).with_max_evals(budget))
         }
-        Method::Rk4 { dt_s } => run.run(Rk4::new(dt_s), y0),
+        Method::Rk4 { dt_s } => Either::Rk4(Rk4::new(dt_s)),
     }
-    .map_err(|(e, _)| e)
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -335,26 +339,207 @@ struct Run<'a, const N: usize, D: Dynamics<N>> {
     budget: Option<usize>,
 }
 
-/// The floor inside one sample interval: linear in time.
-#[derive(Clone, Copy, Debug)]
-struct Segment {
-    t0: f64,
-    a0: [f64; 2],
-    rate: [f64; 2],
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Transition {
+    /// The cart at rest starts to move: the floor's load leaves the set static friction holds.
+    Breakaway,
+    /// Caster i's steering passes 135° from the direction it was last aligned with.
+    Flip(usize),
+    /// The cart slowed below the rest speed: it sticks if static friction holds it.
+    Snap,
+    /// The cart sped up again: the stick check is armed.
+    Rearm,
+    /// A regularised cart first exceeds the moving speed.
+    FirstMotion,
+    /// A slow cart that the floor no longer pushes beyond static friction sticks at the end of
+    /// a sample, though it never sped up enough to re-arm the located check.
+    Settle,
 }
 
-impl Segment {
-    fn at(&self, t: f64) -> [f64; 2] {
-        let s = t - self.t0;
-        [self.a0[0] + self.rate[0] * s, self.a0[1] + self.rate[1] * s]
-    }
-}
-
-/// Event function slots: 0..4 caster flips, then stick check, its re-arming, the first motion.
-const EVENTS: usize = 7;
+/// What the event functions of a moving cart stand for, in their order
+/// ([`Moving::events`]).
+const MOVING_EVENTS: [Transition; 7] = [
+    Transition::Flip(0),
+    Transition::Flip(1),
+    Transition::Flip(2),
+    Transition::Flip(3),
+    Transition::Snap,
+    Transition::Rearm,
+    Transition::FirstMotion,
+];
+const EVENTS: usize = MOVING_EVENTS.len();
 const SNAP: usize = 4;
 const REARM: usize = 5;
 const FIRST_MOTION: usize = 6;
+
+/// The moving cart's equations over one floor segment, with the event functions' switches.
+struct Moving<'r, 'a, const N: usize, D: Dynamics<N>> {
+    run: &'r Run<'a, N, D>,
+    seg: Segment<2>,
+    flip_index: [f64; 4],
+    snap_armed: bool,
+    moved: bool,
+}
+
+impl<const N: usize, D: Dynamics<N>> Equations<N, EVENTS> for Moving<'_, '_, N, D> {
+    type Transition = Transition;
+
+    fn rhs(&self, t: f64, y: &[f64; N]) -> [f64; N] {
+        self.run.model.rhs(y, self.seg.at(t))
+    }
+
+    /// Positive while nothing happens: 0..4 caster flips, then the stick check, its re-arming,
+    /// the first motion ([`MOVING_EVENTS`]).
+    fn events(&self, _: f64, y: &[f64; N]) -> [f64; EVENTS] {
+        let run = self.run;
+        let mut g = [1.0; EVENTS];
+        for i in 0..4 {
+            let centre = self.flip_index[i] * PI;
+            g[i] = (y[3 + i] - (centre - FLIP_ANGLE)).min(centre + FLIP_ANGLE - y[3 + i]);
+        }
+        let needs_energy = run.stick || !self.moved;
+        if needs_energy {
+            let energy = run.model.kinetic_energy(y);
+            if run.stick {
+                if self.snap_armed {
+                    g[SNAP] = energy - run.energy_rest;
+                } else {
+                    g[REARM] = 4.0 * run.energy_rest - energy;
+                }
+            }
+            if !self.moved {
+                g[FIRST_MOTION] = run.energy_moving - energy;
+            }
+        }
+        g
+    }
+
+    fn transition(&self, index: usize) -> Transition {
+        MOVING_EVENTS[index]
+    }
+}
+
+/// A run's state between transitions, and what it records.
+struct Rolling<'r, 'a, const N: usize, D: Dynamics<N>> {
+    run: &'r Run<'a, N, D>,
+    regime: Regime,
+    /// The multiple of π each caster was last aligned with.
+    flip_index: [f64; 4],
+    moved: bool,
+    /// What static friction holds while the cart is at rest.
+    holding: Option<HoldingSet>,
+    response: Response,
+}
+
+impl<const N: usize, D: Dynamics<N>> Rolling<'_, '_, N, D> {
+    /// The cart stops if static friction holds it against the floor at `floor`.
+    fn stick_if_held(&mut self, t: f64, y: [f64; N], floor: [f64; 2]) -> Option<[f64; N]> {
+        let set = self.run.holding_set(&y);
+        if !set.holds(&self.run.load(&y, floor)) {
+            return None;
+        }
+        let mut y = y;
+        self.run.stop(&mut y);
+        self.holding = Some(set);
+        self.regime = Regime::Rest;
+        self.response.log(t, EventKind::Rest, None, &y);
+        Some(y)
+    }
+}
+
+impl<'r, 'a, const N: usize, D: Dynamics<N>> Hybrid<N, EVENTS> for Rolling<'r, 'a, N, D> {
+    type Transition = Transition;
+    type Equations = Moving<'r, 'a, N, D>;
+    type Error = (String, usize);
+
+    fn course(&mut self, now: Now, y: &[f64; N]) -> Result<Course<Transition, Self::Equations>, (String, usize)> {
+        let Now { k, t, limit } = now;
+        let run = self.run;
+        let seg = run.segment(k);
+        Ok(match self.regime {
+            Regime::Rest => {
+                let set = self.holding.get_or_insert_with(|| run.holding_set(y));
+                let (q0, q1) = (run.load(y, seg.at(t)), run.load_rate(y, &seg));
+                match set.exit_time(&q0, &q1, limit - t) {
+                    None => Course::Hold,
+                    Some(s) => Course::Switch { at: t + s, transition: Transition::Breakaway },
+                }
+            }
+            Regime::Moving { snap_armed } => {
+                Course::Integrate(Moving { run, seg, flip_index: self.flip_index, snap_armed, moved: self.moved })
+            }
+        })
+    }
+
+    fn apply(&mut self, k: usize, transition: Transition, t: f64, y: [f64; N], _: bool) -> [f64; N] {
+        match transition {
+            Transition::Breakaway => {
+                self.regime = Regime::Moving { snap_armed: false };
+                self.holding = None;
+                self.moved = true;
+                self.response.log(t, EventKind::Breakaway, None, &y);
+            }
+            Transition::Flip(i) => {
+                self.flip_index[i] += if y[3 + i] > self.flip_index[i] * PI { 1.0 } else { -1.0 };
+                self.response.log(t, EventKind::Flip, Some(i), &y);
+            }
+            Transition::Snap => {
+                let floor = self.run.segment(k).at(t);
+                match self.stick_if_held(t, y, floor) {
+                    Some(stopped) => return stopped,
+                    None => self.regime = Regime::Moving { snap_armed: false },
+                }
+            }
+            Transition::Rearm => self.regime = Regime::Moving { snap_armed: true },
+            Transition::FirstMotion => {
+                self.moved = true;
+                self.response.log(t, EventKind::Breakaway, None, &y);
+            }
+            Transition::Settle => {
+                let floor = self.run.segment(k).at(t);
+                return self.stick_if_held(t, y, floor).expect("settle checked that the cart is held");
+            }
+        }
+        y
+    }
+
+    fn settle(&mut self, k: usize, t_end: f64, y: &[f64; N]) -> Option<Transition> {
+        let run = self.run;
+        let slow = run.stick && self.regime != Regime::Rest && run.model.kinetic_energy(y) < run.energy_rest;
+        (slow && run.holding_set(y).holds(&run.load(y, run.segment(k).at(t_end)))).then_some(Transition::Settle)
+    }
+
+    fn check(&self, t_end: f64, y: &[f64; N], stats: &Stats) -> Result<(), (String, usize)> {
+        if let Some(budget) = self.run.budget.filter(|b| stats.rhs_evals > *b) {
+            return Err((
+                format!("the run needs more than {budget} evaluations by t = {t_end:.3} s (too stiff)"),
+                stats.rhs_evals,
+            ));
+        }
+        if !y.iter().all(|v| v.is_finite()) {
+            return Err((
+                format!(
+                    "the cart's state is no longer a number at t = {t_end:.3} s: the run diverged (too stiff a friction law or too large a change)"
+                ),
+                stats.rhs_evals,
+            ));
+        }
+        Ok(())
+    }
+
+    fn chatter(&self, t: f64, stats: &Stats) -> (String, usize) {
+        (
+            format!(
+                "more than {MAX_TRANSITIONS_PER_SAMPLE} events within the sample at t = {t:.4} s: the run does not settle (raise friction_eps)"
+            ),
+            stats.rhs_evals,
+        )
+    }
+
+    fn record(&mut self, k: usize, y: &[f64; N]) {
+        self.run.record(&mut self.response, k, self.regime, y);
+    }
+}
 
 impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
     fn new(model: &'a D, excitation: &'a Excitation<'a>, law: FrictionLaw, eps_mps: f64) -> Self {
@@ -371,177 +556,41 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
         }
     }
 
-    fn segment(&self, k: usize) -> Segment {
+    fn clock(&self) -> Clock {
         let exc = self.excitation;
-        let n = exc.ax_mps2.len();
-        let k1 = (k + 1).min(n - 1);
-        Segment {
-            t0: exc.t0_s + k as f64 * exc.dt_s,
-            a0: [exc.ax_mps2[k], exc.ay_mps2[k]],
-            rate: [(exc.ax_mps2[k1] - exc.ax_mps2[k]) / exc.dt_s, (exc.ay_mps2[k1] - exc.ay_mps2[k]) / exc.dt_s],
-        }
+        Clock { t0_s: exc.t0_s, dt_s: exc.dt_s, samples: exc.ax_mps2.len() }
+    }
+
+    fn segment(&self, k: usize) -> Segment<2> {
+        let exc = self.excitation;
+        self.clock().segment(k, |j| [exc.ax_mps2[j], exc.ay_mps2[j]])
     }
 
     /// The run, or why it failed with the evaluations it had spent.
-    fn run<S: Stepper<N>>(&self, mut stepper: S, mut y: [f64; N]) -> Result<Response, (String, usize)> {
-        let exc = self.excitation;
-        let n = exc.ax_mps2.len();
-        let dt = exc.dt_s;
-        let stick = self.stick;
-        let mut response = Response::default();
-        let mut flip_index: [f64; 4] = std::array::from_fn(|i| (y[3 + i] / PI).round());
-        let mut moved = false;
-        let mut holding: Option<HoldingSet> = None;
-        let mut regime = Regime::Moving { snap_armed: false };
-        if stick {
-            let set = self.holding_set(&y);
-            if set.holds(&self.load(&y, self.segment(0).at(exc.t0_s))) {
-                regime = Regime::Rest;
-                holding = Some(set);
-            }
-        }
-        let push = |response: &mut Response, time_s: f64, kind: EventKind, caster: Option<usize>, y: &[f64; N]| {
-            response.events.push(Event { time_s, kind, caster, pose: std::array::from_fn(|i| y[i]) });
+    fn run<S: Stepper<N>>(&self, stepper: S, y: [f64; N]) -> Result<Response, (String, usize)> {
+        let t0 = self.excitation.t0_s;
+        let mut rolling = Rolling {
+            run: self,
+            regime: Regime::Moving { snap_armed: false },
+            flip_index: std::array::from_fn(|i| (y[3 + i] / PI).round()),
+            moved: false,
+            holding: None,
+            response: Response::default(),
         };
-        if stick && regime != Regime::Rest {
-            moved = true;
-            push(&mut response, exc.t0_s, EventKind::Breakaway, None, &y);
+        if self.stick {
+            let set = self.holding_set(&y);
+            if set.holds(&self.load(&y, self.segment(0).at(t0))) {
+                rolling.regime = Regime::Rest;
+                rolling.holding = Some(set);
+            } else {
+                rolling.moved = true;
+                rolling.response.log(t0, EventKind::Breakaway, None, &y);
+            }
         }
-        self.record(&mut response, 0, regime, &y);
-        for k in 0..n - 1 {
-            let seg = self.segment(k);
-            let t_end = exc.t0_s + (k + 1) as f64 * dt;
-            let mut t = seg.t0;
-            let mut transitions = 0;
-            while t < t_end {
-                transitions += 1;
-                if transitions > MAX_TRANSITIONS_PER_SAMPLE {
-                    return Err((
-                        format!(
-                            "more than {MAX_TRANSITIONS_PER_SAMPLE} events within the sample at t = {t:.4} s: the run does not settle (raise friction_eps)"
-                        ),
-                        stepper.stats().rhs_evals,
-                    ));
-                }
-                match regime {
-                    Regime::Rest => {
-                        let set = holding.get_or_insert_with(|| self.holding_set(&y));
-                        let (q0, q1) = (self.load(&y, seg.at(t)), self.load_rate(&y, &seg));
-                        match set.exit_time(&q0, &q1, t_end - t) {
-                            None => t = t_end,
-                            Some(s) => {
-                                t += s;
-                                regime = Regime::Moving { snap_armed: false };
-                                holding = None;
-                                moved = true;
-                                stepper.reset();
-                                push(&mut response, t, EventKind::Breakaway, None, &y);
-                            }
-                        }
-                    }
-                    Regime::Moving { snap_armed } => {
-                        let model = self.model;
-                        let f = |time: f64, state: &[f64; N]| model.rhs(state, seg.at(time));
-                        let g = |_: f64, state: &[f64; N]| {
-                            self.event_functions(state, &flip_index, stick, snap_armed, moved)
-                        };
-                        match stepper.advance(&f, t, y, t_end, &g) {
-                            Advance::Reached(y1) => {
-                                y = y1;
-                                t = t_end;
-                            }
-                            Advance::Event { index, t: te, y: ye } => {
-                                t = te;
-                                y = ye;
-                                match index {
-                                    i if i < 4 => {
-                                        flip_index[i] += if y[3 + i] > flip_index[i] * PI { 1.0 } else { -1.0 };
-                                        push(&mut response, te, EventKind::Flip, Some(i), &y);
-                                    }
-                                    SNAP => {
-                                        let set = self.holding_set(&y);
-                                        if set.holds(&self.load(&y, seg.at(te))) {
-                                            self.stop(&mut y);
-                                            holding = Some(set);
-                                            regime = Regime::Rest;
-                                            push(&mut response, te, EventKind::Rest, None, &y);
-                                        } else {
-                                            regime = Regime::Moving { snap_armed: false };
-                                        }
-                                    }
-                                    REARM => regime = Regime::Moving { snap_armed: true },
-                                    _ => {
-                                        moved = true;
-                                        push(&mut response, te, EventKind::Breakaway, None, &y);
-                                    }
-                                }
-                            }
-                        }
-                    }
-                }
-            }
-            // A slow cart that the floor no longer pushes beyond static friction sticks here even
-            // if it never sped up enough to re-arm the located check.
-            if stick && regime != Regime::Rest && self.model.kinetic_energy(&y) < self.energy_rest {
-                let set = self.holding_set(&y);
-                if set.holds(&self.load(&y, seg.at(t_end))) {
-                    self.stop(&mut y);
-                    holding = Some(set);
-                    regime = Regime::Rest;
-                    stepper.reset();
-                    push(&mut response, t_end, EventKind::Rest, None, &y);
-                }
-            }
-            if let Some(budget) = self.budget.filter(|b| stepper.stats().rhs_evals > *b) {
-                return Err((
-                    format!("the run needs more than {budget} evaluations by t = {t_end:.3} s (too stiff)"),
-                    stepper.stats().rhs_evals,
-                ));
-            }
-            if !y.iter().all(|v| v.is_finite()) {
-                return Err((
-                    format!(
-                        "the cart's state is no longer a number at t = {t_end:.3} s: the run diverged (too stiff a friction law or too large a change)"
-                    ),
-                    stepper.stats().rhs_evals,
-                ));
-            }
-            self.record(&mut response, k + 1, regime, &y);
-        }
-        response.stats = stepper.stats();
-        Ok(response)
+        let stats = hybrid::drive(&mut rolling, self.clock(), MAX_TRANSITIONS_PER_SAMPLE, y, stepper)?;
+        rolling.response.stats = stats;
+        Ok(rolling.response)
     }
-
-    fn event_functions(
-        &self,
-        y: &[f64; N],
-        flip_index: &[f64; 4],
-        stick: bool,
-        snap_armed: bool,
-        moved: bool,
-    ) -> [f64; EVENTS] {
-        let mut g = [1.0; EVENTS];
-        for i in 0..4 {
-            let centre = flip_index[i] * PI;
-            g[i] = (y[3 + i] - (centre - FLIP_ANGLE)).min(centre + FLIP_ANGLE - y[3 + i]);
-        }
-        let needs_energy = stick || !moved;
-        if needs_energy {
-            let energy = self.model.kinetic_energy(y);
-            if stick {
-                if snap_armed {
-                    g[SNAP] = energy - self.energy_rest;
-                } else {
-                    g[REARM] = 4.0 * self.energy_rest - energy;
-                }
-            }
-            if !moved {
-                g[FIRST_MOTION] = self.energy_moving - energy;
-            }
-        }
-        g
-    }
-
     fn holding_set(&self, y: &[f64; N]) -> HoldingSet {
         let (_, generators) = self.model.rest_forces(y).expect("only models that can stick reach here");
         HoldingSet::new(&generators)
@@ -553,7 +602,7 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
         map.map(|row| row[0] * floor[0] + row[1] * floor[1])
     }
 
-    fn load_rate(&self, y: &[f64; N], seg: &Segment) -> [f64; 3] {
+    fn load_rate(&self, y: &[f64; N], seg: &Segment<2>) -> [f64; 3] {
         let (map, _) = self.model.rest_forces(y).expect("only models that can stick reach here");
         map.map(|row| row[0] * seg.rate[0] + row[1] * seg.rate[1])
     }
