@@ -24,7 +24,7 @@ from pathlib import Path
 
 import yaml
 
-VERDICTS = ("none", "sliding", "mass_change", "restitution", "flexibility", "obstacle_impact",
+VERDICTS = ("none", "sliding", "mass_change", "restitution", "flexibility", "obstacle_impact", "ambiguous",
             "sensor_tilt", "unexplained")
 PHYSICS = ("sliding", "mass_change", "restitution", "flexibility", "obstacle_impact", "sensor_tilt")
 ONSET_OK_S = 0.5

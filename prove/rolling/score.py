@@ -21,7 +21,7 @@ from pathlib import Path
 
 import yaml
 
-VERDICTS = ["none", "lateral_impact", "mass_change", "caster_brake", "swivel_jam", "unexplained"]
+VERDICTS = ["none", "lateral_impact", "mass_change", "caster_brake", "swivel_jam", "ambiguous", "unexplained"]
 PHYSICS = {"lateral_impact", "mass_change", "caster_brake", "swivel_jam"}
 KEYS = ["mismatch", "verdict", "window", "rmse_before", "rmse_after", "candidates", "explanation"]
 

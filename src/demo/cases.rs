@@ -344,6 +344,7 @@ fn rolling_case(plan: &RollingPlan, ax: &[f64]) -> Result<(Vec<(String, Vec<u8>)
         accel_noise_mps2: ACCEL_NOISE_MPS2,
         camera_noise_m: CAMERA_NOISE_M,
         camera_noise_rad: CAMERA_NOISE_RAD,
+        uncertain: Vec::new(),
     };
     let nominal = case.nominal()?;
     let moved = (0..n)

@@ -17,6 +17,7 @@
 //!
 //! Pure numerics: a [`Case`] in, a [`Diagnosis`] out; files are read and written elsewhere.
 
+pub mod calibration;
 pub mod effects;
 pub mod evidence;
 pub mod fit;
@@ -24,7 +25,8 @@ pub mod rolling;
 
 use rayon::prelude::*;
 
-use crate::physics::rocking::{self, Block, Excitation, Options};
+use crate::physics::rocking::{self, Block, Excitation, Options, Shape};
+use calibration::{Calibration, Uncertain, UnitModel};
 use evidence::{Evidence, Misfit};
 
 /// What one test of one unit recorded, and what is known of the unit.
@@ -43,6 +45,61 @@ pub struct Case {
     /// Standard deviations of the sensors' noise.
     pub accel_noise_mps2: f64,
     pub camera_noise_rad: f64,
+    /// The nominal parameters the equipment file says are known only roughly (its
+    /// `uncertainty` block; empty: every stated value is taken as exact).
+    pub uncertain: Vec<Uncertain>,
+}
+
+/// The rocking block's nominal parameters by their equipment-file keys.
+impl UnitModel for Case {
+    fn nominal_keys(&self) -> Vec<(&'static str, usize)> {
+        let keys: &[&'static str] = match self.block.shape {
+            Shape::Rectangular { .. } => &["B_m", "H_m", "f", "mass_kg"],
+            Shape::Trapezoidal { .. } => &["B1_m", "B2_m", "H_m", "mass_kg"],
+        };
+        keys.iter().map(|k| (*k, 1)).collect()
+    }
+
+    fn parameter(&self, key: &str, _index: usize) -> Option<f64> {
+        match (self.block.shape, key) {
+            (_, "mass_kg") => Some(self.block.mass_kg),
+            (Shape::Rectangular { b_m, .. }, "B_m") => Some(b_m),
+            (Shape::Rectangular { h_m, .. } | Shape::Trapezoidal { h_m, .. }, "H_m") => Some(h_m),
+            (Shape::Rectangular { f, .. }, "f") => Some(f),
+            (Shape::Trapezoidal { b1_m, .. }, "B1_m") => Some(b1_m),
+            (Shape::Trapezoidal { b2_m, .. }, "B2_m") => Some(b2_m),
+            _ => None,
+        }
+    }
+
+    fn set_parameter(&mut self, key: &str, _index: usize, value: f64) -> Result<(), String> {
+        let mut shape = self.block.shape;
+        let mut mass = self.block.mass_kg;
+        match (&mut shape, key) {
+            (_, "mass_kg") => mass = value,
+            (Shape::Rectangular { b_m, .. }, "B_m") => *b_m = value,
+            (Shape::Rectangular { h_m, .. } | Shape::Trapezoidal { h_m, .. }, "H_m") => *h_m = value,
+            (Shape::Rectangular { f, .. }, "f") => *f = value,
+            (Shape::Trapezoidal { b1_m, .. }, "B1_m") => *b1_m = value,
+            (Shape::Trapezoidal { b2_m, .. }, "B2_m") => *b2_m = value,
+            _ => return Err(format!("`{key}` is not a parameter of this block")),
+        }
+        self.block = Block::new(shape, mass, self.block.g_mps2)?;
+        Ok(())
+    }
+
+    fn physical_range(&self, key: &str) -> (f64, f64) {
+        match key {
+            // The centre of mass stays inside the block: hc = (0.5 + f) H.
+            "f" => (-0.45, 0.45),
+            _ => (f64::MIN_POSITIVE, f64::INFINITY),
+        }
+    }
+
+    /// The rocking equations hold I0/m only: the mass is for reports.
+    fn constrains(&self, key: &str) -> bool {
+        key != "mass_kg"
+    }
 }
 
 /// A sensor's samples; NaN marks a missing one (camera dropouts).
@@ -239,6 +296,8 @@ pub struct Candidate {
     pub evaluations: usize,
     pub sentence: String,
     pub prediction: Prediction,
+    /// The uncertain parameters as fitted with this hypothesis.
+    pub calibration: Calibration,
 }
 
 #[derive(Debug, Clone)]
@@ -258,15 +317,26 @@ pub struct Diagnosis {
     /// The accepted model's prediction (the baseline's for `none` and `unexplained`).
     pub model: Prediction,
     pub evidence: Evidence,
+    /// The uncertain parameters as the accepted model (or the calibrated nominal) fits them.
+    pub calibration: Calibration,
 }
 
-pub fn diagnose(case: &Case, settings: &Settings) -> Result<Diagnosis, String> {
-    if case.accel.is_none() && case.camera.is_none() {
-        return Err("the case has neither an accelerometer nor a camera record to compare with".into());
-    }
+/// Two explanations whose BIC differ by less than this are about equally good (Kass & Raftery:
+/// "not worth more than a bare mention"): the verdict is `ambiguous`, naming both.
+pub const AMBIGUOUS_BIC: f64 = 2.0;
+/// An accepted change whose onset falls within this (s) of the calibrated model's first uplift
+/// happened where the records could first show anything: it is not called an event at that time.
+const FIRST_UPLIFT_S: f64 = 0.1;
+/// Horizons of a calibration after the first moment the records can tell anything (s).
+const CALIBRATION_HORIZONS_S: [f64; 4] = [1.5, 4.0, 10.0, f64::INFINITY];
+/// Horizons of the recalibration with a physics, after the window's start (s).
+const JOINT_HORIZONS_S: [f64; 3] = [1.5, 4.0, f64::INFINITY];
+
+/// The evidence of the nominal model as `case` states it: the model under the usual and under
+/// other solver settings (samples where they differ are not evidence).
+fn nominal_evidence(case: &Case, settings: &Settings) -> Result<(Evidence, Prediction), String> {
     let options = case.nominal_options();
     let (_, nominal) = case.simulate(&case.block, &options)?;
-    // The same model under other solver settings: samples where it changes are not evidence.
     let (_, variant) = case.simulate(
         &case.block,
         &Options {
@@ -275,22 +345,62 @@ pub fn diagnose(case: &Case, settings: &Settings) -> Result<Diagnosis, String> {
             ..options
         },
     )?;
-    let evidence = Evidence::new(case, &nominal, &variant, settings.exceedance_sigma);
+    Ok((Evidence::new(case, &nominal, &variant, settings.exceedance_sigma), nominal))
+}
+
+/// The uncertain parameters fitted with the nominal model (priors of the stated sd), from the
+/// first moment the records can tell anything: the first uplift of the stated model, or the
+/// first disagreement if the records show one earlier. A unit that neither uplifts nor
+/// disagrees keeps its stated values (nothing in the records constrains them).
+fn calibrate_nominal(stated: &Case, settings: &Settings) -> Result<Calibration, String> {
+    if stated.uncertain.is_empty() {
+        return Ok(Calibration::default());
+    }
+    let (evidence, nominal) = nominal_evidence(stated, settings)?;
+    let first_uplift = nominal.first(&[rocking::EventKind::Uplift]);
+    let disagreement = evidence.window(&nominal).map(|w| w.0);
+    let from = match (first_uplift, disagreement) {
+        (Some(a), Some(b)) => a.min(b),
+        (a, b) => match a.or(b) {
+            Some(t) => t,
+            None => return Ok(Calibration::stated(stated.uncertain.clone())),
+        },
+    };
+    let horizons = CALIBRATION_HORIZONS_S.map(|h| from + h);
+    let chi2 = |m: &Case, until: f64| {
+        m.simulate(&m.block, &m.nominal_options()).map_or(f64::INFINITY, |(_, p)| evidence.misfit_until(&p, until).chi2)
+    };
+    Ok(calibration::calibrate_model(stated, &stated.uncertain, None, &horizons, true, &chi2))
+}
+
+pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String> {
+    if stated.accel.is_none() && stated.camera.is_none() {
+        return Err("the case has neither an accelerometer nor a camera record to compare with".into());
+    }
+    let calibration = calibrate_nominal(stated, settings)?;
+    let calibrated = calibration.apply(stated)?;
+    let case = &calibrated;
+    let options = case.nominal_options();
+    let (evidence, nominal) = nominal_evidence(case, settings)?;
     let baseline = case.with_sensitivity(&evidence, nominal, |c| Ok(c.simulate(&c.block, &options)?.1))?;
     let base_misfit = evidence.misfit(&baseline);
     let window = evidence.window(&baseline);
     let n = base_misfit.samples.max(1) as f64;
+    // Every calibrated parameter is paid for, by every candidate: its prior and ln N.
+    let calibrated_count = calibration.parameters.iter().filter(|p| case.constrains(&p.key)).count() as f64;
+    let price = |c: &Calibration, k: usize| c.prior_chi2() + (k as f64 + calibrated_count) * n.ln();
     let baseline_candidate = |window: Option<(f64, f64)>| Candidate {
         effect: "none",
         params: Vec::new(),
         rmse: evidence.window_rmse(&baseline, window),
-        bic: base_misfit.chi2,
+        bic: base_misfit.chi2 + price(&calibration, 0),
         score: 0.0,
         flagged: evidence.flagged(&baseline),
         misfit: base_misfit,
-        evaluations: 1,
+        evaluations: 1 + calibration.evaluations,
         sentence: "the nominal rigid-block model (Eq. 20-24) as the equipment file describes it".into(),
         prediction: baseline.clone(),
+        calibration: calibration.clone(),
     };
     let Some(window) = window else {
         let mut only = baseline_candidate(None);
@@ -303,13 +413,14 @@ pub fn diagnose(case: &Case, settings: &Settings) -> Result<Diagnosis, String> {
             window: None,
             rmse_before: rmse,
             rmse_after: rmse,
-            explanation: explain_none(case, &evidence, rmse),
+            explanation: explain_none(case, &evidence, rmse) + &calibration.note(true),
             candidates: vec![only],
             accel_noise_mps2: case.accel_noise_mps2,
             camera_noise_rad: case.camera_noise_rad,
             model: baseline.clone(),
             baseline,
             evidence,
+            calibration,
         });
     };
     let before = baseline_candidate(Some(window));
@@ -317,18 +428,21 @@ pub fn diagnose(case: &Case, settings: &Settings) -> Result<Diagnosis, String> {
         .par_iter()
         .map(|effect| {
             let fit = fit::fit(*effect, case, &evidence, window);
-            let rmse = evidence.window_rmse(&fit.prediction, Some(window));
+            let (calibration, prediction, misfit, evaluations) =
+                recalibrate(stated, &calibration, *effect, &fit, &evidence, window);
+            let k = effect.parameter_names().len();
             Candidate {
                 effect: effect.name(),
                 params: effect.parameter_names().iter().copied().zip(fit.params.iter().copied()).collect(),
-                bic: fit.misfit.chi2 + effect.parameter_names().len() as f64 * n.ln(),
-                rmse,
+                bic: misfit.chi2 + price(&calibration, k),
+                rmse: evidence.window_rmse(&prediction, Some(window)),
                 score: 0.0,
-                flagged: evidence.flagged(&fit.prediction),
-                sentence: effect.explain(case, &fit.params),
-                misfit: fit.misfit,
-                evaluations: fit.evaluations,
-                prediction: fit.prediction,
+                flagged: evidence.flagged(&prediction),
+                sentence: effect.explain(&calibration.apply(stated).unwrap_or_else(|_| case.clone()), &fit.params),
+                misfit,
+                evaluations: fit.evaluations + evaluations,
+                prediction,
+                calibration,
             }
         })
         .collect();
@@ -342,15 +456,21 @@ pub fn diagnose(case: &Case, settings: &Settings) -> Result<Diagnosis, String> {
     }
     // The baseline stays first; the effects follow by BIC.
     candidates[1..].sort_by(|a, b| a.bic.total_cmp(&b.bic));
-    let best = &candidates[1];
     let flagged_before = candidates[0].flagged.max(1) as f64;
     // A model that has the unit fall when the records show it standing (or the reverse) is not
     // the explanation, however well its own chaotic spread covers the misfit.
-    let same_outcome = best.prediction.overturn.is_some() == evidence.observed_overturn;
-    let accepted = same_outcome
-        && best.bic < candidates[0].bic
-        && best.rmse * settings.min_improvement <= candidates[0].rmse
-        && (best.flagged as f64) <= settings.max_remaining_flagged * flagged_before;
+    let passes = |c: &Candidate| {
+        c.prediction.overturn.is_some() == evidence.observed_overturn
+            && c.bic < candidates[0].bic
+            && c.rmse * settings.min_improvement <= candidates[0].rmse
+            && (c.flagged as f64) <= settings.max_remaining_flagged * flagged_before
+    };
+    let accepted = passes(&candidates[1]);
+    let rival = (accepted && candidates.len() > 2 && passes(&candidates[2]))
+        .then(|| candidates[2].bic - candidates[1].bic)
+        .filter(|d| *d < AMBIGUOUS_BIC);
+    let first_uplift = baseline.first(&[rocking::EventKind::Uplift]);
+    let mut onset_at_first_uplift = None;
     let (verdict, model, window) = if accepted {
         let best = &candidates[1];
         // The accepted physics says when the nominal model stops being true: when it first acts
@@ -360,8 +480,18 @@ pub fn diagnose(case: &Case, settings: &Settings) -> Result<Diagnosis, String> {
         let effect =
             effects::library().iter().find(|e| e.name() == best.effect).expect("candidates come from the library");
         let parameters: Vec<f64> = best.params.iter().map(|p| p.1).collect();
-        let onset = effect.onset(&parameters, &best.prediction).unwrap_or(window.0);
-        (best.effect, best.prediction.clone(), (onset.min(window.0), window.1))
+        let onset = effect.onset(&parameters, &best.prediction);
+        // A change fitted at the first uplift is where the records could first show anything:
+        // they hold no evidence of the unchanged unit before it.
+        let fitted_onset = best.params.iter().any(|p| p.0 == "t0_s");
+        onset_at_first_uplift = onset
+            .filter(|_| fitted_onset)
+            .zip(first_uplift)
+            .filter(|(o, u)| (o - u).abs() <= FIRST_UPLIFT_S)
+            .map(|(_, u)| u);
+        let onset = onset.unwrap_or(window.0);
+        let verdict = if rival.is_some() { "ambiguous" } else { best.effect };
+        (verdict, best.prediction.clone(), (onset.min(window.0), window.1))
     } else {
         ("unexplained", baseline.clone(), window)
     };
@@ -370,7 +500,23 @@ pub fn diagnose(case: &Case, settings: &Settings) -> Result<Diagnosis, String> {
     }
     let rmse_before = candidates[0].rmse;
     let rmse_after = if accepted { candidates[1].rmse } else { rmse_before };
-    let explanation = explain(case, &evidence, window, &candidates, accepted, settings);
+    let mut explanation = explain(case, &evidence, window, &candidates, accepted, settings);
+    if let Some(margin) = rival {
+        explanation.push_str(&format!(
+            " But {} ({}) explains the records about equally well (BIC {margin:.1} higher, less than {AMBIGUOUS_BIC}): the records cannot tell {} from {}; the verdict is ambiguous between them.",
+            candidates[2].effect.replace('_', " "),
+            candidates[2].sentence,
+            candidates[1].effect.replace('_', " "),
+            candidates[2].effect.replace('_', " "),
+        ));
+    }
+    if let Some(t) = onset_at_first_uplift {
+        explanation.push_str(&format!(
+            " Its fitted onset is the first uplift ({t:.2} s), the first moment the records could show the change: they hold no evidence of the unchanged unit before it, so it holds from the start, or before {t:.2} s, rather than being an event at that time."
+        ));
+    }
+    let accepted_calibration = if accepted { candidates[1].calibration.clone() } else { calibration };
+    explanation.push_str(&accepted_calibration.note(false));
     Ok(Diagnosis {
         case: case.name.clone(),
         mismatch: true,
@@ -385,7 +531,49 @@ pub fn diagnose(case: &Case, settings: &Settings) -> Result<Diagnosis, String> {
         baseline,
         model,
         evidence,
+        calibration: accepted_calibration,
     })
+}
+
+/// The uncertain parameters fitted again with a physics in place (its fitted parameters held),
+/// from the calibrated values: returns the better of the two (calibration, its prediction with
+/// its chaotic sensitivity, misfit, model runs spent) by posterior.
+fn recalibrate(
+    stated: &Case,
+    calibration: &Calibration,
+    effect: &dyn effects::Effect,
+    fit: &fit::Fit,
+    evidence: &Evidence,
+    window: (f64, f64),
+) -> (Calibration, Prediction, Misfit, usize) {
+    let kept = (calibration.clone(), fit.prediction.clone(), fit.misfit, 0);
+    if calibration.is_empty() {
+        return kept;
+    }
+    let horizons = JOINT_HORIZONS_S.map(|h| window.0 + h);
+    let chi2 = |m: &Case, until: f64| {
+        effect.predict(m, &fit.params).map_or(f64::INFINITY, |p| evidence.misfit_until(&p, until).chi2)
+    };
+    let joint = calibration::calibrate_model(
+        stated,
+        &calibration.parameters,
+        Some(&calibration.fitted),
+        &horizons,
+        false,
+        &chi2,
+    );
+    let Ok(case) = joint.apply(stated) else { return kept };
+    let predict = |c: &Case| effect.predict(c, &fit.params);
+    let Some(prediction) = predict(&case).and_then(|p| case.with_sensitivity(evidence, p, predict)).ok() else {
+        return kept;
+    };
+    let misfit = evidence.misfit(&prediction);
+    if misfit.chi2 + joint.prior_chi2() < fit.misfit.chi2 + calibration.prior_chi2() {
+        let spent = joint.evaluations + 2;
+        (joint, prediction, misfit, spent)
+    } else {
+        (kept.0, kept.1, kept.2, joint.evaluations + 2)
+    }
 }
 
 fn explain_none(case: &Case, evidence: &Evidence, rmse: f64) -> String {

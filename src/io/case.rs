@@ -4,10 +4,13 @@
 
 use std::path::Path;
 
+use crate::diagnose::calibration::{uncertain_parameters, Spread, Uncertain, UnitModel};
 use crate::diagnose::rolling::{Camera, RollingCase};
 use crate::diagnose::{Case, Observed};
 use crate::error::UserError;
-use crate::io::equipment::{declared_model, parse_rolling_equipment, read_equipment_text, read_rocking_equipment};
+use crate::io::equipment::{
+    declared_model, parse_rocking_equipment, parse_rolling_equipment, read_equipment_text, uncertainty_key_position,
+};
 use crate::io::records::{read_delimited, DelimitedOptions};
 use crate::physics::rocking::{Block, Shape};
 use crate::physics::rolling::{self, Cart, Friction, FrictionLaw, Method, Options, Stribeck};
@@ -78,7 +81,8 @@ pub fn read_case(dir: &Path) -> Result<Case, UserError> {
     if !equipment_path.is_file() {
         return Err(UserError::new(format!("`{}` is missing", equipment_path.display())).hint(LAYOUT_HINT));
     }
-    let equipment = read_rocking_equipment(&equipment_path)?;
+    let text = read_equipment_text(&equipment_path)?;
+    let equipment = parse_rocking_equipment(&equipment_path, &text)?;
     let number = |value: Option<f64>, key: &str| {
         value
             .ok_or_else(|| UserError::new(format!("the equipment file does not give `{key}`")).in_file(&equipment_path))
@@ -135,7 +139,7 @@ pub fn read_case(dir: &Path) -> Result<Case, UserError> {
         .hint(LAYOUT_HINT));
     }
     let sensors = equipment.sensors.as_ref();
-    Ok(Case {
+    let mut case = Case {
         name: dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned()),
         block,
         sensor_height_m: None,
@@ -147,7 +151,32 @@ pub fn read_case(dir: &Path) -> Result<Case, UserError> {
         camera,
         accel_noise_mps2: sensor_number(sensors, "accelerometer", "noise_sd_mps2").unwrap_or(DEFAULT_ACCEL_NOISE_MPS2),
         camera_noise_rad: sensor_number(sensors, "camera", "noise_sd_rad").unwrap_or(DEFAULT_CAMERA_NOISE_RAD),
-    })
+        uncertain: Vec::new(),
+    };
+    case.uncertain = uncertain(&case, equipment.uncertainty.as_ref(), &equipment_path, &text)?;
+    Ok(case)
+}
+
+/// The uncertain parameters an `uncertainty` block names for `model`; a key that is not one of
+/// its nominal parameters (or a spread it cannot use) is an error at the key's line.
+fn uncertain<M: UnitModel>(
+    model: &M,
+    block: Option<&std::collections::BTreeMap<String, Spread>>,
+    path: &Path,
+    text: &str,
+) -> Result<Vec<Uncertain>, UserError> {
+    let Some(block) = block else { return Ok(Vec::new()) };
+    let mut out = Vec::new();
+    for (key, spread) in block {
+        let found = uncertain_parameters(model, &[(key.clone(), *spread)]).map_err(|e| {
+            UserError::new(format!("invalid `uncertainty` block: {e}"))
+                .in_file(path)
+                .at(uncertainty_key_position(text, key))
+                .hint("each key of `uncertainty` is a nominal parameter of the unit, with {sd: X} (absolute, each element of a list) or {rel_sd: X} (relative to the stated value); see docs/models/diagnosis.md")
+        })?;
+        out.extend(found);
+    }
+    Ok(out)
 }
 
 const ROLLING_HINT: &str = "a rolling case folder holds equipment.yaml (model: rolling), floor.csv (time_s, ax_mps2, ay_mps2), observed_accel.csv (time_s, top_ax_mps2) and observed_cpt.csv (time_s, x_m, y_m, yaw_rad)";
@@ -245,7 +274,7 @@ pub fn read_rolling_case(dir: &Path) -> Result<RollingCase, UserError> {
         .hint(ROLLING_HINT));
     }
     let sensors = e.sensors.as_ref();
-    Ok(RollingCase {
+    let mut case = RollingCase {
         name: dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned()),
         cart,
         friction,
@@ -259,5 +288,8 @@ pub fn read_rolling_case(dir: &Path) -> Result<RollingCase, UserError> {
         accel_noise_mps2: sensor_number(sensors, "accelerometer", "noise_sd_mps2").unwrap_or(DEFAULT_ACCEL_NOISE_MPS2),
         camera_noise_m: sensor_number(sensors, "camera", "noise_sd_m").unwrap_or(DEFAULT_CAMERA_NOISE_M),
         camera_noise_rad: sensor_number(sensors, "camera", "noise_sd_rad").unwrap_or(DEFAULT_CAMERA_NOISE_RAD),
-    })
+        uncertain: Vec::new(),
+    };
+    case.uncertain = uncertain(&case, e.uncertainty.as_ref(), &equipment_path, &text)?;
+    Ok(case)
 }

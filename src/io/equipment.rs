@@ -2,11 +2,19 @@
 //! cases' `equipment.yaml` (`shape`, `B_m`, `H_m`, `f`, `mass_kg`; `B1_m`, `B2_m` for a
 //! trapezoid). Descriptive sections those files carry (sensors, conventions, derived values) are
 //! accepted and ignored; any other key is an error, so a misspelt dimension is never dropped.
+//!
+//! Both kinds of file may carry an `uncertainty` block: one standard deviation of each stated
+//! value's error, per nominal-parameter key, `{sd: X}` (absolute; each element of a list) or
+//! `{rel_sd: X}` (relative to the stated value). Which keys are nominal parameters is the unit
+//! model's to say (`diagnose::calibration::UnitModel`); [`uncertainty_key_position`] gives the
+//! line of a key it refuses.
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use serde::Deserialize;
 
+use crate::diagnose::calibration::Spread;
 use crate::error::UserError;
 use crate::io::records::{decode, read_bytes};
 use crate::io::yaml::yaml_refusal;
@@ -26,6 +34,8 @@ pub struct RockingEquipment {
     pub b2_m: Option<f64>,
     pub mass_kg: Option<f64>,
     pub g_mps2: Option<f64>,
+    /// One sd of each stated value's error, by key (`diagnose` calibrates these).
+    pub uncertainty: Option<BTreeMap<String, Spread>>,
     // Descriptive: read so that case files load as they are, not used by the model.
     pub name: Option<String>,
     pub description: Option<String>,
@@ -53,8 +63,8 @@ pub fn parse_rocking_equipment(path: &Path, text: &str) -> Result<RockingEquipme
         let position = e.location().map(|l| (l.line(), l.column()));
         let (message, hint) = yaml_refusal(
             &e,
-            "keys: shape (rectangular|trapezoidal), B_m, H_m, f, mass_kg, B1_m, B2_m, g_mps2 \
-             (plus the descriptive name, description, e_formula, derived, sensors, conventions)",
+            "keys: shape (rectangular|trapezoidal), B_m, H_m, f, mass_kg, B1_m, B2_m, g_mps2, \
+             uncertainty ({key: {sd: X}} or {key: {rel_sd: X}}) (plus the descriptive name, description, e_formula, derived, sensors, conventions)",
         );
         UserError::new(format!("not a valid equipment file: {message}")).in_file(path).at(position).hint(hint)
     })
@@ -86,6 +96,8 @@ pub struct RollingEquipment {
     pub friction_eps: Option<f64>,
     pub friction_eps_swivel: Option<f64>,
     pub g_mps2: Option<f64>,
+    /// One sd of each stated value's error, by key (`diagnose` calibrates these).
+    pub uncertainty: Option<BTreeMap<String, Spread>>,
     pub name: Option<String>,
     pub description: Option<String>,
     pub sensors: Option<serde_yaml::Value>,
@@ -117,11 +129,35 @@ pub fn parse_rolling_equipment(path: &Path, text: &str) -> Result<RollingEquipme
             &e,
             "keys: model (rolling), length_m, width_m, platform_mass_kg, wheel_diameter_m, wheel_width_m, \
              wheel_mass_kg, yaw0_deg, steer0_deg (4 values), mu_s_roll, mu_s_swivel, mu_k_roll, mu_k_swivel, \
-             beta_spm, gamma_n, p, trail_m, swivel_arm_m, friction_eps, friction_eps_swivel, g_mps2 \
-             (plus the descriptive name, description, sensors, conventions)",
+             beta_spm, gamma_n, p, trail_m, swivel_arm_m, friction_eps, friction_eps_swivel, g_mps2, \
+             uncertainty ({key: {sd: X}} or {key: {rel_sd: X}}) (plus the descriptive name, description, sensors, conventions)",
         );
         UserError::new(format!("not a valid rolling equipment file: {message}")).in_file(path).at(position).hint(hint)
     })
+}
+
+/// (line, column), 1-based, of `key` inside the top-level `uncertainty` block of an equipment
+/// file's text (block or flow style); the block's own line when the key is not found there.
+pub fn uncertainty_key_position(text: &str, key: &str) -> Option<(usize, usize)> {
+    let lines: Vec<&str> = text.lines().collect();
+    let start = lines.iter().position(|l| l.starts_with("uncertainty:"))?;
+    for (i, line) in lines.iter().enumerate().skip(start) {
+        let body = line.split('#').next().unwrap_or("");
+        if i > start && !body.trim().is_empty() && !line.starts_with([' ', '\t']) {
+            break;
+        }
+        let from = if i == start { "uncertainty:".len() } else { 0 };
+        let bytes = body.as_bytes();
+        let found = body[from.min(body.len())..].match_indices(key).map(|(k, _)| k + from).find(|&k| {
+            let before = k == 0 || !(bytes[k - 1].is_ascii_alphanumeric() || bytes[k - 1] == b'_');
+            let rest = body[k + key.len()..].trim_start_matches(['"', '\'']).trim_start();
+            before && rest.starts_with(':')
+        });
+        if let Some(k) = found {
+            return Some((i + 1, k + 1));
+        }
+    }
+    Some((start + 1, 1))
 }
 
 #[cfg(test)]
@@ -140,5 +176,24 @@ mod tests {
         let err = read_rocking_equipment(&bad).unwrap_err();
         assert_eq!(err.line, Some(3), "{err}");
         assert!(err.to_string().contains("H_M"), "{err}");
+    }
+
+    #[test]
+    fn an_uncertainty_block_is_read_and_a_key_is_found_at_its_line() {
+        let text = "shape: rectangular\nB_m: 0.349\nH_m: 1.082\nuncertainty:\n  f:\n    sd: 0.03\n  H_m: {rel_sd: 0.01}\nsensors: {}\n";
+        let e = parse_rocking_equipment(Path::new("e.yaml"), text).unwrap();
+        let u = e.uncertainty.unwrap();
+        assert_eq!(u["f"], Spread { sd: Some(0.03), rel_sd: None });
+        assert_eq!(u["H_m"], Spread { sd: None, rel_sd: Some(0.01) });
+        assert_eq!(uncertainty_key_position(text, "H_m"), Some((7, 3)));
+        assert_eq!(uncertainty_key_position(text, "f"), Some((5, 3)));
+        // Flow style: the key on the block's line; a key it does not hold: the block's line.
+        let flow = "B_m: 1\nuncertainty: {f: {sd: 0.03}, mu_k: {rel_sd: 0.2}}\n";
+        assert_eq!(uncertainty_key_position(flow, "mu_k"), Some((2, 30)));
+        assert_eq!(uncertainty_key_position(flow, "H_m"), Some((2, 1)));
+        // A misspelt spread is refused by the parser, with its line.
+        let bad = "B_m: 1\nH_m: 2\nuncertainty:\n  H_m: {rel: 0.01}\n";
+        let err = parse_rocking_equipment(Path::new("e.yaml"), bad).unwrap_err();
+        assert_eq!(err.line, Some(4), "{err}");
     }
 }

@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 
 use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use crate::diagnose::calibration::Calibration;
 use crate::diagnose::rolling::RollingDiagnosis;
 use crate::diagnose::{diagnose, Diagnosis, Settings};
 use crate::io::case::read_case_unchanged;
@@ -20,15 +21,15 @@ pub struct Diagnose;
 
 static INFO: StageInfo = StageInfo {
     name: "diagnose",
-    version: 11,
-    summary: "Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt; rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted, ranked by BIC, or `unexplained`.",
+    version: 12,
+    summary: "Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt; rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted jointly with the nominal parameters the equipment file's `uncertainty` block says are known only roughly (calibrated first), ranked by BIC; `ambiguous` when two explain the records about equally well, or `unexplained`.",
     inputs: InputKind::Files(&[RecordFormat::Case]),
     outputs: &[
-        OutputInfo { name: "diagnosis", description: "per case: mismatch, verdict, window_start_s, window_end_s, rmse_before, rmse_after, explanation, candidates (JSON)", kind: OutputKind::Table },
+        OutputInfo { name: "diagnosis", description: "per case: mismatch, verdict, window_start_s, window_end_s, rmse_before, rmse_after, explanation, candidates (JSON), calibration (JSON)", kind: OutputKind::Table },
         OutputInfo { name: "accel", description: "per case: observed, baseline and model top acceleration and the residuals before/after", kind: OutputKind::TimeSeries },
         OutputInfo { name: "camera", description: "per case: observed, baseline and model rotation and the residuals before/after", kind: OutputKind::TimeSeries },
         OutputInfo { name: "reports", description: "<case>.png: records, models, residuals, window shaded", kind: OutputKind::Files },
-        OutputInfo { name: "diagnosis.json", description: "the contract (verdict, window, rmse before/after, candidates, explanation): at the stage folder's root for one case, in `<case>/` for each of several", kind: OutputKind::Page },
+        OutputInfo { name: "diagnosis.json", description: "the contract (verdict, window, rmse before/after, candidates, explanation, calibration): at the stage folder's root for one case, in `<case>/` for each of several", kind: OutputKind::Page },
     ],
     params: &[
         ParamSpec { name: "exceedance_sigma", kind: ParamKind::Float, default: Some("4.0"), unit: "", description: "a residual beyond this many noise standard deviations counts as a disagreement (5 within 0.1 s flag a mismatch)", range: Some((2.0, 20.0)) },
@@ -126,6 +127,7 @@ pub fn diagnosis_json(d: &Diagnosis) -> Value {
                 "overturn_time_s": c.prediction.overturn.map(|o| o.0),
                 "overturn_side": c.prediction.overturn.map(|o| o.1),
                 "explanation": c.sentence,
+                "calibration": calibration_json(&c.calibration),
             })
         })
         .collect();
@@ -140,8 +142,21 @@ pub fn diagnosis_json(d: &Diagnosis) -> Value {
         "noise": {"accel_mps2": d.accel_noise_mps2, "camera_rad": d.camera_noise_rad},
         "candidates": candidates,
         "explanation": d.explanation,
+        "calibration": calibration_json(&d.calibration),
         "shakeflow_version": env!("CARGO_PKG_VERSION"),
     })
+}
+
+/// The contract's `calibration`: for each parameter the equipment file's `uncertainty` block
+/// names, `{stated, fitted, sd, within}` (lists element-wise; `within`: fitted within 3 sd of
+/// stated); `{}` without the block.
+pub fn calibration_json(c: &Calibration) -> Value {
+    let entries: serde_json::Map<String, Value> = c
+        .entries()
+        .into_iter()
+        .map(|(key, entry)| (key, serde_json::to_value(entry).expect("numbers and booleans are JSON")))
+        .collect();
+    Value::Object(entries)
 }
 
 pub fn json_bytes(d: &Diagnosis) -> String {
@@ -218,7 +233,7 @@ fn summary_table(rows: &[(String, AnyDiagnosis)]) -> Table {
     });
     t.push(text(
         "verdict",
-        "none | unexplained; rocking: sliding | mass_change | restitution | flexibility | obstacle_impact | sensor_tilt; rolling: lateral_impact | mass_change | caster_brake | swivel_jam",
+        "none | unexplained | ambiguous; rocking: sliding | mass_change | restitution | flexibility | obstacle_impact | sensor_tilt; rolling: lateral_impact | mass_change | caster_brake | swivel_jam",
         rows.iter().map(|r| r.1.verdict().to_string()).collect(),
     ));
     t.push(optional(
@@ -244,6 +259,11 @@ fn summary_table(rows: &[(String, AnyDiagnosis)]) -> Table {
         "candidates",
         "every fitted hypothesis (JSON)",
         rows.iter().map(|r| r.1.json()["candidates"].to_string()).collect(),
+    ));
+    t.push(text(
+        "calibration",
+        "per uncertain nominal parameter: stated, fitted, sd, within 3 sd (JSON; {} when the equipment file has no uncertainty block)",
+        rows.iter().map(|r| r.1.json()["calibration"].to_string()).collect(),
     ));
     t
 }
@@ -455,6 +475,7 @@ pub fn rolling_json(d: &RollingDiagnosis) -> Value {
         "judged": d.judged.map(|(a, b)| json!({"start_s": a, "end_s": b})),
         "candidates": candidates,
         "explanation": d.explanation,
+        "calibration": calibration_json(&d.calibration),
         "shakeflow_version": env!("CARGO_PKG_VERSION"),
     })
 }

@@ -39,6 +39,7 @@ mod fit;
 
 use rayon::prelude::*;
 
+use super::calibration::{self, Calibration, Uncertain, UnitModel};
 use super::{Observed, Settings};
 use crate::physics::rolling::{simulate_altered, Alteration, Cart, Excitation, Friction, Options};
 use evidence::{Evidence, Misfit};
@@ -69,6 +70,96 @@ pub struct RollingCase {
     pub accel_noise_mps2: f64,
     pub camera_noise_m: f64,
     pub camera_noise_rad: f64,
+    /// The nominal parameters the equipment file says are known only roughly (its
+    /// `uncertainty` block; empty: every stated value is taken as exact).
+    pub uncertain: Vec<Uncertain>,
+}
+
+/// The nominal cart's parameters by the equipment file's keys (`simulate_rolling`'s).
+impl UnitModel for RollingCase {
+    fn nominal_keys(&self) -> Vec<(&'static str, usize)> {
+        let scalars = [
+            "length_m",
+            "width_m",
+            "platform_mass_kg",
+            "wheel_diameter_m",
+            "wheel_width_m",
+            "wheel_mass_kg",
+            "yaw0_deg",
+            "mu_s_roll",
+            "mu_s_swivel",
+            "mu_k_roll",
+            "mu_k_swivel",
+            "beta_spm",
+            "gamma_n",
+            "p",
+            "trail_m",
+            "swivel_arm_m",
+        ];
+        let mut keys: Vec<(&'static str, usize)> = scalars.iter().map(|k| (*k, 1)).collect();
+        keys.insert(7, ("steer0_deg", 4));
+        keys
+    }
+
+    fn parameter(&self, key: &str, index: usize) -> Option<f64> {
+        let (c, f) = (&self.cart, &self.friction);
+        Some(match key {
+            "length_m" => c.length_m,
+            "width_m" => c.width_m,
+            "platform_mass_kg" => c.platform_mass_kg,
+            "wheel_diameter_m" => c.wheel_diameter_m,
+            "wheel_width_m" => c.wheel_width_m,
+            "wheel_mass_kg" => c.wheel_mass_kg,
+            "trail_m" => c.trail_m,
+            "swivel_arm_m" => c.swivel_arm_m,
+            "yaw0_deg" => self.options.yaw0_rad.to_degrees(),
+            "steer0_deg" => self.options.steer0_rad.get(index)?.to_degrees(),
+            "mu_s_roll" => f.roll.mu_s,
+            "mu_k_roll" => f.roll.mu_k,
+            "mu_s_swivel" => f.swivel.mu_s,
+            "mu_k_swivel" => f.swivel.mu_k,
+            "beta_spm" => f.roll.beta_spm,
+            "gamma_n" => f.roll.gamma_n,
+            "p" => f.roll.p,
+            _ => return None,
+        })
+    }
+
+    fn set_parameter(&mut self, key: &str, index: usize, value: f64) -> Result<(), String> {
+        let (c, f) = (&mut self.cart, &mut self.friction);
+        match key {
+            "length_m" => c.length_m = value,
+            "width_m" => c.width_m = value,
+            "platform_mass_kg" => c.platform_mass_kg = value,
+            "wheel_diameter_m" => c.wheel_diameter_m = value,
+            "wheel_width_m" => c.wheel_width_m = value,
+            "wheel_mass_kg" => c.wheel_mass_kg = value,
+            "trail_m" => c.trail_m = value,
+            "swivel_arm_m" => c.swivel_arm_m = value,
+            "yaw0_deg" => self.options.yaw0_rad = value.to_radians(),
+            "steer0_deg" => {
+                *self.options.steer0_rad.get_mut(index).ok_or("steer0_deg has 4 elements")? = value.to_radians()
+            }
+            "mu_s_roll" => f.roll.mu_s = value,
+            "mu_k_roll" => f.roll.mu_k = value,
+            "mu_s_swivel" => f.swivel.mu_s = value,
+            "mu_k_swivel" => f.swivel.mu_k = value,
+            "beta_spm" => (f.roll.beta_spm, f.swivel.beta_spm) = (value, value),
+            "gamma_n" => (f.roll.gamma_n, f.swivel.gamma_n) = (value, value),
+            "p" => (f.roll.p, f.swivel.p) = (value, value),
+            _ => return Err(format!("`{key}` is not a parameter of this cart")),
+        }
+        self.cart.check(false)?;
+        self.friction.check()
+    }
+
+    fn physical_range(&self, key: &str) -> (f64, f64) {
+        match key {
+            "yaw0_deg" | "steer0_deg" => (f64::NEG_INFINITY, f64::INFINITY),
+            "gamma_n" | "beta_spm" | "swivel_arm_m" => (0.0, f64::INFINITY),
+            _ => (f64::MIN_POSITIVE, f64::INFINITY),
+        }
+    }
 }
 
 /// What a cart model says the sensors saw, on the floor's time base (NaN past the end of a
@@ -260,6 +351,7 @@ pub(crate) fn test_cart(name: &str, floor_ax_mps2: Vec<f64>, floor_ay_mps2: Vec<
         accel_noise_mps2: 0.02,
         camera_noise_m: 0.0015,
         camera_noise_rad: 0.002,
+        uncertain: Vec::new(),
     }
 }
 
@@ -340,17 +432,52 @@ pub struct RollingDiagnosis {
     pub baseline: Track,
     pub model: Track,
     pub evidence: Evidence,
+    /// The uncertain parameters as calibrated with the nominal cart (empty: no `uncertainty` block).
+    pub calibration: Calibration,
 }
 
-pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagnosis, String> {
-    if case.accel.is_none() && case.camera.is_none() {
+/// Horizons of the calibration past the stated cart's first disagreement (s): a cart's
+/// sensitivity makes a longer one rugged, and each trial runs the cart that far.
+const CALIBRATION_HORIZONS_S: [f64; 3] = [1.0, 3.0, 6.0];
+/// A calibration trial may cost this many times the stated cart's evaluations per sample.
+const CALIBRATION_BUDGET_FACTOR: f64 = 4.0;
+
+/// The uncertain parameters fitted with the nominal cart (priors of the stated sd) over the
+/// records up to a few seconds past the stated cart's first disagreement (none: the stated
+/// values, nothing to explain). Each trial is the cart from rest to the horizon only.
+fn calibrate_nominal(stated: &RollingCase, evidence: &Evidence, stated_track: &Track) -> Calibration {
+    if stated.uncertain.is_empty() {
+        return Calibration::default();
+    }
+    let Some(window) = evidence.window(stated_track) else {
+        return Calibration::stated(stated.uncertain.clone());
+    };
+    let horizons = CALIBRATION_HORIZONS_S.map(|h| (window.0 + h).min(stated.end_s()));
+    let per_sample = stated_track.evaluations as f64 / stated.samples() as f64;
+    let chi2 = |m: &RollingCase, until: f64| {
+        let Ok(start) = m.nominal_start() else { return f64::INFINITY };
+        let samples = (until - m.t0_s) / m.dt_s + 1.0;
+        let allowance = (CALIBRATION_BUDGET_FACTOR * per_sample * samples).max(BUDGET_FLOOR * samples) as usize;
+        m.altered(&start, &Alteration::default(), m.t0_s, until, Some(allowance))
+            .map_or(f64::INFINITY, |t| evidence.misfit_between(&t, f64::NEG_INFINITY, until).chi2)
+    };
+    calibration::calibrate_model(stated, &stated.uncertain, None, &horizons, false, &chi2)
+}
+
+pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiagnosis, String> {
+    if stated.accel.is_none() && stated.camera.is_none() {
         return Err("the case has neither an accelerometer nor a camera record to compare with".into());
     }
-    if case.samples() < 3 {
+    if stated.samples() < 3 {
         return Err("the floor record needs at least 3 samples".into());
     }
-    let evidence = Evidence::new(case, settings.exceedance_sigma);
-    let baseline = case.nominal()?;
+    let evidence = Evidence::new(stated, settings.exceedance_sigma);
+    let stated_track = stated.nominal()?;
+    let calibration = calibrate_nominal(stated, &evidence, &stated_track);
+    let calibrated = calibration.apply(stated)?;
+    let case = &calibrated;
+    let moved = calibration.parameters.iter().zip(&calibration.fitted).any(|(p, v)| p.stated != *v);
+    let baseline = if moved { case.nominal()? } else { stated_track };
     let window = evidence.window(&baseline);
     // Twins only where there is something to explain, each run to the record's end: whether
     // they part before the disagreement decides if anything is blamed; where they part after it
@@ -379,12 +506,15 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
         Some(p) if p < w.1 => (w.0, p.max(w.0 + MIN_JUDGED_S).min(w.1)),
         _ => w,
     });
+    // Every calibrated parameter is paid for, by every candidate: its prior and ln N.
+    let calibration_price =
+        calibration.prior_chi2() + calibration.parameters.len() as f64 * (base_misfit.samples.max(1) as f64).ln();
     let baseline_candidate = |window: Option<(f64, f64)>| Candidate {
         effect: "none",
         params: Vec::new(),
         rmse: evidence.window_rmse(&baseline, window),
         rmse_judged: evidence.window_rmse(&baseline, judged),
-        bic: base_misfit.chi2,
+        bic: base_misfit.chi2 + calibration_price,
         score: 0.0,
         flagged: evidence.flagged(&baseline),
         flagged_early: window.map_or(0, |w| flagged_early(&evidence, &baseline, w)),
@@ -407,7 +537,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
         rmse_after,
         judged,
         candidates,
-        explanation,
+        explanation: explanation + &calibration.note(verdict == "none"),
         predictable_until_s,
         probe,
         accel_noise_mps2: case.accel_noise_mps2,
@@ -416,6 +546,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
         baseline: baseline.clone(),
         model,
         evidence: evidence.clone(),
+        calibration: calibration.clone(),
     };
     let Some(window) = window else {
         let mut only = baseline_candidate(None);
@@ -448,7 +579,7 @@ pub fn diagnose(case: &RollingCase, settings: &Settings) -> Result<RollingDiagno
             Candidate {
                 effect: effect.name(),
                 params: effect.parameter_names().iter().copied().zip(fit.params.iter().copied()).collect(),
-                bic: fit.misfit.chi2 + effect.parameter_names().len() as f64 * n.ln(),
+                bic: fit.misfit.chi2 + effect.parameter_names().len() as f64 * n.ln() + calibration_price,
                 rmse: evidence.window_rmse(&fit.track, Some(window)),
                 rmse_judged: evidence.window_rmse(&fit.track, judged),
                 score: 0.0,
