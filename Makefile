@@ -56,7 +56,7 @@ $(PY_STAMP): tests/reference/requirements.txt
 
 # The tests build with the release profile, the one `make demo` builds: the dependencies compile
 # once for both commands, not once per profile (docs/benchmarks.md, cold start).
-# The Slurm tests run against a single-node Slurm started here and stopped after (by pid, also when
+# The Slurm tests run against a multi-node test Slurm started here and stopped after (by pid, also when
 # tests fail; left running if it already ran). Without root it cannot start: those tests then fail, saying so.
 test: $(PY_STAMP) wheel-dev
 	sh tests/system/install-r.sh
@@ -96,7 +96,7 @@ bench: release $(PY_STAMP)
 	$(VENV_PY) bench/load_formats.py --shakeflow $(BIN)
 
 # Scale: the demo's per-record stages over a generated archive of TESTS tests, local and on the
-# single-node test Slurm (started and stopped here when it was not running; needs root), no-op rerun.
+# multi-node test Slurm (started and stopped here when it was not running; needs root), no-op rerun.
 TESTS ?= 200
 bench-scale: release $(PY_STAMP)
 	$(VENV_PY) bench/scale.py --shakeflow $(BIN) --tests $(TESTS)

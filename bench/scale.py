@@ -1,6 +1,7 @@
 """`make bench-scale`: the per-record stages of the demo study over a generated archive of
---tests tests (`shakeflow demo-archive --tests N`), through the local executor and through the
-single-node test Slurm (`tests/system/slurm.sh`), and a no-op rerun of the whole archive.
+--tests tests (`shakeflow demo-archive --tests N`; several sizes as `--tests 100,1000`), through
+the local executor and through the multi-node test Slurm (`tests/system/slurm.sh`), and a no-op
+rerun of the whole archive.
 
 Prints, per executor: wall time, work units run, wall time per unit, files created (artifacts
 and lockfile, not shakeflow's state folder), their bytes, the lockfile's size and the commit's
@@ -11,6 +12,11 @@ what a user sees. Figures, not assertions: ARCHITECTURE.md's scale estimate uses
 
 The local commit time is measured from `SHAKEFLOW_FAILPOINT=trace`'s `failpoint: commit.*`
 lines on standard error, timestamped as they arrive: from the commit's first step to its last.
+
+After the runs, per archive size: the engine's overhead per unit (a no-op rerun's wall time over
+the units it checks), the state each array task reads in full (the lockfile and the hash memo:
+today every task reads both, whatever its shard), and the most entries in one folder of the
+output (what a shared file system lists).
 """
 import argparse
 import os
@@ -45,6 +51,17 @@ def files_and_bytes(out: pathlib.Path):
     return n, size
 
 
+def most_entries(out: pathlib.Path):
+    """The largest folder of `out` (shakeflow's state aside): (entries, its path relative to out)."""
+    best = (0, "")
+    for dirpath, dirnames, filenames in os.walk(out):
+        relative = pathlib.Path(dirpath).relative_to(out)
+        if ".shakeflow" in relative.parts[:1]:
+            continue
+        best = max(best, (len(dirnames) + len(filenames), str(relative)))
+    return best
+
+
 def timed_run(cmd, cwd, env=None):
     """Runs cmd; returns (wall s, stderr lines with their arrival in s since the start, exit code)."""
     started = time.monotonic()
@@ -68,18 +85,33 @@ def slurm_times(job, env):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--shakeflow", required=True)
-    ap.add_argument("--tests", type=int, default=200)
+    ap.add_argument("--tests", default="200", help="archive sizes, comma-separated (100,1000)")
     ap.add_argument("--work", default="runs/bench-scale")
     ap.add_argument("--stages", default="synchronize", help="run these stages and what they need")
     ap.add_argument("--units-per-task", type=int, default=50)
     ap.add_argument("--noop-repeat", type=int, default=3)
     ap.add_argument("--no-slurm", action="store_true")
     a = ap.parse_args()
+    growth = []
+    for tests in [int(t) for t in a.tests.split(",")]:
+        growth.append((tests, measure(a, tests)))
+    if len(growth) > 1:
+        print("\ngrowth with the archive (local executor):")
+        print(f"{'tests':>6} {'units':>6} {'wall s':>8} {'commit s':>9} {'no-op s':>8} {'ms/unit':>8} "
+              f"{'state KB/task':>14} {'most entries':>13}")
+        for tests, r in growth:
+            print(f"{tests:6d} {r['units']:6d} {r['wall']:8.2f} {r['commit']:9.2f} {r['noop']:8.2f} "
+                  f"{1000 * r['noop'] / max(r['checked'], 1):8.3f} {r['state'] / 1e3:14.1f} {r['most'][0]:13d}")
+
+
+def measure(a, tests):
+    """Runs the local (and Slurm) measurements on an archive of `tests` tests; prints them and
+    returns the local figures."""
     shakeflow = str(pathlib.Path(a.shakeflow).resolve())
-    work = pathlib.Path(a.work).resolve()
+    work = pathlib.Path(a.work).resolve() / f"tests-{tests}"
     archive = work / "archive"
     work.mkdir(parents=True, exist_ok=True)
-    subprocess.run([shakeflow, "demo-archive", str(archive), "--tests", str(a.tests)], check=True)
+    subprocess.run([shakeflow, "demo-archive", str(archive), "--tests", str(tests)], check=True)
     stages = a.stages.split(",")
     report = {}
 
@@ -108,6 +140,14 @@ def main():
         noops.append(w)
     w, lines, _ = timed_run([shakeflow, "status", "pipeline.yaml"], local)
     status_wall = w
+    memo = local / "out/.shakeflow/hashes.json"
+    report["local"].update(
+        noop=min(noops),
+        # Every unit of the covered stages is checked by a no-op: the lockfile's entries.
+        checked=sum(1 for l in (local / "out/shakeflow.lock").read_text().splitlines() if l.lstrip().startswith("key: ")),
+        state=report["local"]["lock"] + (memo.stat().st_size if memo.exists() else 0),
+        most=most_entries(local / "out"),
+    )
 
     # Slurm.
     slurm_sh = ROOT / "tests/system/slurm.sh"
@@ -145,7 +185,7 @@ def main():
             if started_slurm:
                 subprocess.run(["sh", str(slurm_sh), "stop"])
 
-    print(f"\nbench-scale: {a.tests} tests, stages {', '.join(stages)} and what they need ({shakeflow})")
+    print(f"\nbench-scale: {tests} tests, stages {', '.join(stages)} and what they need ({shakeflow})")
     print(f"{'':8} {'wall s':>8} {'units':>6} {'ms/unit':>8} {'files':>6} {'MB':>8} {'lock KB':>8} {'commit s':>9}")
     for name, r in report.items():
         print(
@@ -160,6 +200,13 @@ def main():
             f"lockfile {'identical to' if s['same'] else 'DIFFERENT from'} the local run's"
         )
     print("no-op reruns: " + ", ".join(f"{w:.2f} s" for w in noops) + f"; status {status_wall:.2f} s")
+    r = report["local"]
+    print(
+        f"engine overhead per unit (no-op / units checked): {1000 * r['noop'] / max(r['checked'], 1):.3f} ms "
+        f"({r['checked']} units); state each task reads: {r['state'] / 1e3:.1f} KB (lockfile + hash memo); "
+        f"most entries in one folder: {r['most'][0]} (`{r['most'][1]}`)"
+    )
+    return r
 
 
 if __name__ == "__main__":

@@ -300,10 +300,10 @@ pub fn main() -> anyhow::Result<ExitCode> {
                     units_per_task,
                     wait,
                 };
-                let summary = executor::slurm::submit(&plan, &options, &slurm, &reporter)?;
+                let summary = executor::run(&plan, &options, &slurm, &reporter)?;
                 return Ok(exit_status(&summary));
             }
-            let summary = executor::run(&plan, &options, &reporter)?;
+            let summary = executor::run(&plan, &options, &executor::Local, &reporter)?;
             let reports = &summary.reports;
             let ran = reports.iter().filter(|r| matches!(r.outcome, Outcome::Ran { .. })).count();
             let skipped = reports.iter().filter(|r| r.outcome == Outcome::Skipped).count();
@@ -426,7 +426,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
             }
             crate::pipeline::ownership::check_output_dir(&plan.file, &input_files)?;
             let output_dir = plan.file.output_dir();
-            let lock = crate::pipeline::lock::LockFile::read(&output_dir.join(crate::pipeline::lock::LOCK_FILE))?;
+            let lock = crate::pipeline::lock::LockFile::read(&output_dir.join(crate::pipeline::layout::LOCK_FILE))?;
             crate::pipeline::ownership::check_pipeline(&plan.file, &lock)?;
             crate::pipeline::ownership::check_stage_folders(&plan, &lock)?;
             for stage in plan.stages.values() {
@@ -634,9 +634,9 @@ fn run_command_plan(plan: &Plan, output: &Path) -> anyhow::Result<(ExitCode, boo
     let created = !output.exists();
     let reporter = Reporter::new(false);
     let options = RunOptions { all_or_nothing: true, ..RunOptions::default() };
-    let result = executor::run(plan, &options, &reporter);
+    let result = executor::run(plan, &options, &executor::Local, &reporter);
     if !executor::lock_path(plan).exists() {
-        let state = output.join(crate::pipeline::lease::STATE_DIR);
+        let state = output.join(crate::pipeline::layout::STATE_DIR);
         let _ = if created { std::fs::remove_dir_all(&state) } else { std::fs::remove_dir(&state) };
         if created {
             let _ = std::fs::remove_dir(output);

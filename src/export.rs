@@ -27,8 +27,8 @@ use serde_json::{json, Value};
 use crate::error::UserError;
 use crate::io::parquet::{self, ColumnInfo};
 use crate::io::{atomic, hash};
+use crate::pipeline::layout::DATA_FILE;
 use crate::pipeline::paths::decode_component;
-use crate::pipeline::sink::DATA_FILE;
 
 /// What `export` wrote.
 #[derive(Debug)]

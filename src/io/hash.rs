@@ -2,8 +2,11 @@
 //!
 //! Reading every input and output again on each run costs seconds at archive scale (a no-op
 //! rerun of 200 tests read 600 MB), so a process may keep a [`StatMemo`]: a file's hash is
-//! reused while its device, inode, size, modification and change times are what they were when
-//! it was hashed — git's index does the same. Only files that had not changed for
+//! reused while its inode, size, modification and change times are what they were when it was
+//! hashed — git's index does the same, and like git (which compares `st_dev` only when built
+//! with `USE_STDEV`) not the device: a shared file system has another device number on every
+//! node, and a memo saved on the login node serves the array tasks. Files are remembered by
+//! absolute path, the same on every node of a shared file system. Only files that had not changed for
 //! [`MEMO_SETTLED`] when hashed are remembered (so a write within the file system's timestamp
 //! granularity after hashing cannot go unseen); the hash stays what is compared.
 
@@ -21,7 +24,6 @@ pub const MEMO_SETTLED: std::time::Duration = std::time::Duration::from_secs(2);
 /// What identifies a file's version without reading it.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 struct Stat {
-    dev: u64,
     ino: u64,
     size: u64,
     mtime_ns: i128,
@@ -33,7 +35,6 @@ impl Stat {
         use std::os::unix::fs::MetadataExt;
         let ns = |s: i64, n: i64| i128::from(s) * 1_000_000_000 + i128::from(n);
         Stat {
-            dev: meta.dev(),
             ino: meta.ino(),
             size: meta.size(),
             mtime_ns: ns(meta.mtime(), meta.mtime_nsec()),
@@ -68,10 +69,11 @@ impl StatMemo {
     pub fn hash(&self, path: &Path) -> anyhow::Result<String> {
         let Ok(meta) = std::fs::metadata(path) else { return read_and_hash(path) };
         let stat = Stat::of(&meta);
+        let key = memo_key(path);
         let remember = |stat: Stat, hash: &String| {
-            self.used.lock().expect("the memo lock is never poisoned").insert(path.to_path_buf(), (stat, hash.clone()));
+            self.used.lock().expect("the memo lock is never poisoned").insert(key.clone(), (stat, hash.clone()));
         };
-        if let Some((_, hash)) = self.known.get(path).filter(|(s, _)| *s == stat) {
+        if let Some((_, hash)) = self.known.get(&key).filter(|(s, _)| *s == stat) {
             remember(stat, hash);
             return Ok(hash.clone());
         }
@@ -96,6 +98,12 @@ impl StatMemo {
     }
 }
 
+/// How the memo names a file: its absolute path (not resolved: no system call), so a run from
+/// another folder or node finds it.
+fn memo_key(path: &Path) -> PathBuf {
+    std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf())
+}
+
 /// From now on [`hash_file`] goes through the memo saved in `file`. The first call in a
 /// process wins; later ones are ignored.
 pub fn use_memo(file: &Path) {
@@ -112,7 +120,7 @@ pub fn remember(path: &Path, hash: &str) {
         memo.used
             .lock()
             .expect("the memo lock is never poisoned")
-            .insert(path.to_path_buf(), (Stat::of(&meta), hash.to_string()));
+            .insert(memo_key(path), (Stat::of(&meta), hash.to_string()));
     }
 }
 
@@ -293,6 +301,15 @@ mod tests {
         std::fs::write(&old, "1,2,4\n").unwrap();
         set_mtime(&old);
         assert_eq!(memo.hash(&old).unwrap(), hash_bytes(b"1,2,4\n"));
+        // Saved by another node: the same file on a shared file system has another device
+        // number there (older memos recorded it); the memo still serves, named absolutely.
+        memo.save().unwrap();
+        let mut entries: Vec<serde_json::Value> = serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+        assert_eq!(entries[0][0], serde_json::json!(old), "absolute paths");
+        entries[0][1]["dev"] = serde_json::json!(0xfeed);
+        entries[0][2] = serde_json::json!("remembered");
+        std::fs::write(&file, serde_json::to_vec(&entries).unwrap()).unwrap();
+        assert_eq!(StatMemo::load(&file).hash(&old).unwrap(), "remembered");
         // A damaged memo is an empty one.
         std::fs::write(&file, "{not json").unwrap();
         assert!(StatMemo::load(&file).known.is_empty());

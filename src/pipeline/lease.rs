@@ -29,12 +29,8 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 use serde::{Deserialize, Serialize};
 
 use super::failpoint;
+use super::layout::{BREAK_FILE, LEASE_FILE, STATE_DIR};
 use crate::error::UserError;
-
-/// shakeflow's own entries in a folder it writes: the lease and unfinished commits.
-pub const STATE_DIR: &str = ".shakeflow";
-const LEASE_FILE: &str = "lease";
-const BREAK_FILE: &str = "lease.break";
 
 /// How often a holder shows it is alive.
 pub const HEARTBEAT: Duration = Duration::from_secs(30);
@@ -99,6 +95,14 @@ impl Lease {
     /// Takes the lease of `root` (created if missing) or says who holds it.
     pub fn acquire(root: &Path) -> Result<Lease, UserError> {
         let dir = root.join(STATE_DIR);
+        if fs::symlink_metadata(&dir).is_ok_and(|m| m.file_type().is_symlink()) {
+            // Transactions are made and removed in it: through a link, outside the output folder.
+            return Err(UserError::new(format!(
+                "`{}` is a symbolic link: shakeflow keeps its transactions there and never writes or removes through a link",
+                dir.display()
+            ))
+            .hint("remove the link (it is shakeflow's own state folder; the link's target is left as it is) and rerun"));
+        }
         fs::create_dir_all(&dir).map_err(|e| {
             UserError::new(format!("cannot create `{}`: {e}", dir.display())).hint("the output folder must be writable")
         })?;

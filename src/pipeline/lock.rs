@@ -14,7 +14,6 @@ use serde::{Deserialize, Serialize};
 use crate::error::UserError;
 use crate::io::atomic;
 
-pub const LOCK_FILE: &str = "shakeflow.lock";
 const LOCK_FORMAT: u32 = 2;
 /// The unit of a stage written by a shakeflow whose lockfile had no work units (format 1).
 pub const FORMAT_1_UNIT: &str = "(format 1)";
@@ -138,7 +137,7 @@ mod format1 {
                     let files = crate::io::hash::list_files(&output_dir.join(&name))
                         .unwrap_or_default()
                         .into_iter()
-                        .filter(|f| f != crate::pipeline::ownership::STAGE_MARKER)
+                        .filter(|f| f != crate::pipeline::layout::STAGE_MARKER)
                         .map(|f| (f, String::new()))
                         .collect();
                     let unit = super::UnitLock { key: String::new(), inputs: BTreeMap::new(), files, flagged: None };

@@ -2,6 +2,8 @@
 
 pub mod executor;
 pub mod failpoint;
+pub mod info;
+pub mod layout;
 pub mod lease;
 pub mod locate;
 pub mod lock;

@@ -10,12 +10,11 @@ use std::path::{Component, Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use super::layout::{LOCK_FILE, STAGE_MARKER, STATE_DIR};
 use super::lock::LockFile;
 use super::plan::Plan;
 use super::spec::PipelineFile;
 use crate::error::UserError;
-
-pub const STAGE_MARKER: &str = ".shakeflow-stage";
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct StageMarker {
@@ -168,9 +167,8 @@ pub fn check_stage_folders(plan: &Plan, lock: &LockFile) -> Result<(), UserError
 
 /// Whether `dir` holds nothing but shakeflow's state folder and lockfile.
 fn is_empty(dir: &Path) -> bool {
-    std::fs::read_dir(dir).is_ok_and(|entries| {
-        entries.flatten().all(|e| e.file_name() == super::lease::STATE_DIR || e.file_name() == super::lock::LOCK_FILE)
-    })
+    std::fs::read_dir(dir)
+        .is_ok_and(|entries| entries.flatten().all(|e| e.file_name() == STATE_DIR || e.file_name() == LOCK_FILE))
 }
 
 /// How the lockfile names the pipeline that owns its folder: the pipeline file's path relative
@@ -208,7 +206,7 @@ pub fn check_pipeline(file: &PipelineFile, lock: &LockFile) -> Result<(), UserEr
             .hint(format!(
                 "two pipelines writing one folder would replace each other's stages: give this one its own `output_dir`. \
                  If you moved or renamed the pipeline file, delete `{}` to hand the folder over (every stage then reruns)",
-                file.output_dir().join(super::lock::LOCK_FILE).display()
+                file.output_dir().join(LOCK_FILE).display()
             ))),
         _ => Ok(()),
     }

@@ -242,7 +242,7 @@ fn plan_stage(
             .error_at(&["stages", name], format!("stage name `{name}` cannot name a folder: {problem}"))
             .hint("each stage writes the folder `<output_dir>/<stage name>`: use letters, digits, `_`, `-`, `.`"));
     }
-    if name == super::lock::LOCK_FILE {
+    if name == super::layout::LOCK_FILE {
         return Err(file
             .error_at(&["stages", name], format!("stage name `{name}` is the lockfile's name"))
             .hint("choose another stage name"));

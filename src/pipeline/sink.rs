@@ -8,16 +8,12 @@ use std::sync::{Arc, Mutex};
 
 use anyhow::{anyhow, bail};
 
-use super::stage::{partition_path, OutputInfo, OutputKind, Partition, StageInfo};
+use super::info::{OutputInfo, OutputKind, StageInfo};
+use super::layout::{partition_path, Partition, DATA_FILE, LOCK_FILE, MCAP_DIR, MCAP_FILE, STAGE_MARKER};
 use crate::io::hash::{self, KnownHashes};
 use crate::io::{mcap, parquet};
 use crate::pipeline::memo::TableMemo;
 use crate::table::Table;
-
-pub const DATA_FILE: &str = "data.parquet";
-pub const MCAP_FILE: &str = "data.mcap";
-/// MCAP twins live under `<stage>/mcap/<output>/`, apart from the Parquet dataset `<stage>/<output>/`.
-pub const MCAP_DIR: &str = "mcap";
 
 pub struct OutputSink {
     root: PathBuf,
@@ -180,8 +176,8 @@ impl OutputSink {
         if self.output_info(output)?.kind != OutputKind::Page {
             bail!("stage type `{}` does not declare `{output}` as a page", self.info.name);
         }
-        let reserved = self.info.outputs.iter().any(|o| o.name == record)
-            || [MCAP_DIR, super::ownership::STAGE_MARKER, super::lock::LOCK_FILE].contains(&record);
+        let reserved =
+            self.info.outputs.iter().any(|o| o.name == record) || [MCAP_DIR, STAGE_MARKER, LOCK_FILE].contains(&record);
         let problem = super::paths::component_problem(record)
             .or_else(|| reserved.then(|| "the stage folder holds an entry of that name".to_string()));
         if let Some(problem) = problem {

@@ -9,10 +9,12 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+pub use super::info::{InputKind, OutputInfo, OutputKind, StageInfo};
+pub use super::layout::{partition_path, Partition};
 use super::memo::TableMemo;
-use super::params::{ParamError, ParamSpec, Params};
+use super::params::{ParamError, Params};
 use super::sink::OutputSink;
-use super::spec::{RecordFormat, SourceSpec};
+use super::spec::SourceSpec;
 use crate::table::Table;
 
 /// The stage types a program offers, by the name pipelines use (the binary hands the engine the
@@ -28,77 +30,6 @@ impl Registry {
     pub fn names(&self) -> Vec<&'static str> {
         self.0.iter().map(|s| s.info().name).collect()
     }
-}
-
-/// What a stage type consumes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum InputKind {
-    /// Record sources declared under `inputs:` (raw files).
-    Sources,
-    /// Datasets written by other stages.
-    Datasets,
-    /// Sources of these non-record formats (an image sequence, control points), whose files
-    /// the stage reads itself; a `frames` source may name folders.
-    Files(&'static [RecordFormat]),
-}
-
-#[derive(Debug, Clone, Copy)]
-pub struct OutputInfo {
-    pub name: &'static str,
-    pub description: &'static str,
-    pub kind: OutputKind,
-}
-
-/// What an output holds, which decides how the sink writes it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum OutputKind {
-    /// Parquet tables, one per record.
-    Table,
-    /// Parquet tables with a `time_s` column, also written as MCAP for Foxglove when the stage's
-    /// `mcap` parameter (`stages::MCAP_PARAM`) asks for it.
-    TimeSeries,
-    /// Files written as they are (figures, reports).
-    Files,
-    /// One file written as it is, at the root of the stage's folder and named by the output
-    /// (`report`'s `index.html`, opened by a person rather than read by another stage).
-    Page,
-}
-
-impl OutputKind {
-    /// How `shakeflow stages` names the files of an output.
-    pub fn describe(self) -> &'static str {
-        match self {
-            OutputKind::Table => "Parquet",
-            OutputKind::TimeSeries => "Parquet (+ MCAP with `mcap: true`)",
-            OutputKind::Files => "files",
-            OutputKind::Page => "one file",
-        }
-    }
-}
-
-#[derive(Debug)]
-pub struct StageInfo {
-    pub name: &'static str,
-    /// Bumped whenever the stage's results change for the same inputs; part of the cache key.
-    pub version: u32,
-    pub summary: &'static str,
-    pub inputs: InputKind,
-    pub outputs: &'static [OutputInfo],
-    pub params: &'static [ParamSpec],
-}
-
-/// Partition keys of a record (`motion=FB-4/floor=5`), in order.
-pub type Partition = Vec<(String, String)>;
-
-/// The dataset folder of a record: `key=value` segments, each value percent-encoded where it is
-/// not a plain name (`090 (CUE)` → `090%20%28CUE%29`), so no value can leave its folder.
-pub fn partition_path(partition: &Partition) -> String {
-    use super::paths::encode_component;
-    partition
-        .iter()
-        .map(|(k, v)| format!("{}={}", encode_component(k), encode_component(v)))
-        .collect::<Vec<_>>()
-        .join("/")
 }
 
 /// How a record's partition is named inside tables (a `record` or `case` column): its values

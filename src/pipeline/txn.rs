@@ -15,7 +15,14 @@
 //! (steps 4–5), one without is removed whole. Every move is a rename inside `root`, so nothing is
 //! copied and a crash at any instant leaves either the old state or a journal that completes
 //! the new one (`tests/it/crash_safety.rs` kills a run at every step and checks).
+//!
+//! No move goes through a symbolic link: a folder between `root` and an entry that is a link
+//! (a partition folder replaced by a link to a user's folder) would make the rename write or
+//! remove outside `root`. The commit refuses it before the commit point (nothing changes), and
+//! rolling forward refuses it too (the commit completes once the link is gone); an entry that is
+//! itself a link is renamed, which moves the link, never what it points to.
 
+use std::collections::HashSet;
 use std::fs;
 use std::path::{Path, PathBuf};
 
@@ -23,11 +30,11 @@ use anyhow::{bail, Context};
 use serde::{Deserialize, Serialize};
 
 use super::failpoint;
-use super::lease::{Lease, STATE_DIR};
-use super::lock::{LockFile, LOCK_FILE};
+use super::layout::{JOURNAL, LOCK_FILE, STATE_DIR, TXN_PREFIX};
+use super::lease::Lease;
+use super::lock::LockFile;
+use crate::error::UserError;
 
-const TXN_PREFIX: &str = "txn-";
-const JOURNAL: &str = "journal";
 const JOURNAL_FORMAT: u32 = 1;
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -66,6 +73,10 @@ impl Transaction {
     /// Makes the new entries, removals and lockfile the root's, all at once (see the module doc).
     /// An error before the commit point leaves the root exactly as it was.
     pub fn commit(self, install: &[String], remove: &[String], lock: Option<&LockFile>) -> anyhow::Result<()> {
+        if let Some(link) = link_on_the_way(&self.root, install.iter().chain(remove)) {
+            self.abort();
+            return Err(link_refused(&link, "nothing was changed").into());
+        }
         let prepared = (|| -> anyhow::Result<()> {
             if let Some(lock) = lock {
                 failpoint::hit("commit.write_lockfile")?;
@@ -124,6 +135,11 @@ fn roll_forward(root: &Path, dir: &Path) -> anyhow::Result<()> {
     if journal.version != JOURNAL_FORMAT {
         bail!("the commit journal `{}` has format {}", dir.join(JOURNAL).display(), journal.version);
     }
+    if let Some(link) = link_on_the_way(root, journal.install.iter().chain(&journal.remove)) {
+        let state =
+            "a committed run's results are not all in place yet: they are, at the next run once the link is gone";
+        return Err(link_refused(&link, state).into());
+    }
     let old = dir.join("old");
     fs::create_dir_all(&old)?;
     let move_aside = |entry: &str| -> anyhow::Result<()> {
@@ -180,6 +196,48 @@ fn roll_forward(root: &Path, dir: &Path) -> anyhow::Result<()> {
     failpoint::hit("commit.journal_removed")?;
     fs::remove_dir_all(dir).with_context(|| format!("removing `{}`", dir.display()))?;
     Ok(())
+}
+
+/// The first folder between `root` and one of `entries` (paths relative to it) that is a
+/// symbolic link: moving the entry would write or remove through the link, outside `root`.
+/// Each folder is looked at once (`lstat`, never following); a folder that does not exist ends
+/// the walk down that path.
+fn link_on_the_way<'e>(root: &Path, entries: impl IntoIterator<Item = &'e String>) -> Option<PathBuf> {
+    let mut seen: HashSet<PathBuf> = HashSet::new();
+    for entry in entries {
+        let mut folder = PathBuf::new();
+        let mut components = Path::new(entry).components().peekable();
+        while let Some(component) = components.next() {
+            if components.peek().is_none() {
+                break; // the entry itself: renamed, not followed
+            }
+            folder.push(component);
+            if !seen.insert(folder.clone()) {
+                continue;
+            }
+            match fs::symlink_metadata(root.join(&folder)) {
+                Ok(meta) if meta.file_type().is_symlink() => return Some(root.join(&folder)),
+                Ok(_) => {}
+                Err(_) => break, // absent: nothing below it exists either
+            }
+        }
+    }
+    None
+}
+
+/// The error for a link found on the way to an entry; `state` says what became of the commit.
+fn link_refused(link: &Path, state: &str) -> UserError {
+    let target = fs::read_link(link).map(|t| t.display().to_string()).unwrap_or_default();
+    UserError::new(format!(
+        "`{}` is a symbolic link (to `{target}`) inside the output folder: shakeflow never writes or removes \
+         through a link, which would change files outside its output folder; {state}",
+        link.display()
+    ))
+    .hint(format!(
+        "remove the link (`rm '{}'` removes the link only, not what it points to) or replace it by a folder, \
+         and rerun",
+        link.display()
+    ))
 }
 
 /// Forces a folder's entries (renames into or out of it) to disk.
@@ -299,6 +357,75 @@ mod tests {
         let recovery = recover(&lease).unwrap();
         assert_eq!(recovery, Recovery { completed: 1, discarded: 3 });
         assert_eq!(tree(root.path()), [".notes.txt", "a/old", "c/new"]);
+    }
+
+    /// A user's folder (`mine`) linked in as a record folder of the output.
+    fn linked_record(root: &Path) -> PathBuf {
+        let mine = root.join("mine");
+        fs::create_dir_all(&mine).unwrap();
+        fs::write(mine.join("thesis.txt"), "years of work").unwrap();
+        let out = root.join("out");
+        fs::create_dir_all(out.join("load/records")).unwrap();
+        std::os::unix::fs::symlink(&mine, out.join("load/records/motion=FB-1")).unwrap();
+        mine
+    }
+
+    fn names(dir: &Path) -> Vec<String> {
+        crate::io::hash::list_files(dir).unwrap()
+    }
+
+    #[test]
+    fn a_commit_through_a_link_is_refused_before_its_commit_point() {
+        let root = crate::tempdir::tempdir().unwrap();
+        let mine = linked_record(root.path());
+        let out = root.path().join("out");
+        fs::write(mine.join("data.parquet"), "the user's").unwrap();
+        let lease = Lease::acquire(&out).unwrap();
+        for (install, remove) in [
+            (vec!["load/records/motion=FB-1/data.parquet".to_string()], vec![]),
+            (vec![], vec!["load/records/motion=FB-1/data.parquet".to_string()]),
+        ] {
+            let txn = Transaction::begin(&lease).unwrap();
+            let new = txn.new_path("load/records/motion=FB-1");
+            fs::create_dir_all(&new).unwrap();
+            fs::write(new.join("data.parquet"), "ours").unwrap();
+            let error = txn.commit(&install, &remove, Some(&LockFile::empty())).unwrap_err().to_string();
+            assert!(
+                error.contains("motion=FB-1` is a symbolic link") && error.contains("nothing was changed"),
+                "{error}"
+            );
+            assert_eq!(names(&mine), ["data.parquet", "thesis.txt"]);
+            assert_eq!(fs::read_to_string(mine.join("data.parquet")).unwrap(), "the user's");
+            assert!(!out.join(LOCK_FILE).exists(), "nothing committed");
+        }
+        assert_eq!(recover(&lease).unwrap(), Recovery::default(), "refused transactions leave nothing behind");
+        // The link itself as an entry is moved, never followed: removing it leaves its target.
+        let txn = Transaction::begin(&lease).unwrap();
+        txn.commit(&[], &["load/records/motion=FB-1".into()], None).unwrap();
+        assert!(fs::symlink_metadata(out.join("load/records/motion=FB-1")).is_err());
+        assert_eq!(names(&mine), ["data.parquet", "thesis.txt"]);
+    }
+
+    #[test]
+    fn rolling_forward_through_a_link_made_after_the_commit_point_is_refused_until_it_is_gone() {
+        let root = crate::tempdir::tempdir().unwrap();
+        let mine = linked_record(root.path());
+        let out = root.path().join("out");
+        let lease = Lease::acquire(&out).unwrap();
+        let txn = Transaction::begin(&lease).unwrap();
+        fs::create_dir_all(txn.new_path("load/records/motion=FB-1")).unwrap();
+        fs::write(txn.new_path("load/records/motion=FB-1/data.parquet"), "ours").unwrap();
+        let entry = "load/records/motion=FB-1/data.parquet".to_string();
+        let journal = Journal { version: 1, install: vec![entry], remove: vec![], lockfile: false };
+        fs::write(txn.dir.join(JOURNAL), serde_json::to_vec(&journal).unwrap()).unwrap();
+        std::mem::forget(txn);
+        let error = recover(&lease).unwrap_err().to_string();
+        assert!(error.contains("motion=FB-1` is a symbolic link") && error.contains("at the next run"), "{error}");
+        assert_eq!(names(&mine), ["thesis.txt"]);
+        fs::remove_file(out.join("load/records/motion=FB-1")).unwrap();
+        assert_eq!(recover(&lease).unwrap(), Recovery { completed: 1, discarded: 0 });
+        assert_eq!(fs::read_to_string(out.join("load/records/motion=FB-1/data.parquet")).unwrap(), "ours");
+        assert_eq!(names(&mine), ["thesis.txt"]);
     }
 
     #[test]

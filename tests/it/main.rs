@@ -46,6 +46,7 @@ mod rolling_swivel;
 mod sdof_identification;
 mod slurm_client;
 mod slurm_executor;
+mod slurm_nodes;
 mod tidy;
 mod toppling_demo_archive;
 mod toppling_demo_cases;

@@ -267,3 +267,68 @@ fn a_second_pipeline_writing_into_anothers_output_dir_is_refused() {
     }
     assert_eq!(before, snapshot(&root.join("out")));
 }
+
+/// The files below `dir`, names only, links not followed: what a user sees in their own folder.
+fn names(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> =
+        std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    names.sort();
+    names
+}
+
+/// Issue 34, as a user met it: a partition folder of `load/records/` replaced by a link to a
+/// folder of theirs. Neither `run --force load` (which wrote `data.parquet` into their folder)
+/// nor a run after that record left the archive (which deleted a file there) writes or removes
+/// through the link: each refuses, naming it, and changes nothing; without the link the run
+/// completes.
+#[test]
+fn a_symbolic_link_inside_the_output_folder_is_never_followed() {
+    let project = small_project();
+    let root = project.path();
+    let out = shakeflow(&["run", "pipeline.yaml"], root);
+    assert!(out.status.success(), "{}", stderr(&out));
+    write(root, "mine/thesis.txt", "years of work");
+    let partition = root.join("out/load/records/motion=FB-1");
+    std::fs::remove_dir_all(&partition).unwrap();
+    std::os::unix::fs::symlink(root.join("mine"), &partition).unwrap();
+    let link = "out/load/records/motion=FB-1` is a symbolic link";
+    let refuses = |args: &[&str]| {
+        let before = snapshot(root);
+        let out = shakeflow(args, root);
+        let message = stderr(&out);
+        assert_eq!(out.status.code(), Some(1), "{args:?} did not refuse:\n{message}");
+        assert!(message.contains(link) && message.contains("nothing was changed"), "{message}");
+        assert!(!message.contains("panicked"), "{message}");
+        assert_eq!(names(&root.join("mine")), ["thesis.txt"], "{args:?} wrote or removed through the link");
+        assert_eq!(before, snapshot(root), "{args:?} changed files");
+    };
+    refuses(&["run", "pipeline.yaml", "--force", "load"]);
+    refuses(&["run", "pipeline.yaml"]);
+    // The record leaves the archive: its files would go, through the link.
+    std::fs::rename(root.join("archive/FB-1"), root.join("FB-1.away")).unwrap();
+    refuses(&["run", "pipeline.yaml"]);
+    assert!(std::fs::symlink_metadata(&partition).unwrap().file_type().is_symlink(), "the link itself stays");
+    // Without the link, the run completes: the gone record's outputs are removed.
+    std::fs::remove_file(&partition).unwrap();
+    let out = shakeflow(&["run", "pipeline.yaml"], root);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!partition.exists() && root.join("out/load/records/motion=FB-2/data.parquet").is_file());
+    assert_eq!(std::fs::read_to_string(root.join("mine/thesis.txt")).unwrap(), "years of work");
+}
+
+/// shakeflow's own state folder as a link: its transactions would be made and removed through it.
+#[test]
+fn a_state_folder_that_is_a_link_is_refused() {
+    let project = small_project();
+    let root = project.path();
+    write(root, "mine/thesis.txt", "years of work");
+    std::fs::create_dir_all(root.join("out")).unwrap();
+    std::os::unix::fs::symlink(root.join("mine"), root.join("out/.shakeflow")).unwrap();
+    let before = snapshot(root);
+    let out = shakeflow(&["run", "pipeline.yaml"], root);
+    let message = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{message}");
+    assert!(message.contains("out/.shakeflow` is a symbolic link"), "{message}");
+    assert_eq!(before, snapshot(root));
+    assert_eq!(names(&root.join("mine")), ["thesis.txt"]);
+}

@@ -1,4 +1,4 @@
-//! The Slurm client against the real single-node Slurm of `tests/system/slurm.sh`: job arrays
+//! The Slurm client against the real test Slurm of `tests/system/slurm.sh`: job arrays
 //! with a throttle, aftercorr chains, failures and cancellations seen per task, split arrays.
 //! Each test names its jobs after itself, so they run side by side.
 

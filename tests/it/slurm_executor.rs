@@ -1,4 +1,4 @@
-//! The Slurm executor against the real single-node Slurm of `tests/system/slurm.sh` (`make test`
+//! The Slurm executor against the real test Slurm of `tests/system/slurm.sh` (`make test`
 //! starts it): the same artifacts and lockfile as a local run, a failed record failing its unit
 //! only, a cancelled task's shard the only one a rerun submits, and `status` during a run.
 
@@ -263,4 +263,37 @@ fn a_branch_still_running_does_not_taint_another_on_slurm() {
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(root.join("out/baseline/records/motion=FB-1/data.parquet").is_file());
     assert!(!root.join("out/load/records").exists(), "baseline ran in full: load's tables go");
+}
+
+/// Issue 34 on Slurm: a partition folder replaced by a link to a user's folder. The commit job
+/// refuses to write through it (`--wait` says why, naming the link), commits nothing and
+/// releases the lease; without the link the next run commits.
+#[test]
+fn the_slurm_commit_never_writes_through_a_symbolic_link() {
+    let project = small_project();
+    let root = project.path();
+    let out = slurm_run(root, &["--wait"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    std::fs::create_dir_all(root.join("mine")).unwrap();
+    std::fs::write(root.join("mine/thesis.txt"), "years of work").unwrap();
+    let partition = root.join("out/load/records/motion=FB-1");
+    std::fs::remove_dir_all(&partition).unwrap();
+    std::os::unix::fs::symlink(root.join("mine"), &partition).unwrap();
+    let before = artifacts(root);
+    let out = slurm_run(root, &["--wait", "--force", "load"]);
+    let log = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{log}");
+    assert!(
+        log.contains("committed nothing") && log.contains("out/load/records/motion=FB-1` is a symbolic link"),
+        "{log}"
+    );
+    let mine: Vec<_> = std::fs::read_dir(root.join("mine")).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(mine, ["thesis.txt"], "the commit job wrote through the link");
+    assert_eq!(before, artifacts(root), "the commit job changed the output folder");
+    assert!(!root.join("out/.shakeflow/lease").exists(), "the commit job released the lease");
+    std::fs::remove_file(&partition).unwrap();
+    let out = slurm_run(root, &["--wait"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(std::fs::symlink_metadata(&partition).unwrap().is_dir());
+    assert!(partition.join("data.parquet").is_file());
 }

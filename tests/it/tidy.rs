@@ -305,4 +305,81 @@ fn contributing_names_what_exists() {
     }
     assert!(checked > 40, "only {checked} names checked: has CONTRIBUTING.md lost its walkthroughs?");
     assert!(problems.is_empty(), "CONTRIBUTING.md names what is gone:\n{}", problems.join("\n"));
+/// The module path of a source file (`pipeline/executor/mod.rs` → `pipeline::executor`).
+fn module_path(relative: &str) -> Vec<String> {
+    let mut parts: Vec<String> = relative.split('/').map(str::to_string).collect();
+    let file = parts.pop().unwrap();
+    if file != "mod.rs" {
+        parts.push(file.trim_end_matches(".rs").to_string());
+    }
+    parts
+}
+
+/// Inside each top-level module, its submodules → the sibling submodules their production code
+/// names (`super::x`, `super::super::x`, `self::x` resolved from the file's own module, or
+/// `crate::<module>::x`), and the files that name each. A grandchild's uses count for its child.
+fn submodule_graph() -> BTreeMap<String, BTreeMap<String, BTreeSet<String>>> {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut graph: BTreeMap<String, BTreeMap<String, BTreeSet<String>>> = BTreeMap::new();
+    let ident = |s: &str| s.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect::<String>();
+    for file in files {
+        let relative = file.strip_prefix(&src).unwrap().to_string_lossy().replace('\\', "/");
+        let module = module_path(&relative);
+        if module.len() < 2 {
+            continue;
+        }
+        let Some(code) = production_code(&file) else { continue };
+        let (top, child) = (&module[0], &module[1]);
+        let mut named: Vec<Vec<String>> = Vec::new();
+        for (i, _) in code.match_indices("crate::") {
+            let path: Vec<String> = code[i + 7..].split("::").take(2).map(ident).collect();
+            named.push(path);
+        }
+        for start in ["super::", "self::"] {
+            for (i, _) in code.match_indices(start) {
+                // Only where a path starts (not `super::super::` counted twice, not `itself::`).
+                if code[..i].ends_with(|c: char| c.is_ascii_alphanumeric() || c == '_' || c == ':') {
+                    continue;
+                }
+                let mut base = module.clone();
+                let mut rest = &code[i..];
+                while let Some(after) = rest.strip_prefix("super::") {
+                    base.pop();
+                    rest = after;
+                }
+                if let Some(after) = rest.strip_prefix("self::") {
+                    rest = after;
+                }
+                base.push(ident(rest));
+                named.push(base);
+            }
+        }
+        for path in named {
+            if path.len() >= 2 && path[0] == *top && path[1] != *child && !path[1].is_empty() {
+                let (from, to) = (format!("{top}::{child}"), format!("{top}::{}", path[1]));
+                graph.entry(from).or_default().entry(to).or_default().insert(relative.clone());
+            }
+        }
+    }
+    graph
+}
+
+/// After rust-analyzer's and cargo's own tidy rules: inside a module too (the engine's lockfile,
+/// sink, ownership checks, plan and stage contract once imported each other in a ring), a
+/// submodule that names another is not named back, directly or not.
+#[test]
+fn submodules_form_no_cycle() {
+    let graph = submodule_graph();
+    assert!(graph.contains_key("pipeline::executor") && graph.contains_key("pipeline::sink"), "{graph:?}");
+    let mut cycles = Vec::new();
+    for (a, uses) in &graph {
+        for (b, files) in uses {
+            if reaches(&graph, b, a) {
+                cycles.push(format!("{a} → {b} ({files:?}) and back"));
+            }
+        }
+    }
+    assert!(cycles.is_empty(), "import cycles inside a module:\n{}", cycles.join("\n"));
 }

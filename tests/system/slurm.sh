@@ -1,12 +1,21 @@
 #!/bin/sh
-# A real single-node Slurm for the tests: Debian's slurm-wlm and munge, started without systemd and
+# A real multi-node Slurm for the tests: Debian's slurm-wlm and munge, started without systemd and
 # stopped by the pids this script recorded (docs/slurm.md, "A real Slurm in the tests").
 #
-#   tests/system/slurm.sh install   apt-get install slurm-wlm munge (root), unless already there
-#   tests/system/slurm.sh start     install, write the configuration, start munged, slurmctld, slurmd
-#                                   and wait until the node is idle; a no-op when they already run
-#   tests/system/slurm.sh stop      kill exactly the pids `start` recorded
-#   tests/system/slurm.sh status    say what runs; exit 0 when the node answers, else 1
+#   tests/system/slurm.sh install          apt-get install slurm-wlm munge (root), unless already there
+#   tests/system/slurm.sh start            install, write the configuration, start munged, slurmctld
+#                                          and one slurmd per node, and wait until the nodes are idle;
+#                                          starts only what is not running (a killed node comes back)
+#   tests/system/slurm.sh stop             kill exactly the pids `start` recorded
+#   tests/system/slurm.sh status           say what runs; exit 0 when the nodes answer, else 1
+#   tests/system/slurm.sh kill-node NODE   SIGKILL every process of NODE (its slurmd and the job
+#                                          steps it runs), as a node that crashed
+#
+# The nodes are slurmd processes of this machine, each started as `slurmd -N <node>` in a UTS
+# namespace of its own whose host name is the node's (what a job sees), each on its own port of
+# the loopback address (Slurm's multiple-slurmd mode); they share the file system, as a cluster's
+# nodes share Lustre or NFS. Partition `debug` (the default) has n1 and n2; partition `lossy` has
+# n3 alone, for the test that kills a node mid-run without touching the others' jobs.
 #
 # Everything lives in $SHAKEFLOW_SLURM_DIR (default ~/.cache/shakeflow/slurm): slurm.conf, state,
 # spool, logs, pids. Clients find it through SLURM_CONF=$SHAKEFLOW_SLURM_DIR/slurm.conf (the
@@ -17,6 +26,9 @@ set -eu
 DIR=${SHAKEFLOW_SLURM_DIR:-$HOME/.cache/shakeflow/slurm}
 CONF=$DIR/slurm.conf
 NODE=$(hostname -s)
+SHARED="n1 n2"
+LOSSY="n3"
+NODES="$SHARED $LOSSY"
 export SLURM_CONF="$CONF"
 
 say() { echo "slurm.sh: $*" >&2; }
@@ -42,14 +54,22 @@ install() {
 }
 
 write_conf() {
-    mkdir -p "$DIR/state" "$DIR/spool" "$DIR/log"
+    mkdir -p "$DIR/state" "$DIR/log"
+    for node in $NODES; do mkdir -p "$DIR/spool/$node"; done
     # RealMemory above what slurmd measures drains the node: take what it measures, less 5 %.
     mem=$(slurmd -C 2>/dev/null | sed -n 's/.*RealMemory=\([0-9]*\).*/\1/p')
     cpus=$(slurmd -C 2>/dev/null | sed -n 's/.*CPUs=\([0-9]*\).*/\1/p')
     [ -n "$mem" ] && [ -n "$cpus" ] || die "\`slurmd -C\` did not report this node's CPUs and memory"
-    mem=$((mem * 95 / 100))
+    # The machine's CPUs and memory shared out between the nodes (a node claiming more than
+    # slurmd measures is drained).
+    count=$(echo $SHARED | wc -w)
+    cpus=$((cpus / count)); [ "$cpus" -ge 1 ] || cpus=1
+    mem=$((mem * 95 / 100 / count))
+    nodes=$(echo $NODES | tr ' ' ',')
+    shared=$(echo $SHARED | tr ' ' ',')
     cat >"$CONF.tmp" <<CONF
-# Written by tests/system/slurm.sh: one node, no cgroups, no accounting database.
+# Written by tests/system/slurm.sh: nodes $nodes (slurmd -N, one UTS namespace each), no cgroups,
+# no accounting database.
 ClusterName=shakeflow
 SlurmctldHost=$NODE
 SlurmUser=root
@@ -57,11 +77,11 @@ SlurmdUser=root
 AuthType=auth/munge
 CryptoType=crypto/munge
 StateSaveLocation=$DIR/state
-SlurmdSpoolDir=$DIR/spool
+SlurmdSpoolDir=$DIR/spool/%n
 SlurmctldPidFile=$DIR/slurmctld.pid.slurm
-SlurmdPidFile=$DIR/slurmd.pid.slurm
+SlurmdPidFile=$DIR/slurmd-%n.pid.slurm
 SlurmctldLogFile=$DIR/log/slurmctld.log
-SlurmdLogFile=$DIR/log/slurmd.log
+SlurmdLogFile=$DIR/log/slurmd-%n.log
 ProctrackType=proctrack/linuxproc
 TaskPlugin=task/none
 SchedulerType=sched/backfill
@@ -78,9 +98,16 @@ MinJobAge=3600
 MaxArraySize=1001
 MaxJobCount=10000
 SchedulerParameters=sched_interval=2
-NodeName=$NODE CPUs=$cpus RealMemory=$mem State=UNKNOWN
-PartitionName=debug Nodes=$NODE Default=YES MaxTime=INFINITE State=UP
+# A node that stops answering is down after 10 s, and its jobs with it (NODE_FAIL).
+SlurmdTimeout=10
 CONF
+    port=6820
+    for node in $NODES; do
+        port=$((port + 1))
+        echo "NodeName=$node NodeHostname=$node NodeAddr=127.0.0.1 Port=$port CPUs=$cpus RealMemory=$mem State=UNKNOWN" >>"$CONF.tmp"
+    done
+    echo "PartitionName=debug Nodes=$shared Default=YES MaxTime=INFINITE State=UP" >>"$CONF.tmp"
+    echo "PartitionName=lossy Nodes=$LOSSY MaxTime=INFINITE State=UP" >>"$CONF.tmp"
     mv "$CONF.tmp" "$CONF"
 }
 
@@ -108,58 +135,106 @@ start_daemon() { # name
     echo $! >"$DIR/$1.pid"
 }
 
+# One node: `slurmd -N <node>` in a new UTS namespace named after it (unshare and sh exec, so the
+# recorded pid is slurmd's).
+start_node() { # node
+    if alive slurmd "$DIR/slurmd-$1.pid"; then return 0; fi
+    setsid unshare --uts sh -c "hostname '$1' && exec /usr/sbin/slurmd -D -N '$1' -f '$CONF'" >"$DIR/log/slurmd-$1.out" 2>&1 &
+    echo $! >"$DIR/slurmd-$1.pid"
+}
+
+# Every node answers (idle or running jobs).
+nodes_up() {
+    for node in $NODES; do
+        case "$(sinfo -h -n "$node" -o %t 2>/dev/null)" in
+            idle|mix|alloc) ;;
+            *) return 1 ;;
+        esac
+    done
+}
+
 start() {
     [ "$(id -u)" = 0 ] || die "starting the test Slurm needs root (its daemons run jobs as their submitters): run \`$0 start\` as root, or \`make test\` as root"
     install
-    getent hosts "$NODE" >/dev/null || die "the node name \`$NODE\` (short host name) does not resolve: add \`127.0.0.1 $NODE\` to /etc/hosts"
-    if alive slurmctld "$DIR/slurmctld.pid" && alive slurmd "$DIR/slurmd.pid" && alive munged "$DIR/munged.pid"; then
+    getent hosts "$NODE" >/dev/null || die "the controller's name \`$NODE\` (short host name) does not resolve: add \`127.0.0.1 $NODE\` to /etc/hosts"
+    command -v unshare >/dev/null || die "\`unshare\` (util-linux) is needed to give each node its host name"
+    all=yes
+    for node in $NODES; do alive slurmd "$DIR/slurmd-$node.pid" || all=; done
+    if [ -n "$all" ] && alive slurmctld "$DIR/slurmctld.pid" && alive munged "$DIR/munged.pid"; then
         say "already running (SLURM_CONF=$CONF)"
         return 0
     fi
-    write_conf
+    # The configuration is rewritten only while slurmctld is down (a node coming back keeps it).
+    alive slurmctld "$DIR/slurmctld.pid" || write_conf
     start_munge
     start_daemon slurmctld
-    start_daemon slurmd
-    # Wait for the node to be idle: slurmctld answers, slurmd registered.
+    for node in $NODES; do start_node "$node"; done
+    # Wait for the nodes to answer: slurmctld up, every slurmd registered.
     i=0
-    until [ "$(sinfo -h -n "$NODE" -o %t 2>/dev/null)" = idle ] || [ "$(sinfo -h -n "$NODE" -o %t 2>/dev/null)" = mix ]; do
+    until nodes_up; do
         i=$((i + 1))
         if [ $i -ge 600 ]; then
-            say "the node did not become idle in 60 s; sinfo says: $(sinfo -h -N 2>&1)"
-            tail -n 20 "$DIR/log/slurmctld.log" "$DIR/log/slurmd.log" >&2 || true
+            say "the nodes did not become idle in 60 s; sinfo says: $(sinfo -h -N 2>&1)"
+            tail -n 20 "$DIR/log/slurmctld.log" "$DIR"/log/slurmd-*.log >&2 || true
             exit 1
         fi
-        # A node drained by an earlier configuration (e.g. a larger RealMemory) is brought back.
-        case "$(sinfo -h -n "$NODE" -o %t 2>/dev/null)" in
-            drain*|down*) scontrol update nodename="$NODE" state=resume >/dev/null 2>&1 || true ;;
-        esac
+        # A node drained or down (an earlier configuration, a node killed) is brought back.
+        for node in $NODES; do
+            case "$(sinfo -h -n "$node" -o %t 2>/dev/null)" in
+                drain*|down*) scontrol update nodename="$node" state=resume >/dev/null 2>&1 || true ;;
+            esac
+        done
         sleep 0.1
     done
-    for name in munged slurmctld slurmd; do
+    for name in munged slurmctld; do
         alive "$name" "$DIR/$name.pid" || die "$name exited; see $DIR/log/"
     done
-    say "running: SLURM_CONF=$CONF, node $NODE idle"
+    for node in $NODES; do
+        alive slurmd "$DIR/slurmd-$node.pid" || die "the slurmd of $node exited; see $DIR/log/"
+    done
+    say "running: SLURM_CONF=$CONF, nodes $(echo $NODES) idle"
+}
+
+# Every process in the UTS namespace of NODE's slurmd (slurmd, its slurmstepd, the job's tasks).
+kill_node() { # node
+    alive slurmd "$DIR/slurmd-$1.pid" || die "node $1 is not running"
+    ns=$(readlink "/proc/$(cat "$DIR/slurmd-$1.pid")/ns/uts")
+    for proc in /proc/[0-9]*; do
+        [ "$(readlink "$proc/ns/uts" 2>/dev/null)" = "$ns" ] && kill -9 "${proc#/proc/}" 2>/dev/null || true
+    done
+    rm -f "$DIR/slurmd-$1.pid"
+    say "node $1 killed"
+}
+
+stop_pid() { # name pidfile
+    if alive "$1" "$2"; then
+        pid=$(cat "$2")
+        kill "$pid"
+        i=0
+        while [ -d "/proc/$pid" ] && [ $i -lt 100 ]; do sleep 0.1; i=$((i + 1)); done
+        [ -d "/proc/$pid" ] && kill -9 "$pid"
+    fi
+    rm -f "$2"
 }
 
 stop() {
-    for name in slurmd slurmctld munged; do
-        if alive "$name" "$DIR/$name.pid"; then
-            pid=$(cat "$DIR/$name.pid")
-            kill "$pid"
-            i=0
-            while [ -d "/proc/$pid" ] && [ $i -lt 100 ]; do sleep 0.1; i=$((i + 1)); done
-            [ -d "/proc/$pid" ] && kill -9 "$pid"
-        fi
-        rm -f "$DIR/$name.pid"
-    done
+    for node in $NODES; do stop_pid slurmd "$DIR/slurmd-$node.pid"; done
+    # A single-node Slurm started by an earlier version of this script.
+    stop_pid slurmd "$DIR/slurmd.pid"
+    for name in slurmctld munged; do stop_pid "$name" "$DIR/$name.pid"; done
 }
 
 status() {
-    for name in munged slurmctld slurmd; do
-        if alive "$name" "$DIR/$name.pid"; then echo "$name: running, pid $(cat "$DIR/$name.pid")"; else echo "$name: not running"; fi
+    up=yes
+    for name in munged slurmctld; do
+        if alive "$name" "$DIR/$name.pid"; then echo "$name: running, pid $(cat "$DIR/$name.pid")"; else echo "$name: not running"; up=; fi
+    done
+    for node in $NODES; do
+        if alive slurmd "$DIR/slurmd-$node.pid"; then echo "slurmd $node: running, pid $(cat "$DIR/slurmd-$node.pid")"; else echo "slurmd $node: not running"; up=; fi
     done
     echo "SLURM_CONF=$CONF"
     sinfo -h -N -o '%N %t %c %m' 2>/dev/null || return 1
+    [ -n "$up" ]
 }
 
 case "${1:-}" in
@@ -167,5 +242,6 @@ case "${1:-}" in
     start) start ;;
     stop) stop ;;
     status) status ;;
-    *) die "usage: $0 {install|start|stop|status}" ;;
+    kill-node) [ -n "${2:-}" ] || die "usage: $0 kill-node NODE"; kill_node "$2" ;;
+    *) die "usage: $0 {install|start|stop|status|kill-node NODE}" ;;
 esac

@@ -32,14 +32,17 @@ use std::sync::Arc;
 use anyhow::{anyhow, bail, Context};
 use serde::{Deserialize, Serialize};
 
+use super::assess::{assess_stage, predict, Known, Prediction, RealDisk, StatusLine};
+use super::commit::{fold, leave_out_not_kept, UnitOutcome, UnitRecord};
+use super::inputs::{cached_files, param_file_hashes, resolve_sources, Produced, ProducedFile};
+use super::local::execute;
 use super::{
-    assess_stage, execute, fold, forced_stages, leave_out_not_kept, param_file_hashes, predict, resolve_sources,
-    selected_stages, upstream_stages, Prediction, Produced, ProducedFile, Rerun, RunOptions, RunSummary, UnitOutcome,
-    UnitProblem, UnitRecord,
+    forced_stages, selected_stages, upstream_stages, Backend, Opened, Rerun, RunOptions, RunSummary, UnitProblem,
 };
 use crate::error::UserError;
-use crate::pipeline::lease::{Lease, STATE_DIR};
-use crate::pipeline::lock::{LockFile, LOCK_FILE};
+use crate::pipeline::layout::{LOCK_FILE, RUNS_DIR, STATE_DIR};
+use crate::pipeline::lease::Lease;
+use crate::pipeline::lock::LockFile;
 use crate::pipeline::memo::TableMemo;
 use crate::pipeline::ownership;
 use crate::pipeline::plan::Plan;
@@ -49,8 +52,6 @@ use crate::pipeline::spec::PipelineFile;
 use crate::pipeline::stage::{Registry, WorkUnits};
 use crate::pipeline::txn::Transaction;
 
-/// Where Slurm runs keep their folders, under the output folder's `.shakeflow`.
-pub const RUNS_DIR: &str = "slurm";
 const RUN_FILE: &str = "run.json";
 /// What the commit job leaves for `--wait` and `status`: `<run>.summary.json` beside the run folders.
 const SUMMARY_SUFFIX: &str = ".summary.json";
@@ -133,7 +134,7 @@ struct Manifest {
     upstream_tainted: bool,
 }
 
-#[derive(Debug, Serialize, Deserialize)]
+#[derive(Debug, Default, Serialize, Deserialize)]
 struct Summary {
     failed: Vec<(String, String, String)>,
     flagged: Vec<(String, String, String)>,
@@ -141,6 +142,9 @@ struct Summary {
     /// With retries left after a failure: the run that resubmitted the failed shards.
     #[serde(default)]
     retried_as: Option<String>,
+    /// Why the commit job committed nothing (e.g. a link in the output folder), for `--wait`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    error: Option<String>,
 }
 
 fn runs_dir(output_dir: &Path) -> PathBuf {
@@ -194,28 +198,35 @@ fn pipeline_plan(run: &RunFile, registry: Registry) -> anyhow::Result<Plan> {
     Ok(Plan::new(file, registry)?)
 }
 
-/// Submits the run and returns at once (or, with `wait`, when it is committed).
-pub fn submit(
-    plan: &Plan,
-    options: &RunOptions,
-    slurm: &SlurmOptions,
-    reporter: &Reporter,
-) -> anyhow::Result<RunSummary> {
-    slurm.executor.check().map_err(|e| e.error)?;
-    if slurm.executor.in_allocation == Some(true) {
-        return run_in_allocation(plan, options, slurm, reporter);
+/// The Slurm backend: job arrays and a commit job, or with `in_allocation` the `srun` steps of
+/// the allocation this process runs in.
+impl Backend for SlurmOptions {
+    fn check(&self) -> anyhow::Result<()> {
+        self.executor.check().map_err(|e| e.error)?;
+        if self.executor.in_allocation == Some(true) {
+            crate::pipeline::slurm::Allocation::current()?;
+        }
+        Ok(())
     }
-    let selected = selected_stages(plan, options)?;
-    let rerun = Rerun { stages: forced_stages(plan, &options.force), remake: BTreeMap::new() };
+
+    fn run(&self, opened: Opened<'_>, reporter: &Reporter) -> anyhow::Result<RunSummary> {
+        if self.executor.in_allocation == Some(true) {
+            return run_in_allocation(opened, self, reporter);
+        }
+        submit(opened, self, reporter)
+    }
+}
+
+/// Submits the run and returns at once (or, with `wait`, when it is committed).
+fn submit(opened: Opened<'_>, slurm: &SlurmOptions, reporter: &Reporter) -> anyhow::Result<RunSummary> {
+    let (plan, options, selected) = (opened.plan, opened.options, &opened.selected);
     let output_dir = plan.file.output_dir();
-    let sources = resolve_sources(plan)?;
-    let files = param_file_hashes(plan)?;
-    let (lease, lock) = super::take_output_folder(plan, &sources, reporter)?;
-    let prediction = predict(plan, &lock, &sources, &files, &rerun)?;
+    let prediction = predict(plan, &opened.known())?;
+    let lease = opened.lease;
     save_hash_memo(reporter);
     let client = Slurm::new();
     let limits = client.limits()?;
-    let Some(run) = submit_run(plan, options, slurm, reporter, &prediction, &selected, &client, &limits)? else {
+    let Some(run) = submit_run(plan, options, slurm, reporter, &prediction, selected, &client, &limits)? else {
         reporter.line("every unit is up to date: nothing submitted");
         return Ok(RunSummary::default());
     };
@@ -278,7 +289,7 @@ fn submit_run(
 /// Per stage in run order, its shards cut from the predicted units, and those holding a stale
 /// unit (the shards to run); stages with none are left out.
 fn cut_shards(
-    lines: &[super::StatusLine],
+    lines: &[StatusLine],
     selected: &BTreeSet<String>,
     per_task: usize,
 ) -> Vec<(String, Vec<Vec<String>>, BTreeSet<u32>)> {
@@ -307,22 +318,14 @@ fn aligned(plan: &Plan, run: &RunFile, stage: &str, upstream: &str) -> bool {
 /// `--in-allocation`: inside one `sbatch`/`salloc` allocation, each stage's shards run as
 /// `srun` steps (as many at once as the allocation has tasks), stage after stage; a failed
 /// step is run again up to `retries` times; then this process commits, as a commit job would.
-fn run_in_allocation(
-    plan: &Plan,
-    options: &RunOptions,
-    slurm: &SlurmOptions,
-    reporter: &Reporter,
-) -> anyhow::Result<RunSummary> {
+fn run_in_allocation(opened: Opened<'_>, slurm: &SlurmOptions, reporter: &Reporter) -> anyhow::Result<RunSummary> {
     let allocation = crate::pipeline::slurm::Allocation::current()?;
-    let selected = selected_stages(plan, options)?;
-    let rerun = Rerun { stages: forced_stages(plan, &options.force), remake: BTreeMap::new() };
+    let (plan, options) = (opened.plan, opened.options);
     let output_dir = plan.file.output_dir();
-    let sources = resolve_sources(plan)?;
-    let files = param_file_hashes(plan)?;
-    let (lease, lock) = super::take_output_folder(plan, &sources, reporter)?;
-    let prediction = predict(plan, &lock, &sources, &files, &rerun)?;
+    let prediction = predict(plan, &opened.known())?;
+    let lease = opened.lease;
     save_hash_memo(reporter);
-    let cut = cut_shards(&prediction.lines, &selected, slurm.units_per_task);
+    let cut = cut_shards(&prediction.lines, &opened.selected, slurm.units_per_task);
     if cut.is_empty() {
         reporter.line("every unit is up to date: nothing to run");
         return Ok(RunSummary::default());
@@ -528,6 +531,9 @@ fn wait(
         let summary: Summary = serde_json::from_slice(
             &std::fs::read(&path).with_context(|| format!("the commit job left no summary `{}`", path.display()))?,
         )?;
+        if let Some(error) = &summary.error {
+            bail!("the commit job of the Slurm run `{}` committed nothing: {error}", run.id);
+        }
         let Some(next) = summary.retried_as else { break summary };
         run = read_run(&runs_dir(output_dir).join(&next))?;
         reporter.line(&format!(
@@ -556,11 +562,7 @@ fn upstream_produced(
     for (name, _) in plan.stages.iter().filter(|(n, _)| n.as_str() != stage && upstream.contains(n.as_str())) {
         let stage_dir = plan.stage_dir(name);
         let committed = |id: &str| -> Produced {
-            lock.stages
-                .get(name)
-                .and_then(|e| e.units.get(id))
-                .map(|u| super::cached_files(u, &stage_dir))
-                .unwrap_or_default()
+            lock.stages.get(name).and_then(|e| e.units.get(id)).map(|u| cached_files(u, &stage_dir)).unwrap_or_default()
         };
         let mut files = Produced::new();
         match run.shards.get(name) {
@@ -629,7 +631,8 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let files = param_file_hashes(&plan)?;
     let (produced, upstream_tainted) = upstream_produced(run_dir, &run, &plan, &lock, stage_name, shard)?;
     let rerun = Rerun { stages: forced_stages(&plan, &run.force), remake: run.remake.clone() };
-    let assessed = assess_stage(&plan, stage, &sources, &produced, &files, &lock, &rerun)?;
+    let state = Known { lock: &lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk };
+    let assessed = assess_stage(&plan, stage, &state, &produced)?;
     // A unit nobody predicted (a partition no earlier output had) goes to the last shard.
     let ours: Vec<&(crate::pipeline::units::Unit, String, Vec<String>)> = assessed
         .units
@@ -687,7 +690,16 @@ pub fn commit(run_dir: &Path, registry: Registry) -> anyhow::Result<()> {
     let plan = pipeline_plan(&run, registry)?;
     let output_dir = plan.file.output_dir();
     let lease = Lease::take_handed(&output_dir, &run.id)?;
-    let (mut summary, new_lock) = commit_manifests(run_dir, &run, &plan, &lease)?;
+    let runs = runs_dir(&output_dir);
+    let (mut summary, new_lock) = match commit_manifests(run_dir, &run, &plan, &lease) {
+        Ok(committed) => committed,
+        Err(error) => {
+            let why = format!("{error:#}");
+            let summary = Summary { error: Some(why), ..Summary::default() };
+            publish(&runs.join(format!("{}{SUMMARY_SUFFIX}", run.id)), &serde_json::to_vec_pretty(&summary)?)?;
+            return Err(error);
+        }
+    };
     let retries = run.options.executor.retries.unwrap_or(0);
     let retry = if summary.failed.is_empty() || retries == 0 {
         None
@@ -698,7 +710,6 @@ pub fn commit(run_dir: &Path, registry: Registry) -> anyhow::Result<()> {
         })
     };
     summary.retried_as = retry.as_ref().map(|r| r.id.clone());
-    let runs = runs_dir(&output_dir);
     publish(&runs.join(format!("{}{SUMMARY_SUFFIX}", run.id)), &serde_json::to_vec_pretty(&summary)?)?;
     match retry {
         Some(next) => {
@@ -735,7 +746,7 @@ fn commit_manifests(run_dir: &Path, run: &RunFile, plan: &Plan, lease: &Lease) -
     let mut install: BTreeSet<String> = BTreeSet::new();
     let mut remove: BTreeSet<String> = BTreeSet::new();
     let mut tainted: BTreeSet<String> = BTreeSet::new();
-    let mut summary = Summary { failed: Vec::new(), flagged: Vec::new(), committed_units: 0, retried_as: None };
+    let mut summary = Summary::default();
     for (name, stage) in &plan.stages {
         let Some(shards) = run.shards.get(name) else {
             if upstream_stages(stage).iter().any(|u| tainted.contains(*u)) {
@@ -823,7 +834,8 @@ fn commit_manifests(run_dir: &Path, run: &RunFile, plan: &Plan, lease: &Lease) -
 fn resubmit(run: &RunFile, plan: &Plan, lock: &LockFile, retries_left: u32) -> anyhow::Result<Option<RunFile>> {
     let options = RunOptions { only: run.only.clone(), keep_going: run.keep_going, ..RunOptions::default() };
     let selected = selected_stages(plan, &options)?;
-    let prediction = predict(plan, lock, &resolve_sources(plan)?, &param_file_hashes(plan)?, &Rerun::default())?;
+    let (sources, files, rerun) = (resolve_sources(plan)?, param_file_hashes(plan)?, Rerun::default());
+    let prediction = predict(plan, &Known { lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk })?;
     let mut slurm = run.options.clone();
     slurm.executor.retries = Some(retries_left);
     let client = Slurm::new();

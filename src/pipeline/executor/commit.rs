@@ -1,0 +1,391 @@
+//! The commit side of a run: what became of each unit ([`UnitRecord`]) folded into its stage's
+//! new lockfile entry and the files to install and remove ([`fold`]), `keep: false` files left
+//! out ([`leave_out_not_kept`]), and the transaction committed ([`commit`]). The local run folds
+//! each stage as it finishes; Slurm's commit job folds the manifests its tasks left.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use anyhow::anyhow;
+
+use super::inputs::{cached_files, Produced, ProducedFile};
+use super::{upstream_stages, UnitProblem};
+use crate::pipeline::layout::{FLAGGED, STAGE_MARKER};
+use crate::pipeline::lock::{LockFile, StageLock, UnitLock};
+use crate::pipeline::ownership;
+use crate::pipeline::plan::{InputRef, Plan, PlannedStage};
+use crate::pipeline::sink::OutputSink;
+use crate::pipeline::spec::OnError;
+use crate::pipeline::stage::StageInfo;
+use crate::pipeline::txn::Transaction;
+use crate::pipeline::units;
+
+/// The lockfile unit that owns a stage's `flagged` table.
+pub(super) const FLAGGED_UNIT: &str = "(flagged)";
+
+/// What became of one unit in a run: the record the commit folds into the lockfile (and, for a
+/// Slurm run, what each array task leaves in its shard's manifest).
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct UnitRecord {
+    pub id: String,
+    pub key: String,
+    pub inputs: BTreeMap<String, String>,
+    pub outcome: UnitOutcome,
+}
+
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum UnitOutcome {
+    /// Up to date: its lockfile entry and files stay.
+    Cached,
+    /// Wrote these files (relative to the stage folder → hash) under `dir`.
+    Ran { dir: PathBuf, files: BTreeMap<String, String> },
+    /// Failed; its previous files and entry stay (stale).
+    Failed { reason: String },
+    /// Its record could not be read and its source says `on_error: skip`.
+    Flagged { file: String, reason: String },
+}
+
+/// A stage's run folded into what the commit does.
+#[derive(Default)]
+pub(super) struct Folded {
+    pub(super) entry: Option<StageLock>,
+    /// Paths relative to the output folder → where the new file is now.
+    pub(super) install: BTreeMap<String, PathBuf>,
+    pub(super) remove: BTreeSet<String>,
+    pub(super) produced: Produced,
+    pub(super) failed: Vec<UnitProblem>,
+    pub(super) flagged: Vec<UnitProblem>,
+    /// Whether every unit succeeded (records gone from the inputs then leave too).
+    pub(super) complete: bool,
+}
+
+/// Folds a stage's unit records into its new lockfile entry, the files to install and remove,
+/// and what downstream stages read. `staging` is where new stage-level files (the marker, the
+/// `flagged` table) are written.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn fold(
+    plan: &Plan,
+    stage: &PlannedStage,
+    entry: Option<&StageLock>,
+    records: Vec<UnitRecord>,
+    vanished: &[String],
+    upstream_tainted: bool,
+    staging: &Path,
+) -> anyhow::Result<Folded> {
+    let name = stage.name.as_str();
+    let info = stage.stage.info();
+    let stage_dir = plan.stage_dir(name);
+    let at = |file: &str| plan.stage_entry(name, file);
+    let mut folded = Folded::default();
+    let mut new_entry = StageLock {
+        stage_type: info.name.to_string(),
+        stage_version: info.version,
+        params: serde_json::Value::Object(stage.params.clone()),
+        select: stage.select.clone(),
+        units: BTreeMap::new(),
+    };
+    let mut owner: BTreeMap<String, String> = BTreeMap::new();
+    let mut flagged_rows: Vec<(String, String, String)> = Vec::new();
+    let mut failed = 0;
+    for record in records {
+        let old = entry.and_then(|e| e.units.get(&record.id));
+        let old_files: Vec<&String> = old.map(|o| o.files.keys().collect()).unwrap_or_default();
+        match record.outcome {
+            UnitOutcome::Cached => {
+                let old =
+                    old.ok_or_else(|| anyhow!("stage `{name}`: cached unit `{}` is not in the lockfile", record.id))?;
+                folded.produced.extend(cached_files(old, &stage_dir));
+                if let Some(why) = &old.flagged {
+                    let file =
+                        old.inputs.keys().find(|k| !k.starts_with("source ") && !k.starts_with("params.")).cloned();
+                    flagged_rows.push((record.id.clone(), file.unwrap_or_default(), why.clone()));
+                    // Still skipped: the run says so, cached or not.
+                    folded.flagged.push(UnitProblem {
+                        stage: name.into(),
+                        unit: record.id.clone(),
+                        reason: why.clone(),
+                    });
+                }
+                new_entry.units.insert(record.id, old.clone());
+            }
+            UnitOutcome::Ran { dir, files } => {
+                for (file, hash) in &files {
+                    if let Some(other) = owner.insert(file.clone(), record.id.clone()) {
+                        anyhow::bail!(
+                            "stage `{name}`: the {} and the {} both wrote `{file}`; give the sources distinct `partition:` values",
+                            units::describe(&other),
+                            units::describe(&record.id)
+                        );
+                    }
+                    folded.produced.insert(file.clone(), ProducedFile { path: dir.join(file), hash: hash.clone() });
+                    folded.install.insert(at(file), dir.join(file));
+                }
+                for gone in old_files.into_iter().filter(|f| !files.contains_key(*f)) {
+                    folded.remove.insert(at(gone));
+                }
+                new_entry
+                    .units
+                    .insert(record.id, UnitLock { key: record.key, inputs: record.inputs, files, flagged: None });
+            }
+            UnitOutcome::Flagged { file, reason } => {
+                for gone in old_files {
+                    folded.remove.insert(at(gone));
+                }
+                flagged_rows.push((record.id.clone(), file, reason.clone()));
+                folded.flagged.push(UnitProblem {
+                    stage: name.into(),
+                    unit: record.id.clone(),
+                    reason: reason.clone(),
+                });
+                let unit =
+                    UnitLock { key: record.key, inputs: record.inputs, files: BTreeMap::new(), flagged: Some(reason) };
+                new_entry.units.insert(record.id, unit);
+            }
+            UnitOutcome::Failed { reason } => {
+                failed += 1;
+                folded.failed.push(UnitProblem { stage: name.into(), unit: record.id.clone(), reason });
+                // Its previous outputs stay, stale, with their entry; nothing reads them this run.
+                if let Some(old) = old {
+                    new_entry.units.insert(record.id, old.clone());
+                }
+            }
+        }
+    }
+    folded.complete = failed == 0 && !upstream_tainted;
+    for id in vanished {
+        let old = &entry.expect("vanished units come from the lockfile").units[id];
+        if folded.complete {
+            folded.remove.extend(old.files.keys().map(|gone| at(gone)));
+        } else {
+            new_entry.units.insert(id.clone(), old.clone());
+        }
+    }
+    let skips = stage.inputs.iter().any(|i| match i {
+        InputRef::Source(s) => plan.file.spec.inputs[s].on_error == OnError::Skip,
+        InputRef::Stage { .. } => false,
+    });
+    if skips {
+        flagged_rows.sort();
+        let (file, hash) = flagged_table(staging, name, info, &stage.params, &flagged_rows)?;
+        let old = entry.and_then(|e| e.units.get(FLAGGED_UNIT));
+        if old.is_none_or(|o| o.key != hash || !stage_dir.join(&file).is_file()) {
+            folded.install.insert(at(&file), staging.join(&file));
+        }
+        folded.produced.insert(file.clone(), ProducedFile { path: staging.join(&file), hash: hash.clone() });
+        let files = BTreeMap::from([(file, hash.clone())]);
+        new_entry
+            .units
+            .insert(FLAGGED_UNIT.into(), UnitLock { key: hash, inputs: BTreeMap::new(), files, flagged: None });
+    }
+    if !folded.install.is_empty() && ownership::read_marker(&stage_dir).is_none() {
+        ownership::write_marker(staging, name, info.name)?;
+        folded.install.insert(at(STAGE_MARKER), staging.join(STAGE_MARKER));
+    }
+    folded.entry = Some(new_entry);
+    Ok(folded)
+}
+
+/// `<stage>/flagged/data.parquet`: one row per skipped record; returns its path in the stage
+/// folder and its hash.
+pub(super) fn flagged_table(
+    new_dir: &Path,
+    stage: &str,
+    info: &'static StageInfo,
+    params: &crate::pipeline::params::Params,
+    rows: &[(String, String, String)],
+) -> anyhow::Result<(String, String)> {
+    use crate::table::{Column, ColumnData, Table};
+    let text = |name: &str, description: &str, values: Vec<String>| Column {
+        name: name.into(),
+        unit: String::new(),
+        description: description.into(),
+        data: ColumnData::Str(values),
+    };
+    let mut table = Table::new();
+    table.extend([
+        text("record", "the record's partition (its work unit)", rows.iter().map(|r| r.0.clone()).collect()),
+        text("file", "the record file, relative to the pipeline", rows.iter().map(|r| r.1.clone()).collect()),
+        text(
+            "reason",
+            "why it could not be read (file:line:column where known)",
+            rows.iter().map(|r| r.2.clone()).collect(),
+        ),
+    ]);
+    let sink = OutputSink::new(new_dir, stage, info, params, &BTreeMap::new(), indicatif::ProgressBar::hidden());
+    sink.write(FLAGGED, &Vec::new(), table)?;
+    let (path, hash) = sink.into_hashes().into_iter().next().expect("one table written");
+    Ok((relative(&path, new_dir), hash))
+}
+
+/// `path` relative to `dir`, with `/` separators (lockfile keys are the same on every OS).
+pub(super) fn relative(path: &Path, dir: &Path) -> String {
+    path.strip_prefix(dir)
+        .unwrap_or(path)
+        .components()
+        .map(|c| c.as_os_str().to_string_lossy())
+        .collect::<Vec<_>>()
+        .join("/")
+}
+
+/// Takes the files of `keep: false` stages out of a commit's `install` and puts those on disk in
+/// its `remove` (paths relative to the output folder): the files of every such stage that ran in
+/// full, as did every stage reading it (cached counts: it is up to date with them). Their
+/// lockfile entries stay, hashes and all.
+pub(super) fn leave_out_not_kept(
+    plan: &Plan,
+    selected: &BTreeSet<String>,
+    tainted: &BTreeSet<String>,
+    entries: &BTreeMap<String, StageLock>,
+    install: &mut BTreeSet<String>,
+    remove: &mut BTreeSet<String>,
+) {
+    let done = |name: &str| selected.contains(name) && !tainted.contains(name);
+    let not_kept = plan
+        .stages
+        .values()
+        .filter(|s| !s.keep && done(&s.name))
+        .filter(|s| {
+            plan.stages.values().filter(|r| upstream_stages(r).contains(s.name.as_str())).all(|r| done(&r.name))
+        })
+        .filter_map(|s| entries.get(&s.name).map(|entry| (s, entry)))
+        .flat_map(|(s, entry)| {
+            entry
+                .units
+                .iter()
+                .filter(|(id, _)| *id != FLAGGED_UNIT)
+                .flat_map(|(_, unit)| unit.files.keys().map(|file| plan.stage_entry(&s.name, file)))
+        });
+    let output_dir = plan.file.output_dir();
+    for path in not_kept {
+        install.remove(&path);
+        if output_dir.join(&path).exists() {
+            remove.insert(path);
+        }
+    }
+}
+
+/// What a run commits: the new entries of the stages that ran, and the entries of the output
+/// folder (paths relative to it) to install from the transaction and to remove.
+#[derive(Clone, Copy)]
+pub(super) struct Changes<'a> {
+    pub(super) entries: &'a BTreeMap<String, StageLock>,
+    pub(super) install: &'a BTreeSet<String>,
+    pub(super) remove: &'a BTreeSet<String>,
+}
+
+/// Commits `changes` over `lock` in `transaction`: nothing at all when nothing is installed or
+/// removed (everything cached, or every unit that ran failed), so the folder and its lockfile
+/// stay exactly as they were.
+pub(super) fn commit(
+    transaction: Transaction,
+    changes: Changes<'_>,
+    plan: &Plan,
+    lock: &LockFile,
+) -> anyhow::Result<()> {
+    let mut stages = lock.stages.clone();
+    // Stages the pipeline no longer has keep their entries until `gc` removes their folders.
+    stages.extend(changes.entries.iter().map(|(name, entry)| (name.clone(), entry.clone())));
+    let new_lock = LockFile { version: lock.version, pipeline: Some(ownership::pipeline_label(&plan.file)), stages };
+    if changes.install.is_empty() && changes.remove.is_empty() {
+        transaction.abort();
+        return Ok(());
+    }
+    let install: Vec<String> = changes.install.iter().cloned().collect();
+    let remove: Vec<String> = changes.remove.difference(changes.install).cloned().collect();
+    transaction.commit(&install, &remove, Some(&new_lock))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_support::{assess_load, entry_after, plan, sources, FakeDisk, PIPELINE};
+    use super::super::Rerun;
+    use super::*;
+
+    /// `load` with units FB-1..3 committed, and a staging folder for the next run.
+    fn committed(dir: &Path) -> (Plan, StageLock) {
+        let plan = plan(dir, PIPELINE);
+        let mut disk = FakeDisk::default();
+        let records = sources(&plan, &[("FB-1", "a"), ("FB-2", "b"), ("FB-3", "c")]);
+        let assessed = assess_load(&plan, &records, &LockFile::empty(), &Rerun::default(), &disk);
+        let entry = entry_after(&plan, "load", &assessed, &mut disk);
+        std::fs::create_dir_all(plan.stage_dir("load")).unwrap();
+        ownership::write_marker(&plan.stage_dir("load"), "load", "load").unwrap();
+        (plan, entry)
+    }
+
+    fn record(id: &str, outcome: UnitOutcome) -> UnitRecord {
+        UnitRecord { id: id.into(), key: format!("key:{id}"), inputs: BTreeMap::new(), outcome }
+    }
+
+    fn ran(dir: &Path, files: &[(&str, &str)]) -> UnitOutcome {
+        let files = files.iter().map(|(f, h)| (f.to_string(), h.to_string())).collect();
+        UnitOutcome::Ran { dir: dir.to_path_buf(), files }
+    }
+
+    #[test]
+    fn a_fold_installs_what_ran_keeps_what_is_cached_and_what_failed() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let (plan, entry) = committed(dir.path());
+        let staging = dir.path().join("staging");
+        let records = vec![
+            record("motion=FB-1", UnitOutcome::Cached),
+            // FB-2 now writes a figure instead of its table: the table goes.
+            record("motion=FB-2", ran(&staging, &[("figures/FB-2.png", "png")])),
+            record("motion=FB-3", UnitOutcome::Failed { reason: "bad row".into() }),
+        ];
+        let folded = fold(&plan, &plan.stages["load"], Some(&entry), records, &[], false, &staging).unwrap();
+        assert_eq!(folded.install.keys().collect::<Vec<_>>(), ["load/figures/FB-2.png"]);
+        assert_eq!(folded.install["load/figures/FB-2.png"], staging.join("figures/FB-2.png"));
+        assert_eq!(folded.remove.iter().collect::<Vec<_>>(), ["load/records/motion=FB-2/data.parquet"]);
+        let new = folded.entry.unwrap();
+        assert_eq!(new.units["motion=FB-1"], entry.units["motion=FB-1"], "cached: its entry as it was");
+        assert_eq!(new.units["motion=FB-3"], entry.units["motion=FB-3"], "failed: its entry as it was (stale)");
+        assert_eq!(new.units["motion=FB-2"].key, "key:motion=FB-2");
+        assert!(!folded.complete, "a failed unit: the stage is not complete");
+        assert_eq!(folded.failed.len(), 1);
+        assert_eq!(folded.produced.len(), 2, "downstream reads FB-1's table and FB-2's figure, not FB-3's");
+    }
+
+    #[test]
+    fn records_gone_from_the_inputs_leave_only_with_a_complete_stage() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let (plan, entry) = committed(dir.path());
+        let staging = dir.path().join("staging");
+        let stage = &plan.stages["load"];
+        let cached = || vec![record("motion=FB-1", UnitOutcome::Cached), record("motion=FB-2", UnitOutcome::Cached)];
+        let gone = ["motion=FB-3".to_string()];
+        let complete = fold(&plan, stage, Some(&entry), cached(), &gone, false, &staging).unwrap();
+        assert_eq!(complete.remove.iter().collect::<Vec<_>>(), ["load/records/motion=FB-3/data.parquet"]);
+        assert!(!complete.entry.unwrap().units.contains_key("motion=FB-3"));
+        // An upstream unit failed: the record may only look gone; its files and entry stay.
+        let tainted = fold(&plan, stage, Some(&entry), cached(), &gone, true, &staging).unwrap();
+        assert!(tainted.remove.is_empty() && tainted.install.is_empty());
+        assert_eq!(tainted.entry.unwrap().units["motion=FB-3"], entry.units["motion=FB-3"]);
+    }
+
+    #[test]
+    fn two_units_writing_one_file_are_refused_and_a_new_stage_folder_gets_its_marker() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let plan = plan(dir.path(), PIPELINE);
+        let staging = dir.path().join("staging");
+        let stage = &plan.stages["load"];
+        let both = vec![
+            record("motion=FB-1", ran(&staging, &[("records/x/data.parquet", "1")])),
+            record("motion=FB-2", ran(&staging, &[("records/x/data.parquet", "2")])),
+        ];
+        let error = fold(&plan, stage, None, both, &[], false, &staging).err().unwrap().to_string();
+        assert!(
+            error.contains("record motion=FB-1 and the record motion=FB-2 both wrote `records/x/data.parquet`"),
+            "{error}"
+        );
+        let one = vec![record("motion=FB-1", ran(&staging, &[("records/motion=FB-1/data.parquet", "1")]))];
+        let folded = fold(&plan, stage, None, one, &[], false, &staging).unwrap();
+        assert!(folded.complete);
+        assert_eq!(
+            folded.install.keys().collect::<Vec<_>>(),
+            ["load/.shakeflow-stage", "load/records/motion=FB-1/data.parquet"]
+        );
+        assert_eq!(ownership::read_marker(&staging).unwrap().stage, "load");
+    }
+}

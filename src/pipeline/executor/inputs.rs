@@ -1,0 +1,245 @@
+//! What a stage reads this run: its sources resolved to files (hashed, through the stat memo),
+//! the files its `Path` parameters name, and the parts its upstream stages produced, restricted
+//! by its `select:`.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+
+use crate::error::UserError;
+use crate::io::hash;
+use crate::pipeline::layout::{partition_of, DATA_FILE, HASH_MEMO, STATE_DIR};
+use crate::pipeline::lock::UnitLock;
+use crate::pipeline::plan::{InputRef, Plan, PlannedStage};
+use crate::pipeline::sources;
+use crate::pipeline::spec::{RecordFormat, SourceSpec};
+use crate::pipeline::stage::{InputPart, StageInput};
+
+/// A source resolved to files.
+pub(super) struct ResolvedSource {
+    pub(super) input: StageInput,
+}
+
+/// A file a stage wrote (or will write): where it is now and its content hash.
+#[derive(Clone)]
+pub(super) struct ProducedFile {
+    pub(super) path: PathBuf,
+    pub(super) hash: String,
+}
+
+/// A stage's files that downstream stages read this run, by path relative to the stage folder.
+pub(super) type Produced = BTreeMap<String, ProducedFile>;
+
+pub(super) fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, UserError> {
+    // A no-op rerun then reads no file whose size and times are unchanged.
+    hash::use_memo(&plan.file.output_dir().join(STATE_DIR).join(HASH_MEMO));
+    let base = plan.file.base_dir();
+    let used: BTreeSet<&str> = plan
+        .stages
+        .values()
+        .flat_map(|s| s.inputs.iter())
+        .filter_map(|i| match i {
+            InputRef::Source(name) => Some(name.as_str()),
+            InputRef::Stage { .. } => None,
+        })
+        .collect();
+    let mut resolved = BTreeMap::new();
+    // Sources may share files (one DAQ export split into floors): each file is read once.
+    let mut hashed: BTreeMap<PathBuf, String> = BTreeMap::new();
+    for name in used {
+        let spec = &plan.file.spec.inputs[name];
+        let files = source_files(plan, name, spec)?;
+        let unhashed: Vec<&Path> =
+            files.iter().map(|f| f.path.as_path()).filter(|p| !hashed.contains_key(*p)).collect();
+        let new_hashes: Vec<String> = unhashed
+            .par_iter()
+            .map(|p| hash::hash_path(p))
+            .collect::<anyhow::Result<_>>()
+            .map_err(|e| UserError::new(format!("source `{name}`: {e:#}")))?;
+        hashed.extend(unhashed.into_iter().map(Path::to_path_buf).zip(new_hashes));
+        let parts: Vec<InputPart> = files
+            .into_iter()
+            .map(|f| {
+                let relative = f.path.strip_prefix(&base).unwrap_or(&f.path).to_string_lossy().replace('\\', "/");
+                let hash = hashed[&f.path].clone();
+                InputPart { partition: f.partition, path: f.path, label: relative, hash }
+            })
+            .collect();
+        let input = match spec.format {
+            RecordFormat::Dataset => StageInput::Dataset { name: name.to_string(), parts },
+            _ => {
+                StageInput::Source { name: name.to_string(), spec: spec.clone(), base_dir: base.clone(), files: parts }
+            }
+        };
+        resolved.insert(name.to_string(), ResolvedSource { input });
+    }
+    Ok(resolved)
+}
+
+/// The files a source reads, with their partitions: its path matched as a pattern (a command's
+/// names one file or folder literally); a case is its folder, a dataset folder its parts.
+fn source_files(plan: &Plan, name: &str, spec: &SourceSpec) -> Result<Vec<sources::MatchedFile>, UserError> {
+    let base = plan.file.base_dir();
+    let files = match plan.file.command {
+        Some(_) => {
+            let path = if base == Path::new(".") { PathBuf::from(&spec.path) } else { base.join(&spec.path) };
+            if !(path.is_file() || spec.format.names_folders() && path.is_dir()) {
+                let what = if path.is_dir() { "is a folder, not a file" } else { "does not exist" };
+                return Err(UserError::new(format!("the input `{}` {what}", path.display())).in_file(&path));
+            }
+            let partition = spec.partition.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+            vec![sources::MatchedFile { path, partition }]
+        }
+        None => sources::resolve(&base, &spec.path, &spec.partition, spec.format.names_folders()).map_err(|e| {
+            let located = plan.file.error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message));
+            match e.hint {
+                Some(h) => located.hint(h),
+                None => located,
+            }
+        })?,
+    };
+    let mut expanded = Vec::new();
+    for file in files {
+        match spec.format {
+            // A case source names each case by its equipment.yaml; the case is the whole folder.
+            RecordFormat::Case => expanded.push(sources::MatchedFile {
+                path: file.path.parent().map(Path::to_path_buf).unwrap_or(file.path),
+                ..file
+            }),
+            RecordFormat::Dataset if file.path.is_dir() => {
+                let parts: Vec<String> = hash::list_files(&file.path)
+                    .map_err(|e| UserError::new(format!("source `{name}`: {e:#}")).in_file(&file.path))?
+                    .into_iter()
+                    .filter(|f| f == DATA_FILE || f.ends_with(&format!("/{DATA_FILE}")))
+                    .collect();
+                if parts.is_empty() {
+                    return Err(UserError::new(format!("source `{name}`: the folder holds no `{DATA_FILE}`"))
+                        .in_file(&file.path)
+                        .hint("a dataset folder is a stage's output (`<stage>/<output>`), its tables in `key=value/…/data.parquet`"));
+                }
+                for part in parts {
+                    let mut partition = file.partition.clone();
+                    partition.extend(partition_of(&part));
+                    expanded.push(sources::MatchedFile { path: file.path.join(part), partition });
+                }
+            }
+            _ => expanded.push(file),
+        }
+    }
+    expanded.sort_by(|a, b| a.path.cmp(&b.path));
+    Ok(expanded)
+}
+
+/// Per stage, the content hashes of the files its `Path` parameters name, keyed
+/// `params.<name> (<path as written>)`: editing such a file reruns the stage.
+pub(super) fn param_file_hashes(plan: &Plan) -> Result<BTreeMap<String, BTreeMap<String, String>>, UserError> {
+    plan.stages
+        .values()
+        .map(|stage| {
+            let hashes = stage
+                .files
+                .iter()
+                .map(|(name, path)| {
+                    let written = stage.params[name].as_str().unwrap_or_default();
+                    let hash = hash::hash_file(path)
+                        .map_err(|e| plan.file.error_at(&["stages", &stage.name, "params", name], format!("{e:#}")))?;
+                    Ok((format!("params.{name} ({written})"), hash))
+                })
+                .collect::<Result<_, UserError>>()?;
+            Ok((stage.name.clone(), hashes))
+        })
+        .collect()
+}
+
+/// A stage's inputs this run: its sources' files, and the parts upstream stages produced.
+pub(super) fn stage_inputs(
+    plan: &Plan,
+    stage: &PlannedStage,
+    sources: &BTreeMap<String, ResolvedSource>,
+    produced: &BTreeMap<String, Produced>,
+) -> anyhow::Result<Vec<StageInput>> {
+    let mut inputs: Vec<StageInput> = stage
+        .inputs
+        .iter()
+        .map(|input| match input {
+            InputRef::Source(name) => sources[name].input.clone(),
+            InputRef::Stage { stage: upstream, output } => {
+                let files = produced.get(upstream).map(|p| dataset_of(p, output, &input.label())).unwrap_or_default();
+                StageInput::Dataset { name: input.label(), parts: files }
+            }
+        })
+        .collect();
+    check_select(plan, stage, &inputs)?;
+    for input in &mut inputs {
+        match input {
+            StageInput::Source { files, .. } => files.retain(|f| stage.selects(&f.partition)),
+            StageInput::Dataset { parts, .. } => parts.retain(|p| stage.selects(&p.partition)),
+        }
+    }
+    Ok(inputs)
+}
+
+/// The Parquet parts of one output among a stage's produced files.
+fn dataset_of(produced: &Produced, output: &str, label: &str) -> Vec<InputPart> {
+    let prefix = format!("{output}/");
+    produced
+        .iter()
+        .filter_map(|(relative, file)| {
+            let inner = relative.strip_prefix(&prefix)?;
+            if inner != DATA_FILE && !inner.ends_with(&format!("/{DATA_FILE}")) {
+                return None;
+            }
+            Some(InputPart {
+                partition: partition_of(inner),
+                path: file.path.clone(),
+                label: format!("{label}/{inner}"),
+                hash: file.hash.clone(),
+            })
+        })
+        .collect()
+}
+
+/// A `select:` key or value that no record of the stage's inputs has is a typo, not a wish for
+/// an empty selection.
+fn check_select(plan: &Plan, stage: &PlannedStage, inputs: &[StageInput]) -> Result<(), UserError> {
+    let partitions: Vec<&(String, String)> = inputs.iter().flat_map(|i| i.parts()).flat_map(|p| &p.partition).collect();
+    if partitions.is_empty() {
+        return Ok(()); // nothing upstream succeeded (or will): nothing to check against
+    }
+    for (key, values) in &stage.select {
+        let refuse = |message: String, wanted: &str, known: &BTreeSet<&str>, what: &str| {
+            let suggestion = crate::error::did_you_mean_hint(wanted, known.iter().copied());
+            let known: Vec<&str> = known.iter().copied().collect();
+            UserError::new(message)
+                .in_file(&plan.file.path)
+                .at(crate::pipeline::locate::key_position(&plan.file.text, &["stages", &stage.name, "select", key]))
+                .hint(format!("{suggestion}{what}: {}", known.join(", ")))
+        };
+        let seen: BTreeSet<&str> = partitions.iter().filter(|(k, _)| k == key).map(|(_, v)| v.as_str()).collect();
+        if seen.is_empty() {
+            let keys: BTreeSet<&str> = partitions.iter().map(|(k, _)| k.as_str()).collect();
+            let message =
+                format!("stage `{}` selects by `{key}`, but no record of its inputs has that key", stage.name);
+            return Err(refuse(message, key, &keys, "the inputs' partition keys"));
+        }
+        if let Some(value) = values.iter().find(|v| !seen.contains(v.as_str())) {
+            let message =
+                format!("stage `{}` selects {key} = `{value}`, but no record of its inputs has it", stage.name);
+            return Err(refuse(message, value, &seen, &format!("values of `{key}`")));
+        }
+    }
+    Ok(())
+}
+
+/// The files a cached unit wrote, where they are.
+pub(super) fn cached_files(old: &UnitLock, stage_dir: &Path) -> Produced {
+    old.files.iter().map(|(f, h)| (f.clone(), ProducedFile { path: stage_dir.join(f), hash: h.clone() })).collect()
+}
+
+/// Every file a run reads: record files and files named by parameters.
+pub(super) fn input_paths(plan: &Plan, sources: &BTreeMap<String, ResolvedSource>) -> Vec<PathBuf> {
+    let records = sources.values().flat_map(|s| s.input.parts().iter().map(|p| p.path.clone()));
+    let params = plan.stages.values().flat_map(|s| s.files.values().cloned());
+    records.chain(params).collect()
+}
