@@ -14,23 +14,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 
 import yaml
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from score import wilson  # noqa: E402
+
 # Parameters the records cannot constrain, and why (the rocking equations hold I0/m only).
 UNCONSTRAINED = {"mass_kg": "rocking is mass-independent"}
-
-
-def wilson(k: int, n: int, z: float = 1.959964):
-    if n == 0:
-        return None
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z / (1 + z * z / n) * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def elements(value):

@@ -78,26 +78,27 @@ pub struct RollingCase {
 /// The nominal cart's parameters by the equipment file's keys (`simulate_rolling`'s).
 impl UnitModel for RollingCase {
     fn nominal_keys(&self) -> Vec<(&'static str, usize)> {
+        // What a user estimates first (friction, initial angles, the load), then the geometry.
         let scalars = [
-            "length_m",
-            "width_m",
-            "platform_mass_kg",
-            "wheel_diameter_m",
-            "wheel_width_m",
-            "wheel_mass_kg",
-            "yaw0_deg",
             "mu_s_roll",
             "mu_s_swivel",
             "mu_k_roll",
             "mu_k_swivel",
+            "yaw0_deg",
+            "platform_mass_kg",
+            "length_m",
+            "width_m",
+            "wheel_mass_kg",
+            "wheel_diameter_m",
+            "wheel_width_m",
+            "trail_m",
+            "swivel_arm_m",
             "beta_spm",
             "gamma_n",
             "p",
-            "trail_m",
-            "swivel_arm_m",
         ];
         let mut keys: Vec<(&'static str, usize)> = scalars.iter().map(|k| (*k, 1)).collect();
-        keys.insert(7, ("steer0_deg", 4));
+        keys.insert(5, ("steer0_deg", 4));
         keys
     }
 
