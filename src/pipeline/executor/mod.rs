@@ -28,7 +28,7 @@ use super::progress::Reporter;
 use super::sink::{OutputSink, DATA_FILE};
 use super::sources;
 use super::spec::{OnError, RecordFormat, SourceSpec};
-use super::stage::{InputPart, OutputKind, Partition, StageContext, StageInfo, StageInput, WorkUnits};
+use super::stage::{InputKind, InputPart, OutputKind, Partition, StageContext, StageInfo, StageInput, WorkUnits};
 use super::txn::{self, Recovery, Transaction};
 use super::units::{self, Unit, GATHER};
 use crate::error::UserError;
@@ -38,6 +38,15 @@ use crate::io::hash;
 pub const FLAGGED: &str = "flagged";
 /// The lockfile unit that owns a stage's `flagged` table.
 const FLAGGED_UNIT: &str = "(flagged)";
+/// The `load` output the engine writes for every record: loaded, flagged, skipped or failed.
+pub const STATUS: &str = "status";
+/// The lockfile unit that owns a stage's `status` table.
+const STATUS_UNIT: &str = "(status)";
+
+/// Whether a lockfile unit is one of the engine's tables (`flagged`, `status`), not a record.
+fn engine_unit(id: &str) -> bool {
+    id == FLAGGED_UNIT || id == STATUS_UNIT
+}
 /// A hash standing for a file an upstream unit has yet to write (in `status` and `--dry-run`).
 const PENDING: &str = "pending";
 
@@ -187,6 +196,14 @@ fn source_files(plan: &Plan, name: &str, spec: &SourceSpec) -> Result<Vec<source
                 None => located,
             }
         })?,
+    };
+    let files = match &spec.components {
+        Some(c) => sources::group_components(&spec.path, files, &c.key).map_err(|e| {
+            let located =
+                plan.file.error_at(&["inputs", name, "components", "key"], format!("source `{name}`: {}", e.message));
+            located.hint(e.hint.unwrap_or_default())
+        })?,
+        None => files,
     };
     let mut expanded = Vec::new();
     for file in files {
@@ -421,7 +438,9 @@ fn pending_files(stage: &PlannedStage, unit: &Unit, old: Option<&UnitLock>) -> P
         .info()
         .outputs
         .iter()
-        .filter(|o| matches!(o.kind, OutputKind::Table | OutputKind::TimeSeries) && o.name != FLAGGED)
+        .filter(|o| {
+            matches!(o.kind, OutputKind::Table | OutputKind::TimeSeries) && o.name != FLAGGED && o.name != STATUS
+        })
         .map(|o| {
             let inner = if partition.is_empty() { DATA_FILE.to_string() } else { format!("{partition}/{DATA_FILE}") };
             pending(format!("{}/{inner}", o.name))
@@ -657,7 +676,7 @@ fn assess_stage(
         .collect::<anyhow::Result<Vec<_>>>()?;
     let ids: BTreeSet<&str> = units.iter().map(|(u, _, _)| u.id.as_str()).collect();
     let vanished = entry
-        .map(|e| e.units.keys().filter(|id| *id != FLAGGED_UNIT && !ids.contains(id.as_str())).cloned().collect())
+        .map(|e| e.units.keys().filter(|id| !engine_unit(id) && !ids.contains(id.as_str())).cloned().collect())
         .unwrap_or_default();
     Ok(AssessedStage { units, vanished })
 }
@@ -818,7 +837,7 @@ fn leave_out_not_kept(
             entry
                 .units
                 .iter()
-                .filter(|(id, _)| *id != FLAGGED_UNIT)
+                .filter(|(id, _)| !engine_unit(id))
                 .flat_map(|(_, unit)| unit.files.keys().map(|file| plan.stage_entry(&s.name, file)))
         });
     let output_dir = plan.file.output_dir();
@@ -1006,8 +1025,14 @@ pub struct UnitRecord {
 pub enum UnitOutcome {
     /// Up to date: its lockfile entry and files stay.
     Cached,
-    /// Wrote these files (relative to the stage folder → hash) under `dir`.
-    Ran { dir: PathBuf, files: BTreeMap<String, String> },
+    /// Wrote these files (relative to the stage folder → hash) under `dir`; `notes`: what its
+    /// tables flag (`sink::FLAGS_KEY`).
+    Ran {
+        dir: PathBuf,
+        files: BTreeMap<String, String>,
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        notes: Vec<String>,
+    },
     /// Failed; its previous files and entry stay (stale).
     Failed { reason: String },
     /// Its record could not be read and its source says `on_error: skip`.
@@ -1047,9 +1072,10 @@ fn execute(
             bar.inc(1);
             let outcome = match result {
                 Ok(()) => {
+                    let notes = sink.flags();
                     let files =
                         sink.into_hashes().into_iter().map(|(path, hash)| (relative(&path, dir), hash)).collect();
-                    UnitOutcome::Ran { dir: dir.to_path_buf(), files }
+                    UnitOutcome::Ran { dir: dir.to_path_buf(), files, notes }
                 }
                 Err(error) => {
                     let reason = format!("{error:#}");
@@ -1105,6 +1131,11 @@ fn fold(
     };
     let mut owner: BTreeMap<String, String> = BTreeMap::new();
     let mut flagged_rows: Vec<(String, String, String)> = Vec::new();
+    // Every record's status, for a stage that reads record sources (`load`).
+    let mut status_rows: Vec<[String; 4]> = Vec::new();
+    let mut status = |id: &str, what: &str, file: String, reason: String| {
+        status_rows.push([id.to_string(), what.to_string(), file, reason]);
+    };
     let mut failed = 0;
     for record in records {
         let old = entry.and_then(|e| e.units.get(&record.id));
@@ -1125,9 +1156,15 @@ fn fold(
                         reason: why.clone(),
                     });
                 }
+                let (what, reason) = match (&old.flagged, old.notes.is_empty()) {
+                    (Some(why), _) => ("skipped", why.clone()),
+                    (None, false) => ("flagged", old.notes.join("; ")),
+                    (None, true) => ("loaded", String::new()),
+                };
+                status(&record.id, what, record_files(&old.inputs), reason);
                 new_entry.units.insert(record.id, old.clone());
             }
-            UnitOutcome::Ran { dir, files } => {
+            UnitOutcome::Ran { dir, files, notes } => {
                 for (file, hash) in &files {
                     if let Some(other) = owner.insert(file.clone(), record.id.clone()) {
                         anyhow::bail!(
@@ -1142,26 +1179,36 @@ fn fold(
                 for gone in old_files.into_iter().filter(|f| !files.contains_key(*f)) {
                     folded.remove.insert(at(gone));
                 }
-                new_entry
-                    .units
-                    .insert(record.id, UnitLock { key: record.key, inputs: record.inputs, files, flagged: None });
+                let what = if notes.is_empty() { "loaded" } else { "flagged" };
+                status(&record.id, what, record_files(&record.inputs), notes.join("; "));
+                new_entry.units.insert(
+                    record.id,
+                    UnitLock { key: record.key, inputs: record.inputs, files, flagged: None, notes },
+                );
             }
             UnitOutcome::Flagged { file, reason } => {
                 for gone in old_files {
                     folded.remove.insert(at(gone));
                 }
                 flagged_rows.push((record.id.clone(), file, reason.clone()));
+                status(&record.id, "skipped", record_files(&record.inputs), reason.clone());
                 folded.flagged.push(UnitProblem {
                     stage: name.into(),
                     unit: record.id.clone(),
                     reason: reason.clone(),
                 });
-                let unit =
-                    UnitLock { key: record.key, inputs: record.inputs, files: BTreeMap::new(), flagged: Some(reason) };
+                let unit = UnitLock {
+                    key: record.key,
+                    inputs: record.inputs,
+                    files: BTreeMap::new(),
+                    flagged: Some(reason),
+                    notes: Vec::new(),
+                };
                 new_entry.units.insert(record.id, unit);
             }
             UnitOutcome::Failed { reason } => {
                 failed += 1;
+                status(&record.id, "failed", record_files(&record.inputs), reason.clone());
                 folded.failed.push(UnitProblem { stage: name.into(), unit: record.id.clone(), reason });
                 // Its previous outputs stay, stale, with their entry; nothing reads them this run.
                 if let Some(old) = old {
@@ -1183,18 +1230,28 @@ fn fold(
         InputRef::Source(s) => plan.file.spec.inputs[s].on_error == OnError::Skip,
         InputRef::Stage { .. } => false,
     });
-    if skips {
-        flagged_rows.sort();
-        let (file, hash) = flagged_table(staging, name, info, &stage.params, &flagged_rows)?;
-        let old = entry.and_then(|e| e.units.get(FLAGGED_UNIT));
+    // The engine's tables: made anew by every run of the stage, installed when they changed.
+    let mut engine_table = |unit: &str, (file, hash): (String, String)| {
+        let old = entry.and_then(|e| e.units.get(unit));
         if old.is_none_or(|o| o.key != hash || !stage_dir.join(&file).is_file()) {
             folded.install.insert(at(&file), staging.join(&file));
         }
         folded.produced.insert(file.clone(), ProducedFile { path: staging.join(&file), hash: hash.clone() });
         let files = BTreeMap::from([(file, hash.clone())]);
-        new_entry
-            .units
-            .insert(FLAGGED_UNIT.into(), UnitLock { key: hash, inputs: BTreeMap::new(), files, flagged: None });
+        let lock = UnitLock { key: hash, inputs: BTreeMap::new(), files, flagged: None, notes: Vec::new() };
+        new_entry.units.insert(unit.into(), lock);
+    };
+    if skips {
+        flagged_rows.sort();
+        let rows: Vec<[String; 3]> = flagged_rows.into_iter().map(|(r, f, why)| [r, f, why]).collect();
+        engine_table(FLAGGED_UNIT, text_table(staging, name, info, &stage.params, FLAGGED, &FLAGGED_COLUMNS, &rows)?);
+    }
+    if info.inputs == InputKind::Sources {
+        status_rows.sort();
+        engine_table(
+            STATUS_UNIT,
+            text_table(staging, name, info, &stage.params, STATUS, &STATUS_COLUMNS, &status_rows)?,
+        );
     }
     if !folded.install.is_empty() && ownership::read_marker(&stage_dir).is_none() {
         ownership::write_marker(staging, name, info.name)?;
@@ -1329,34 +1386,50 @@ fn why_running(stale: &[&(Unit, String, Vec<String>)], units: usize) -> String {
     format!("{} of {units} records; {first}{more}", stale.len())
 }
 
-/// `<stage>/flagged/data.parquet`: one row per skipped record; returns its path in the stage
-/// folder and its hash.
-fn flagged_table(
+/// The columns of the `flagged` table: one row per record skipped under `on_error: skip`.
+const FLAGGED_COLUMNS: [(&str, &str); 3] = [
+    ("record", "the record's partition (its work unit)"),
+    ("file", "the record file, relative to the pipeline"),
+    ("reason", "why it could not be read (file:line:column where known)"),
+];
+
+/// The columns of the `status` table: one row per record of the stage's sources.
+const STATUS_COLUMNS: [(&str, &str); 4] = [
+    ("record", "the record's partition (its work unit)"),
+    ("status", "loaded; flagged (loaded whole, with something to know: see reason); skipped (on_error: skip); failed (its previous outputs, if any, are kept, stale)"),
+    ("file", "the record's files, relative to the pipeline (comma-separated)"),
+    ("reason", "why it is flagged, skipped or failed, with file:line where known; empty when loaded"),
+];
+
+/// The files a unit read (its input labels), comma-separated: not its sources' specs nor its
+/// parameters' files.
+fn record_files(inputs: &BTreeMap<String, String>) -> String {
+    let files: Vec<&str> =
+        inputs.keys().filter(|k| !k.starts_with("source ") && !k.starts_with("params.")).map(String::as_str).collect();
+    files.join(", ")
+}
+
+/// `<stage>/<output>/data.parquet`, a table of text `columns` (name, description) and `rows`,
+/// written by the engine (`flagged`, `status`); returns its path in the stage folder and its hash.
+fn text_table<const N: usize>(
     new_dir: &Path,
     stage: &str,
     info: &'static StageInfo,
     params: &super::params::Params,
-    rows: &[(String, String, String)],
+    output: &str,
+    columns: &[(&str, &str); N],
+    rows: &[[String; N]],
 ) -> anyhow::Result<(String, String)> {
     use crate::table::{Column, ColumnData, Table};
-    let text = |name: &str, description: &str, values: Vec<String>| Column {
-        name: name.into(),
-        unit: String::new(),
-        description: description.into(),
-        data: ColumnData::Str(values),
-    };
     let mut table = Table::new();
-    table.extend([
-        text("record", "the record's partition (its work unit)", rows.iter().map(|r| r.0.clone()).collect()),
-        text("file", "the record file, relative to the pipeline", rows.iter().map(|r| r.1.clone()).collect()),
-        text(
-            "reason",
-            "why it could not be read (file:line:column where known)",
-            rows.iter().map(|r| r.2.clone()).collect(),
-        ),
-    ]);
+    table.extend(columns.iter().enumerate().map(|(k, (name, description))| Column {
+        name: (*name).into(),
+        unit: String::new(),
+        description: (*description).into(),
+        data: ColumnData::Str(rows.iter().map(|r| r[k].clone()).collect()),
+    }));
     let sink = OutputSink::new(new_dir, stage, info, params, &BTreeMap::new(), indicatif::ProgressBar::hidden());
-    sink.write(FLAGGED, &Vec::new(), table)?;
+    sink.write(output, &Vec::new(), table)?;
     let (path, hash) = sink.into_hashes().into_iter().next().expect("one table written");
     Ok((relative(&path, new_dir), hash))
 }
