@@ -200,7 +200,7 @@ fn source_files(plan: &Plan, name: &str, spec: &SourceSpec) -> Result<Vec<source
     let files = match &spec.components {
         Some(c) => sources::group_components(&spec.path, files, &c.key).map_err(|e| {
             let located =
-                plan.file.error_at(&["inputs", name, "components", "key"], format!("source `{name}`: {}", e.message));
+                plan.file.error_at(&["inputs", name, "components"], format!("source `{name}`: {}", e.message));
             located.hint(e.hint.unwrap_or_default())
         })?,
         None => files,
@@ -1246,7 +1246,7 @@ fn fold(
         let rows: Vec<[String; 3]> = flagged_rows.into_iter().map(|(r, f, why)| [r, f, why]).collect();
         engine_table(FLAGGED_UNIT, text_table(staging, name, info, &stage.params, FLAGGED, &FLAGGED_COLUMNS, &rows)?);
     }
-    if info.inputs == InputKind::Sources {
+    if info.inputs == InputKind::Sources && skips && failed == 0 {
         status_rows.sort();
         engine_table(
             STATUS_UNIT,
