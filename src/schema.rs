@@ -64,6 +64,12 @@ pub fn pipeline_schema() -> Value {
             }}}
         }));
     }
+    // Its own value: one `json!` of the whole schema would pass the macro recursion limit.
+    let components = json!({"type": "object", "additionalProperties": false, "required": ["key"], "description": "records whose components are files of their own (K-NET .EW/.NS/.UD, PEER .AT2, COSMOS .V2c per channel): files whose partition keys agree but for `key` are one record (docs/formats.md)", "properties": {
+        "key": {"type": "string", "description": "the {key} of `path` naming a file's component; not a partition key"},
+        "require": {"type": "array", "items": {"enum": ["x", "y", "z"]}, "default": ["x", "y", "z"], "description": "axes every record must have; a record missing one is refused, naming its files"},
+        "axes": {"type": "object", "additionalProperties": {"enum": ["x", "y", "z"]}, "description": "component (the key's value) → axis, for files whose header does not say where they point"}
+    }});
     json!({
         "$schema": "http://json-schema.org/draft-07/schema#",
         "title": "shakeflow pipeline",
@@ -101,7 +107,7 @@ pub fn pipeline_schema() -> Value {
                 "additionalProperties": false,
                 "required": ["format", "path"],
                 "properties": {
-                    "format": {"enum": RecordFormat::ALL.map(|f| f.name()), "description": "record file format (read by `load`), or `frames` (an image sequence: a folder of PNG/JPEG frames or a video file, for `cpt_track`) or `control_points` (X_mm, Y_mm, Z_mm, u_px, v_px CSV, for `cpt_calibrate`), or `case` (a diagnosis case folder, named by its equipment.yaml, for `diagnose`), or `dataset` (tables another stage or pipeline wrote: a dataset folder of `key=value/…/data.parquet` parts or one Parquet file, for stages that read stage outputs; record-file options do not apply)"},
+                    "format": {"enum": RecordFormat::ALL.map(|f| f.name()), "description": "record file format (read by `load`), or `frames` (an image sequence: a folder of PNG/JPEG frames or a video file, for `cpt_track`) or `control_points` (X_mm, Y_mm, Z_mm, u_px, v_px CSV, for `cpt_calibrate`), or `case` (a diagnosis case folder, named by its equipment.yaml, for `diagnose`), or `auto` (each file's record format from its content, else its extension; the load metadata names the reader used), or `dataset` (tables another stage or pipeline wrote: a dataset folder of `key=value/…/data.parquet` parts or one Parquet file, for stages that read stage outputs; record-file options do not apply)"},
                     "path": {"type": "string", "description": "file (or, for `frames` and `dataset`, a folder), glob, or template whose {key} parts become partition keys"},
                     "description": {"type": "string"},
                     "partition": {"type": "object", "additionalProperties": {"type": "string"}, "description": "constant partition keys for every record"},
@@ -120,7 +126,8 @@ pub fn pipeline_schema() -> Value {
                     "gaps": {"enum": ["error", "interpolate"], "default": "error", "description": "what to do with empty/NaN samples"},
                     "non_uniform": {"enum": ["error", "resample"], "default": "error", "description": "what to do with a non-uniform time column"},
                     "on_error": {"enum": ["fail", "skip"], "default": "fail", "description": "a record that cannot be read: `fail` fails its work unit; `skip` lists it in the load stage's `flagged` table and goes on (exit status 2)"},
-                    "component_as": {"enum": ["ax", "ay", "label"], "default": "ax", "description": "accelerogram formats without `columns`: the axis a record's lone horizontal component becomes, or `label` to keep the file's channel names (docs/formats.md)"}
+                    "component_as": {"enum": ["ax", "ay", "label"], "default": "ax", "description": "accelerogram formats without `columns`: the axis a record's lone horizontal component becomes, or `label` to keep the file's channel names (docs/formats.md)"},
+                    "components": components
                 }
             },
             "column": {

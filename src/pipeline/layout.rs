@@ -13,6 +13,7 @@
 //!     <output>/<key>=<value>/…/data.parquet   DATA_FILE, one record's table (`partition_path`)
 //!     mcap/<output>/…/data.mcap        MCAP_DIR, MCAP_FILE: opt-in MCAP twins
 //!     flagged/data.parquet             FLAGGED: records skipped by `on_error: skip`
+//!     status/data.parquet              STATUS: every record's status (loaded, flagged, skipped)
 //! ```
 //!
 //! Modules that read or write these import the names from here, so the lockfile, the sink, the
@@ -41,6 +42,9 @@ pub const MCAP_FILE: &str = "data.mcap";
 pub const MCAP_DIR: &str = "mcap";
 /// The output the engine writes for records skipped under `on_error: skip`.
 pub const FLAGGED: &str = "flagged";
+/// The output the engine writes for every record of a run over an archive: loaded, flagged,
+/// skipped or failed.
+pub const STATUS: &str = "status";
 
 /// Partition keys of a record (`motion=FB-4/floor=5`), in order.
 pub type Partition = Vec<(String, String)>;

@@ -55,6 +55,10 @@ pub struct UnitLock {
     /// Why the record was skipped (`on_error: skip`); it has no files then.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub flagged: Option<String>,
+    /// What the unit's tables flagged about a record they hold whole (`sink::FLAGS_KEY`), for
+    /// the `status` table of the runs that find it cached.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
 }
 
 impl LockFile {
@@ -140,7 +144,13 @@ mod format1 {
                         .filter(|f| f != crate::pipeline::layout::STAGE_MARKER)
                         .map(|f| (f, String::new()))
                         .collect();
-                    let unit = super::UnitLock { key: String::new(), inputs: BTreeMap::new(), files, flagged: None };
+                    let unit = super::UnitLock {
+                        key: String::new(),
+                        inputs: BTreeMap::new(),
+                        files,
+                        flagged: None,
+                        notes: Vec::new(),
+                    };
                     let entry = super::StageLock {
                         stage_type: old.stage_type,
                         stage_version: old.stage_version,

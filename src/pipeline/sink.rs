@@ -15,6 +15,29 @@ use crate::io::{mcap, parquet};
 use crate::pipeline::memo::TableMemo;
 use crate::table::Table;
 
+/// Table metadata by which a stage flags a record it wrote whole but that its user should know
+/// about (`load`: channels of unequal lengths, null-padded): a JSON array of objects with
+/// `reason`, `file` and `line` (null where there is none). The engine lists them in the
+/// stage's `status` table.
+pub const FLAGS_KEY: &str = "shakeflow.flags";
+
+/// The flags of [`FLAGS_KEY`] as lines: `reason (file:line)`; text that is not such an array
+/// stays as it is.
+fn describe_flags(text: &str) -> Vec<String> {
+    let Ok(serde_json::Value::Array(flags)) = serde_json::from_str(text) else { return vec![text.to_string()] };
+    flags
+        .iter()
+        .map(|flag| {
+            let reason = flag["reason"].as_str().unwrap_or_default();
+            match (flag["file"].as_str(), flag["line"].as_u64()) {
+                (Some(file), Some(line)) => format!("{reason} ({file}:{line})"),
+                (Some(file), None) => format!("{reason} ({file})"),
+                _ => reason.to_string(),
+            }
+        })
+        .collect()
+}
+
 pub struct OutputSink {
     root: PathBuf,
     stage_name: String,
@@ -29,6 +52,8 @@ pub struct OutputSink {
     /// Where tables stay in memory for the stages that read them next, and how many stages
     /// those are (none: nobody reads them this run).
     memo: Option<(Arc<TableMemo>, usize)>,
+    /// What the tables written so far flag ([`FLAGS_KEY`]), as `reason (file:line)`.
+    flags: Mutex<Vec<String>>,
 }
 
 impl OutputSink {
@@ -59,6 +84,7 @@ impl OutputSink {
             mcap: params.get("mcap").and_then(|v| v.as_bool()).unwrap_or(false),
             hashes: Mutex::new(KnownHashes::new()),
             memo: None,
+            flags: Mutex::new(Vec::new()),
         }
     }
 
@@ -107,6 +133,9 @@ impl OutputSink {
         table.metadata.extend(self.provenance.clone());
         table.metadata.insert("shakeflow.output".into(), output.into());
         table.metadata.insert("shakeflow.partition".into(), relative.clone());
+        if let Some(flags) = table.metadata.get(FLAGS_KEY) {
+            self.flags.lock().expect("no panics while holding the lock").extend(describe_flags(flags));
+        }
         let path = dir.join(DATA_FILE);
         let hash = parquet::write_table(&path, &table)?;
         self.hashes.lock().expect("no panics while holding the lock").insert(path.clone(), hash);
@@ -190,6 +219,11 @@ impl OutputSink {
     }
 
     /// The hashes of the files written.
+    /// What the tables written flag, each as `reason (file:line)`, in the order written.
+    pub fn flags(&self) -> Vec<String> {
+        self.flags.lock().expect("no panics while holding the lock").clone()
+    }
+
     pub fn into_hashes(self) -> KnownHashes {
         self.hashes.into_inner().expect("no panics while holding the lock")
     }

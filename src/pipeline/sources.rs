@@ -80,13 +80,7 @@ pub fn resolve(
 ) -> Result<Vec<MatchedFile>, UserError> {
     let pieces = parse_template(pattern).map_err(UserError::new)?;
     let has_keys = pieces.iter().any(|p| matches!(p, Piece::Key(_)));
-    let glob_pattern: String = pieces
-        .iter()
-        .map(|p| match p {
-            Piece::Literal(l) => l.clone(),
-            Piece::Key(_) | Piece::Wild => "*".to_string(),
-        })
-        .collect();
+    let glob_pattern = glob_of(&pieces);
     let is_glob = glob_pattern.contains(['*', '?', '[']);
     let full = base_dir.join(&glob_pattern);
     let full_text = full.to_string_lossy().replace('\\', "/");
@@ -98,12 +92,8 @@ pub fn resolve(
         if !(path.is_file() || folders && path.is_dir()) {
             continue;
         }
-        // The template is matched against what it was joined to: the path below `base_dir` for a
-        // relative template, the whole path for an absolute one (also when it lies below it).
-        let root = if Path::new(&glob_pattern).is_absolute() { Path::new("") } else { base_dir };
-        let relative = path.strip_prefix(root).unwrap_or(&path).to_string_lossy().replace('\\', "/");
         let mut partition = if has_keys {
-            match match_pieces(&relative, &pieces) {
+            match match_path(base_dir, &glob_pattern, &pieces, &path) {
                 Some(p) => p,
                 None => continue,
             }
@@ -123,6 +113,52 @@ pub fn resolve(
         ));
     }
     Ok(files)
+}
+
+/// The glob a template's pieces match: each key and wildcard a `*`.
+fn glob_of(pieces: &[Piece]) -> String {
+    pieces
+        .iter()
+        .map(|p| match p {
+            Piece::Literal(l) => l.as_str(),
+            Piece::Key(_) | Piece::Wild => "*",
+        })
+        .collect()
+}
+
+/// The keys a template's `pieces` give `path`. The template is matched against what it was
+/// joined to: the path below `base_dir` for a relative template, the whole path for an absolute
+/// one (also when it lies below it).
+fn match_path(base_dir: &Path, glob_pattern: &str, pieces: &[Piece], path: &Path) -> Option<Partition> {
+    let root = if Path::new(glob_pattern).is_absolute() { Path::new("") } else { base_dir };
+    let relative = path.strip_prefix(root).unwrap_or(path).to_string_lossy().replace('\\', "/");
+    match_pieces(&relative, pieces)
+}
+
+/// A `components:` source's files with the component `key` taken out of their partitions: the
+/// files whose other keys agree are one record. Refuses a `key` that `pattern` does not name.
+pub fn group_components(pattern: &str, mut files: Vec<MatchedFile>, key: &str) -> Result<Vec<MatchedFile>, UserError> {
+    let pieces = parse_template(pattern).map_err(UserError::new)?;
+    if !pieces.contains(&Piece::Key(key.to_string())) {
+        return Err(UserError::new(format!(
+            "`components: {{key: {key}}}` names no `{{{key}}}` of the path `{pattern}`"
+        ))
+        .hint(format!(
+            "name each file's component in the path, e.g. `gm/{{station}}.{{{key}}}` for K-NET's `.EW`, `.NS`, `.UD`"
+        )));
+    }
+    for file in &mut files {
+        file.partition.retain(|(k, _)| k != key);
+    }
+    Ok(files)
+}
+
+/// The value of the template key `key` for `path`, a file of the source whose `pattern` is
+/// resolved against `base_dir` (a `components:` source's component: `EW` of `AOM005.EW`).
+pub fn key_value(base_dir: &Path, pattern: &str, path: &Path, key: &str) -> Option<String> {
+    let pieces = parse_template(pattern).ok()?;
+    let partition = match_path(base_dir, &glob_of(&pieces), &pieces, path)?;
+    partition.into_iter().find(|(k, _)| k == key).map(|(_, v)| v)
 }
 
 #[cfg(test)]

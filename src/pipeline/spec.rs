@@ -89,6 +89,9 @@ pub enum RecordFormat {
     Geonet,
     /// LabVIEW Measurement `.lvm` (decimal point or comma, one or more segments).
     Lvm,
+    /// Each file's record format told from its content (its first 4 KB), else from its extension,
+    /// as `shakeflow stage load` does; the load metadata names the reader used.
+    Auto,
     /// A diagnosis case folder, named by its `equipment.yaml` (`cases/{case}/equipment.yaml`):
     /// equipment, floor record and observations, read whole by `diagnose`.
     Case,
@@ -103,7 +106,7 @@ pub enum RecordFormat {
 
 impl RecordFormat {
     /// Every format, in the order the schema lists them.
-    pub const ALL: [RecordFormat; 17] = [
+    pub const ALL: [RecordFormat; 18] = [
         RecordFormat::Delimited,
         RecordFormat::Csv,
         RecordFormat::Tsv,
@@ -117,6 +120,7 @@ impl RecordFormat {
         RecordFormat::Esm,
         RecordFormat::Geonet,
         RecordFormat::Lvm,
+        RecordFormat::Auto,
         RecordFormat::Frames,
         RecordFormat::ControlPoints,
         RecordFormat::Case,
@@ -240,6 +244,51 @@ pub struct SourceSpec {
     /// and goes on, and the run exits with status 2.
     #[serde(default, skip_serializing_if = "OnError::is_fail")]
     pub on_error: OnError,
+    /// Records whose components live in files of their own (K-NET `.EW`/`.NS`/`.UD`, PEER
+    /// `.AT2`, COSMOS `.V2c` per channel): the files whose partition keys agree but for
+    /// `key` are one record, their channels side by side on one clock.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub components: Option<Components>,
+}
+
+/// How a source's files group into records by component (`components:`).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Components {
+    /// The `{key}` of the source's `path` whose value names a file's component
+    /// (`path: knet/{station}.{component}`, `key: component`); it is not a partition key.
+    pub key: String,
+    /// The axes every record must have (default x, y, z): a record missing one is refused,
+    /// naming its files.
+    #[serde(default = "every_axis")]
+    pub require: Vec<Axis>,
+    /// A component (the key's value) → its axis, for files whose own header or label does not
+    /// say where they point (`H1: x`, `H2: y`); the others go by their stated orientation.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub axes: BTreeMap<String, Axis>,
+}
+
+/// An axis of the east–north–up frame records are loaded in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Axis {
+    X,
+    Y,
+    Z,
+}
+
+impl Axis {
+    pub fn letter(self) -> char {
+        match self {
+            Axis::X => 'x',
+            Axis::Y => 'y',
+            Axis::Z => 'z',
+        }
+    }
+}
+
+fn every_axis() -> Vec<Axis> {
+    vec![Axis::X, Axis::Y, Axis::Z]
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]

@@ -34,7 +34,12 @@ impl Unit {
     /// The source a per-record unit's record comes from, when it is a raw record file.
     pub fn source(&self) -> Option<(&str, &crate::pipeline::spec::SourceSpec, &InputPart)> {
         self.inputs.iter().find_map(|input| match input {
-            StageInput::Source { name, spec, files, .. } if files.len() == 1 => Some((name.as_str(), spec, &files[0])),
+            // A record of several files (`components:`) is named by its first.
+            StageInput::Source { name, spec, files, .. }
+                if files.len() == 1 || spec.components.is_some() && !files.is_empty() =>
+            {
+                Some((name.as_str(), spec, &files[0]))
+            }
             _ => None,
         })
     }
@@ -74,8 +79,8 @@ pub fn split(
         WorkUnits::Gather => vec![unit(GATHER.to_string(), inputs.to_vec())],
         WorkUnits::EachRecord => inputs
             .iter()
-            .flat_map(|input| input.parts().iter().map(move |part| (input, part)))
-            .map(|(input, part)| unit(partition_path(&part.partition), vec![only(input, vec![part.clone()])]))
+            .flat_map(|input| record_files(input).into_iter().map(move |parts| (input, parts)))
+            .map(|(input, parts)| unit(partition_path(&parts[0].partition), vec![only(input, parts)]))
             .collect(),
         WorkUnits::PerRecordOf { primary } => {
             let Some(main) = inputs.get(primary) else {
@@ -115,6 +120,20 @@ pub fn split(
         );
     }
     Ok(units)
+}
+
+/// The files of each record of `input`: one each, but a `components:` source's files that
+/// share a partition (a station's `.EW`, `.NS`, `.UD`) are one record.
+fn record_files(input: &StageInput) -> Vec<Vec<InputPart>> {
+    let grouped = matches!(input, StageInput::Source { spec, .. } if spec.components.is_some());
+    if !grouped {
+        return input.parts().iter().map(|part| vec![part.clone()]).collect();
+    }
+    let mut records: BTreeMap<String, Vec<InputPart>> = BTreeMap::new();
+    for part in input.parts() {
+        records.entry(partition_path(&part.partition)).or_default().push(part.clone());
+    }
+    records.into_values().collect()
 }
 
 /// `input` holding only `parts`.

@@ -12,9 +12,9 @@ use super::{InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, S
 use crate::error::{did_you_mean_hint, UserError};
 use crate::io::records::{self, DelimitedOptions, RawRecord};
 use crate::pipeline::params::{self, ParamError, Params};
-use crate::pipeline::spec::{ColumnSpec, ComponentAs, GapPolicy, NonUniformPolicy, RecordFormat, SourceSpec};
+use crate::pipeline::spec::{Axis, ColumnSpec, ComponentAs, GapPolicy, NonUniformPolicy, RecordFormat, SourceSpec};
 use crate::signal::resample;
-use crate::table::{Column, Table, TIME_COLUMN};
+use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 use crate::units;
 
 pub struct Load;
@@ -26,7 +26,7 @@ pub struct LoadParams {}
 
 static INFO: StageInfo = StageInfo {
     name: "load",
-    version: 2,
+    version: 3,
     summary: "Read record files into SI time-series tables: checks sampling, gaps and point counts, converts units.",
     inputs: InputKind::Sources,
     outputs: &[
@@ -37,7 +37,12 @@ static INFO: StageInfo = StageInfo {
         },
         OutputInfo {
             name: "flagged",
-            description: "written by the engine when a source has `on_error: skip`: one row per record that could not be read (record, source, file, line, column, reason)",
+            description: "written by the engine when a source has `on_error: skip`: one row per record that could not be read (record, file, reason with file:line:column)",
+            kind: OutputKind::Table,
+        },
+        OutputInfo {
+            name: "status",
+            description: "written by the engine: one row per record (record, status, file, reason): loaded, flagged (loaded whole, e.g. channels of unequal lengths null-padded; reason with file:line), skipped (`on_error: skip`) or failed",
             kind: OutputKind::Table,
         },
     ],
@@ -58,17 +63,35 @@ impl Stage for Load {
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
-        let jobs: Vec<Job<'_>> = ctx
-            .inputs
-            .iter()
-            .flat_map(|input| match input {
-                StageInput::Source { name, spec, files, .. } => {
-                    files.iter().map(move |f| (spec, name.as_str(), f)).collect::<Vec<_>>()
+        // Records of one file each, and records of a `components:` source: its files that share
+        // a partition.
+        let mut jobs: Vec<Job<'_>> = Vec::new();
+        let mut groups: BTreeMap<(&str, String), Group<'_>> = BTreeMap::new();
+        for input in ctx.inputs {
+            let StageInput::Source { name, spec, files, base_dir } = input else {
+                unreachable!("the plan gives `load` sources only")
+            };
+            for file in files {
+                match spec.components {
+                    Some(_) => groups
+                        .entry((name.as_str(), super::partition_path(&file.partition)))
+                        .or_insert_with(|| Group { spec, source: name, base_dir, parts: Vec::new() })
+                        .parts
+                        .push(file),
+                    None => jobs.push((spec, name.as_str(), file)),
                 }
-                StageInput::Dataset { .. } => unreachable!("the plan gives `load` sources only"),
-            })
-            .collect();
-        ctx.sink.set_total(jobs.len());
+            }
+        }
+        ctx.sink.set_total(jobs.len() + groups.len());
+        groups.into_par_iter().try_for_each(|(_, group)| {
+            let mut table = load_group(&group).map_err(anyhow::Error::new)?;
+            table.metadata.insert("shakeflow.source".into(), group.source.to_string());
+            let joined =
+                |field: fn(&InputPart) -> &str| group.parts.iter().map(|p| field(p)).collect::<Vec<_>>().join(", ");
+            table.metadata.insert("shakeflow.input_file".into(), joined(|p| &p.label));
+            table.metadata.insert("shakeflow.input_hash".into(), joined(|p| &p.hash));
+            ctx.sink.write("records", &group.parts[0].partition, table)
+        })?;
         // Sources that read the same file the same way (a DAQ export split into floors) share
         // one parse.
         let mut files: BTreeMap<(&std::path::Path, ParseKey<'_>), Vec<Job<'_>>> = BTreeMap::new();
@@ -90,6 +113,150 @@ impl Stage for Load {
 
 /// One record file to load: the source's spec, the source's name and the file.
 type Job<'a> = (&'a SourceSpec, &'a str, &'a InputPart);
+
+/// One record of a `components:` source: its files, one per component.
+struct Group<'a> {
+    spec: &'a SourceSpec,
+    source: &'a str,
+    base_dir: &'a std::path::Path,
+    parts: Vec<&'a InputPart>,
+}
+
+/// A `components:` record: its files read, checked to share one clock, and joined.
+fn load_group(group: &Group<'_>) -> Result<Table, UserError> {
+    let raws: Vec<RawRecord> = group.parts.par_iter().map(|part| parse(group.spec, part)).collect::<Result<_, _>>()?;
+    let merged = merge_components(group, raws)?;
+    load_parsed(group.spec, group.parts[0], &merged)
+}
+
+/// The components of one record joined into one: the same reader, sampling and start time
+/// (where the files state one), every axis `require`d present. Each channel's header keys
+/// gain its `file` and `component`; record-wide keys the files disagree on are kept per
+/// component (`component.EW.peak_gal`).
+fn merge_components(group: &Group<'_>, raws: Vec<RawRecord>) -> Result<RawRecord, UserError> {
+    let spec = group.spec;
+    let components = spec.components.as_ref().expect("a group comes from a `components:` source");
+    let record = super::partition_values(&group.parts[0].partition);
+    let files = || group.parts.iter().map(|p| p.label.as_str()).collect::<Vec<_>>().join(", ");
+    let names: Vec<String> = group
+        .parts
+        .iter()
+        .map(|p| {
+            crate::pipeline::sources::key_value(group.base_dir, &spec.path, &p.path, &components.key)
+                .unwrap_or_else(|| p.label.clone())
+        })
+        .collect();
+    let refuse = |k: usize, message: String, hint: &str| {
+        UserError::new(format!("record `{record}` ({}): {message}", files()))
+            .in_file(&group.parts[k].path)
+            .hint(hint.to_string())
+    };
+    let first = &raws[0];
+    for (k, raw) in raws.iter().enumerate() {
+        if raw.format != first.format {
+            return Err(refuse(
+                k,
+                format!(
+                    "its `{}` file is a `{}` record, its `{}` file a `{}` record",
+                    names[0], first.format, names[k], raw.format
+                ),
+                "one record's components come from one reader: narrow the source's path",
+            ));
+        }
+        if raw.time.is_some() {
+            return Err(refuse(
+                k,
+                format!("its `{}` file has a time column of its own", names[k]),
+                "files with their own times cannot share one clock: load each with a source of its own",
+            ));
+        }
+        let (a, b) = (spec.dt.or(first.dt), spec.dt.or(raw.dt));
+        if let (Some(a), Some(b)) = (a, b) {
+            if (a - b).abs() > 1e-9 * a.abs().max(b.abs()) {
+                return Err(refuse(
+                    k,
+                    format!("its `{}` file is sampled every {a} s, its `{}` file every {b} s", names[0], names[k]),
+                    "components on one clock share one sampling: resample one, or load them as separate records",
+                ));
+            }
+        }
+        if let (Some(a), Some(b)) = (first.header.get("record_start"), raw.header.get("record_start")) {
+            if a != b {
+                return Err(refuse(
+                    k,
+                    format!("its `{}` file starts at {a}, its `{}` file at {b}", names[0], names[k]),
+                    "components on one clock start together: trim them to a common start, or load them as separate records",
+                ));
+            }
+        }
+    }
+    let mut merged = RawRecord {
+        format: first.format,
+        dt: spec.dt.or(first.dt),
+        time: None,
+        channels: Vec::new(),
+        header: BTreeMap::new(),
+    };
+    let mut shared: BTreeMap<String, Vec<(usize, String)>> = BTreeMap::new();
+    for (k, raw) in raws.into_iter().enumerate() {
+        let component = &names[k];
+        let stated = components.axes.get(component);
+        if stated.is_some() && raw.channels.len() != 1 {
+            return Err(refuse(
+                k,
+                format!("`components: axes` names `{component}`, but its file holds {} channels", raw.channels.len()),
+                "`axes` says where a one-component file points; a file of several channels states its own",
+            ));
+        }
+        for (key, value) in &raw.header {
+            if !key.starts_with("channel.") {
+                shared.entry(key.clone()).or_default().push((k, value.clone()));
+            }
+        }
+        for mut channel in raw.channels {
+            let own = format!("channel.{}.", channel.name);
+            if merged.channels.iter().any(|c| c.name == channel.name) {
+                channel.name = format!("{}_{component}", channel.name);
+            }
+            let prefix = format!("channel.{}.", channel.name);
+            for (key, value) in raw.header.range(own.clone()..).take_while(|(key, _)| key.starts_with(&own)) {
+                merged.header.insert(format!("{prefix}{}", &key[own.len()..]), value.clone());
+            }
+            if let Some(axis) = stated {
+                let orientation = match axis {
+                    Axis::X => "90",
+                    Axis::Y => "0",
+                    Axis::Z => "up",
+                };
+                merged.header.insert(format!("{prefix}orientation"), orientation.into());
+            }
+            merged.header.insert(format!("{prefix}file"), group.parts[k].label.clone());
+            merged.header.insert(format!("{prefix}component"), component.clone());
+            merged.channels.push(channel);
+        }
+    }
+    for (key, values) in shared {
+        if values.len() == names.len() && values.iter().all(|(_, v)| *v == values[0].1) {
+            merged.header.insert(key, values[0].1.clone());
+        } else {
+            for (k, value) in values {
+                merged.header.insert(format!("component.{}.{key}", names[k]), value);
+            }
+        }
+    }
+    let channels: Vec<&records::RawChannel> = merged.channels.iter().collect();
+    let single = (spec.component_as == Some(ComponentAs::Ay)).then_some('y');
+    let axes = records::roles::axes(&merged, &channels, single)
+        .map_err(|e| refuse(0, e, "say which component is which with `components: {axes: {H1: x, H2: y, UP: z}}`"))?;
+    if let Some(missing) = components.require.iter().find(|a| !axes.contains(&a.letter())) {
+        return Err(refuse(
+            0,
+            format!("no `{}` component among its {} file(s) (components {})", missing.letter(), names.len(), names.join(", ")),
+            "a component file is missing: add it, or set `components: {require: [...]}` to the axes this archive has; `on_error: skip` lists the record and goes on",
+        ));
+    }
+    Ok(merged)
+}
 
 /// What decides how a file parses: sources equal in these read it identically.
 #[derive(PartialEq, Eq, PartialOrd, Ord)]
@@ -137,8 +304,12 @@ fn parse(spec: &SourceSpec, part: &InputPart) -> Result<RawRecord, UserError> {
     }
     let bytes = records::read_bytes(path).map_err(user_error)?;
     records::unchanged(path, &part.hash, &bytes).map_err(user_error)?;
-    let delimited = delimited_options(spec).unwrap_or_default();
-    match spec.format {
+    let format = match spec.format {
+        RecordFormat::Auto => detected(path, &bytes)?,
+        named => named,
+    };
+    let delimited = delimited_options(&SourceSpec { format, ..spec.clone() }).unwrap_or_default();
+    match format {
         RecordFormat::At2 => records::parse_at2(path, &bytes),
         RecordFormat::RenadicV1 => records::parse_renadic_v1(path, &bytes),
         RecordFormat::SimcenterJson => records::parse_simcenter_json(path, &bytes),
@@ -152,11 +323,34 @@ fn parse(spec: &SourceSpec, part: &InputPart) -> Result<RawRecord, UserError> {
         RecordFormat::Csv | RecordFormat::Tsv | RecordFormat::Delimited => {
             records::parse_delimited(path, &bytes, &delimited)
         }
-        RecordFormat::Frames | RecordFormat::ControlPoints | RecordFormat::Case | RecordFormat::Dataset => {
-            unreachable!("refused above")
+        RecordFormat::Frames
+        | RecordFormat::ControlPoints
+        | RecordFormat::Case
+        | RecordFormat::Dataset
+        | RecordFormat::Auto => {
+            unreachable!("refused above, or told from the file")
         }
     }
     .map_err(user_error)
+}
+
+/// The record format of a `format: auto` file: its content first, then its extension.
+fn detected(path: &std::path::Path, bytes: &[u8]) -> Result<RecordFormat, UserError> {
+    let name = records::sniff_bytes(path, bytes).ok_or_else(|| user_error(records::unknown_format(path)))?;
+    Ok(format_named(name))
+}
+
+/// The source format a reader's name (`RawRecord::format`) is.
+fn format_named(name: &str) -> RecordFormat {
+    serde_json::from_value(json!(name)).expect("readers are named as the formats they read")
+}
+
+/// The format the record was read as: the source's, or for `format: auto` the reader's.
+fn read_as(spec: &SourceSpec, raw: &RawRecord) -> RecordFormat {
+    match spec.format {
+        RecordFormat::Auto => format_named(raw.format),
+        named => named,
+    }
 }
 
 /// How a delimited source's files parse; None for the other formats.
@@ -200,6 +394,7 @@ fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<T
 fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Table, UserError> {
     let path = part.path.as_path();
     let err = |message: String| UserError::new(message).in_file(path);
+    let format = read_as(spec, raw);
 
     // Time: an explicit column, the file's own time (RENADIC), or a sample interval. The other
     // columns are the record's channels.
@@ -248,10 +443,36 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
             .collect::<Result<_, UserError>>()?
     };
     distinct_names(path, spec, raw, &selected)?;
-    // Channels of one file may differ in length (CSMIP Vol.1): the table takes the shortest.
-    let n = selected.iter().map(|s| s.1.values.len()).min().unwrap_or(0);
-    let cut: serde_json::Map<String, serde_json::Value> =
-        selected.iter().filter(|s| s.1.values.len() != n).map(|s| (s.0.clone(), json!(s.1.values.len()))).collect();
+    // Channels of one file may differ in length (CSMIP, COSMOS, GeoNet): the table takes the
+    // longest, a shorter channel is null where it has ended, and the record is flagged. No
+    // sample is dropped.
+    let n = selected.iter().map(|s| s.1.values.len()).max().unwrap_or(0);
+    let flags: Vec<Flag> = selected
+        .iter()
+        .filter(|s| s.1.values.len() < n)
+        .map(|(out, channel, _)| Flag {
+            reason: format!(
+                "channel `{}` (column `{out}`) has {} samples, the record's longest {n}: its last {} row(s) are null",
+                channel.name,
+                channel.values.len(),
+                n - channel.values.len()
+            ),
+            file: channel_file(raw, channel).unwrap_or(&part.label).to_string(),
+            line: channel.first_data_line,
+        })
+        .collect();
+    if let Some((time, line)) = &explicit_time {
+        if let Some((out, channel, _)) = selected.iter().find(|s| s.1.values.len() != time.len()) {
+            return Err(err(format!(
+                "channel `{}` (column `{out}`) has {} samples but the time column {}: which time goes with which sample is unknown",
+                channel.name,
+                channel.values.len(),
+                time.len()
+            ))
+            .at(line.map(|l| (l, 1)))
+            .hint("a record with its own time column needs as many values in every channel: repair the file"));
+        }
+    }
     if n < 2 {
         return Err(err(format!("the record has {n} sample(s); at least 2 are needed")));
     }
@@ -366,10 +587,10 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
         })?;
         let factor = conversion.factor * spec.scale * detail.and_then(|d| d.scale).unwrap_or(1.0);
         let mut values: Vec<f64> = match calibration {
-            Some(c) => channel.values[..n].iter().map(|&v| c.apply(v) * factor).collect(),
-            None => channel.values[..n].iter().map(|v| v * factor).collect(),
+            Some(c) => channel.values.iter().map(|&v| c.apply(v) * factor).collect(),
+            None => channel.values.iter().map(|v| v * factor).collect(),
         };
-        if let Some(i) = overflowed(&channel.values[..n], &values) {
+        if let Some(i) = overflowed(&channel.values, &values) {
             return Err(err(format!(
                 "column `{}` overflows in unit conversion: sample {} ({} {unit_name}) times {factor} is not a finite number of {}",
                 channel.name,
@@ -377,7 +598,8 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
                 short(channel.values[i]),
                 conversion.si_unit
             ))
-            .at(channel.first_data_line.filter(|_| explicit_time.is_some() || spec.format != RecordFormat::At2).map(|l| (l + i, 1)))
+            .in_file(channel_file(raw, channel).map_or(path, std::path::Path::new))
+            .at(channel.first_data_line.filter(|_| explicit_time.is_some() || format != RecordFormat::At2).map(|l| (l + i, 1)))
             .hint("the value is damaged, or the unit or `scale` is wrong; it is not a missing value, so `gaps: interpolate` does not fill it"));
         }
         let missing = values.iter().filter(|v| !v.is_finite()).count();
@@ -390,7 +612,8 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
                         channel.name,
                         first + 1
                     ))
-                    .at(channel.first_data_line.filter(|_| explicit_time.is_some() || spec.format != RecordFormat::At2).map(|l| (l + first, 1)))
+                    .in_file(channel_file(raw, channel).map_or(path, std::path::Path::new))
+                    .at(channel.first_data_line.filter(|_| explicit_time.is_some() || format != RecordFormat::At2).map(|l| (l + first, 1)))
                     .hint("repair the file, or set `gaps: interpolate` on the source to fill gaps linearly (reported in the artifact)"));
                 }
                 GapPolicy::Interpolate => {
@@ -405,7 +628,7 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
         // Gap filling has nothing to start from in a column of gaps only: it stays NaN, never
         // to be written. (Filling and resampling interpolate convexly: finite values stay finite.)
         if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-            let cause = if missing == n {
+            let cause = if missing == channel.values.len() {
                 "every value is missing: `gaps: interpolate` has nothing to interpolate from"
             } else {
                 "gap filling or resampling left it undefined"
@@ -421,7 +644,9 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
             .unwrap_or_else(|| {
                 format!("the record's channel read as `{out_name}` (its file, column and unit: metadata shakeflow.input_file, shakeflow.load)")
             });
-        let mut conversion_entry = json!({"file_column": channel.name, "file_unit": unit_name, "factor": factor});
+        // The channel's own sample count: the file's, whatever the table's length.
+        let mut conversion_entry =
+            json!({"file_column": channel.name, "file_unit": unit_name, "factor": factor, "npts": values.len()});
         if let Some(c) = calibration {
             conversion_entry["calibration"] = json!({
                 "raw_unit": file_unit,
@@ -433,11 +658,13 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
             });
         }
         conversions.insert(out_name.clone(), conversion_entry);
-        columns.push(Column::f64(&out_name, conversion.si_unit, &description, values));
+        columns.push(padded(Column::f64(&out_name, conversion.si_unit, &description, values), n_out));
     }
     table.extend(columns);
-    let mut summary = json!({
-        "format": spec.format,
+    let summary = json!({
+        // The reader used (for `format: auto`, the one the file's content or extension chose).
+        "format": format,
+        "format_detected": spec.format == RecordFormat::Auto,
         "dt_s": dt,
         "sample_rate_hz": 1.0 / dt,
         "npts": n_out,
@@ -447,13 +674,43 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
         "resampled_from_non_uniform": resampled_from.is_some(),
         "header": raw.header,
     });
-    if !cut.is_empty() {
-        // The original lengths of the channels cut to the shortest; absent when none was.
-        summary["cut_to_shortest_channel"] = json!(cut);
+    if !flags.is_empty() {
+        // Why the record is flagged (it loaded whole): the status table and the report list these.
+        let listed: Vec<serde_json::Value> =
+            flags.iter().map(|f| json!({"reason": f.reason, "file": f.file, "line": f.line})).collect();
+        metadata.insert(FLAGS_KEY.to_string(), serde_json::Value::Array(listed).to_string());
     }
     metadata.insert("shakeflow.load".to_string(), summary.to_string());
     table.metadata = metadata;
     Ok(table)
+}
+
+/// Load metadata listing why a record that loaded is flagged: a JSON array of
+/// `{"reason", "file", "line"}` (line null where the format has none to name).
+pub use crate::pipeline::sink::FLAGS_KEY;
+
+/// Something about a record that loaded whole but that its user should know.
+struct Flag {
+    reason: String,
+    file: String,
+    line: Option<usize>,
+}
+
+/// The file a channel of a `components:` record came from (as provenance names it).
+fn channel_file<'a>(raw: &'a RawRecord, channel: &records::RawChannel) -> Option<&'a str> {
+    raw.header.get(&format!("channel.{}.file", channel.name)).map(String::as_str)
+}
+
+/// `column` as a table of `rows` rows: a shorter channel becomes nullable, null past its end.
+fn padded(column: Column, rows: usize) -> Column {
+    match column.data {
+        ColumnData::F64(values) if values.len() < rows => {
+            let mut optional: Vec<Option<f64>> = values.into_iter().map(Some).collect();
+            optional.resize(rows, None);
+            Column { data: ColumnData::OptF64(optional), ..column }
+        }
+        _ => column,
+    }
 }
 
 /// The factor to seconds of a time column: `time_unit` when given, else the unit its file states
@@ -583,7 +840,7 @@ fn name_line(spec: &SourceSpec, raw: &RawRecord, channel: &records::RawChannel) 
 /// delimited and RENADIC files, and `component_as: label`, keep the file's names.
 fn default_names(spec: &SourceSpec, raw: &RawRecord, channels: &[&records::RawChannel]) -> Result<Vec<String>, String> {
     use RecordFormat::*;
-    let by_axis = matches!(spec.format, At2 | SimcenterJson | Cosmos | Dmg | Smc | Knet | Esm | Geonet);
+    let by_axis = matches!(read_as(spec, raw), At2 | SimcenterJson | Cosmos | Dmg | Smc | Knet | Esm | Geonet);
     if !by_axis || spec.component_as == Some(ComponentAs::Label) {
         return Ok(channels.iter().map(|c| c.name.clone()).collect());
     }

@@ -87,9 +87,10 @@ struct Inputs<'a> {
     fragility: Vec<&'a StageInput>,
     rolling: Vec<&'a StageInput>,
     diagnosis: Vec<&'a StageInput>,
+    status: Vec<&'a StageInput>,
 }
 
-const READS: &str = "transfer_function.identified and .spectra, detect_toppling.events, synchronize.records (or another table of records with time_s), simulate_toppling.events, toppling_fragility.fragility, simulate_rolling.events, diagnose.diagnosis";
+const READS: &str = "transfer_function.identified and .spectra, detect_toppling.events, synchronize.records (or another table of records with time_s), simulate_toppling.events, toppling_fragility.fragility, simulate_rolling.events, diagnose.diagnosis, load.status";
 
 impl Stage for Report {
     fn info(&self) -> &'static StageInfo {
@@ -117,6 +118,7 @@ impl Stage for Report {
                 ("toppling_fragility", "fragility") => &mut inputs.fragility,
                 ("simulate_rolling", "events") => &mut inputs.rolling,
                 ("diagnose", "diagnosis") => &mut inputs.diagnosis,
+                ("load", "status") => &mut inputs.status,
                 _ if table.column(crate::table::TIME_COLUMN).is_some() => &mut inputs.records,
                 (stage_type, output) => anyhow::bail!(
                     "`report` cannot show `{}` (output `{output}` of a `{stage_type}` stage); it reads {READS}",
@@ -255,6 +257,23 @@ fn study_page(
     drawn: &[String],
 ) -> anyhow::Result<html::Page> {
     let mut page = html::Page { tests: identified.iter().map(|(m, _)| m.clone()).collect(), ..html::Page::default() };
+    for input in &inputs.status {
+        for part in input.parts() {
+            let table = ctx.read_table(part)?;
+            let stage = meta(&table, "shakeflow.stage").to_string();
+            let [record, status, file, reason] =
+                ["record", "status", "file", "reason"].map(|name| strings(&table, name));
+            for (((record, status), file), reason) in record?.iter().zip(status?).zip(file?).zip(reason?) {
+                page.records.push(html::RecordStatus {
+                    stage: stage.clone(),
+                    record: record.clone(),
+                    status: status.clone(),
+                    file: file.clone(),
+                    reason: reason.clone(),
+                });
+            }
+        }
+    }
     let unit_name = |channel: &str| channel.strip_suffix(suffix).unwrap_or(channel).to_string();
     for (i, (_, table)) in identified.iter().enumerate() {
         for (channel, f) in strings(table, "output")?.iter().zip(optionals(table, "frequency_hz")?) {

@@ -32,6 +32,7 @@ mod mutation_harness;
 mod nees_archive;
 mod never_lose_data;
 mod pipeline_runs;
+mod record_components;
 mod record_formats;
 mod report_html;
 mod rocking_demo_cases;

@@ -8,7 +8,7 @@ use crate::common::{self, shakeflow, stderr};
 use serde_json::{json, Value};
 use shakeflow::pipeline::spec::SourceSpec;
 use shakeflow::stages::{load, InputPart};
-use shakeflow::table::{Table, TIME_COLUMN};
+use shakeflow::table::{ColumnData, Table, TIME_COLUMN};
 use std::path::PathBuf;
 
 const G0: f64 = 9.80665;
@@ -33,8 +33,19 @@ fn load(file: &str, format: &str) -> Table {
     load_with(file, format, json!({})).unwrap_or_else(|e| panic!("{e}"))
 }
 
-fn column<'t>(table: &'t Table, name: &str) -> &'t [f64] {
-    table.f64_column(name).unwrap_or_else(|| panic!("no column {name}: {:?}", table.column_names()))
+/// A channel's samples: a channel shorter than the record is null past its end (only there),
+/// which is left out.
+pub fn column(table: &Table, name: &str) -> Vec<f64> {
+    let column = table.column(name).unwrap_or_else(|| panic!("no column {name}: {:?}", table.column_names()));
+    match &column.data {
+        ColumnData::F64(values) => values.clone(),
+        ColumnData::OptF64(values) => {
+            let n = values.iter().take_while(|v| v.is_some()).count();
+            assert!(values[n..].iter().all(Option::is_none), "{name}: a null before the channel's end");
+            values[..n].iter().flatten().copied().collect()
+        }
+        other => panic!("{name} is {}", other.type_name()),
+    }
 }
 
 fn load_header(table: &Table) -> Value {
@@ -87,8 +98,11 @@ fn every_record_matches_gmprocess() {
             let ours = column(&table, name);
             let file_column = summary["columns"][*name]["file_column"].as_str().unwrap();
             let npts = trace["npts"].as_u64().unwrap() as usize;
-            // CIWLT.RAW's channels differ in length: the table keeps the shortest.
-            assert!(npts == rows || (file.ends_with(".RAW") && npts > rows), "{file} {name}: {npts} vs {rows} rows");
+            // Every sample gmprocess reads is kept: CIWLT.RAW's channels differ in length, the
+            // table has the longest's rows and the others are null past their end.
+            assert_eq!(ours.len(), npts, "{file} {name}: samples");
+            assert_eq!(summary["columns"][*name]["npts"], json!(npts), "{file} {name}: npts in the metadata");
+            assert!(npts <= rows, "{file} {name}: {npts} vs {rows} rows");
             let time = table.f64_column(TIME_COLUMN).unwrap();
             assert!((time[1] - time[0] - trace["delta"].as_f64().unwrap()).abs() < 1e-12, "{file}: dt");
             let to_si = if trace["units"] == "counts" {
@@ -103,7 +117,7 @@ fn every_record_matches_gmprocess() {
             let stride = trace["stride"].as_u64().unwrap() as usize;
             for (k, expected) in trace["samples"].as_array().unwrap().iter().enumerate() {
                 let i = k * stride;
-                if i >= rows {
+                if i >= npts {
                     break;
                 }
                 let expected = expected.as_f64().unwrap() * to_si;
@@ -113,9 +127,9 @@ fn every_record_matches_gmprocess() {
                     ours[i]
                 );
             }
-            if npts == rows {
+            {
                 let last = trace["last"].as_f64().unwrap() * to_si;
-                assert!((ours[rows - 1] - last).abs() <= tolerance, "{file} {name}: last");
+                assert!((ours[npts - 1] - last).abs() <= tolerance, "{file} {name}: last");
                 let i = trace["peak_index"].as_u64().unwrap() as usize;
                 assert!((ours[i] - peak).abs() <= tolerance, "{file} {name}: peak {} vs {peak}", ours[i]);
                 let largest = ours.iter().fold(0.0f64, |m, v| m.max(v.abs()));
@@ -180,12 +194,42 @@ fn a_lone_horizontal_is_ax_unless_the_source_says_otherwise() {
     assert!(bad.unwrap_err().to_string().contains("unknown variant `east`"));
 }
 
+/// CIWLT.RAW's channels hold 30130 (90°), 30058 (360°) and 30312 (up) points (SOURCES.md): the
+/// table has 30312 rows, the shorter channels are null past their end, each column's `npts` is
+/// its channel's, and the record is flagged at each shorter channel's first data line.
 #[test]
-fn channels_of_different_lengths_are_cut_to_the_shortest_and_say_so() {
+fn channels_of_different_lengths_keep_every_sample_and_are_flagged() {
     let table = load("dmg/CIWLT.RAW", "dmg");
-    assert_eq!(column(&table, "ax_mps2").len(), 30058);
+    assert_eq!(table.num_rows(), 30312);
+    let time = table.f64_column(TIME_COLUMN).unwrap();
+    assert!((time[30311] - 303.11).abs() < 1e-9, "time runs to the longest channel's end");
+    assert_eq!(column(&table, "ax_mps2").len(), 30130);
+    assert_eq!(column(&table, "ay_mps2").len(), 30058);
+    assert_eq!(column(&table, "az_mps2").len(), 30312);
+    // The longest channel is not nullable; the others are.
+    assert!(matches!(table.column("az_mps2").unwrap().data, ColumnData::F64(_)));
+    assert!(matches!(table.column("ax_mps2").unwrap().data, ColumnData::OptF64(_)));
     let summary = load_header(&table);
-    assert_eq!(summary["cut_to_shortest_channel"], json!({"ax_mps2": 30130, "az_mps2": 30312}));
+    assert!(summary.get("cut_to_shortest_channel").is_none());
+    for (name, npts) in [("ax_mps2", 30130), ("ay_mps2", 30058), ("az_mps2", 30312)] {
+        assert_eq!(summary["columns"][name]["npts"], json!(npts), "{name}");
+    }
+    assert_eq!(summary["npts"], json!(30312));
+    let flags: Value = serde_json::from_str(&table.metadata[load::FLAGS_KEY]).unwrap();
+    let flags = flags.as_array().unwrap();
+    assert_eq!(flags.len(), 2, "{flags:?}");
+    assert!(
+        flags[0]["reason"].as_str().unwrap().contains(
+            "`chan1` (column `ax_mps2`) has 30130 samples, the record's longest 30312: its last 182 row(s) are null"
+        ),
+        "{flags:?}"
+    );
+    assert!(flags[1]["reason"].as_str().unwrap().contains("has 30058 samples"), "{flags:?}");
+    assert_eq!(flags[0]["file"], "dmg/CIWLT.RAW");
+    let text = std::fs::read_to_string(record("dmg/CIWLT.RAW")).unwrap();
+    let line = flags[1]["line"].as_u64().unwrap() as usize;
+    let before = text.lines().nth(line - 2).unwrap();
+    assert!(before.trim_start().starts_with("30058 "), "line {line} follows the channel's data line: {before}");
     // Units: g to m/s² with g0, as the table says.
     assert_eq!(summary["columns"]["ax_mps2"]["file_unit"], "g");
     assert_eq!(summary["columns"]["ax_mps2"]["factor"], G0);

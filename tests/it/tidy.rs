@@ -305,6 +305,8 @@ fn contributing_names_what_exists() {
     }
     assert!(checked > 40, "only {checked} names checked: has CONTRIBUTING.md lost its walkthroughs?");
     assert!(problems.is_empty(), "CONTRIBUTING.md names what is gone:\n{}", problems.join("\n"));
+}
+
 /// The module path of a source file (`pipeline/executor/mod.rs` → `pipeline::executor`).
 fn module_path(relative: &str) -> Vec<String> {
     let mut parts: Vec<String> = relative.split('/').map(str::to_string).collect();

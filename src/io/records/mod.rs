@@ -145,10 +145,18 @@ impl std::error::Error for ParseError {}
 pub fn sniff_format(path: &Path) -> Option<&'static str> {
     let mut head = Vec::new();
     if let Ok(file) = std::fs::File::open(path) {
-        // 4 KB covers the AT2 and RENADIC headers' first lines.
-        let _ = file.take(4096).read_to_end(&mut head);
+        let _ = file.take(SNIFF_BYTES as u64).read_to_end(&mut head);
     }
-    let head = String::from_utf8_lossy(&head);
+    sniff_bytes(path, &head)
+}
+
+/// How much of a file [`sniff_bytes`] looks at: 4 KB covers every format's telling first lines.
+const SNIFF_BYTES: usize = 4096;
+
+/// [`sniff_format`] of a file's bytes (its first [`SNIFF_BYTES`] are read): content first,
+/// then the extension of `path`.
+pub fn sniff_bytes(path: &Path, bytes: &[u8]) -> Option<&'static str> {
+    let head = String::from_utf8_lossy(&bytes[..bytes.len().min(SNIFF_BYTES)]);
     if let Some(format) = sniff_content(&head) {
         return Some(format);
     }
@@ -212,6 +220,10 @@ pub fn check_header(
         ParseError::new(path, None, None, format!("cannot read the file: {e}"), "check the path and its permissions")
     })?;
     let text = record_text(path, &head, "a record")?;
+    let format = match format {
+        "auto" => sniff_bytes(path, &head).ok_or_else(|| unknown_format(path))?,
+        named => named,
+    };
     if let Some(found) = sniff_content(&text).filter(|found| *found != format) {
         if !(delimited.is_some() && found == "delimited") {
             return Err(ParseError::new(
@@ -245,6 +257,18 @@ pub fn check_header(
     };
     let record = parse_delimited(path, &head[..cut], opts)?;
     Ok(Some(record.channels.into_iter().map(|c| c.name).collect()))
+}
+
+/// The refusal of a file whose format neither its content nor its extension tells (`format: auto`).
+pub fn unknown_format(path: &Path) -> ParseError {
+    let ext = path.extension().map(|e| format!("`.{}`", e.to_string_lossy())).unwrap_or_else(|| "none".into());
+    ParseError::new(
+        path,
+        Some(1),
+        None,
+        format!("`format: auto` cannot tell this file's format: its first lines match no reader, and its extension ({ext}) is none of theirs"),
+        "give the source the file's `format:` (docs/formats.md lists them), or narrow its path to record files",
+    )
 }
 
 /// The strong-motion formats by content (COSMOS, CSMIP/DMG, SMC, K-NET, ESM, GeoNet): their

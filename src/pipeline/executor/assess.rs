@@ -8,12 +8,12 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
-use super::commit::FLAGGED_UNIT;
+use super::commit::engine_unit;
 use super::inputs::{cached_files, stage_inputs, Produced, ProducedFile, ResolvedSource};
 use super::Rerun;
 use crate::error::UserError;
 use crate::io::hash;
-use crate::pipeline::layout::{DATA_FILE, FLAGGED};
+use crate::pipeline::layout::{DATA_FILE, FLAGGED, STATUS};
 use crate::pipeline::lock::{LockFile, StageLock, UnitLock};
 use crate::pipeline::plan::{Plan, PlannedStage};
 use crate::pipeline::stage::OutputKind;
@@ -140,7 +140,9 @@ fn pending_files(stage: &PlannedStage, unit: &Unit, old: Option<&UnitLock>) -> P
         .info()
         .outputs
         .iter()
-        .filter(|o| matches!(o.kind, OutputKind::Table | OutputKind::TimeSeries) && o.name != FLAGGED)
+        .filter(|o| {
+            matches!(o.kind, OutputKind::Table | OutputKind::TimeSeries) && o.name != FLAGGED && o.name != STATUS
+        })
         .map(|o| {
             let inner = if partition.is_empty() { DATA_FILE.to_string() } else { format!("{partition}/{DATA_FILE}") };
             pending(format!("{}/{inner}", o.name))
@@ -332,7 +334,7 @@ pub(super) fn assess_stage(
         .collect();
     let ids: BTreeSet<&str> = units.iter().map(|(u, _, _)| u.id.as_str()).collect();
     let vanished = entry
-        .map(|e| e.units.keys().filter(|id| *id != FLAGGED_UNIT && !ids.contains(id.as_str())).cloned().collect())
+        .map(|e| e.units.keys().filter(|id| !engine_unit(id) && !ids.contains(id.as_str())).cloned().collect())
         .unwrap_or_default();
     Ok(AssessedStage { units, vanished })
 }

@@ -10,18 +10,25 @@ use anyhow::anyhow;
 
 use super::inputs::{cached_files, Produced, ProducedFile};
 use super::{upstream_stages, UnitProblem};
-use crate::pipeline::layout::{FLAGGED, STAGE_MARKER};
+use crate::pipeline::layout::{FLAGGED, STAGE_MARKER, STATUS};
 use crate::pipeline::lock::{LockFile, StageLock, UnitLock};
 use crate::pipeline::ownership;
 use crate::pipeline::plan::{InputRef, Plan, PlannedStage};
 use crate::pipeline::sink::OutputSink;
 use crate::pipeline::spec::OnError;
-use crate::pipeline::stage::StageInfo;
+use crate::pipeline::stage::{InputKind, StageInfo};
 use crate::pipeline::txn::Transaction;
 use crate::pipeline::units;
 
 /// The lockfile unit that owns a stage's `flagged` table.
 pub(super) const FLAGGED_UNIT: &str = "(flagged)";
+/// The lockfile unit that owns a stage's `status` table.
+const STATUS_UNIT: &str = "(status)";
+
+/// Whether a lockfile unit is one of the engine's tables (`flagged`, `status`), not a record.
+pub(super) fn engine_unit(id: &str) -> bool {
+    id == FLAGGED_UNIT || id == STATUS_UNIT
+}
 
 /// What became of one unit in a run: the record the commit folds into the lockfile (and, for a
 /// Slurm run, what each array task leaves in its shard's manifest).
@@ -38,8 +45,14 @@ pub struct UnitRecord {
 pub enum UnitOutcome {
     /// Up to date: its lockfile entry and files stay.
     Cached,
-    /// Wrote these files (relative to the stage folder → hash) under `dir`.
-    Ran { dir: PathBuf, files: BTreeMap<String, String> },
+    /// Wrote these files (relative to the stage folder → hash) under `dir`; `notes`: what its
+    /// tables flag (`sink::FLAGS_KEY`).
+    Ran {
+        dir: PathBuf,
+        files: BTreeMap<String, String>,
+        #[serde(default, skip_serializing_if = "Vec::is_empty")]
+        notes: Vec<String>,
+    },
     /// Failed; its previous files and entry stay (stale).
     Failed { reason: String },
     /// Its record could not be read and its source says `on_error: skip`.
@@ -87,6 +100,11 @@ pub(super) fn fold(
     };
     let mut owner: BTreeMap<String, String> = BTreeMap::new();
     let mut flagged_rows: Vec<(String, String, String)> = Vec::new();
+    // Every record's status, for a stage that reads record sources (`load`).
+    let mut status_rows: Vec<[String; 4]> = Vec::new();
+    let mut status = |id: &str, what: &str, file: String, reason: String| {
+        status_rows.push([id.to_string(), what.to_string(), file, reason]);
+    };
     let mut failed = 0;
     for record in records {
         let old = entry.and_then(|e| e.units.get(&record.id));
@@ -107,9 +125,15 @@ pub(super) fn fold(
                         reason: why.clone(),
                     });
                 }
+                let (what, reason) = match (&old.flagged, old.notes.is_empty()) {
+                    (Some(why), _) => ("skipped", why.clone()),
+                    (None, false) => ("flagged", old.notes.join("; ")),
+                    (None, true) => ("loaded", String::new()),
+                };
+                status(&record.id, what, record_files(&old.inputs), reason);
                 new_entry.units.insert(record.id, old.clone());
             }
-            UnitOutcome::Ran { dir, files } => {
+            UnitOutcome::Ran { dir, files, notes } => {
                 for (file, hash) in &files {
                     if let Some(other) = owner.insert(file.clone(), record.id.clone()) {
                         anyhow::bail!(
@@ -124,26 +148,36 @@ pub(super) fn fold(
                 for gone in old_files.into_iter().filter(|f| !files.contains_key(*f)) {
                     folded.remove.insert(at(gone));
                 }
-                new_entry
-                    .units
-                    .insert(record.id, UnitLock { key: record.key, inputs: record.inputs, files, flagged: None });
+                let what = if notes.is_empty() { "loaded" } else { "flagged" };
+                status(&record.id, what, record_files(&record.inputs), notes.join("; "));
+                new_entry.units.insert(
+                    record.id,
+                    UnitLock { key: record.key, inputs: record.inputs, files, flagged: None, notes },
+                );
             }
             UnitOutcome::Flagged { file, reason } => {
                 for gone in old_files {
                     folded.remove.insert(at(gone));
                 }
                 flagged_rows.push((record.id.clone(), file, reason.clone()));
+                status(&record.id, "skipped", record_files(&record.inputs), reason.clone());
                 folded.flagged.push(UnitProblem {
                     stage: name.into(),
                     unit: record.id.clone(),
                     reason: reason.clone(),
                 });
-                let unit =
-                    UnitLock { key: record.key, inputs: record.inputs, files: BTreeMap::new(), flagged: Some(reason) };
+                let unit = UnitLock {
+                    key: record.key,
+                    inputs: record.inputs,
+                    files: BTreeMap::new(),
+                    flagged: Some(reason),
+                    notes: Vec::new(),
+                };
                 new_entry.units.insert(record.id, unit);
             }
             UnitOutcome::Failed { reason } => {
                 failed += 1;
+                status(&record.id, "failed", record_files(&record.inputs), reason.clone());
                 folded.failed.push(UnitProblem { stage: name.into(), unit: record.id.clone(), reason });
                 // Its previous outputs stay, stale, with their entry; nothing reads them this run.
                 if let Some(old) = old {
@@ -165,18 +199,28 @@ pub(super) fn fold(
         InputRef::Source(s) => plan.file.spec.inputs[s].on_error == OnError::Skip,
         InputRef::Stage { .. } => false,
     });
-    if skips {
-        flagged_rows.sort();
-        let (file, hash) = flagged_table(staging, name, info, &stage.params, &flagged_rows)?;
-        let old = entry.and_then(|e| e.units.get(FLAGGED_UNIT));
+    // The engine's tables: made anew by every run of the stage, installed when they changed.
+    let mut engine_table = |unit: &str, (file, hash): (String, String)| {
+        let old = entry.and_then(|e| e.units.get(unit));
         if old.is_none_or(|o| o.key != hash || !stage_dir.join(&file).is_file()) {
             folded.install.insert(at(&file), staging.join(&file));
         }
         folded.produced.insert(file.clone(), ProducedFile { path: staging.join(&file), hash: hash.clone() });
         let files = BTreeMap::from([(file, hash.clone())]);
-        new_entry
-            .units
-            .insert(FLAGGED_UNIT.into(), UnitLock { key: hash, inputs: BTreeMap::new(), files, flagged: None });
+        let lock = UnitLock { key: hash, inputs: BTreeMap::new(), files, flagged: None, notes: Vec::new() };
+        new_entry.units.insert(unit.into(), lock);
+    };
+    if skips {
+        flagged_rows.sort();
+        let rows: Vec<[String; 3]> = flagged_rows.into_iter().map(|(r, f, why)| [r, f, why]).collect();
+        engine_table(FLAGGED_UNIT, text_table(staging, name, info, &stage.params, FLAGGED, &FLAGGED_COLUMNS, &rows)?);
+    }
+    if info.inputs == InputKind::Sources && skips && failed == 0 {
+        status_rows.sort();
+        engine_table(
+            STATUS_UNIT,
+            text_table(staging, name, info, &stage.params, STATUS, &STATUS_COLUMNS, &status_rows)?,
+        );
     }
     if !folded.install.is_empty() && ownership::read_marker(&stage_dir).is_none() {
         ownership::write_marker(staging, name, info.name)?;
@@ -186,34 +230,50 @@ pub(super) fn fold(
     Ok(folded)
 }
 
-/// `<stage>/flagged/data.parquet`: one row per skipped record; returns its path in the stage
-/// folder and its hash.
-pub(super) fn flagged_table(
+/// The columns of the `flagged` table: one row per record skipped under `on_error: skip`.
+const FLAGGED_COLUMNS: [(&str, &str); 3] = [
+    ("record", "the record's partition (its work unit)"),
+    ("file", "the record file, relative to the pipeline"),
+    ("reason", "why it could not be read (file:line:column where known)"),
+];
+
+/// The columns of the `status` table: one row per record of the stage's sources.
+const STATUS_COLUMNS: [(&str, &str); 4] = [
+    ("record", "the record's partition (its work unit)"),
+    ("status", "loaded; flagged (loaded whole, with something to know: see reason); skipped (on_error: skip); failed (its previous outputs, if any, are kept, stale)"),
+    ("file", "the record's files, relative to the pipeline (comma-separated)"),
+    ("reason", "why it is flagged, skipped or failed, with file:line where known; empty when loaded"),
+];
+
+/// The files a unit read (its input labels), comma-separated: not its sources' specs nor its
+/// parameters' files.
+fn record_files(inputs: &BTreeMap<String, String>) -> String {
+    let files: Vec<&str> =
+        inputs.keys().filter(|k| !k.starts_with("source ") && !k.starts_with("params.")).map(String::as_str).collect();
+    files.join(", ")
+}
+
+/// `<stage>/<output>/data.parquet`, a table of text `columns` (name, description) and `rows`,
+/// written by the engine (`flagged`, `status`); returns its path in the stage folder and its hash.
+fn text_table<const N: usize>(
     new_dir: &Path,
     stage: &str,
     info: &'static StageInfo,
     params: &crate::pipeline::params::Params,
-    rows: &[(String, String, String)],
+    output: &str,
+    columns: &[(&str, &str); N],
+    rows: &[[String; N]],
 ) -> anyhow::Result<(String, String)> {
     use crate::table::{Column, ColumnData, Table};
-    let text = |name: &str, description: &str, values: Vec<String>| Column {
-        name: name.into(),
-        unit: String::new(),
-        description: description.into(),
-        data: ColumnData::Str(values),
-    };
     let mut table = Table::new();
-    table.extend([
-        text("record", "the record's partition (its work unit)", rows.iter().map(|r| r.0.clone()).collect()),
-        text("file", "the record file, relative to the pipeline", rows.iter().map(|r| r.1.clone()).collect()),
-        text(
-            "reason",
-            "why it could not be read (file:line:column where known)",
-            rows.iter().map(|r| r.2.clone()).collect(),
-        ),
-    ]);
+    table.extend(columns.iter().enumerate().map(|(k, (name, description))| Column {
+        name: (*name).into(),
+        unit: String::new(),
+        description: (*description).into(),
+        data: ColumnData::Str(rows.iter().map(|r| r[k].clone()).collect()),
+    }));
     let sink = OutputSink::new(new_dir, stage, info, params, &BTreeMap::new(), indicatif::ProgressBar::hidden());
-    sink.write(FLAGGED, &Vec::new(), table)?;
+    sink.write(output, &Vec::new(), table)?;
     let (path, hash) = sink.into_hashes().into_iter().next().expect("one table written");
     Ok((relative(&path, new_dir), hash))
 }
@@ -253,7 +313,7 @@ pub(super) fn leave_out_not_kept(
             entry
                 .units
                 .iter()
-                .filter(|(id, _)| *id != FLAGGED_UNIT)
+                .filter(|(id, _)| !engine_unit(id))
                 .flat_map(|(_, unit)| unit.files.keys().map(|file| plan.stage_entry(&s.name, file)))
         });
     let output_dir = plan.file.output_dir();
@@ -320,7 +380,7 @@ mod tests {
 
     fn ran(dir: &Path, files: &[(&str, &str)]) -> UnitOutcome {
         let files = files.iter().map(|(f, h)| (f.to_string(), h.to_string())).collect();
-        UnitOutcome::Ran { dir: dir.to_path_buf(), files }
+        UnitOutcome::Ran { dir: dir.to_path_buf(), files, notes: Vec::new() }
     }
 
     #[test]

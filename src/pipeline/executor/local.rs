@@ -285,9 +285,10 @@ pub(super) fn execute(
             bar.inc(1);
             let outcome = match result {
                 Ok(()) => {
+                    let notes = sink.flags();
                     let files =
                         sink.into_hashes().into_iter().map(|(path, hash)| (relative(&path, dir), hash)).collect();
-                    UnitOutcome::Ran { dir: dir.to_path_buf(), files }
+                    UnitOutcome::Ran { dir: dir.to_path_buf(), files, notes }
                 }
                 Err(error) => {
                     let reason = format!("{error:#}");

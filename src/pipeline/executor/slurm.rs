@@ -597,7 +597,7 @@ fn upstream_produced(
                     for record in manifest.records {
                         match record.outcome {
                             UnitOutcome::Cached => files.extend(committed(&record.id)),
-                            UnitOutcome::Ran { dir, files: written } => files.extend(
+                            UnitOutcome::Ran { dir, files: written, .. } => files.extend(
                                 written
                                     .into_iter()
                                     .map(|(f, hash)| (f.clone(), ProducedFile { path: dir.join(&f), hash })),

@@ -14,6 +14,8 @@ pub struct Page {
     pub tests: Vec<String>,
     pub units: Vec<Unit>,
     pub cases: Vec<Case>,
+    /// Every record of the `load` stages whose `status` tables the report read.
+    pub records: Vec<RecordStatus>,
     pub stages: Vec<Provenance>,
     /// Kinds of results the report had no input for (said on the page, not an error).
     pub absent: Vec<&'static str>,
@@ -81,6 +83,17 @@ pub struct RollingRun {
     pub caster_flips: i64,
     pub breakaway_time_s: Option<f64>,
     pub figure: Option<String>,
+}
+
+/// One record's row of a `load` stage's `status` table.
+#[derive(Debug)]
+pub struct RecordStatus {
+    pub stage: String,
+    pub record: String,
+    /// loaded, flagged, skipped or failed.
+    pub status: String,
+    pub file: String,
+    pub reason: String,
 }
 
 /// One diagnosed case.
@@ -190,11 +203,17 @@ pub fn render(page: &Page) -> String {
     for unit in &page.units {
         let _ = write!(h, "<a href=\"#{}\">{}</a>", anchor("unit", &unit.name), escape(&unit.name));
     }
+    if !page.records.is_empty() {
+        h.push_str("<a href=\"#records\">Records</a>");
+    }
     if !page.cases.is_empty() {
         h.push_str("<a href=\"#diagnosis\">Diagnosis</a>");
     }
     h.push_str("<a href=\"#provenance\">Provenance</a></nav>\n");
     summary(&mut h, page);
+    if !page.records.is_empty() {
+        records(&mut h, &page.records);
+    }
     for unit in &page.units {
         unit_section(&mut h, page, unit);
     }
@@ -412,6 +431,53 @@ fn figures_per_motion<'a>(h: &mut String, unit: &str, figures: impl Iterator<Ite
         figure(h, src, &format!("{unit} under {motion}"));
     }
     h.push_str("</details>\n");
+}
+
+/// Every record with its status: counts, the records to look at (flagged, skipped, failed) with
+/// their reasons, and the loaded ones folded away.
+fn records(h: &mut String, records: &[RecordStatus]) {
+    const ORDER: [&str; 4] = ["failed", "skipped", "flagged", "loaded"];
+    h.push_str("<section id=\"records\">\n<h2>Records</h2>\n");
+    let count = |status: &str| records.iter().filter(|r| r.status == status).count();
+    let counts: Vec<String> = ORDER.iter().map(|s| format!("{} {s}", count(s))).collect();
+    let _ = writeln!(
+        h,
+        "<p>{} record(s): {}. Flagged records loaded whole with something to know; skipped ones (<code>on_error: skip</code>) and failed ones have no table from this run.</p>",
+        records.len(),
+        counts.join(", ")
+    );
+    let row = |h: &mut String, r: &RecordStatus| {
+        let _ = writeln!(
+            h,
+            "<tr{}><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            if r.status == "loaded" { "" } else { " class=\"hit\"" },
+            escape(&r.record),
+            escape(&r.status),
+            escape(&r.stage),
+            escape(&r.file),
+            escape(&r.reason)
+        );
+    };
+    const HEAD: &str = "<table><tr><th>record</th><th>status</th><th>stage</th><th>file</th><th>reason</th></tr>\n";
+    let attention: Vec<&RecordStatus> =
+        ORDER[..3].iter().flat_map(|s| records.iter().filter(move |r| r.status == *s)).collect();
+    if !attention.is_empty() {
+        h.push_str(HEAD);
+        for r in attention {
+            row(h, r);
+        }
+        h.push_str("</table>\n");
+    }
+    let loaded: Vec<&RecordStatus> = records.iter().filter(|r| r.status == "loaded").collect();
+    if !loaded.is_empty() {
+        let _ = writeln!(h, "<details><summary>{} loaded record(s)</summary>", loaded.len());
+        h.push_str(HEAD);
+        for r in loaded {
+            row(h, r);
+        }
+        h.push_str("</table>\n</details>\n");
+    }
+    h.push_str("</section>\n");
 }
 
 fn diagnosis(h: &mut String, cases: &[Case]) {
