@@ -15,7 +15,7 @@
 //! As γ → ∞ (μ → 0) the base no longer feels the block and the model is the prescribed-base one.
 
 use super::{
-    chatter, initial_side, sensor_acceleration, Block, EventKind, Excitation, IsolatedBase, Options, Response,
+    chatter, initial_side, sensor_acceleration, Block, EventKind, Excitation, IsolatedBase, Options, Phase, Response,
     MAX_TRANSITIONS_PER_SAMPLE,
 };
 use crate::physics::hybrid::{self, rebounds, Course, Equations, Hybrid, Now, Segment};
@@ -89,30 +89,23 @@ enum Transition {
     Overturn,
 }
 
-/// What the event functions of each integrated regime stand for ([`Phase::events`]).
+/// What the event functions of each integrated regime stand for, in their order.
 const REST_EVENTS: [Transition; 2] = [Transition::Uplift(1), Transition::Uplift(-1)];
 const ROCKING_EVENTS: [Transition; 2] = [Transition::Impact, Transition::Overturn];
 
-/// One regime's equations over one floor segment.
-struct Phase<'a> {
-    system: System<'a>,
-    regime: Regime,
-    seg: Segment<2>,
-}
-
-impl Equations<4, 2> for Phase<'_> {
+impl Equations<4, 2> for Phase<System<'_>, Regime> {
     type Transition = Transition;
 
     fn rhs(&self, t: f64, y: &[f64; 4]) -> [f64; 4] {
-        self.system.rhs(self.regime, &self.seg, t, y)
+        self.model.rhs(self.regime, &self.seg, t, y)
     }
 
     fn events(&self, t: f64, state: &[f64; 4]) -> [f64; 2] {
         match self.regime {
-            Regime::Rest => self.system.uplift_margins(&self.seg, t, state),
+            Regime::Rest => self.model.uplift_margins(&self.seg, t, state),
             Regime::Rocking { side } => {
                 let s = f64::from(side);
-                [s * state[0], self.system.block.lie_angle_rad - s * state[0]]
+                [s * state[0], self.model.block.lie_angle_rad - s * state[0]]
             }
             // The base carries the lying block on: nothing ends that (positive, never fires).
             Regime::Overturned => [1.0; 2],
@@ -171,10 +164,10 @@ struct Coupled<'a> {
 
 impl<'a> Hybrid<4, 2> for Coupled<'a> {
     type Transition = Transition;
-    type Equations = Phase<'a>;
+    type Equations = Phase<System<'a>, Regime>;
     type Error = String;
 
-    fn course(&mut self, now: Now, y: &[f64; 4]) -> Result<Course<Transition, Phase<'a>>, String> {
+    fn course(&mut self, now: Now, y: &[f64; 4]) -> Result<Course<Transition, Self::Equations>, String> {
         let (k, t) = (now.k, now.t);
         let seg = self.excitation.segment(k);
         if self.regime == Regime::Rest {
@@ -192,7 +185,7 @@ impl<'a> Hybrid<4, 2> for Coupled<'a> {
                 return Ok(Course::Switch { at: t, transition: Transition::UpliftNow(side) });
             }
         }
-        Ok(Course::Integrate(Phase { system: self.system, regime: self.regime, seg }))
+        Ok(Course::Integrate(Phase { model: self.system, regime: self.regime, seg }))
     }
 
     fn apply(&mut self, _: usize, transition: Transition, t: f64, y: [f64; 4], immediate: bool) -> [f64; 4] {

@@ -426,6 +426,14 @@ fn initial_side(theta: f64, theta_dot: f64) -> Option<i8> {
     }
 }
 
+/// One regime's equations over one floor segment: those of `model` in `regime` (the sliding
+/// and the coupled models).
+struct Phase<Mo, R> {
+    model: Mo,
+    regime: R,
+    seg: Segment<2>,
+}
+
 /// The error of a run whose `what` (impacts, stick-slip) kept switching near `t`.
 fn chatter(what: &str, t: f64, rest_amplitude_rad: f64) -> String {
     format!("{what} chatter near t = {t:.4} s did not settle; raise `rest_amplitude_rad` (now {rest_amplitude_rad})")

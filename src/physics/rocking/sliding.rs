@@ -25,7 +25,7 @@
 //! Free flight (N < 0) is outside the model and refused with the time.
 
 use super::{
-    chatter, initial_side, most_negative, sensor_acceleration, Block, EventKind, Excitation, Friction, Options,
+    chatter, initial_side, most_negative, sensor_acceleration, Block, EventKind, Excitation, Friction, Options, Phase,
     Response, MAX_TRANSITIONS_PER_SAMPLE,
 };
 use crate::physics::hybrid::{self, rebounds, Course, Equations, Hybrid, Now, Segment};
@@ -183,7 +183,7 @@ enum Transition {
     Overturn,
 }
 
-/// What the event functions of each integrated regime stand for, in their order ([`Phase`]).
+/// What the event functions of each integrated regime stand for, in their order.
 const STICK_EVENTS: [Transition; 4] = [
     Transition::Leave(STICK_EXITS[0]),
     Transition::Leave(STICK_EXITS[1]),
@@ -199,14 +199,7 @@ const SLIDE_ROCK_EVENTS: [Transition; 3] = [Transition::Impact, Transition::Over
 /// An event slot a regime does not use: positive, so it never fires.
 const UNUSED: f64 = 1.0;
 
-/// One regime's equations over one floor segment.
-struct Phase<'a> {
-    model: Model<'a>,
-    regime: Regime,
-    seg: Segment<2>,
-}
-
-impl Equations<4, 4> for Phase<'_> {
+impl Equations<4, 4> for Phase<Model<'_>, Regime> {
     type Transition = Transition;
 
     fn rhs(&self, t: f64, y: &[f64; 4]) -> [f64; 4] {
@@ -336,10 +329,10 @@ impl Sliding<'_> {
 
 impl<'a> Hybrid<4, 4> for Sliding<'a> {
     type Transition = Transition;
-    type Equations = Phase<'a>;
+    type Equations = Phase<Model<'a>, Regime>;
     type Error = String;
 
-    fn course(&mut self, now: Now, y: &[f64; 4]) -> Result<Course<Transition, Phase<'a>>, String> {
+    fn course(&mut self, now: Now, y: &[f64; 4]) -> Result<Course<Transition, Self::Equations>, String> {
         let (k, t) = (now.k, now.t);
         let seg = self.excitation.segment(k);
         if let Some(transition) = self.at_once(&seg, t, y) {
