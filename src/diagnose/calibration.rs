@@ -23,11 +23,11 @@ pub const BOUND_SD: f64 = 5.0;
 /// A fitted value farther than this many sd from the stated one is a finding (`within: false`).
 pub const WITHIN_SD: f64 = 3.0;
 /// Nelder–Mead iterations per horizon.
-const MAX_ITERATIONS: u64 = 60;
+const MAX_ITERATIONS: u64 = 80;
 /// Grid points a local search starts from.
-const STARTS: usize = 2;
+const STARTS: usize = 3;
 /// Fresh simplices per horizon at most.
-const RESTARTS: usize = 2;
+const RESTARTS: usize = 3;
 
 /// One standard deviation of a stated value's error, as the `uncertainty` block gives it:
 /// exactly one of `sd` (absolute, in the key's unit) and `rel_sd` (relative to the stated value).

@@ -330,7 +330,7 @@ const FIRST_UPLIFT_S: f64 = 0.1;
 /// Horizons of a calibration after the first moment the records can tell anything (s).
 const CALIBRATION_HORIZONS_S: [f64; 4] = [1.5, 4.0, 10.0, f64::INFINITY];
 /// Horizons of the recalibration with a physics, after the window's start (s).
-const JOINT_HORIZONS_S: [f64; 2] = [1.5, f64::INFINITY];
+const JOINT_HORIZONS_S: [f64; 3] = [1.5, 4.0, f64::INFINITY];
 
 /// The evidence of the nominal model as `case` states it: the model under the usual and under
 /// other solver settings (samples where they differ are not evidence).
@@ -427,12 +427,9 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
     let fitted: Vec<Candidate> = effects::library()
         .par_iter()
         .map(|effect| {
-            // From the stated values: the calibrated nominal model may have absorbed part of
-            // the physics into its parameters (pushed to their bounds), which would hide it.
-            let fit = fit::fit(*effect, stated, &evidence, window);
-            let start = Calibration::stated(calibration.parameters.clone());
+            let fit = fit::fit(*effect, case, &evidence, window);
             let (calibration, prediction, misfit, evaluations) =
-                recalibrate(stated, &start, *effect, &fit, &evidence, window);
+                recalibrate(stated, &calibration, *effect, &fit, &evidence, window);
             let k = effect.parameter_names().len();
             Candidate {
                 effect: effect.name(),
@@ -539,7 +536,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
 }
 
 /// The uncertain parameters fitted again with a physics in place (its fitted parameters held),
-/// from `calibration`'s values: returns the better of the two (calibration, its prediction with
+/// from the calibrated values: returns the better of the two (calibration, its prediction with
 /// its chaotic sensitivity, misfit, model runs spent) by posterior.
 fn recalibrate(
     stated: &Case,
