@@ -27,13 +27,7 @@ sys.path.insert(0, str(ROOT / "tests" / "reference"))
 sys.path.insert(0, str(ROOT / "bench"))
 import rocking_scipy  # noqa: E402
 from load_baseline import summary_line  # noqa: E402
-from rocking import BLOCK, RECORDS, read_at2, write_csv  # noqa: E402
-
-
-def timed(cmd):
-    started = time.perf_counter()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return time.perf_counter() - started
+from rocking import BLOCK, RECORDS, read_at2, timed, write_csv  # noqa: E402
 
 
 def main():
