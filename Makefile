@@ -19,13 +19,14 @@ VENV_PY := $(VENV)/bin/python
 PY_STAMP := $(VENV)/.requirements-$(shell cksum < tests/reference/requirements.txt | cut -d' ' -f1)
 BIN := $(CARGO_TARGET_DIR)/release/shakeflow
 
-.PHONY: all demo test wheel wheel-dev bench bench-scale prove prove-rolling prove-check release schema fmt lint clean help rolling-findings fuzz
+.PHONY: all demo test wheel wheel-dev bench bench-scale convergence prove prove-rolling prove-check release schema fmt lint clean help rolling-findings fuzz
 
 help:
 	@echo "make demo    build (release) and run the demo study: runs/demo-archive -> runs/demo"
 	@echo "make test    build and run the whole test suite (installs the Python references it needs)"
 	@echo "make wheel   the PyPI wheel (manylinux2014, baseline x86-64, zig) and sdist in dist/ (docs/packaging.md)"
 	@echo "make bench   the demo study's artifact footprint vs its raw archive; load+baseline and the whole demo study vs numpy/scipy/pyarrow scripts; the rocking and rolling models vs scipy and RK4; CPT matching and 1080p tracking vs OpenCV"
+	@echo "make convergence  the convergence study of the models' numerical defaults over the shared real records (docs/convergence.md)"
 	@echo "make bench-scale  the per-record stages over a generated archive of TESTS=200 tests, local and on the test Slurm; no-op rerun"
 	@echo "make prove   fresh concealed-effect cases (prove/generate_cases.py) scored against shakeflow diagnose"
 	@echo "             [SEED=n] [PER_EFFECT=5] [PROVE_JOBS=2]; make prove-check re-checks the generator's physics"
@@ -83,8 +84,11 @@ wheel: $(PY_STAMP)
 	  $(VENV_PY) -m maturin build --release --locked --zig --compatibility manylinux2014 --out dist
 	$(VENV_PY) -m maturin sdist --out dist
 
+BENCH_SUMMARY := runs/bench-summary.txt
+bench: export SHAKEFLOW_BENCH_SUMMARY = $(abspath $(BENCH_SUMMARY))
 bench: release $(PY_STAMP)
 	$(BIN) demo-archive runs/demo-archive
+	rm -f $(BENCH_SUMMARY)
 	$(VENV_PY) bench/footprint.py --shakeflow $(BIN) --archive runs/demo-archive
 	$(VENV_PY) bench/parquet_encodings.py --archive runs/demo-archive
 	$(VENV_PY) bench/load_baseline.py --shakeflow $(BIN) --archive runs/demo-archive
@@ -94,6 +98,14 @@ bench: release $(PY_STAMP)
 	$(CARGO) build --release --locked --example cpt_match
 	$(VENV_PY) bench/cpt.py --shakeflow $(BIN) --matcher $(CARGO_TARGET_DIR)/release/examples/cpt_match
 	$(VENV_PY) bench/load_formats.py --shakeflow $(BIN)
+	$(VENV_PY) bench/stage_call.py --shakeflow $(BIN)
+	@echo "Ratios side by side:"; cat $(BENCH_SUMMARY)
+
+# The convergence study of the numerical defaults (docs/convergence.md): rolling, then rocking.
+convergence:
+	$(CARGO) build --release --locked --example convergence
+	$(CARGO_TARGET_DIR)/release/examples/convergence --out docs/convergence
+	$(CARGO_TARGET_DIR)/release/examples/convergence --out docs/convergence --rocking
 
 # Scale: the demo's per-record stages over a generated archive of TESTS tests, local and on the
 # multi-node test Slurm (started and stopped here when it was not running; needs root), no-op rerun.

@@ -136,6 +136,15 @@ def parse_args(doc):
     return args
 
 
+def summary_line(text):
+    """One line of `make bench`'s closing summary (the ratios side by side): appended to the file
+    $SHAKEFLOW_BENCH_SUMMARY names, when it does."""
+    path = os.environ.get("SHAKEFLOW_BENCH_SUMMARY")
+    if path:
+        with open(path, "a") as f:
+            f.write(text + "\n")
+
+
 def print_table(title, results, python_sides):
     """Medians per side, and each Python side's / the side's ratios (above 1: the side is faster
     or leaner), one pair of ratio columns per Python side (named by its position: script 1, 2)."""

@@ -17,7 +17,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use super::simulate_rolling::SimulateRollingParams;
-use super::simulate_toppling::RockingParams;
+use super::simulate_toppling::{RockingParams, SimulateTopplingParams};
 use super::transfer_function::TransferFunctionParams;
 use super::{
     figure_stem, partition_values, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo,
@@ -312,11 +312,9 @@ fn study_page(
                 overturn_time_s: first_f64(&table, "overturn_time_s"),
                 max_abs_theta_rad: first_f64(&table, "max_abs_theta_rad").unwrap_or(f64::NAN),
                 impacts: first_i64(&table, "n_impacts"),
-                figure: Some(figure_link(
-                    &table,
-                    "figures",
-                    &format!("{}.png", figure_stem(&part.partition, "response")),
-                )),
+                figure: upstream_params::<SimulateTopplingParams>(&table).is_none_or(|p| p.figure).then(|| {
+                    figure_link(&table, "figures", &format!("{}.png", figure_stem(&part.partition, "response")))
+                }),
             });
         }
         for (stage, (unit, runs)) in runs {

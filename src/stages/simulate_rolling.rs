@@ -228,15 +228,15 @@ static PARAMS: [ParamSpec; MODEL_KEYS + 15] = [
     ParamSpec {
         name: "rtol",
         kind: ParamKind::Float,
-        default: Some("1e-8"),
+        default: Some("1e-10"),
         unit: "",
-        description: "relative tolerance of the adaptive integrator",
+        description: "relative tolerance of the adaptive integrator (1e-10: converged on the shared real records, docs/convergence.md)",
         range: Some((1e-14, 1e-2)),
     },
     ParamSpec {
         name: "atol",
         kind: ParamKind::Float,
-        default: Some("1e-10"),
+        default: Some("1e-12"),
         unit: "m",
         description: "absolute tolerance on positions (m) and angles (rad); ten times it on velocities",
         range: Some((1e-16, 1e-2)),

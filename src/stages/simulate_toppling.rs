@@ -102,6 +102,8 @@ pub struct SimulateTopplingParams {
     #[serde(flatten)]
     pub model: RockingParams,
     pub initial_theta_rad: f64,
+    /// Draw the PNG per record (`report` links it when it was drawn).
+    pub figure: bool,
     /// Read by the engine's sink.
     pub mcap: bool,
 }
@@ -118,6 +120,7 @@ static INFO: StageInfo = StageInfo {
     ],
     params: rocking_params![
         ParamSpec { name: "initial_theta_rad", kind: ParamKind::Float, default: Some("0.0"), unit: "rad", description: "initial rotation (free-rocking tests); 0: at rest", range: Some((-1.5, 1.5)) },
+        ParamSpec { name: "figure", kind: ParamKind::Bool, default: Some("true"), unit: "", description: "draw a PNG per record (floor and top acceleration, θ with the events); false: tables only, as a script calling the stage per record wants", range: None },
         super::MCAP_PARAM,
     ],
 };
@@ -159,14 +162,16 @@ impl Stage for SimulateToppling {
                 t.metadata.extend(super::record_provenance(part));
                 t.metadata.insert("shakeflow.rocking".into(), facts.clone());
             }
-            let name = super::figure_stem(&part.partition, "response");
-            let title = format!(
-                "{}: rocking model under {}",
-                unit_name(&p.model, ctx.stage_name),
-                super::record_title(&part.partition, &part.label)
-            );
-            let png = figure(&title, &floor, &response).map_err(anyhow::Error::msg)?;
-            ctx.sink.write_file("figures", &format!("{name}.png"), &png)?;
+            if p.figure {
+                let name = super::figure_stem(&part.partition, "response");
+                let title = format!(
+                    "{}: rocking model under {}",
+                    unit_name(&p.model, ctx.stage_name),
+                    super::record_title(&part.partition, &part.label)
+                );
+                let png = figure(&title, &floor, &response).map_err(anyhow::Error::msg)?;
+                ctx.sink.write_file("figures", &format!("{name}.png"), &png)?;
+            }
             ctx.sink.write("events", &part.partition, events)?;
             ctx.sink.write("response", &part.partition, series)
         })

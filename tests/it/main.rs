@@ -11,6 +11,7 @@ mod toppling_common;
 mod bad_input;
 mod baseline_reference;
 mod command_stages;
+mod converged_defaults;
 mod cpt_calibration;
 mod cpt_occlusion;
 mod cpt_project_inputs;

@@ -18,6 +18,8 @@ From the notes, literally:
 Pivot order (the notes' mirror-symmetry test): (+a,+b), (-a,+b), (-a,-b), (+a,-b).
 
     rolling_notes.py rolling_floor_rinaldi.csv --seconds 10 > rolling_notes_rinaldi.json
+    rolling_notes.py rolling_floor_gil067_isolated.csv --seconds 40 --rtol 1e-10 --unit PB2 --every 10 \
+        > rolling_notes_gil067_isolated.json
 """
 import argparse
 import json
@@ -35,6 +37,13 @@ MC2 = dict(length_m=0.65, width_m=0.90, platform_mass_kg=154.0, yaw0_deg=15.0, w
            wheel_width_m=0.030, wheel_mass_kg=0.5, steer0_deg=[0.0, 0.0, 0.0, 0.0], mu_s_roll=0.044,
            mu_s_swivel=0.044, mu_k_roll=0.0044, mu_k_swivel=0.0044, beta_spm=6.05, gamma_n=0.00044, p=1.0,
            trail_m=0.3 * 0.125, swivel_arm_m=0.02, friction_eps=1e-4, friction_eps_swivel=1e-4)
+# The patient bed PB2 of Table 4, with shakeflow's defaults where the study gives nothing (trail
+# 0.3 D, rho 0.02 m, eps 1e-4 m/s, eps_sw 1e-3 rad/s).
+PB2 = dict(length_m=2.36, width_m=1.05, platform_mass_kg=350.0, yaw0_deg=8.0, wheel_diameter_m=0.20,
+           wheel_width_m=0.055, wheel_mass_kg=1.5, steer0_deg=[-35.0, 0.0, 0.0, 35.0], mu_s_roll=0.012,
+           mu_s_swivel=0.00132, mu_k_roll=6.0e-4, mu_k_swivel=1.2e-4, beta_spm=15.0, gamma_n=0.00042, p=1.0,
+           trail_m=0.3 * 0.20, swivel_arm_m=0.02, friction_eps=1e-4, friction_eps_swivel=1e-3)
+UNITS = {"MC2": MC2, "PB2": PB2}
 
 
 def model(spec):
@@ -114,6 +123,8 @@ def main():
     ap.add_argument("floor")
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--rtol", type=float, default=1e-9)
+    ap.add_argument("--unit", choices=sorted(UNITS), default="MC2")
+    ap.add_argument("--every", type=int, default=1, help="write every n-th sample of the trajectory")
     args = ap.parse_args()
     data = np.genfromtxt(args.floor, delimiter=",", names=True)
     keep = data["time_s"] <= args.seconds + 1e-9
@@ -126,19 +137,21 @@ def main():
         f = x - k
         return np.array([ax[k] + f * (ax[k + 1] - ax[k]), ay[k] + f * (ay[k + 1] - ay[k])])
 
-    rhs = model(MC2)
+    spec = UNITS[args.unit]
+    rhs = model(spec)
     y0 = np.zeros(10)
-    y0[2] = math.radians(MC2["yaw0_deg"])
-    y0[3:7] = np.radians(MC2["steer0_deg"])
+    y0[2] = math.radians(spec["yaw0_deg"])
+    y0[3:7] = np.radians(spec["steer0_deg"])
     started = time.perf_counter()
     sol = solve_ivp(lambda tt, yy: rhs(tt, yy, floor), (t[0], t[-1]), y0, method="DOP853", rtol=args.rtol,
                     atol=1e-11, t_eval=t, max_step=dt)
     assert sol.status == 0, sol.message
     x, y, yaw = sol.y[0], sol.y[1], sol.y[2] - y0[2]
-    json.dump({"source": "tests/reference/rolling_notes.py " + " ".join(sys.argv[1:]), "model": MC2,
-               "rtol": args.rtol, "seconds": time.perf_counter() - started, "time_s": sol.t.tolist(),
-               "x_m": x.tolist(), "y_m": y.tolist(), "yaw_change_rad": yaw.tolist(),
-               "steer_rad": sol.y[3:7].tolist(),
+    k = slice(None, None, args.every)
+    json.dump({"source": "tests/reference/rolling_notes.py " + " ".join(sys.argv[1:]), "model": spec,
+               "rtol": args.rtol, "seconds": time.perf_counter() - started, "every": args.every,
+               "time_s": sol.t[k].tolist(), "x_m": x[k].tolist(), "y_m": y[k].tolist(),
+               "yaw_change_rad": yaw[k].tolist(), "steer_rad": sol.y[3:7, k].tolist(),
                "peak_displacement_m": float(np.max(np.hypot(x, y))),
                "peak_yaw_change_rad": float(np.max(np.abs(yaw)))}, sys.stdout)
     print()

@@ -1,0 +1,87 @@
+//! The numerical defaults are converged (issue 35, docs/convergence.md): a run with every
+//! default agrees with a run ten times tighter, on a record where the former defaults did not.
+
+use crate::rolling_common::*;
+use shakeflow::physics::rolling::{self, Cart, Friction, FrictionLaw, Method, Options, Response};
+
+/// A Table 4 unit with every default of `simulate_rolling` (trail, swivel arm, ε, ε_sw).
+fn unit(name: &str) -> (Cart, Friction, Options) {
+    let table = rolling::preset(name).unwrap();
+    let cart = table.cart(Cart::default_trail_m(table.wheel_diameter_m), rolling::DEFAULT_SWIVEL_ARM_M);
+    let friction = table.friction(rolling::DEFAULT_FRICTION_EPS_MPS, FrictionLaw::Regularised);
+    let (yaw0_rad, steer0_rad) = table.initial_pose();
+    (cart, friction, Options { yaw0_rad, steer0_rad, ..Options::default() })
+}
+
+fn peaks(r: &Response) -> (f64, f64) {
+    (r.peak_displacement().0, r.peak_yaw().0.to_degrees())
+}
+
+fn simulate_default(floor: &Floor, cart: &Cart, friction: &Friction, options: &Options) -> Response {
+    rolling::simulate(cart, friction, &floor.excitation(), options).unwrap()
+}
+
+/// 1994 Northridge, Sylmar Converter Station comp 052 (PEER RSN1084): its strong part (2 s
+/// before the 5 % Arias time to 10 s after the 95 % one) through floor 4 of the isolated demo
+/// building, X at a 0.3 g peak floor acceleration, Y the same ground motion reversed in time at
+/// 0.6 of it: one of the study's floors (examples/convergence.rs, docs/convergence.md).
+fn sylmar_isolated_floor() -> Floor {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/ground_motions/RSN1084_NORTHR_SCS052.AT2");
+    let record = shakeflow::io::records::read_at2(&path).unwrap_or_else(|e| panic!("{e}"));
+    let (x, dt) = (&record.channels[0].values, record.dt.unwrap());
+    let energy: Vec<f64> = x
+        .iter()
+        .scan(0.0, |sum, v| {
+            *sum += v * v;
+            Some(*sum)
+        })
+        .collect();
+    let total = energy[energy.len() - 1];
+    let i5 = energy.iter().position(|&e| e >= 0.05 * total).unwrap();
+    let i95 = energy.iter().position(|&e| e >= 0.95 * total).unwrap();
+    let start = i5.saturating_sub((2.0 / dt) as usize);
+    let end = (i95 + (10.0 / dt) as usize).min(x.len()).min(start + (45.0 / dt) as usize);
+    let ground_x = &x[start..end];
+    let ground_y: Vec<f64> = ground_x.iter().rev().copied().collect();
+    let base = shakeflow::demo::study::Base::Isolated;
+    let mut ax = shakeflow::demo::archive::floor_response(base, 4, ground_x, dt);
+    let mut ay = shakeflow::demo::archive::floor_response(base, 4, &ground_y, dt);
+    let peak = |v: &[f64]| v.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+    let (sx, sy) = (0.3 * G / peak(&ax), 0.18 * G / peak(&ay));
+    ax.iter_mut().for_each(|v| *v *= sx);
+    ay.iter_mut().for_each(|v| *v *= sy);
+    ax[0] = 0.0;
+    ay[0] = 0.0;
+    Floor { dt, ax, ay }
+}
+
+#[test]
+fn pb2_at_the_default_tolerance_agrees_with_a_ten_times_tighter_run() {
+    let floor = sylmar_isolated_floor();
+    let (cart, friction, options) = unit("PB2");
+    let at = |rtol: f64| {
+        let method = Method::Adaptive { rtol, atol: 1e-2 * rtol };
+        peaks(&rolling::simulate(&cart, &friction, &floor.excitation(), &Options { method, ..options }).unwrap())
+    };
+    let default = peaks(&simulate_default(&floor, &cart, &friction, &options));
+    let (tight, former) = (at(1e-11), at(1e-8));
+    println!(
+        "PB2 on Sylmar SCS052, isolated floor 4 at 0.3 g: peak {:.4} m / yaw {:.2}° at the default, {:.4} m / {:.2}° at rtol 1e-11, {:.4} m / {:.2}° at the former 1e-8",
+        default.0, default.1, tight.0, tight.1, former.0, former.1
+    );
+    assert!((default.0 - tight.0).abs() < 0.005 * tight.0, "peak {} m vs {} m", default.0, tight.0);
+    assert!((default.1 - tight.1).abs() < 0.5, "peak yaw {}° vs {}°", default.1, tight.1);
+    // The record discriminates: the former default (rtol 1e-8) was 3.6 % short.
+    assert!((former.0 - tight.0).abs() > 0.02 * tight.0, "the former default is within 2 %: {} m", former.0);
+}
+
+#[test]
+fn simulate_rolling_declares_the_models_default_tolerances() {
+    let spec = |name: &str| {
+        let info = shakeflow::stages::registry().find("simulate_rolling").unwrap().info();
+        info.params.iter().find(|p| p.name == name).unwrap().default.unwrap().parse::<f64>().unwrap()
+    };
+    assert_eq!((spec("rtol"), spec("atol")), (rolling::DEFAULT_RTOL, rolling::DEFAULT_ATOL));
+    assert_eq!(Method::default(), Method::Adaptive { rtol: rolling::DEFAULT_RTOL, atol: rolling::DEFAULT_ATOL });
+}
