@@ -166,10 +166,10 @@ mod tests {
 
     #[test]
     fn source_properties_match_the_parser() {
-        // `component_as`, `units_row`, `description_row`, `calibration` and `on_error` are left out
-        // of the serialised spec when absent (source hashes stay as they were): give them, so every key shows.
-        let spec: SourceSpec =
-            serde_json::from_value(json!({"format": "at2", "path": "x", "component_as": "ax", "units_row": 3, "description_row": 2, "calibration": "c.csv", "on_error": "skip"})).unwrap();
+        // `component_as`, `units_row`, `description_row`, `calibration`, `on_error` and `components`
+        // are left out of the serialised spec when absent (source hashes stay as they were): give
+        // them, so every key shows.
+        let spec: SourceSpec = serde_json::from_value(json!({"format": "at2", "path": "x", "component_as": "ax", "units_row": 3, "description_row": 2, "calibration": "c.csv", "on_error": "skip", "components": {"key": "component"}})).unwrap();
         let parsed: Vec<String> = serde_json::to_value(spec).unwrap().as_object().unwrap().keys().cloned().collect();
         let schema = pipeline_schema();
         let documented: Vec<String> =

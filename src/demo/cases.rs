@@ -324,7 +324,13 @@ fn rolling_case(plan: &RollingPlan, ax: &[f64]) -> Result<(Vec<(String, Vec<u8>)
     let cart = table.cart(rolling::Cart::default_trail_m(table.wheel_diameter_m), rolling::DEFAULT_SWIVEL_ARM_M);
     let friction = table.friction(rolling::DEFAULT_FRICTION_EPS_MPS, FrictionLaw::Regularised);
     let (yaw0_rad, steer0_rad) = table.initial_pose();
-    let options = rolling::Options { yaw0_rad, steer0_rad, ..rolling::Options::default() };
+    // At the diagnosis's tolerances, as the archive was made before the converged defaults.
+    let options = rolling::Options {
+        yaw0_rad,
+        steer0_rad,
+        method: crate::diagnose::rolling::METHOD,
+        ..rolling::Options::default()
+    };
     // The floor as floor.csv prints it, so that the tool reads back exactly what moved the cart.
     // The first ROLLING_RECORD_S of the test: the strong motion and some seconds after.
     let kept = ax.len().min((ROLLING_RECORD_S * FS_HZ) as usize + 1);

@@ -13,7 +13,7 @@ use crate::io::equipment::{
 };
 use crate::io::records::{read_delimited, DelimitedOptions};
 use crate::physics::rocking::{Block, Shape};
-use crate::physics::rolling::{self, Cart, Friction, FrictionLaw, Method, Options, Stribeck};
+use crate::physics::rolling::{self, Cart, Friction, FrictionLaw, Options, Stribeck};
 
 pub const EQUIPMENT: &str = "equipment.yaml";
 pub const FLOOR: &str = "floor.csv";
@@ -236,9 +236,7 @@ pub fn read_rolling_case(dir: &Path) -> Result<RollingCase, UserError> {
         yaw0_rad: e.yaw0_deg.to_radians(),
         steer0_rad: e.steer0_deg.map(f64::to_radians),
         lateral_slip: None,
-        // The diagnosis's evaluation allowances were tuned at these tolerances (issue 33 owns
-        // them), not at simulate_rolling's converged defaults (docs/convergence.md).
-        method: Method::Adaptive { rtol: 1e-8, atol: 1e-10 },
+        method: crate::diagnose::rolling::METHOD,
         g_mps2: g,
     };
     let floor_path = dir.join(FLOOR);

@@ -41,8 +41,12 @@ use rayon::prelude::*;
 
 use super::calibration::{self, Calibration, Uncertain, UnitModel};
 use super::{Observed, Settings};
-use crate::physics::rolling::{simulate_altered, Alteration, Cart, Excitation, Friction, Options};
+use crate::physics::rolling::{simulate_altered, Alteration, Cart, Excitation, Friction, Method, Options};
 use evidence::{Evidence, Misfit};
+
+/// The integrator the diagnosis runs the cart with: its counted evaluation allowances were tuned
+/// at these tolerances, not at `simulate_rolling`'s converged defaults (docs/convergence.md).
+pub const METHOD: Method = Method::Adaptive { rtol: 1e-8, atol: 1e-10 };
 
 /// The camera's view of the platform: centre displacement from its start and absolute yaw.
 #[derive(Debug, Clone, Default)]

@@ -101,7 +101,8 @@ fn source_files(plan: &Plan, name: &str, spec: &SourceSpec) -> Result<Vec<source
     };
     let files = match &spec.components {
         Some(c) => sources::group_components(&spec.path, files, &c.key).map_err(|e| {
-            let located = plan.file.error_at(&["inputs", name, "components"], format!("source `{name}`: {}", e.message));
+            let located =
+                plan.file.error_at(&["inputs", name, "components"], format!("source `{name}`: {}", e.message));
             located.hint(e.hint.unwrap_or_default())
         })?,
         None => files,

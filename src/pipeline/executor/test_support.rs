@@ -109,7 +109,10 @@ pub fn entry_after(plan: &Plan, stage: &str, assessed: &AssessedStage, disk: &mu
             let hash = format!("out:{}", unit.id);
             disk.files.insert(plan.stage_dir(stage).join(&file), hash.clone());
             let files = BTreeMap::from([(file, hash)]);
-            (unit.id.clone(), UnitLock { key: key.clone(), inputs: unit.hashes.clone(), files, flagged: None, notes: Vec::new() })
+            (
+                unit.id.clone(),
+                UnitLock { key: key.clone(), inputs: unit.hashes.clone(), files, flagged: None, notes: Vec::new() },
+            )
         })
         .collect();
     StageLock {
