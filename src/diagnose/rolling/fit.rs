@@ -321,8 +321,12 @@ mod tests {
                 (if t < 6.0 { 0.47 } else { 4.0 }) * (2.0 * std::f64::consts::PI * 0.8 * t).sin()
             })
             .collect();
-        let options =
-            Options { yaw0_rad: 0.2, steer0_rad: [0.3, -0.2, 0.1, 0.4], method: super::METHOD, ..Options::default() };
+        let options = Options {
+            yaw0_rad: 0.2,
+            steer0_rad: [0.3, -0.2, 0.1, 0.4],
+            method: crate::diagnose::rolling::METHOD,
+            ..Options::default()
+        };
         let ay = ax.iter().map(|a| 0.3 * a).collect();
         let mut case = test_cart("dragging", ax, ay, options);
         let nominal = case.nominal().expect("the nominal cart runs");

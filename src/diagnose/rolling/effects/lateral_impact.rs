@@ -149,8 +149,12 @@ mod tests {
     fn pushed_cart(push_s: f64) -> (RollingCase, Track) {
         let dt = 0.005;
         let ax: Vec<f64> = (0..601).map(|k| if (k as f64) * dt < push_s { -2.0 } else { 0.0 }).collect();
-        let options =
-            Options { yaw0_rad: 0.0, steer0_rad: [0.0; 4], method: super::super::METHOD, ..Options::default() };
+        let options = Options {
+            yaw0_rad: 0.0,
+            steer0_rad: [0.0; 4],
+            method: crate::diagnose::rolling::METHOD,
+            ..Options::default()
+        };
         let case = test_cart("pushed", ax, vec![0.0; 601], options);
         let nominal = case.nominal().expect("the nominal cart runs");
         (case, nominal)
