@@ -2,8 +2,9 @@
 //!
 //! ```text
 //! <output_dir>/
-//!   shakeflow.lock                     LOCK_FILE: what each work unit ran with and wrote
+//!   shakeflow.lock                     LOCK_FILE: the state's root, naming each stage's state file
 //!   .shakeflow/                        STATE_DIR: shakeflow's own state
+//!     state/<stage>.<hash>.json        STATE_FILES: a stage's entry: what each unit ran with and wrote
 //!     lease, lease.break               LEASE_FILE, BREAK_FILE: one run at a time
 //!     txn-<pid>-<nanos>/               TXN_PREFIX: a transaction (`new/`, `old/`, JOURNAL)
 //!     hashes.json                      HASH_MEMO: the stat/hash memo
@@ -19,8 +20,10 @@
 //! Modules that read or write these import the names from here, so the lockfile, the sink, the
 //! ownership checks and the plan do not import each other for a file name.
 
-/// The lockfile at the root of the output folder.
+/// The lockfile at the root of the output folder: the root of its state.
 pub const LOCK_FILE: &str = "shakeflow.lock";
+/// The folder of the per-stage state files in [`STATE_DIR`] (`pipeline/lock.rs`).
+pub const STATE_FILES: &str = "state";
 /// shakeflow's own entries in a folder it writes: the lease, unfinished commits, the hash memo.
 pub const STATE_DIR: &str = ".shakeflow";
 /// The lease file in [`STATE_DIR`], and the file that makes taking over a stale one exclusive.

@@ -3,12 +3,16 @@
 //! A transaction is a folder `<root>/.shakeflow/txn-<token>/` of the lease holder:
 //!
 //! 1. stages write their outputs under `new/<entry>/`;
-//! 2. the new lockfile is written to `shakeflow.lock` in the transaction, forced to disk;
-//! 3. the journal (entries to install and to remove, whether a lockfile comes) is written to
+//! 2. the new state is written in the transaction, forced to disk: the state files of the stages
+//!    that changed under `state/`, and the new lockfile, naming them, as `shakeflow.lock`;
+//! 3. the journal (entries to install and to remove, state files to install and to retire,
+//!    whether a lockfile comes) is written to
 //!    `journal.tmp`, forced to disk, and renamed to `journal`. **That rename is the commit
 //!    point**: before it, the transaction never happened; after it, it has;
 //! 4. roll forward, each step idempotent: each entry `<root>/<e>` moves to `old/<e>`, then
-//!    `new/<e>` to `<root>/<e>`; the lockfile moves to `<root>/shakeflow.lock`;
+//!    `new/<e>` to `<root>/<e>`; each new state file moves to `<root>/.shakeflow/state/`; the
+//!    lockfile moves to `<root>/shakeflow.lock`; the state files only the old lockfile named are
+//!    removed;
 //! 5. the journal is removed, then the transaction folder with the old outputs in it.
 //!
 //! Whoever next takes the lease [`recover`]s first: a transaction with a journal is rolled forward
@@ -30,7 +34,7 @@ use anyhow::{bail, Context};
 use serde::{Deserialize, Serialize};
 
 use super::failpoint;
-use super::layout::{JOURNAL, LOCK_FILE, STATE_DIR, TXN_PREFIX};
+use super::layout::{JOURNAL, LOCK_FILE, STATE_DIR, STATE_FILES, TXN_PREFIX};
 use super::lease::Lease;
 use super::lock::LockFile;
 use crate::error::UserError;
@@ -47,6 +51,18 @@ struct Journal {
     remove: Vec<String>,
     /// Whether the transaction's `shakeflow.lock` replaces the root's.
     lockfile: bool,
+    /// State files (`state/<name>` in the transaction) moved into `.shakeflow/state/` before the
+    /// lockfile that names them.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    state: Vec<String>,
+    /// State files of `.shakeflow/state/` the new lockfile no longer names, removed once it is in place.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    retire: Vec<String>,
+}
+
+/// `.shakeflow/state/<name>`, relative to the root.
+fn state_entry(name: &str) -> String {
+    format!("{STATE_DIR}/{STATE_FILES}/{name}")
 }
 
 /// An open transaction of the lease holder on its root.
@@ -70,25 +86,47 @@ impl Transaction {
         self.dir.join("new").join(entry)
     }
 
-    /// Makes the new entries, removals and lockfile the root's, all at once (see the module doc).
-    /// An error before the commit point leaves the root exactly as it was.
-    pub fn commit(self, install: &[String], remove: &[String], lock: Option<&LockFile>) -> anyhow::Result<()> {
-        if let Some(link) = link_on_the_way(&self.root, install.iter().chain(remove)) {
+    /// Makes the new entries, removals and state the root's, all at once (see the module doc).
+    /// `lock` is the new state and the one it replaces (read whole): only the stages whose entry
+    /// changed get a new state file. An error before the commit point leaves the root exactly as
+    /// it was.
+    pub fn commit(
+        self,
+        install: &[String],
+        remove: &[String],
+        lock: Option<(&LockFile, &LockFile)>,
+    ) -> anyhow::Result<()> {
+        // A pseudo entry of the state folder: `.shakeflow/state` itself may not be a link either.
+        let state_folder = [state_entry("-")];
+        let state_folder = state_folder.iter().filter(|_| lock.is_some());
+        if let Some(link) = link_on_the_way(&self.root, install.iter().chain(remove).chain(state_folder)) {
             self.abort();
             return Err(link_refused(&link, "nothing was changed").into());
         }
         let prepared = (|| -> anyhow::Result<()> {
-            if let Some(lock) = lock {
-                failpoint::hit("commit.write_lockfile")?;
-                lock.write(&self.dir.join(LOCK_FILE)).context("writing the new lockfile")?;
-                failpoint::hit("commit.lockfile_written")?;
-            }
-            let journal = Journal {
+            let mut journal = Journal {
                 version: JOURNAL_FORMAT,
                 install: install.to_vec(),
                 remove: remove.to_vec(),
                 lockfile: lock.is_some(),
+                state: Vec::new(),
+                retire: Vec::new(),
             };
+            if let Some((lock, previous)) = lock {
+                failpoint::hit("commit.write_lockfile")?;
+                let state = lock.encode(previous)?;
+                let dir = self.dir.join(STATE_FILES);
+                fs::create_dir_all(&dir)?;
+                for (name, bytes) in &state.files {
+                    crate::io::atomic::write_new_durable(&dir.join(name), bytes).context("writing the new state")?;
+                }
+                sync_dir(&dir)?;
+                crate::io::atomic::write_new_durable(&self.dir.join(LOCK_FILE), &state.root)
+                    .context("writing the new lockfile")?;
+                failpoint::hit("commit.lockfile_written")?;
+                journal.state = state.files.into_iter().map(|(name, _)| name).collect();
+                journal.retire = state.retired;
+            }
             let tmp = self.dir.join("journal.tmp");
             crate::io::atomic::write_new_durable(&tmp, &serde_json::to_vec_pretty(&journal)?)
                 .context("writing the commit journal")?;
@@ -135,7 +173,8 @@ fn roll_forward(root: &Path, dir: &Path) -> anyhow::Result<()> {
     if journal.version != JOURNAL_FORMAT {
         bail!("the commit journal `{}` has format {}", dir.join(JOURNAL).display(), journal.version);
     }
-    if let Some(link) = link_on_the_way(root, journal.install.iter().chain(&journal.remove)) {
+    let states: Vec<String> = journal.state.iter().chain(&journal.retire).map(|n| state_entry(n)).collect();
+    if let Some(link) = link_on_the_way(root, journal.install.iter().chain(&journal.remove).chain(&states)) {
         let state =
             "a committed run's results are not all in place yet: they are, at the next run once the link is gone";
         return Err(link_refused(&link, state).into());
@@ -186,12 +225,33 @@ fn roll_forward(root: &Path, dir: &Path) -> anyhow::Result<()> {
             parent = dir.parent();
         }
     }
+    let states = root.join(STATE_DIR).join(STATE_FILES);
+    for name in journal.state.iter().filter(|n| !n.contains('/')) {
+        let new = dir.join(STATE_FILES).join(name);
+        if !exists(&new) {
+            continue; // installed before a crash
+        }
+        fs::create_dir_all(&states)?;
+        fs::rename(&new, states.join(name)).with_context(|| format!("installing the state file `{name}`"))?;
+        failpoint::hit(&format!("commit.state_installed.{name}"))?;
+    }
+    if !journal.state.is_empty() {
+        sync_dir(&states)?; // the state files are on disk before the lockfile naming them
+    }
     let new_lock = dir.join(LOCK_FILE);
     if journal.lockfile && exists(&new_lock) {
         fs::rename(&new_lock, root.join(LOCK_FILE)).context("installing the new lockfile")?;
         failpoint::hit("commit.lockfile_installed")?;
     }
     sync_dir(root)?;
+    for name in journal.retire.iter().filter(|n| !n.contains('/')) {
+        match fs::remove_file(states.join(name)) {
+            Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                return Err(e).with_context(|| format!("removing the old state file `{name}`"));
+            }
+            _ => {}
+        }
+    }
     fs::remove_file(dir.join(JOURNAL))?;
     failpoint::hit("commit.journal_removed")?;
     fs::remove_dir_all(dir).with_context(|| format!("removing `{}`", dir.display()))?;
@@ -328,8 +388,8 @@ mod tests {
             fs::create_dir_all(txn.new_path(entry)).unwrap();
             fs::write(txn.new_path(entry).join("new"), entry).unwrap();
         }
-        let lock = LockFile { version: 1, pipeline: None, stages: Default::default() };
-        txn.commit(&["a".into(), "b".into()], &["gone".into()], Some(&lock)).unwrap();
+        let lock = LockFile::empty();
+        txn.commit(&["a".into(), "b".into()], &["gone".into()], Some((&lock, &lock))).unwrap();
         assert_eq!(tree(root.path()), ["a/new", "b/new", "keep/k", "shakeflow.lock"]);
     }
 
@@ -348,7 +408,14 @@ mod tests {
         let txn = Transaction::begin(&lease).unwrap();
         fs::create_dir_all(txn.new_path("c")).unwrap();
         fs::write(txn.new_path("c").join("new"), "3").unwrap();
-        let journal = Journal { version: 1, install: vec!["c".into()], remove: vec![], lockfile: false };
+        let journal = Journal {
+            version: 1,
+            install: vec!["c".into()],
+            remove: vec![],
+            lockfile: false,
+            state: vec![],
+            retire: vec![],
+        };
         fs::write(txn.dir.join(JOURNAL), serde_json::to_vec(&journal).unwrap()).unwrap();
         std::mem::forget(txn);
         fs::write(root.path().join(".staging-4242"), "legacy").unwrap();
@@ -389,7 +456,8 @@ mod tests {
             let new = txn.new_path("load/records/motion=FB-1");
             fs::create_dir_all(&new).unwrap();
             fs::write(new.join("data.parquet"), "ours").unwrap();
-            let error = txn.commit(&install, &remove, Some(&LockFile::empty())).unwrap_err().to_string();
+            let error =
+                txn.commit(&install, &remove, Some((&LockFile::empty(), &LockFile::empty()))).unwrap_err().to_string();
             assert!(
                 error.contains("motion=FB-1` is a symbolic link") && error.contains("nothing was changed"),
                 "{error}"
@@ -416,7 +484,14 @@ mod tests {
         fs::create_dir_all(txn.new_path("load/records/motion=FB-1")).unwrap();
         fs::write(txn.new_path("load/records/motion=FB-1/data.parquet"), "ours").unwrap();
         let entry = "load/records/motion=FB-1/data.parquet".to_string();
-        let journal = Journal { version: 1, install: vec![entry], remove: vec![], lockfile: false };
+        let journal = Journal {
+            version: 1,
+            install: vec![entry],
+            remove: vec![],
+            lockfile: false,
+            state: vec![],
+            retire: vec![],
+        };
         fs::write(txn.dir.join(JOURNAL), serde_json::to_vec(&journal).unwrap()).unwrap();
         std::mem::forget(txn);
         let error = recover(&lease).unwrap_err().to_string();

@@ -192,9 +192,10 @@ fn leftovers_of_older_shakeflow_runs_are_removed_and_nothing_else() {
     let left: Vec<_> = std::fs::read_dir(root.join("out")).unwrap().map(|e| e.unwrap().file_name()).collect();
     let mut left: Vec<String> = left.into_iter().map(|n| n.to_string_lossy().into_owned()).collect();
     left.sort();
-    // `.shakeflow` keeps the hash memo only (no lease, no transaction).
+    // `.shakeflow` keeps the hash memo and the state files only (no lease, no transaction).
     assert_eq!(left, [".shakeflow", "NOTES.txt", "baseline", "load", "shakeflow.lock"]);
-    let state: Vec<_> =
+    let mut state: Vec<_> =
         std::fs::read_dir(root.join("out/.shakeflow")).unwrap().map(|e| e.unwrap().file_name()).collect();
-    assert_eq!(state, ["hashes.json"]);
+    state.sort();
+    assert_eq!(state, ["hashes.json", "state"]);
 }

@@ -48,15 +48,6 @@ fn status_text(root: &Path) -> String {
     stdout(&out)
 }
 
-/// Every file of the output folder with its bytes, shakeflow's own state folder aside.
-fn artifacts(root: &Path) -> Vec<(String, Vec<u8>)> {
-    snapshot(&root.join("out"))
-        .into_iter()
-        .map(|(p, b)| (p.strip_prefix(root).unwrap().display().to_string(), b))
-        .filter(|(p, _)| !p.starts_with("out/.shakeflow"))
-        .collect()
-}
-
 /// Waits until no Slurm run holds the folder (its commit job released the lease).
 fn wait_for_commit(root: &Path) {
     let started = Instant::now();
@@ -76,7 +67,11 @@ fn a_slurm_run_writes_the_local_runs_artifacts_and_lockfile() {
     assert!(out.status.success(), "{log}");
     assert!(log.contains("load               submitted: 2 of 2 shard(s)"), "{log}");
     assert!(show_job(&array_job(&log, "load")).contains("Requeue=0"), "submitted --no-requeue by default");
-    assert_eq!(artifacts(local.path()), artifacts(cluster.path()), "bit-identical artifacts and lockfile");
+    assert_eq!(
+        artifacts_and_state(local.path()),
+        artifacts_and_state(cluster.path()),
+        "bit-identical artifacts, lockfile and state files"
+    );
     assert!(!cluster.path().join("out/.shakeflow/lease").exists(), "the commit job released the lease");
     // Up to date afterwards, by either executor.
     let again = slurm_run(cluster.path(), &[]);
@@ -166,12 +161,16 @@ fn retries_resubmit_the_shard_whose_task_died_and_requeue_reaches_sbatch() {
         .flat_map(|p| std::fs::read_dir(p).unwrap().map(|e| std::fs::read_to_string(e.unwrap().path()).unwrap()))
         .collect();
     assert!(logs.contains("load               submitted: 1 of 2 shard(s), 1 stale unit(s) of 2"), "{logs}");
-    assert_eq!(artifacts(local.path()), artifacts(project.path()), "bit-identical artifacts and lockfile");
+    assert_eq!(
+        artifacts_and_state(local.path()),
+        artifacts_and_state(project.path()),
+        "bit-identical artifacts, lockfile and state files"
+    );
     assert!(!root.join("out/.shakeflow/lease").exists(), "the last commit job released the lease");
 }
 
 #[test]
-fn in_allocation_runs_the_shards_as_srun_steps_with_the_local_runs_artifacts() {
+fn in_allocation_runs_the_shards_as_srun_steps_with_the_local_runs_artifacts_and_state() {
     let local = small_project();
     assert!(shakeflow(&["run", "pipeline.yaml"], local.path()).status.success());
     let project = small_project();
@@ -196,7 +195,11 @@ fn in_allocation_runs_the_shards_as_srun_steps_with_the_local_runs_artifacts() {
     assert!(log.contains("2 step(s) at once, 1 CPU(s) each"), "{log}");
     assert!(log.contains("load               2 step(s), 0 failed"), "{log}");
     assert!(log.contains("baseline           2 step(s), 0 failed"), "{log}");
-    assert_eq!(artifacts(local.path()), artifacts(root), "bit-identical artifacts and lockfile");
+    assert_eq!(
+        artifacts_and_state(local.path()),
+        artifacts_and_state(root),
+        "bit-identical artifacts, lockfile and state files"
+    );
     assert!(!root.join("out/.shakeflow/lease").exists(), "the run released the lease");
     // Each shard ran as a step of its own, with its own log.
     let runs = root.join("out/.shakeflow/slurm");
@@ -244,7 +247,11 @@ fn an_intermediate_goes_and_comes_back_on_slurm_as_it_does_locally() {
             assert!(stderr(&out).contains("load               submitted: 2 of 2 shard(s)"), "{}", stderr(&out));
         }
         assert!(!cluster.path().join("out/load/records").exists(), "load's tables go after the commit");
-        assert_eq!(artifacts(local.path()), artifacts(cluster.path()), "bit-identical artifacts and lockfile");
+        assert_eq!(
+            artifacts_and_state(local.path()),
+            artifacts_and_state(cluster.path()),
+            "bit-identical artifacts, lockfile and state files"
+        );
     }
 }
 
@@ -279,7 +286,7 @@ fn the_slurm_commit_never_writes_through_a_symbolic_link() {
     let partition = root.join("out/load/records/motion=FB-1");
     std::fs::remove_dir_all(&partition).unwrap();
     std::os::unix::fs::symlink(root.join("mine"), &partition).unwrap();
-    let before = artifacts(root);
+    let before = artifacts_and_state(root);
     let out = slurm_run(root, &["--wait", "--force", "load"]);
     let log = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{log}");
@@ -289,7 +296,7 @@ fn the_slurm_commit_never_writes_through_a_symbolic_link() {
     );
     let mine: Vec<_> = std::fs::read_dir(root.join("mine")).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert_eq!(mine, ["thesis.txt"], "the commit job wrote through the link");
-    assert_eq!(before, artifacts(root), "the commit job changed the output folder");
+    assert_eq!(before, artifacts_and_state(root), "the commit job changed the output folder");
     assert!(!root.join("out/.shakeflow/lease").exists(), "the commit job released the lease");
     std::fs::remove_file(&partition).unwrap();
     let out = slurm_run(root, &["--wait"]);

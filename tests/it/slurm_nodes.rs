@@ -160,12 +160,5 @@ fn a_node_lost_mid_array_ends_in_a_clean_runs_state() {
     let log = stderr(&out);
     assert!(out.status.success(), "{log}");
     assert!(log.contains("failed unit(s) resubmitted"), "{log}");
-    let artifacts = |dir: &Path| -> Vec<(String, Vec<u8>)> {
-        snapshot(&dir.join("out"))
-            .into_iter()
-            .map(|(p, b)| (p.strip_prefix(dir).unwrap().display().to_string(), b))
-            .filter(|(p, _)| !p.starts_with("out/.shakeflow"))
-            .collect()
-    };
-    assert_eq!(artifacts(local.path()), artifacts(root), "the artifacts and lockfile of a clean run");
+    assert_eq!(artifacts_and_state(local.path()), artifacts_and_state(root), "the artifacts and state of a clean run");
 }

@@ -10,7 +10,7 @@ fn run(root: &Path, args: &[&str]) -> std::process::Output {
 }
 
 fn lockfile(root: &Path) -> serde_yaml::Value {
-    serde_yaml::from_str(&std::fs::read_to_string(root.join("out/shakeflow.lock")).unwrap()).unwrap()
+    state_yaml(&root.join("out"))
 }
 
 fn units_of(lock: &serde_yaml::Value, stage: &str) -> Vec<String> {
@@ -162,6 +162,32 @@ fn an_output_folder_of_the_format_1_lockfile_is_carried_over() {
     let out = run(root, &[]);
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(!root.join("out/baseline/records/old.parquet").exists(), "the old unit's files are replaced or removed");
-    assert_eq!(lockfile(root)["version"].as_u64(), Some(2));
+    assert_eq!(lockfile(root)["version"].as_u64(), Some(3));
     assert!(stderr(&run(root, &[])).contains("2 cached"));
+}
+
+#[test]
+fn an_output_folder_of_the_format_2_lockfile_is_carried_over_without_recomputing() {
+    let project = small_project();
+    let root = project.path();
+    assert!(run(root, &[]).status.success());
+    let artifacts: Vec<_> =
+        snapshot(&root.join("out")).into_iter().filter(|(p, _)| !p.to_string_lossy().contains(".shakeflow")).collect();
+    let sharded = std::fs::read(root.join("out/shakeflow.lock")).unwrap();
+    let state = artifacts_and_state(root);
+    // What the shakeflow before sharded state wrote: every stage's entry in the one lockfile.
+    let mut format2 = lockfile(root);
+    format2["version"] = 2.into();
+    std::fs::write(root.join("out/shakeflow.lock"), serde_yaml::to_string(&format2).unwrap()).unwrap();
+    std::fs::remove_dir_all(root.join("out/.shakeflow/state")).unwrap();
+    let status = stdout(&shakeflow(&["status", "pipeline.yaml"], root));
+    assert!(status.contains("0 of 2 stage(s) stale"), "read as it is: {status}");
+    let out = run(root, &[]);
+    let log = stderr(&out);
+    assert!(out.status.success() && log.contains("0 ran, 2 cached (0 unit(s) ran)"), "nothing reruns: {log}");
+    let now: Vec<_> =
+        snapshot(&root.join("out")).into_iter().filter(|(p, _)| !p.to_string_lossy().contains(".shakeflow")).collect();
+    assert!(now == artifacts, "the artifacts are as they were");
+    assert_eq!(std::fs::read(root.join("out/shakeflow.lock")).unwrap(), sharded, "written as format 3");
+    assert!(artifacts_and_state(root) == state, "the same state files, byte for byte");
 }

@@ -336,7 +336,7 @@ pub(super) struct Changes<'a> {
 
 /// Commits `changes` over `lock` in `transaction`: nothing at all when nothing is installed or
 /// removed (everything cached, or every unit that ran failed), so the folder and its lockfile
-/// stay exactly as they were.
+/// stay exactly as they were — but for a lockfile of an older format, written as format 3.
 pub(super) fn commit(
     transaction: Transaction,
     changes: Changes<'_>,
@@ -346,14 +346,16 @@ pub(super) fn commit(
     let mut stages = lock.stages.clone();
     // Stages the pipeline no longer has keep their entries until `gc` removes their folders.
     stages.extend(changes.entries.iter().map(|(name, entry)| (name.clone(), entry.clone())));
-    let new_lock = LockFile { version: lock.version, pipeline: Some(ownership::pipeline_label(&plan.file)), stages };
-    if changes.install.is_empty() && changes.remove.is_empty() {
+    let mut new_lock = LockFile::empty();
+    new_lock.pipeline = Some(ownership::pipeline_label(&plan.file));
+    new_lock.stages = stages;
+    if changes.install.is_empty() && changes.remove.is_empty() && !lock.is_older_format() {
         transaction.abort();
         return Ok(());
     }
     let install: Vec<String> = changes.install.iter().cloned().collect();
     let remove: Vec<String> = changes.remove.difference(changes.install).cloned().collect();
-    transaction.commit(&install, &remove, Some(&new_lock))
+    transaction.commit(&install, &remove, Some((&new_lock, lock)))
 }
 
 #[cfg(test)]

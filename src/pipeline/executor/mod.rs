@@ -39,7 +39,7 @@ pub use local::Local;
 
 use self::assess::{predict, Known, RealDisk};
 use self::inputs::{input_paths, param_file_hashes, resolve_sources, ResolvedSource};
-use super::layout::{HASH_MEMO, LOCK_FILE, RUNS_DIR, STATE_DIR};
+use super::layout::{HASH_MEMO, LOCK_FILE, RUNS_DIR, STATE_DIR, STATE_FILES};
 use super::lease::Lease;
 use super::lock::LockFile;
 use super::ownership;
@@ -178,7 +178,7 @@ pub fn status(plan: &Plan, notes: &mut Vec<String>) -> Result<Vec<StatusLine>, U
     // A lease or an unfinished commit, not merely the hash memo or finished Slurm runs' folders:
     // `status` takes the lease only then, so a run starting meanwhile is not refused.
     let in_progress = std::fs::read_dir(output_dir.join(STATE_DIR))
-        .map(|d| d.flatten().any(|e| e.file_name() != HASH_MEMO && e.file_name() != RUNS_DIR))
+        .map(|d| d.flatten().any(|e| ![HASH_MEMO, RUNS_DIR, STATE_FILES].iter().any(|n| e.file_name() == *n)))
         .unwrap_or(false);
     if in_progress {
         // An interrupted commit is completed first, so the answer is about what is on disk now;
@@ -301,7 +301,7 @@ pub fn gc(plan: &Plan, dry_run: bool) -> anyhow::Result<Vec<(String, u64)>> {
         for orphan in &orphans {
             new_lock.stages.remove(orphan);
         }
-        Transaction::begin(&lease)?.commit(&[], &orphans, Some(&new_lock))?;
+        Transaction::begin(&lease)?.commit(&[], &orphans, Some((&new_lock, &lock)))?;
     }
     Ok(sized)
 }

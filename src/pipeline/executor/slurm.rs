@@ -626,7 +626,9 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let known: BTreeSet<&str> = shards.iter().flatten().map(String::as_str).collect();
     let last = shard + 1 == shards.len();
     let output_dir = plan.file.output_dir();
-    let lock = LockFile::read(&output_dir.join(LOCK_FILE))?;
+    // Only this stage's state and its upstream stages': what the task plans with.
+    let (lock, read) = LockFile::read_stages(&output_dir.join(LOCK_FILE), &plan.with_upstream([stage_name]))?;
+    eprintln!("{stage_name} shard {shard}: read {} state file(s), {} bytes", read.files, read.bytes);
     let sources = resolve_sources(&plan)?;
     let files = param_file_hashes(&plan)?;
     let (produced, upstream_tainted) = upstream_produced(run_dir, &run, &plan, &lock, stage_name, shard)?;
@@ -818,7 +820,7 @@ fn commit_manifests(run_dir: &Path, run: &RunFile, plan: &Plan, lease: &Lease) -
     leave_out_not_kept(plan, &selected, &tainted, &new_lock.stages, &mut install, &mut remove);
     let install: Vec<String> = install.into_iter().collect();
     let remove: Vec<String> = remove.into_iter().filter(|r| !install.contains(r)).collect();
-    transaction.commit(&install, &remove, Some(&new_lock))?;
+    transaction.commit(&install, &remove, Some((&new_lock, &lock)))?;
     for (stage, unit, reason) in &summary.failed {
         eprintln!("error: stage `{stage}` {} failed: {reason}", crate::pipeline::units::describe(unit));
     }

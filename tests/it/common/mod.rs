@@ -152,6 +152,24 @@ pub fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     out
 }
 
+/// Every file of `root/out` with its bytes (paths from `root`): the artifacts, the lockfile and
+/// the per-stage state files, not shakeflow's working files (lease, hash memo, Slurm runs).
+/// What every executor must leave the same.
+pub fn artifacts_and_state(root: &Path) -> Vec<(String, Vec<u8>)> {
+    snapshot(&root.join("out"))
+        .into_iter()
+        .map(|(p, b)| (p.strip_prefix(root).unwrap().display().to_string(), b))
+        .filter(|(p, _)| !p.starts_with("out/.shakeflow") || p.starts_with("out/.shakeflow/state/"))
+        .collect()
+}
+
+/// Every stage's state in `out` (the lockfile and the state files it names) as one YAML value:
+/// `stages.<stage>.units.<unit>.files`…
+pub fn state_yaml(out: &Path) -> serde_yaml::Value {
+    let lock = shakeflow::pipeline::lock::LockFile::read(&out.join("shakeflow.lock")).unwrap();
+    serde_yaml::to_value(&lock).unwrap()
+}
+
 /// Runs the binary with extra environment variables.
 pub fn shakeflow_env(args: &[&str], cwd: &Path, env: &[(&str, &str)]) -> Output {
     let mut command = Command::new(env!("CARGO_BIN_EXE_shakeflow"));
