@@ -4,9 +4,11 @@ the local executor and through the multi-node test Slurm (`tests/system/slurm.sh
 rerun of the whole archive.
 
 Prints, per executor: wall time, work units run, wall time per unit, files created (artifacts
-and lockfile, not shakeflow's state folder), their bytes, the lockfile's size and the commit's
-time; for Slurm also array tasks, the per-task overhead over the local run and the commit job's
-time (Slurm's start/end, 1 s resolution); and whether both lockfiles are identical. The no-op
+and lockfile, not shakeflow's state folder), their bytes, the state's size (the lockfile, now a
+root, and every stage's state file in `.shakeflow/state/`) and the commit's time; for Slurm also
+array tasks, the per-task overhead over the local run, the commit job's time (Slurm's start/end,
+1 s resolution), the state each array task read (its own log line: the root and its stage's and
+upstream stages' state files), and whether both states (root and state files) are identical. The no-op
 reruns: the first after the run reads the files the memo does not hold yet, the next ones are
 what a user sees. Figures, not assertions: ARCHITECTURE.md's scale estimate uses them.
 
@@ -14,11 +16,13 @@ The local commit time is measured from `SHAKEFLOW_FAILPOINT=trace`'s `failpoint:
 lines on standard error, timestamped as they arrive: from the commit's first step to its last.
 
 After the runs, per archive size: the engine's overhead per unit (a no-op rerun's wall time over
-the units it checks), the state each array task reads in full (the lockfile and the hash memo:
-today every task reads both, whatever its shard), and the most entries in one folder of the
-output (what a shared file system lists).
+the units it checks), the state the array tasks read (the most and the mean over tasks, from
+their logs; without Slurm, what a task of the largest stage would read: the root and that stage's
+file, upstream stages aside), the hash memo (which tasks read too), and the most entries in one
+folder of the output (what a shared file system lists).
 """
 import argparse
+import json
 import os
 import pathlib
 import re
@@ -62,6 +66,28 @@ def most_entries(out: pathlib.Path):
     return best
 
 
+def state_files(out: pathlib.Path):
+    """The state: the lockfile (its root) and the per-stage state files, name → bytes."""
+    files = {"shakeflow.lock": (out / "shakeflow.lock").read_bytes()}
+    for f in sorted((out / ".shakeflow/state").glob("*.json")):
+        files[f".shakeflow/state/{f.name}"] = f.read_bytes()
+    return files
+
+
+def state_units(out: pathlib.Path):
+    """Units in the state: what a no-op checks."""
+    return sum(len(json.loads(b)["units"]) for n, b in state_files(out).items() if n.endswith(".json"))
+
+
+def task_reads(out: pathlib.Path):
+    """Bytes of state each array task read, from its log line (`read N state file(s), B bytes`)."""
+    reads = []
+    for log in (out / ".shakeflow/slurm").glob("*/logs/*"):
+        for m in re.finditer(r"read (\d+) state file\(s\), (\d+) bytes", log.read_text(errors="replace")):
+            reads.append(int(m.group(2)))
+    return reads
+
+
 def timed_run(cmd, cwd, env=None):
     """Runs cmd; returns (wall s, stderr lines with their arrival in s since the start, exit code)."""
     started = time.monotonic()
@@ -98,10 +124,10 @@ def main():
     if len(growth) > 1:
         print("\ngrowth with the archive (local executor):")
         print(f"{'tests':>6} {'units':>6} {'wall s':>8} {'commit s':>9} {'no-op s':>8} {'ms/unit':>8} "
-              f"{'state KB/task':>14} {'most entries':>13}")
+              f"{'state KB/task':>14} {'memo KB':>8} {'most entries':>13}")
         for tests, r in growth:
             print(f"{tests:6d} {r['units']:6d} {r['wall']:8.2f} {r['commit']:9.2f} {r['noop']:8.2f} "
-                  f"{1000 * r['noop'] / max(r['checked'], 1):8.3f} {r['state'] / 1e3:14.1f} {r['most'][0]:13d}")
+                  f"{1000 * r['noop'] / max(r['checked'], 1):8.3f} {r['state'] / 1e3:14.1f} {r['memo'] / 1e3:8.1f} {r['most'][0]:13d}")
 
 
 def measure(a, tests):
@@ -129,7 +155,7 @@ def measure(a, tests):
         units=units,
         files=n_files,
         bytes=n_bytes,
-        lock=(local / "out/shakeflow.lock").stat().st_size,
+        lock=sum(len(b) for b in state_files(local / "out").values()),
         commit=commit[-1] - commit[0] if commit else float("nan"),
     )
     noops = []
@@ -143,9 +169,13 @@ def measure(a, tests):
     memo = local / "out/.shakeflow/hashes.json"
     report["local"].update(
         noop=min(noops),
-        # Every unit of the covered stages is checked by a no-op: the lockfile's entries.
-        checked=sum(1 for l in (local / "out/shakeflow.lock").read_text().splitlines() if l.lstrip().startswith("key: ")),
-        state=report["local"]["lock"] + (memo.stat().st_size if memo.exists() else 0),
+        # Every unit of the covered stages is checked by a no-op: the state's entries.
+        checked=state_units(local / "out"),
+        memo=memo.stat().st_size if memo.exists() else 0,
+        # Without Slurm: what a task of the largest stage reads (the root and that stage's file).
+        state=max((len(b) for n, b in state_files(local / "out").items() if n.endswith(".json")), default=0)
+        + (local / "out/shakeflow.lock").stat().st_size,
+        state_mean=float("nan"),
         most=most_entries(local / "out"),
     )
 
@@ -169,13 +199,16 @@ def measure(a, tests):
             tasks = sum(int(m.group(1)) for _, l in lines for m in [re.search(r"submitted: (\d+) of", l)] if m)
             commit_job = next(re.search(r"commit job (\d+)", l).group(1) for _, l in lines if "commit job" in l)
             n_files, n_bytes = files_and_bytes(cluster / "out")
-            same = (cluster / "out/shakeflow.lock").read_bytes() == (local / "out/shakeflow.lock").read_bytes()
+            same = state_files(cluster / "out") == state_files(local / "out")
+            reads = task_reads(cluster / "out")
+            if reads:
+                report["local"].update(state=max(reads), state_mean=sum(reads) / len(reads))
             report["slurm"] = dict(
                 wall=wall,
                 units=report["local"]["units"],
                 files=n_files,
                 bytes=n_bytes,
-                lock=(cluster / "out/shakeflow.lock").stat().st_size,
+                lock=sum(len(b) for b in state_files(cluster / "out").values()),
                 commit=slurm_times(commit_job, env),
                 tasks=tasks,
                 submit=submit,
@@ -186,7 +219,7 @@ def measure(a, tests):
                 subprocess.run(["sh", str(slurm_sh), "stop"])
 
     print(f"\nbench-scale: {tests} tests, stages {', '.join(stages)} and what they need ({shakeflow})")
-    print(f"{'':8} {'wall s':>8} {'units':>6} {'ms/unit':>8} {'files':>6} {'MB':>8} {'lock KB':>8} {'commit s':>9}")
+    print(f"{'':8} {'wall s':>8} {'units':>6} {'ms/unit':>8} {'files':>6} {'MB':>8} {'state KB':>8} {'commit s':>9}")
     for name, r in report.items():
         print(
             f"{name:8} {r['wall']:8.2f} {r['units']:6d} {1000 * r['wall'] / max(r['units'], 1):8.2f} {r['files']:6d} "
@@ -197,13 +230,14 @@ def measure(a, tests):
         print(
             f"slurm: {s['tasks']} array task(s) + 1 commit job, submitted in {s['submit']:.2f} s; "
             f"overhead over local {(s['wall'] - l['wall']) / max(s['tasks'], 1):.2f} s per task; "
-            f"lockfile {'identical to' if s['same'] else 'DIFFERENT from'} the local run's"
+            f"state (root and state files) {'identical to' if s['same'] else 'DIFFERENT from'} the local run's"
         )
     print("no-op reruns: " + ", ".join(f"{w:.2f} s" for w in noops) + f"; status {status_wall:.2f} s")
     r = report["local"]
     print(
         f"engine overhead per unit (no-op / units checked): {1000 * r['noop'] / max(r['checked'], 1):.3f} ms "
-        f"({r['checked']} units); state each task reads: {r['state'] / 1e3:.1f} KB (lockfile + hash memo); "
+        f"({r['checked']} units); state a task reads: at most {r['state'] / 1e3:.1f} KB, mean {r['state_mean'] / 1e3:.1f} KB "
+        f"(root + its stage's and upstream stages' files), and the hash memo {r['memo'] / 1e3:.1f} KB; "
         f"most entries in one folder: {r['most'][0]} (`{r['most'][1]}`)"
     )
     return r

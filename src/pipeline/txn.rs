@@ -503,6 +503,75 @@ mod tests {
         assert_eq!(names(&mine), ["thesis.txt"]);
     }
 
+    fn one_stage(units: &[&str]) -> LockFile {
+        let unit = |key: &str| crate::pipeline::lock::UnitLock {
+            key: key.into(),
+            inputs: Default::default(),
+            files: Default::default(),
+            flagged: None,
+            notes: Vec::new(),
+        };
+        let mut lock = LockFile::empty();
+        let entry = crate::pipeline::lock::StageLock {
+            stage_type: "load".into(),
+            stage_version: 1,
+            params: serde_json::json!({}),
+            select: Default::default(),
+            units: units.iter().map(|u| (u.to_string(), unit(u))).collect(),
+        };
+        lock.stages.insert("load".into(), entry);
+        lock
+    }
+
+    #[test]
+    fn state_files_go_in_before_the_root_and_the_old_ones_after_it() {
+        let root = crate::tempdir::tempdir().unwrap();
+        let lease = Lease::acquire(root.path()).unwrap();
+        let lock_path = root.path().join(LOCK_FILE);
+        let states = root.path().join(STATE_DIR).join(STATE_FILES);
+        let first = one_stage(&["a"]);
+        Transaction::begin(&lease).unwrap().commit(&[], &[], Some((&first, &LockFile::empty()))).unwrap();
+        let read = LockFile::read(&lock_path).unwrap();
+        assert_eq!(read.stages, first.stages);
+        let old = read.state_files["load"].clone();
+        assert_eq!(names(&states), [old.clone()]);
+
+        // Committed, then "crashed" right after the commit point: the next lease holder installs
+        // the new state file, then the root naming it, then removes the old file.
+        let second = one_stage(&["a", "b"]);
+        let new = second.encode(&read).unwrap();
+        let txn = Transaction::begin(&lease).unwrap();
+        fs::create_dir_all(txn.dir.join(STATE_FILES)).unwrap();
+        let (name, bytes) = &new.files[0];
+        fs::write(txn.dir.join(STATE_FILES).join(name), bytes).unwrap();
+        fs::write(txn.dir.join(LOCK_FILE), &new.root).unwrap();
+        let journal = Journal {
+            version: 1,
+            install: vec![],
+            remove: vec![],
+            lockfile: true,
+            state: vec![name.clone()],
+            retire: new.retired.clone(),
+        };
+        fs::write(txn.dir.join(JOURNAL), serde_json::to_vec(&journal).unwrap()).unwrap();
+        std::mem::forget(txn);
+        assert_eq!(LockFile::read(&lock_path).unwrap().stages, first.stages, "the old state until rolled forward");
+        assert_eq!(recover(&lease).unwrap(), Recovery { completed: 1, discarded: 0 });
+        assert_eq!(LockFile::read(&lock_path).unwrap().stages, second.stages);
+        assert_eq!(names(&states), [name.clone()], "the old state file is gone");
+
+        // A state folder replaced by a link to a user's folder: refused, nothing written there.
+        let mine = root.path().join("mine");
+        fs::create_dir_all(&mine).unwrap();
+        fs::write(mine.join("thesis.txt"), "years of work").unwrap();
+        fs::rename(&states, root.path().join("kept")).unwrap();
+        std::os::unix::fs::symlink(&mine, &states).unwrap();
+        let read = LockFile::empty();
+        let error = Transaction::begin(&lease).unwrap().commit(&[], &[], Some((&first, &read))).unwrap_err();
+        assert!(error.to_string().contains("state` is a symbolic link"), "{error}");
+        assert_eq!(names(&mine), ["thesis.txt"]);
+    }
+
     #[test]
     fn legacy_leftovers_are_recognised_by_their_exact_shape() {
         assert!(is_legacy_leftover(".staging-123"));

@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use crate::common::{self, shakeflow, stderr, stdout};
+use crate::common::{self, shakeflow, state_yaml, stderr, stdout};
 
 /// What the page showed in the browser.
 pub struct Rendered {
