@@ -43,7 +43,8 @@ fn an_intermediate_goes_once_read_and_comes_back_the_same_when_a_reader_reruns()
     assert!(root.join("out/baseline/records/motion=FB-2/data.parquet").is_file());
     let first = lock_text(root);
     let lock: serde_yaml::Value = serde_yaml::from_str(&first).unwrap();
-    let hash = &lock["stages"]["load"]["units"]["motion=FB-1"]["files"]["records/motion=FB-1/data.parquet"];
+    let state = state_yaml(&root.join("out"));
+    let hash = &state["stages"]["load"]["units"]["motion=FB-1"]["files"]["records/motion=FB-1/data.parquet"];
     assert!(hash.as_str().is_some_and(|h| h.len() == 64), "the lockfile keeps the removed file's hash: {hash:?}");
     let baseline = std::fs::read(root.join("out/baseline/records/motion=FB-1/data.parquet")).unwrap();
 
@@ -67,6 +68,7 @@ fn an_intermediate_goes_once_read_and_comes_back_the_same_when_a_reader_reruns()
     let log = stderr(&run(root, &[]));
     assert!(log.contains("load               done in") && log.contains("2 unit(s) ran"), "{log}");
     assert_eq!(load_tables(root), 0);
+    // The lockfile names each stage's state file by its content: the same name, the same entry.
     let second: serde_yaml::Value = serde_yaml::from_str(&lock_text(root)).unwrap();
     assert_eq!(second["stages"]["load"], lock["stages"]["load"], "made again: the same bytes, the same entry");
     assert_ne!(second["stages"]["baseline"], lock["stages"]["baseline"]);

@@ -170,7 +170,7 @@ fn retries_resubmit_the_shard_whose_task_died_and_requeue_reaches_sbatch() {
 }
 
 #[test]
-fn in_allocation_runs_the_shards_as_srun_steps_with_the_local_runs_artifacts_and_state() {
+fn in_allocation_runs_the_shards_as_srun_steps_with_the_local_runs_artifacts() {
     let local = small_project();
     assert!(shakeflow(&["run", "pipeline.yaml"], local.path()).status.success());
     let project = small_project();
