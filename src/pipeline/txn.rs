@@ -534,7 +534,7 @@ mod tests {
         let read = LockFile::read(&lock_path).unwrap();
         assert_eq!(read.stages, first.stages);
         let old = read.state_files["load"].clone();
-        assert_eq!(names(&states), [old.clone()]);
+        assert_eq!(names(&states), [old.as_str()]);
 
         // Committed, then "crashed" right after the commit point: the next lease holder installs
         // the new state file, then the root naming it, then removes the old file.
@@ -558,7 +558,7 @@ mod tests {
         assert_eq!(LockFile::read(&lock_path).unwrap().stages, first.stages, "the old state until rolled forward");
         assert_eq!(recover(&lease).unwrap(), Recovery { completed: 1, discarded: 0 });
         assert_eq!(LockFile::read(&lock_path).unwrap().stages, second.stages);
-        assert_eq!(names(&states), [name.clone()], "the old state file is gone");
+        assert_eq!(names(&states), [name.as_str()], "the old state file is gone");
 
         // A state folder replaced by a link to a user's folder: refused, nothing written there.
         let mine = root.path().join("mine");
