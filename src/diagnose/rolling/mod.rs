@@ -229,6 +229,13 @@ impl RollingCase {
 
     /// The nominal cart over the whole record, with its states.
     pub fn nominal(&self) -> Result<Track, String> {
+        self.nominal_until(self.end_s(), None).map_err(|(e, _)| e)
+    }
+
+    /// The nominal cart from rest until `until_s`, with its states, within `allowance`
+    /// right-hand-side evaluations (`Err((message, evaluations spent))` past it).
+    fn nominal_until(&self, until_s: f64, allowance: Option<usize>) -> Result<Track, (String, usize)> {
+        let end = (((until_s - self.t0_s) / self.dt_s).ceil().max(0.0) as usize).min(self.samples() - 1);
         let r = simulate_altered(
             &self.cart,
             &self.friction,
@@ -236,10 +243,9 @@ impl RollingCase {
             &self.options,
             &Alteration::default(),
             None,
-            self.samples() - 1,
-            None,
-        )
-        .map_err(|(e, _)| e)?;
+            end,
+            allowance,
+        )?;
         Ok(Track {
             evaluations: r.stats.rhs_evals,
             x_m: r.x_m,
@@ -403,6 +409,7 @@ impl Contracted for RollingCase {
             rmse_judged: Some(c.extra.rmse_judged),
             flagged_early_samples: Some(c.extra.flagged_early),
             onset_s: Some(c.prediction.onset_s),
+            calibration: true,
             ..ModelFields::default()
         }
     }
@@ -456,6 +463,74 @@ fn calibrate_nominal(stated: &RollingCase, evidence: &Evidence, stated_track: &T
             .map_or(f64::INFINITY, |t| evidence.misfit_between(&t, f64::NEG_INFINITY, until).chi2)
     };
     calibration::calibrate_model(stated, &stated.uncertain, None, &horizons, false, &chi2)
+}
+
+/// `effect` with `params` on the cart `m` from rest until `until_s` (the nominal cart until the
+/// effect begins, as a fit runs it), each of its two runs within `allowance` evaluations; an
+/// altered run may cost [`BUDGET_FACTOR`] times `per_run` evaluations per sample of the record.
+fn with_effect(
+    m: &RollingCase,
+    effect: &dyn effects::Effect,
+    params: &[f64],
+    until_s: f64,
+    allowance: Option<usize>,
+    per_run: usize,
+) -> Option<Track> {
+    let mut nominal = m.nominal_until(until_s, allowance).ok()?;
+    let (alteration, onset) = effect.alteration(m, &nominal, params).ok()?;
+    nominal.evaluations = per_run;
+    let mut track = m.altered(&nominal, &alteration, onset, until_s, allowance).ok()?;
+    track.accel_unseen = effect.accel_unseen(m, &nominal, params, &track);
+    Some(track)
+}
+
+/// Horizons of the recalibration with a physics, past the window's start (s): the nominal
+/// calibration's, then the whole record.
+const JOINT_HORIZONS_S: [f64; 3] = [1.0, 3.0, 6.0];
+
+/// The uncertain parameters fitted again with a physics in place (its fitted parameters held),
+/// from the calibrated values: the better of the two by posterior over the whole record, as
+/// (calibration, track, misfit, cart runs spent). Each trial runs the cart from rest.
+fn recalibrate(
+    stated: &RollingCase,
+    calibration: &Calibration,
+    effect: &dyn effects::Effect,
+    fit: &fit::Fit,
+    evidence: &Evidence,
+    window: (f64, f64),
+    baseline: &Track,
+) -> (Calibration, Track, verdict::Misfit, usize) {
+    let kept = (calibration.clone(), fit.track.clone(), fit.misfit, 0);
+    if calibration.is_empty() {
+        return kept;
+    }
+    let horizons = JOINT_HORIZONS_S.map(|h| (window.0 + h).min(stated.end_s()));
+    let per_sample = baseline.evaluations as f64 / stated.samples() as f64;
+    let chi2 = |m: &RollingCase, until: f64| {
+        let samples = (until - m.t0_s) / m.dt_s + 1.0;
+        let allowance = (CALIBRATION_BUDGET_FACTOR * per_sample * samples).max(BUDGET_FLOOR * samples) as usize;
+        with_effect(m, effect, &fit.params, until, Some(allowance), baseline.evaluations)
+            .map_or(f64::INFINITY, |t| evidence.misfit_between(&t, f64::NEG_INFINITY, until).chi2)
+    };
+    let joint = calibration::calibrate_model(
+        stated,
+        &calibration.parameters,
+        Some(&calibration.fitted),
+        &horizons,
+        false,
+        &chi2,
+    );
+    let spent = joint.evaluations + 1;
+    let Ok(case) = joint.apply(stated) else { return (kept.0, kept.1, kept.2, spent) };
+    let Some(track) = with_effect(&case, effect, &fit.params, case.end_s(), None, baseline.evaluations) else {
+        return (kept.0, kept.1, kept.2, spent);
+    };
+    let misfit = evidence.misfit(&track);
+    if misfit.chi2 + joint.prior_chi2() < fit.misfit.chi2 + calibration.prior_chi2() {
+        (joint, track, misfit, spent)
+    } else {
+        (kept.0, kept.1, kept.2, spent)
+    }
 }
 
 pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiagnosis, String> {
@@ -525,25 +600,29 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
                 candidates: Vec<Candidate>,
                 model: Track,
                 explanation: String,
-                rmse_after: f64| RollingDiagnosis {
-        case: case.name.clone(),
-        mismatch: window.is_some(),
-        verdict,
-        window,
-        rmse_before: candidates[0].rmse,
-        rmse_after,
-        candidates,
-        explanation: explanation + &calibration.note(verdict == Verdict::None),
-        noise: Noise {
-            accel_mps2: case.accel_noise_mps2,
-            camera_m: Some(case.camera_noise_m),
-            camera_rad: case.camera_noise_rad,
-        },
-        predictability: Some(Predictability { predictable_until_s, probe, judged }),
-        baseline: baseline.clone(),
-        model,
-        evidence: evidence.clone(),
-        calibration: calibration.clone(),
+                rmse_after: f64| {
+        // The uncertain parameters as the accepted physics (or the nominal cart) fits them.
+        let calibration = candidates[usize::from(verdict.explained_by_physics())].calibration.clone();
+        RollingDiagnosis {
+            case: case.name.clone(),
+            mismatch: window.is_some(),
+            verdict,
+            window,
+            rmse_before: candidates[0].rmse,
+            rmse_after,
+            explanation: explanation + &calibration.note(verdict == Verdict::None),
+            candidates,
+            noise: Noise {
+                accel_mps2: case.accel_noise_mps2,
+                camera_m: Some(case.camera_noise_m),
+                camera_rad: case.camera_noise_rad,
+            },
+            predictability: Some(Predictability { predictable_until_s, probe, judged }),
+            baseline: baseline.clone(),
+            model,
+            evidence: evidence.clone(),
+            calibration,
+        }
     };
     let Some(window) = window else {
         let mut only = baseline_candidate(None);
@@ -573,22 +652,26 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
         .par_iter()
         .map(|effect| {
             let fit = fit::fit(*effect, case, &baseline, &evidence, window, judged.map_or(window.1, |j| j.1));
+            let (calibration, track, misfit, runs) =
+                recalibrate(stated, &calibration, *effect, &fit, &evidence, window, &baseline);
+            // Every candidate pays for its own parameters and every calibrated one.
+            let price = calibration.prior_chi2() + calibration.parameters.len() as f64 * n.ln();
             Candidate {
                 effect: effect.name(),
                 params: effect.parameter_names().iter().copied().zip(fit.params.iter().copied()).collect(),
-                bic: fit.misfit.chi2 + effect.parameter_names().len() as f64 * n.ln() + calibration_price,
-                rmse: evidence.window_rmse(&fit.track, Some(window)),
+                bic: misfit.chi2 + effect.parameter_names().len() as f64 * n.ln() + price,
+                rmse: evidence.window_rmse(&track, Some(window)),
                 score: 0.0,
-                flagged: evidence.flagged(&fit.track),
+                flagged: evidence.flagged(&track),
                 sentence: effect.explain(case, &baseline, &fit.params),
-                misfit: fit.misfit,
-                evaluations: fit.evaluations,
+                misfit,
+                evaluations: fit.evaluations + runs,
                 extra: Judged {
-                    rmse_judged: evidence.window_rmse(&fit.track, judged),
-                    flagged_early: flagged_early(&evidence, &fit.track, window),
+                    rmse_judged: evidence.window_rmse(&track, judged),
+                    flagged_early: flagged_early(&evidence, &track, window),
                 },
-                prediction: fit.track,
-                calibration: calibration.clone(),
+                prediction: track,
+                calibration,
             }
         })
         .collect();
