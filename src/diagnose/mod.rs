@@ -501,9 +501,8 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
     })
 }
 
-/// The uncertain parameters fitted again with a physics in place (its fitted parameters held),
-/// from the calibrated values: returns the better of the two (calibration, its prediction with
-/// its chaotic sensitivity, misfit, model runs spent) by posterior.
+/// The uncertain parameters fitted again with a physics in place ([`verdict::recalibrate`]): the
+/// rocking model's prediction with its chaotic sensitivity (two runs) over the whole record.
 fn recalibrate(
     stated: &Case,
     calibration: &Calibration,
@@ -512,34 +511,17 @@ fn recalibrate(
     evidence: &Evidence,
     window: (f64, f64),
 ) -> (Calibration, Prediction, Misfit, usize) {
-    let kept = (calibration.clone(), fit.prediction.clone(), fit.misfit, 0);
-    if calibration.is_empty() {
-        return kept;
-    }
     let horizons = JOINT_HORIZONS_S.map(|h| window.0 + h);
     let chi2 = |m: &Case, until: f64| {
         effect.predict(m, &fit.params).map_or(f64::INFINITY, |p| evidence.misfit_until(&p, until).chi2)
     };
-    let joint = calibration::calibrate_model(
-        stated,
-        &calibration.parameters,
-        Some(&calibration.fitted),
-        &horizons,
-        false,
-        &chi2,
-    );
-    let Ok(case) = joint.apply(stated) else { return kept };
     let predict = |c: &Case| effect.predict(c, &fit.params);
-    let Some(prediction) = predict(&case).and_then(|p| case.with_sensitivity(evidence, p, predict)).ok() else {
-        return kept;
+    let whole = |case: &Case| {
+        let prediction = predict(case).and_then(|p| case.with_sensitivity(evidence, p, predict)).ok()?;
+        let misfit = evidence.misfit(&prediction);
+        Some((prediction, misfit))
     };
-    let misfit = evidence.misfit(&prediction);
-    if misfit.chi2 + joint.prior_chi2() < fit.misfit.chi2 + calibration.prior_chi2() {
-        let spent = joint.evaluations + 2;
-        (joint, prediction, misfit, spent)
-    } else {
-        (kept.0, kept.1, kept.2, joint.evaluations + 2)
-    }
+    verdict::recalibrate(stated, calibration, &horizons, &chi2, whole, 2, (fit.prediction.clone(), fit.misfit))
 }
 
 fn explain_none(case: &Case, evidence: &Evidence, rmse: f64) -> String {

@@ -6,7 +6,7 @@
 
 use serde::{Serialize, Serializer};
 
-use super::calibration::{Calibration, UnitModel};
+use super::calibration::{self, Calibration, UnitModel};
 
 /// What a diagnosis concludes about a unit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -154,6 +154,36 @@ pub struct Diagnosis<M: Model> {
     pub evidence: M::Evidence,
     /// The uncertain parameters as the accepted model (or the calibrated nominal) fits them.
     pub calibration: Calibration,
+}
+
+/// The uncertain parameters fitted again with a physics in place (its fitted parameters held
+/// inside `chi2` and `whole`), from the nominal calibration's values over growing `horizons`:
+/// the better of the two by posterior over the whole record, as (calibration, prediction,
+/// misfit, model runs spent). `whole` runs the physics on a calibrated unit over the whole
+/// record (`whole_runs` model runs), `kept` is the physics on the nominal calibration.
+pub fn recalibrate<M: Model>(
+    stated: &M,
+    calibration: &Calibration,
+    horizons: &[f64],
+    chi2: &(dyn Fn(&M, f64) -> f64 + Sync),
+    whole: impl Fn(&M) -> Option<(M::Prediction, Misfit)>,
+    whole_runs: usize,
+    kept: (M::Prediction, Misfit),
+) -> (Calibration, M::Prediction, Misfit, usize) {
+    if calibration.is_empty() {
+        return (calibration.clone(), kept.0, kept.1, 0);
+    }
+    let joint =
+        calibration::calibrate_model(stated, &calibration.parameters, Some(&calibration.fitted), horizons, false, chi2);
+    let Some((prediction, misfit)) = joint.apply(stated).ok().and_then(|unit| whole(&unit)) else {
+        return (calibration.clone(), kept.0, kept.1, 0);
+    };
+    let spent = joint.evaluations + whole_runs;
+    if misfit.chi2 + joint.prior_chi2() < kept.1.chi2 + calibration.prior_chi2() {
+        (joint, prediction, misfit, spent)
+    } else {
+        (calibration.clone(), kept.0, kept.1, spent)
+    }
 }
 
 /// Samples closer than this (s) form one cluster of exceedances.

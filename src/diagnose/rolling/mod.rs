@@ -488,9 +488,8 @@ fn with_effect(
 /// calibration's, then the whole record.
 const JOINT_HORIZONS_S: [f64; 3] = [1.0, 3.0, 6.0];
 
-/// The uncertain parameters fitted again with a physics in place (its fitted parameters held),
-/// from the calibrated values: the better of the two by posterior over the whole record, as
-/// (calibration, track, misfit, cart runs spent). Each trial runs the cart from rest.
+/// The uncertain parameters fitted again with a physics in place ([`verdict::recalibrate`]): each
+/// trial runs the cart from rest to the horizon, then the physics from its onset.
 fn recalibrate(
     stated: &RollingCase,
     calibration: &Calibration,
@@ -500,10 +499,6 @@ fn recalibrate(
     window: (f64, f64),
     baseline: &Track,
 ) -> (Calibration, Track, verdict::Misfit, usize) {
-    let kept = (calibration.clone(), fit.track.clone(), fit.misfit, 0);
-    if calibration.is_empty() {
-        return kept;
-    }
     let horizons = JOINT_HORIZONS_S.map(|h| (window.0 + h).min(stated.end_s()));
     let per_sample = baseline.evaluations as f64 / stated.samples() as f64;
     let chi2 = |m: &RollingCase, until: f64| {
@@ -512,25 +507,12 @@ fn recalibrate(
         with_effect(m, effect, &fit.params, until, Some(allowance), baseline.evaluations)
             .map_or(f64::INFINITY, |t| evidence.misfit_between(&t, f64::NEG_INFINITY, until).chi2)
     };
-    let joint = calibration::calibrate_model(
-        stated,
-        &calibration.parameters,
-        Some(&calibration.fitted),
-        &horizons,
-        false,
-        &chi2,
-    );
-    let spent = joint.evaluations + 1;
-    let Ok(case) = joint.apply(stated) else { return (kept.0, kept.1, kept.2, spent) };
-    let Some(track) = with_effect(&case, effect, &fit.params, case.end_s(), None, baseline.evaluations) else {
-        return (kept.0, kept.1, kept.2, spent);
+    let whole = |case: &RollingCase| {
+        let track = with_effect(case, effect, &fit.params, case.end_s(), None, baseline.evaluations)?;
+        let misfit = evidence.misfit(&track);
+        Some((track, misfit))
     };
-    let misfit = evidence.misfit(&track);
-    if misfit.chi2 + joint.prior_chi2() < fit.misfit.chi2 + calibration.prior_chi2() {
-        (joint, track, misfit, spent)
-    } else {
-        (kept.0, kept.1, kept.2, spent)
-    }
+    verdict::recalibrate(stated, calibration, &horizons, &chi2, whole, 1, (fit.track.clone(), fit.misfit))
 }
 
 pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiagnosis, String> {
