@@ -1,15 +1,10 @@
 //! The observations a prediction is judged against: each sensor's samples placed on the floor's
 //! time base, weighed by the sensor's noise, with what no model here predicts masked out.
 
+use super::verdict::{clustered, span, Misfit, ACCEL_CLUSTER, CAMERA_CLUSTER};
 use super::{Case, Prediction};
 use crate::signal::toppling::{detect_toppling, DetectOptions};
 
-/// Samples closer than this (s) form one cluster of exceedances.
-const CLUSTER_S: f64 = 0.1;
-/// Exceedances needed within a cluster span: 5 accelerometer (of 20 at 200 Hz) or 2 camera
-/// (of 3 at 30 Hz) samples, so isolated noise peaks and lone outliers never flag.
-const ACCEL_CLUSTER: usize = 5;
-const CAMERA_CLUSTER: usize = 2;
 /// The overturn impact rings for tens of ms; no rigid model predicts it.
 const SPIKE_MASK_S: (f64, f64) = (0.05, 0.3);
 /// A sample is solver-sensitive when the nominal model's prediction moves by more than this
@@ -62,13 +57,6 @@ struct Sample {
     value: f64,
     /// False when missing (NaN), masked as a spike, or solver-sensitive.
     valid: bool,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Misfit {
-    /// Σ ((observed − predicted)/σ)² over the valid samples of both sensors.
-    pub chi2: f64,
-    pub samples: usize,
 }
 
 #[derive(Debug, Clone)]
@@ -221,15 +209,7 @@ impl Evidence {
         for (samples, z, needed) in sensors {
             let exceeding: Vec<f64> =
                 samples.iter().filter(|s| s.valid && z(s).abs() > self.exceedance_sigma).map(|s| s.t).collect();
-            // A cluster: `needed` exceedances within CLUSTER_S; all of its members are flagged.
-            let mut marked = vec![false; exceeding.len()];
-            for i in 0..exceeding.len() {
-                let j = exceeding[i..].partition_point(|t| *t < exceeding[i] + CLUSTER_S) + i;
-                if j - i >= needed {
-                    marked[i..j].iter_mut().for_each(|m| *m = true);
-                }
-            }
-            flagged.extend(exceeding.iter().zip(&marked).filter(|(_, m)| **m).map(|(t, _)| *t));
+            flagged.extend(clustered(&exceeding, needed));
         }
         flagged
     }
@@ -241,10 +221,7 @@ impl Evidence {
 
     /// From the first to the last flagged sample: where the prediction disagrees with the records.
     pub fn window(&self, p: &Prediction) -> Option<(f64, f64)> {
-        let times = self.flagged_times(p);
-        let first = times.iter().copied().fold(f64::INFINITY, f64::min);
-        let last = times.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        (first <= last).then_some((first, last))
+        span(&self.flagged_times(p))
     }
 
     /// "the accelerometer by up to 3.2 m/s^2 and the camera by up to 0.12 rad".

@@ -16,8 +16,9 @@ use argmin::solver::neldermead::NelderMead;
 use rayon::prelude::*;
 
 use super::effects::Effect;
-use super::evidence::{Evidence, Misfit};
+use super::evidence::Evidence;
 use super::{Case, Prediction};
+use crate::diagnose::verdict::Misfit;
 
 /// Grid points a local search starts from.
 const STARTS: usize = 4;

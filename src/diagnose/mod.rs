@@ -18,16 +18,20 @@
 //! Pure numerics: a [`Case`] in, a [`Diagnosis`] out; files are read and written elsewhere.
 
 pub mod calibration;
+pub mod contract;
 pub mod effects;
 pub mod evidence;
 pub mod fit;
 pub mod rolling;
+pub mod verdict;
 
 use rayon::prelude::*;
 
 use crate::physics::rocking::{self, Block, Excitation, Options, Shape};
 use calibration::{Calibration, Uncertain, UnitModel};
-use evidence::{Evidence, Misfit};
+use contract::{Contracted, ModelFields};
+use evidence::Evidence;
+use verdict::{Misfit, Model, Noise, Verdict};
 
 /// What one test of one unit recorded, and what is known of the unit.
 #[derive(Debug, Clone)]
@@ -280,50 +284,26 @@ impl Default for Settings {
     }
 }
 
-/// One fitted hypothesis.
-#[derive(Debug, Clone)]
-pub struct Candidate {
-    pub effect: &'static str,
-    pub params: Vec<(&'static str, f64)>,
-    pub misfit: Misfit,
-    /// Noise-normalised RMS residual inside the window.
-    pub rmse: f64,
-    pub bic: f64,
-    /// exp(−ΔBIC/2), normalised over the candidates: how strongly the data prefer it.
-    pub score: f64,
-    /// Samples its residuals still flag (beyond the threshold, clustered) in the whole record.
-    pub flagged: usize,
-    pub evaluations: usize,
-    pub sentence: String,
-    pub prediction: Prediction,
-    /// The uncertain parameters as fitted with this hypothesis.
-    pub calibration: Calibration,
+/// One fitted hypothesis about a rocking unit.
+pub type Candidate = verdict::Candidate<Case>;
+/// The diagnosis of a rocking unit.
+pub type Diagnosis = verdict::Diagnosis<Case>;
+
+impl Model for Case {
+    type Prediction = Prediction;
+    type Evidence = Evidence;
+    type CandidateExtra = ();
 }
 
-#[derive(Debug, Clone)]
-pub struct Diagnosis {
-    pub case: String,
-    pub mismatch: bool,
-    pub verdict: &'static str,
-    pub window: Option<(f64, f64)>,
-    pub rmse_before: f64,
-    pub rmse_after: f64,
-    /// The baseline first, then the effects by score.
-    pub candidates: Vec<Candidate>,
-    pub explanation: String,
-    pub accel_noise_mps2: f64,
-    pub camera_noise_rad: f64,
-    pub baseline: Prediction,
-    /// The accepted model's prediction (the baseline's for `none` and `unexplained`).
-    pub model: Prediction,
-    pub evidence: Evidence,
-    /// The uncertain parameters as the accepted model (or the calibrated nominal) fits them.
-    pub calibration: Calibration,
+impl Contracted for Case {
+    const MODEL: Option<&'static str> = None;
+    const RMSE_DEFINITION: &'static str = "sqrt(mean(((observed - predicted) / noise_sd)^2)) over the accelerometer and camera samples inside the window (the whole record when there is none), overturn impact spike and solver-sensitive samples excluded; 1 is pure sensor noise";
+
+    fn candidate_fields(c: &Candidate) -> ModelFields {
+        ModelFields { overturn: Some(c.prediction.overturn), calibration: true, ..ModelFields::default() }
+    }
 }
 
-/// Two explanations whose BIC differ by less than this are about equally good (Kass & Raftery:
-/// "not worth more than a bare mention"): the verdict is `ambiguous`, naming both.
-pub const AMBIGUOUS_BIC: f64 = 2.0;
 /// An accepted change whose onset falls within this (s) of the calibrated model's first uplift
 /// happened where the records could first show anything: it is not called an event at that time.
 const FIRST_UPLIFT_S: f64 = 0.1;
@@ -401,7 +381,9 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
         sentence: "the nominal rigid-block model (Eq. 20-24) as the equipment file describes it".into(),
         prediction: baseline.clone(),
         calibration: calibration.clone(),
+        extra: (),
     };
+    let noise = Noise { accel_mps2: case.accel_noise_mps2, camera_m: None, camera_rad: case.camera_noise_rad };
     let Some(window) = window else {
         let mut only = baseline_candidate(None);
         only.score = 1.0;
@@ -409,14 +391,14 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
         return Ok(Diagnosis {
             case: case.name.clone(),
             mismatch: false,
-            verdict: "none",
+            verdict: Verdict::None,
             window: None,
             rmse_before: rmse,
             rmse_after: rmse,
             explanation: explain_none(case, &evidence, rmse) + &calibration.note(true),
             candidates: vec![only],
-            accel_noise_mps2: case.accel_noise_mps2,
-            camera_noise_rad: case.camera_noise_rad,
+            noise,
+            predictability: None,
             model: baseline.clone(),
             baseline,
             evidence,
@@ -443,32 +425,25 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
                 evaluations: fit.evaluations + evaluations,
                 prediction,
                 calibration,
+                extra: (),
             }
         })
         .collect();
     let mut candidates = vec![before];
     candidates.extend(fitted);
-    let best_bic = candidates.iter().map(|c| c.bic).fold(f64::INFINITY, f64::min);
-    let weights: Vec<f64> = candidates.iter().map(|c| (-(c.bic - best_bic) / 2.0).exp()).collect();
-    let total: f64 = weights.iter().sum();
-    for (c, w) in candidates.iter_mut().zip(weights) {
-        c.score = w / total;
-    }
-    // The baseline stays first; the effects follow by BIC.
-    candidates[1..].sort_by(|a, b| a.bic.total_cmp(&b.bic));
+    verdict::rank(&mut candidates);
+    let (base_bic, base_rmse) = (candidates[0].bic, candidates[0].rmse);
     let flagged_before = candidates[0].flagged.max(1) as f64;
     // A model that has the unit fall when the records show it standing (or the reverse) is not
-    // the explanation, however well its own chaotic spread covers the misfit.
-    let passes = |c: &Candidate| {
+    // the explanation, however well its own chaotic spread covers the misfit. Only the best by
+    // BIC may be accepted.
+    let choice = verdict::choose(&mut candidates, true, |c: &Candidate| {
         c.prediction.overturn.is_some() == evidence.observed_overturn
-            && c.bic < candidates[0].bic
-            && c.rmse * settings.min_improvement <= candidates[0].rmse
+            && c.bic < base_bic
+            && c.rmse * settings.min_improvement <= base_rmse
             && (c.flagged as f64) <= settings.max_remaining_flagged * flagged_before
-    };
-    let accepted = passes(&candidates[1]);
-    let rival = (accepted && candidates.len() > 2 && passes(&candidates[2]))
-        .then(|| candidates[2].bic - candidates[1].bic)
-        .filter(|d| *d < AMBIGUOUS_BIC);
+    });
+    let accepted = choice.accepted;
     let first_uplift = baseline.first(&[rocking::EventKind::Uplift]);
     let mut onset_at_first_uplift = None;
     let (verdict, model, window) = if accepted {
@@ -490,10 +465,9 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
             .filter(|(o, u)| (o - u).abs() <= FIRST_UPLIFT_S)
             .map(|(_, u)| u);
         let onset = onset.unwrap_or(window.0);
-        let verdict = if rival.is_some() { "ambiguous" } else { best.effect };
-        (verdict, best.prediction.clone(), (onset.min(window.0), window.1))
+        (choice.verdict(&candidates), best.prediction.clone(), (onset.min(window.0), window.1))
     } else {
-        ("unexplained", baseline.clone(), window)
+        (Verdict::Unexplained, baseline.clone(), window)
     };
     for c in &mut candidates {
         c.rmse = evidence.window_rmse(&c.prediction, Some(window));
@@ -501,15 +475,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
     let rmse_before = candidates[0].rmse;
     let rmse_after = if accepted { candidates[1].rmse } else { rmse_before };
     let mut explanation = explain(case, &evidence, window, &candidates, accepted, settings);
-    if let Some(margin) = rival {
-        explanation.push_str(&format!(
-            " But {} ({}) explains the records about equally well (BIC {margin:.1} higher, less than {AMBIGUOUS_BIC}): the records cannot tell {} from {}; the verdict is ambiguous between them.",
-            candidates[2].effect.replace('_', " "),
-            candidates[2].sentence,
-            candidates[1].effect.replace('_', " "),
-            candidates[2].effect.replace('_', " "),
-        ));
-    }
+    explanation.push_str(&choice.ambiguity(&candidates));
     if let Some(t) = onset_at_first_uplift {
         explanation.push_str(&format!(
             " Its fitted onset is the first uplift ({t:.2} s), the first moment the records could show the change: they hold no evidence of the unchanged unit before it, so it holds from the start, or before {t:.2} s, rather than being an event at that time."
@@ -526,8 +492,8 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
         rmse_after,
         candidates,
         explanation,
-        accel_noise_mps2: case.accel_noise_mps2,
-        camera_noise_rad: case.camera_noise_rad,
+        noise,
+        predictability: None,
         baseline,
         model,
         evidence,
@@ -535,9 +501,8 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
     })
 }
 
-/// The uncertain parameters fitted again with a physics in place (its fitted parameters held),
-/// from the calibrated values: returns the better of the two (calibration, its prediction with
-/// its chaotic sensitivity, misfit, model runs spent) by posterior.
+/// The uncertain parameters fitted again with a physics in place ([`verdict::recalibrate`]): the
+/// rocking model's prediction with its chaotic sensitivity (two runs) over the whole record.
 fn recalibrate(
     stated: &Case,
     calibration: &Calibration,
@@ -546,34 +511,17 @@ fn recalibrate(
     evidence: &Evidence,
     window: (f64, f64),
 ) -> (Calibration, Prediction, Misfit, usize) {
-    let kept = (calibration.clone(), fit.prediction.clone(), fit.misfit, 0);
-    if calibration.is_empty() {
-        return kept;
-    }
     let horizons = JOINT_HORIZONS_S.map(|h| window.0 + h);
     let chi2 = |m: &Case, until: f64| {
         effect.predict(m, &fit.params).map_or(f64::INFINITY, |p| evidence.misfit_until(&p, until).chi2)
     };
-    let joint = calibration::calibrate_model(
-        stated,
-        &calibration.parameters,
-        Some(&calibration.fitted),
-        &horizons,
-        false,
-        &chi2,
-    );
-    let Ok(case) = joint.apply(stated) else { return kept };
     let predict = |c: &Case| effect.predict(c, &fit.params);
-    let Some(prediction) = predict(&case).and_then(|p| case.with_sensitivity(evidence, p, predict)).ok() else {
-        return kept;
+    let whole = |case: &Case| {
+        let prediction = predict(case).and_then(|p| case.with_sensitivity(evidence, p, predict)).ok()?;
+        let misfit = evidence.misfit(&prediction);
+        Some((prediction, misfit))
     };
-    let misfit = evidence.misfit(&prediction);
-    if misfit.chi2 + joint.prior_chi2() < fit.misfit.chi2 + calibration.prior_chi2() {
-        let spent = joint.evaluations + 2;
-        (joint, prediction, misfit, spent)
-    } else {
-        (kept.0, kept.1, kept.2, joint.evaluations + 2)
-    }
+    verdict::recalibrate(stated, calibration, &horizons, &chi2, whole, 2, (fit.prediction.clone(), fit.misfit))
 }
 
 fn explain_none(case: &Case, evidence: &Evidence, rmse: f64) -> String {

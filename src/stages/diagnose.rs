@@ -6,10 +6,9 @@
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
-use serde_json::{json, Value};
 
 use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::diagnose::calibration::Calibration;
+use crate::diagnose::contract::Contract;
 use crate::diagnose::rolling::RollingDiagnosis;
 use crate::diagnose::{diagnose, Diagnosis, Settings};
 use crate::io::case::read_case_unchanged;
@@ -21,7 +20,7 @@ pub struct Diagnose;
 
 static INFO: StageInfo = StageInfo {
     name: "diagnose",
-    version: 12,
+    version: 13,
     summary: "Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt; rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted jointly with the nominal parameters the equipment file's `uncertainty` block says are known only roughly (calibrated first), ranked by BIC; `ambiguous` when two explain the records about equally well, or `unexplained`.",
     inputs: InputKind::Files(&[RecordFormat::Case]),
     outputs: &[
@@ -76,13 +75,12 @@ impl Stage for Diagnose {
         let settings = settings(ctx.params)?;
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();
         ctx.sink.set_total(parts.len());
-        let mut rows: Vec<(String, AnyDiagnosis)> = parts
+        let mut rows: Vec<(String, Contract)> = parts
             .par_iter()
             .map(|part| {
-                let d = diagnose_folder(&part.path, &part.hash, &settings)
-                    .map_err(|e| anyhow::anyhow!("{}: {e:#}", part.label))?;
-                let mut accel = d.accel_table();
-                let mut camera = d.camera_table();
+                let Report { contract, mut accel, mut camera, figure } =
+                    diagnose_folder(&part.path, &part.hash, &settings)
+                        .map_err(|e| anyhow::anyhow!("{}: {e:#}", part.label))?;
                 for t in [&mut accel, &mut camera] {
                     t.metadata.extend(super::record_provenance(part));
                 }
@@ -90,77 +88,21 @@ impl Stage for Diagnose {
                 ctx.sink.write("camera", &part.partition, camera)?;
                 // Named by the case's partition values, as the `case` column names it.
                 let name = match super::partition_values(&part.partition).replace('/', "_") {
-                    n if n.is_empty() => d.case().to_string(),
+                    n if n.is_empty() => contract.case.clone(),
                     n => n,
                 };
                 // The contract: `diagnosis.json` of the one case, or `<case>/diagnosis.json` of each.
                 match parts.len() {
-                    1 => ctx.sink.write_page(CONTRACT, d.json_bytes().as_bytes())?,
-                    _ => ctx.sink.write_record_page(CONTRACT, &name, d.json_bytes().as_bytes())?,
+                    1 => ctx.sink.write_page(CONTRACT, contract.bytes().as_bytes())?,
+                    _ => ctx.sink.write_record_page(CONTRACT, &name, contract.bytes().as_bytes())?,
                 }
-                ctx.sink.write_file("reports", &format!("{name}.png"), &d.figure().map_err(anyhow::Error::msg)?)?;
-                Ok((super::partition_values(&part.partition), d))
+                ctx.sink.write_file("reports", &format!("{name}.png"), &figure.map_err(anyhow::Error::msg)?)?;
+                Ok((super::partition_values(&part.partition), contract))
             })
             .collect::<anyhow::Result<_>>()?;
         rows.sort_by(|a, b| a.0.cmp(&b.0));
         ctx.sink.write("diagnosis", &Vec::new(), summary_table(&rows))
     }
-}
-
-/// The `diagnosis.json` contract, with a few fields added for readers.
-pub fn diagnosis_json(d: &Diagnosis) -> Value {
-    let candidates: Vec<Value> = d
-        .candidates
-        .iter()
-        .map(|c| {
-            let params: serde_json::Map<String, Value> =
-                c.params.iter().map(|(k, v)| (k.to_string(), json!(v))).collect();
-            json!({
-                "effect": c.effect,
-                "params": params,
-                "rmse": c.rmse,
-                "score": c.score,
-                "bic": c.bic,
-                "chi2": c.misfit.chi2,
-                "flagged_samples": c.flagged,
-                "evaluations": c.evaluations,
-                "overturn_time_s": c.prediction.overturn.map(|o| o.0),
-                "overturn_side": c.prediction.overturn.map(|o| o.1),
-                "explanation": c.sentence,
-                "calibration": calibration_json(&c.calibration),
-            })
-        })
-        .collect();
-    json!({
-        "case": d.case,
-        "mismatch": d.mismatch,
-        "verdict": d.verdict,
-        "window": d.window.map(|(a, b)| json!({"start_s": a, "end_s": b})),
-        "rmse_before": d.rmse_before,
-        "rmse_after": d.rmse_after,
-        "rmse_definition": "sqrt(mean(((observed - predicted) / noise_sd)^2)) over the accelerometer and camera samples inside the window (the whole record when there is none), overturn impact spike and solver-sensitive samples excluded; 1 is pure sensor noise",
-        "noise": {"accel_mps2": d.accel_noise_mps2, "camera_rad": d.camera_noise_rad},
-        "candidates": candidates,
-        "explanation": d.explanation,
-        "calibration": calibration_json(&d.calibration),
-        "shakeflow_version": env!("CARGO_PKG_VERSION"),
-    })
-}
-
-/// The contract's `calibration`: for each parameter the equipment file's `uncertainty` block
-/// names, `{stated, fitted, sd, within}` (lists element-wise; `within`: fitted within 3 sd of
-/// stated); `{}` without the block.
-pub fn calibration_json(c: &Calibration) -> Value {
-    let entries: serde_json::Map<String, Value> = c
-        .entries()
-        .into_iter()
-        .map(|(key, entry)| (key, serde_json::to_value(entry).expect("numbers and booleans are JSON")))
-        .collect();
-    Value::Object(entries)
-}
-
-pub fn json_bytes(d: &Diagnosis) -> String {
-    serde_json::to_string_pretty(&diagnosis_json(d)).expect("the diagnosis is JSON") + "\n"
 }
 
 fn series_table(rows: &[(f64, f64, f64, f64)], model: &[(f64, f64, f64, f64)], quantity: &str, unit: &str) -> Table {
@@ -206,7 +148,7 @@ pub fn camera_table(d: &Diagnosis) -> Table {
     series_table(&d.evidence.camera_series(&d.baseline), &d.evidence.camera_series(&d.model), "theta_rad", "rad")
 }
 
-fn summary_table(rows: &[(String, AnyDiagnosis)]) -> Table {
+fn summary_table(rows: &[(String, Contract)]) -> Table {
     let text = |name: &str, description: &str, v: Vec<String>| Column {
         name: name.into(),
         unit: String::new(),
@@ -229,41 +171,41 @@ fn summary_table(rows: &[(String, AnyDiagnosis)]) -> Table {
         name: "mismatch".into(),
         unit: String::new(),
         description: "the nominal model disagrees with the records beyond their noise".into(),
-        data: crate::table::ColumnData::Bool(rows.iter().map(|r| r.1.mismatch()).collect()),
+        data: crate::table::ColumnData::Bool(rows.iter().map(|r| r.1.mismatch).collect()),
     });
     t.push(text(
         "verdict",
         "none | unexplained | ambiguous; rocking: sliding | mass_change | restitution | flexibility | obstacle_impact | sensor_tilt; rolling: lateral_impact | mass_change | caster_brake | swivel_jam",
-        rows.iter().map(|r| r.1.verdict().to_string()).collect(),
+        rows.iter().map(|r| r.1.verdict.to_string()).collect(),
     ));
     t.push(optional(
         "window_start_s",
         "first disagreement (null without one)",
-        rows.iter().map(|r| r.1.window().map(|w| w.0)).collect(),
+        rows.iter().map(|r| r.1.window.map(|w| w.0)).collect(),
     ));
-    t.push(optional("window_end_s", "last disagreement", rows.iter().map(|r| r.1.window().map(|w| w.1)).collect()));
+    t.push(optional("window_end_s", "last disagreement", rows.iter().map(|r| r.1.window.map(|w| w.1)).collect()));
     t.push(Column::f64(
         "rmse_before",
         "",
         "noise-normalised RMS misfit of the nominal model in the window",
-        rows.iter().map(|r| r.1.rmse().0).collect(),
+        rows.iter().map(|r| r.1.rmse_before).collect(),
     ));
     t.push(Column::f64(
         "rmse_after",
         "",
         "the same for the accepted model",
-        rows.iter().map(|r| r.1.rmse().1).collect(),
+        rows.iter().map(|r| r.1.rmse_after).collect(),
     ));
-    t.push(text("explanation", "for a test engineer", rows.iter().map(|r| r.1.explanation().to_string()).collect()));
+    t.push(text("explanation", "for a test engineer", rows.iter().map(|r| r.1.explanation.clone()).collect()));
     t.push(text(
         "candidates",
         "every fitted hypothesis (JSON)",
-        rows.iter().map(|r| r.1.json()["candidates"].to_string()).collect(),
+        rows.iter().map(|r| compact(&r.1.candidates)).collect(),
     ));
     t.push(text(
         "calibration",
         "per uncertain nominal parameter: stated, fitted, sd, within 3 sd (JSON; {} when the equipment file has no uncertainty block)",
-        rows.iter().map(|r| r.1.json()["calibration"].to_string()).collect(),
+        rows.iter().map(|r| compact(&r.1.calibration)).collect(),
     ));
     t
 }
@@ -281,8 +223,8 @@ pub fn figure(d: &Diagnosis) -> Result<Vec<u8>, String> {
         (col(&accel, |r| r.0), col(&accel, |r| r.1), col(&accel, |r| r.2), col(&accel_model, |r| r.2));
     let (tc, oc, bc, mc) =
         (col(&camera, |r| r.0), col(&camera, |r| r.1), col(&camera, |r| r.2), col(&camera_model, |r| r.2));
-    let za: Vec<f64> = accel.iter().map(|r| r.3 / d.accel_noise_mps2).collect();
-    let zm: Vec<f64> = accel_model.iter().map(|r| r.3 / d.accel_noise_mps2).collect();
+    let za: Vec<f64> = accel.iter().map(|r| r.3 / d.noise.accel_mps2).collect();
+    let zm: Vec<f64> = accel_model.iter().map(|r| r.3 / d.noise.accel_mps2).collect();
     let spans: Vec<(f64, f64)> = d.window.into_iter().collect();
     let model_label = format!("model: {}", d.verdict);
     let panels = [
@@ -329,19 +271,39 @@ pub fn figure(d: &Diagnosis) -> Result<Vec<u8>, String> {
     render_png(&title, &panels, 1400, 1100)
 }
 
-/// A diagnosis of either kind of unit: the rocking block or the rolling cart (`model: rolling`).
-pub enum AnyDiagnosis {
-    Rocking(Diagnosis),
-    Rolling(RollingDiagnosis),
+/// What the stage writes of one case: the contract, the two tables and the figure.
+pub struct Report {
+    pub contract: Contract,
+    pub accel: Table,
+    pub camera: Table,
+    pub figure: Result<Vec<u8>, String>,
+}
+
+impl From<Diagnosis> for Report {
+    fn from(d: Diagnosis) -> Report {
+        Report { contract: Contract::from(&d), accel: accel_table(&d), camera: camera_table(&d), figure: figure(&d) }
+    }
+}
+
+impl From<RollingDiagnosis> for Report {
+    fn from(d: RollingDiagnosis) -> Report {
+        Report {
+            contract: Contract::from(&d),
+            accel: rolling_accel_table(&d),
+            camera: rolling_camera_table(&d),
+            figure: rolling_figure(&d),
+        }
+    }
+}
+
+/// A part of the contract as one line of JSON (the summary table's cells).
+fn compact(value: &impl Serialize) -> String {
+    serde_json::to_string(value).expect("the diagnosis is JSON")
 }
 
 /// Reads and diagnoses the case folder `dir`, rocking or rolling as its equipment file says;
 /// `expected_hash` as for [`read_case_unchanged`].
-pub fn diagnose_folder(
-    dir: &std::path::Path,
-    expected_hash: &str,
-    settings: &Settings,
-) -> anyhow::Result<AnyDiagnosis> {
+pub fn diagnose_folder(dir: &std::path::Path, expected_hash: &str, settings: &Settings) -> anyhow::Result<Report> {
     if crate::io::case::case_model(dir)?.as_deref() == Some("rolling") {
         let case = crate::io::case::read_rolling_case(dir)?;
         if !expected_hash.is_empty() && crate::io::hash::hash_dir(dir)?.0 != expected_hash {
@@ -349,135 +311,10 @@ pub fn diagnose_folder(
         }
         let d = crate::diagnose::rolling::diagnose(&case, settings)
             .map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
-        return Ok(AnyDiagnosis::Rolling(d));
+        return Ok(d.into());
     }
     let case = read_case_unchanged(dir, expected_hash)?;
-    Ok(AnyDiagnosis::Rocking(diagnose(&case, settings).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?))
-}
-
-impl AnyDiagnosis {
-    pub fn case(&self) -> &str {
-        match self {
-            AnyDiagnosis::Rocking(d) => &d.case,
-            AnyDiagnosis::Rolling(d) => &d.case,
-        }
-    }
-
-    pub fn verdict(&self) -> &'static str {
-        match self {
-            AnyDiagnosis::Rocking(d) => d.verdict,
-            AnyDiagnosis::Rolling(d) => d.verdict,
-        }
-    }
-
-    pub fn window(&self) -> Option<(f64, f64)> {
-        match self {
-            AnyDiagnosis::Rocking(d) => d.window,
-            AnyDiagnosis::Rolling(d) => d.window,
-        }
-    }
-
-    pub fn rmse(&self) -> (f64, f64) {
-        match self {
-            AnyDiagnosis::Rocking(d) => (d.rmse_before, d.rmse_after),
-            AnyDiagnosis::Rolling(d) => (d.rmse_before, d.rmse_after),
-        }
-    }
-
-    pub fn json_bytes(&self) -> String {
-        match self {
-            AnyDiagnosis::Rocking(d) => json_bytes(d),
-            AnyDiagnosis::Rolling(d) => {
-                serde_json::to_string_pretty(&rolling_json(d)).expect("the diagnosis is JSON") + "\n"
-            }
-        }
-    }
-
-    pub fn accel_table(&self) -> Table {
-        match self {
-            AnyDiagnosis::Rocking(d) => accel_table(d),
-            AnyDiagnosis::Rolling(d) => rolling_accel_table(d),
-        }
-    }
-
-    pub fn camera_table(&self) -> Table {
-        match self {
-            AnyDiagnosis::Rocking(d) => camera_table(d),
-            AnyDiagnosis::Rolling(d) => rolling_camera_table(d),
-        }
-    }
-
-    pub fn figure(&self) -> Result<Vec<u8>, String> {
-        match self {
-            AnyDiagnosis::Rocking(d) => figure(d),
-            AnyDiagnosis::Rolling(d) => rolling_figure(d),
-        }
-    }
-
-    fn json(&self) -> Value {
-        match self {
-            AnyDiagnosis::Rocking(d) => diagnosis_json(d),
-            AnyDiagnosis::Rolling(d) => rolling_json(d),
-        }
-    }
-
-    fn mismatch(&self) -> bool {
-        match self {
-            AnyDiagnosis::Rocking(d) => d.mismatch,
-            AnyDiagnosis::Rolling(d) => d.mismatch,
-        }
-    }
-
-    fn explanation(&self) -> &str {
-        match self {
-            AnyDiagnosis::Rocking(d) => &d.explanation,
-            AnyDiagnosis::Rolling(d) => &d.explanation,
-        }
-    }
-}
-
-/// The `diagnosis.json` contract of a rolling unit.
-pub fn rolling_json(d: &RollingDiagnosis) -> Value {
-    let candidates: Vec<Value> = d
-        .candidates
-        .iter()
-        .map(|c| {
-            let params: serde_json::Map<String, Value> =
-                c.params.iter().map(|(k, v)| (k.to_string(), json!(v))).collect();
-            json!({
-                "effect": c.effect,
-                "params": params,
-                "rmse": c.rmse,
-                "rmse_judged": c.rmse_judged,
-                "score": c.score,
-                "bic": c.bic,
-                "chi2": c.misfit.chi2,
-                "flagged_samples": c.flagged,
-                "flagged_early_samples": c.flagged_early,
-                "evaluations": c.evaluations,
-                "onset_s": c.track.onset_s,
-                "explanation": c.sentence,
-            })
-        })
-        .collect();
-    json!({
-        "case": d.case,
-        "model": "rolling",
-        "mismatch": d.mismatch,
-        "verdict": d.verdict,
-        "window": d.window.map(|(a, b)| json!({"start_s": a, "end_s": b})),
-        "rmse_before": d.rmse_before,
-        "rmse_after": d.rmse_after,
-        "rmse_definition": "sqrt(mean(((observed - predicted) / noise_sd)^2)) over the camera's x, y, yaw and the accelerometer's samples inside the window (the whole record when there is none); an accelerometer sample a model cannot speak for (around a stiff wall's contact) counts as 1; 1 is pure sensor noise",
-        "noise": {"accel_mps2": d.accel_noise_mps2, "camera_m": d.camera_noise_m, "camera_rad": d.camera_noise_rad},
-        "predictable_until_s": d.predictable_until_s,
-        "twin_probe": d.probe,
-        "judged": d.judged.map(|(a, b)| json!({"start_s": a, "end_s": b})),
-        "candidates": candidates,
-        "explanation": d.explanation,
-        "calibration": calibration_json(&d.calibration),
-        "shakeflow_version": env!("CARGO_PKG_VERSION"),
-    })
+    Ok(diagnose(&case, settings).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?.into())
 }
 
 fn rolling_accel_table(d: &RollingDiagnosis) -> Table {
@@ -529,8 +366,8 @@ fn rolling_figure(d: &RollingDiagnosis) -> Result<Vec<u8>, String> {
     let (oy, by, my) = (pick(&camera, true, 1), pick(&camera, false, 1), pick(&camera_model, false, 1));
     let (ow, bw, mw) = (pick(&camera, true, 2), pick(&camera, false, 2), pick(&camera_model, false, 2));
     let ta: Vec<f64> = accel.iter().map(|r| r.0).collect();
-    let za: Vec<f64> = accel.iter().map(|r| r.3 / d.accel_noise_mps2).collect();
-    let zm: Vec<f64> = accel_model.iter().map(|r| r.3 / d.accel_noise_mps2).collect();
+    let za: Vec<f64> = accel.iter().map(|r| r.3 / d.noise.accel_mps2).collect();
+    let zm: Vec<f64> = accel_model.iter().map(|r| r.3 / d.noise.accel_mps2).collect();
     let spans: Vec<(f64, f64)> = d.window.into_iter().collect();
     let label = format!("model: {}", d.verdict);
     fn three<'a>(

@@ -37,6 +37,11 @@ fn rolling_demo_cases_get_their_concealed_verdicts() {
         ] {
             assert!(out.path().join(&file).is_file(), "{id}: no {file}");
         }
+        // Every candidate carries the uncertain parameters as fitted with it: none without an
+        // `uncertainty` block, the stated values taken as exact.
+        for c in d["candidates"].as_array().unwrap() {
+            assert_eq!(c["calibration"], serde_json::json!({}), "{id}: {}", c["effect"]);
+        }
         let truth = truth(id);
         let expected = truth["expected_verdict"].as_str().unwrap();
         let (before, after) = (d["rmse_before"].as_f64().unwrap(), d["rmse_after"].as_f64().unwrap());

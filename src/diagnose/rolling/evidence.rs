@@ -3,13 +3,7 @@
 //! (200 Hz), each placed on the floor's time base and divided by its sensor's noise.
 
 use super::{RollingCase, Track};
-
-/// Samples closer than this (s) form one cluster of exceedances.
-const CLUSTER_S: f64 = 0.1;
-/// Exceedances a cluster needs: 5 accelerometer samples (of 20 in 0.1 s) or 2 camera samples
-/// (of 3), so isolated noise peaks and lone outliers never flag.
-const ACCEL_CLUSTER: usize = 5;
-const CAMERA_CLUSTER: usize = 2;
+use crate::diagnose::verdict::{clustered, first_cluster, span, Misfit, ACCEL_CLUSTER, CAMERA_CLUSTER};
 
 #[derive(Debug, Clone, Copy)]
 struct Sample {
@@ -20,13 +14,6 @@ struct Sample {
     /// Observed values (x, y, yaw for the camera; a_x in slot 0 for the accelerometer).
     value: [f64; 3],
     valid: bool,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Misfit {
-    /// Σ ((observed − predicted)/σ)² over the compared values.
-    pub chi2: f64,
-    pub samples: usize,
 }
 
 #[derive(Debug, Clone)]
@@ -159,14 +146,7 @@ impl Evidence {
             .map(|s| s.t)
             .collect();
         for (exceeding, needed) in [(accel, ACCEL_CLUSTER), (camera, CAMERA_CLUSTER)] {
-            let mut marked = vec![false; exceeding.len()];
-            for i in 0..exceeding.len() {
-                let j = exceeding[i..].partition_point(|t| *t < exceeding[i] + CLUSTER_S) + i;
-                if j - i >= needed {
-                    marked[i..j].iter_mut().for_each(|m| *m = true);
-                }
-            }
-            flagged.extend(exceeding.iter().zip(&marked).filter(|(_, m)| **m).map(|(t, _)| *t));
+            flagged.extend(clustered(&exceeding, needed));
         }
         flagged
     }
@@ -182,10 +162,7 @@ impl Evidence {
 
     /// From the first to the last flagged sample.
     pub fn window(&self, p: &Track) -> Option<(f64, f64)> {
-        let times = self.flagged_times(p);
-        let first = times.iter().copied().fold(f64::INFINITY, f64::min);
-        let last = times.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        (first <= last).then_some((first, last))
+        span(&self.flagged_times(p))
     }
 
     /// The first time two predictions differ as much as a disagreement with the records would
@@ -207,11 +184,6 @@ impl Evidence {
             .filter(|s| s.valid && !((self.accel_z(a, s) - self.accel_z(b, s)).abs() <= self.exceedance_sigma))
             .map(|s| s.t)
             .collect();
-        let first_cluster = |times: &[f64], needed: usize| {
-            (0..times.len())
-                .find(|&i| times[i..].partition_point(|t| *t < times[i] + CLUSTER_S) >= needed)
-                .map(|i| times[i])
-        };
         match (first_cluster(&camera, CAMERA_CLUSTER), first_cluster(&accel, ACCEL_CLUSTER)) {
             (Some(x), Some(y)) => Some(x.min(y)),
             (x, y) => x.or(y),

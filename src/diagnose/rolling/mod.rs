@@ -40,9 +40,11 @@ mod fit;
 use rayon::prelude::*;
 
 use super::calibration::{self, Calibration, Uncertain, UnitModel};
+use super::contract::{Contracted, ModelFields};
+use super::verdict::{self, Model, Noise, Predictability, Verdict};
 use super::{Observed, Settings};
 use crate::physics::rolling::{simulate_altered, Alteration, Cart, Excitation, Friction, Method, Options};
-use evidence::{Evidence, Misfit};
+use evidence::Evidence;
 
 /// The integrator the diagnosis runs the cart with: its counted evaluation allowances were tuned
 /// at these tolerances, not at `simulate_rolling`'s converged defaults (docs/convergence.md).
@@ -227,6 +229,13 @@ impl RollingCase {
 
     /// The nominal cart over the whole record, with its states.
     pub fn nominal(&self) -> Result<Track, String> {
+        self.nominal_until(self.end_s(), None).map_err(|(e, _)| e)
+    }
+
+    /// The nominal cart from rest until `until_s`, with its states, within `allowance`
+    /// right-hand-side evaluations (`Err((message, evaluations spent))` past it).
+    fn nominal_until(&self, until_s: f64, allowance: Option<usize>) -> Result<Track, (String, usize)> {
+        let end = (((until_s - self.t0_s) / self.dt_s).ceil().max(0.0) as usize).min(self.samples() - 1);
         let r = simulate_altered(
             &self.cart,
             &self.friction,
@@ -234,10 +243,9 @@ impl RollingCase {
             &self.options,
             &Alteration::default(),
             None,
-            self.samples() - 1,
-            None,
-        )
-        .map_err(|(e, _)| e)?;
+            end,
+            allowance,
+        )?;
         Ok(Track {
             evaluations: r.stats.rhs_evals,
             x_m: r.x_m,
@@ -372,23 +380,39 @@ fn early_within_allowance(left: usize, nominal: usize) -> bool {
     left as f64 <= MAX_LEFT_EARLY * (nominal as f64).max(1.0)
 }
 
-/// One fitted hypothesis.
-#[derive(Debug, Clone)]
-pub struct Candidate {
-    pub effect: &'static str,
-    pub params: Vec<(&'static str, f64)>,
-    pub misfit: Misfit,
-    pub rmse: f64,
+/// One fitted hypothesis about a rolling unit.
+pub type Candidate = verdict::Candidate<RollingCase>;
+/// The diagnosis of a rolling unit.
+pub type RollingDiagnosis = verdict::Diagnosis<RollingCase>;
+
+/// A rolling candidate's figures of the acceptance tests.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Judged {
     /// The window's misfit where the nominal cart is predictable (what the 3× test judges).
     pub rmse_judged: f64,
-    pub bic: f64,
-    pub score: f64,
-    pub flagged: usize,
     /// Flagged samples in the first seconds past the window's start (the acceptance horizon).
     pub flagged_early: usize,
-    pub evaluations: usize,
-    pub sentence: String,
-    pub track: Track,
+}
+
+impl Model for RollingCase {
+    type Prediction = Track;
+    type Evidence = Evidence;
+    type CandidateExtra = Judged;
+}
+
+impl Contracted for RollingCase {
+    const MODEL: Option<&'static str> = Some("rolling");
+    const RMSE_DEFINITION: &'static str = "sqrt(mean(((observed - predicted) / noise_sd)^2)) over the camera's x, y, yaw and the accelerometer's samples inside the window (the whole record when there is none); an accelerometer sample a model cannot speak for (around a stiff wall's contact) counts as 1; 1 is pure sensor noise";
+
+    fn candidate_fields(c: &Candidate) -> ModelFields {
+        ModelFields {
+            rmse_judged: Some(c.extra.rmse_judged),
+            flagged_early_samples: Some(c.extra.flagged_early),
+            onset_s: Some(c.prediction.onset_s),
+            calibration: true,
+            ..ModelFields::default()
+        }
+    }
 }
 
 impl Candidate {
@@ -397,7 +421,7 @@ impl Candidate {
     /// a physics that leaves only noise counts as a full cut even when the disagreement was
     /// barely above it (RMS 1.4 to 1.0 is 0.98 to 0: explained; RMS 30 to 10 is 3×).
     pub fn cut_from(&self, base: &Candidate) -> f64 {
-        cut_beyond_noise(base.rmse_judged, self.rmse_judged)
+        cut_beyond_noise(base.extra.rmse_judged, self.extra.rmse_judged)
     }
 }
 
@@ -411,34 +435,6 @@ fn cut_beyond_noise(before: f64, after: f64) -> f64 {
     } else {
         b / a.max(1e-12)
     }
-}
-
-#[derive(Debug, Clone)]
-pub struct RollingDiagnosis {
-    pub case: String,
-    pub mismatch: bool,
-    pub verdict: &'static str,
-    pub window: Option<(f64, f64)>,
-    pub rmse_before: f64,
-    pub rmse_after: f64,
-    /// The nominal cart first, then the effects by BIC.
-    pub candidates: Vec<Candidate>,
-    pub explanation: String,
-    /// Until when the nominal cart is predictable at the probe the records allow (None: to the end).
-    pub predictable_until_s: Option<f64>,
-    /// The twins' probe that decided it (0: no twins, nothing to explain).
-    pub probe: f64,
-    /// The span the 3× test judges: the window's start to where the twins part, at least
-    /// [`MIN_JUDGED_S`], within the window (None: no window).
-    pub judged: Option<(f64, f64)>,
-    pub accel_noise_mps2: f64,
-    pub camera_noise_m: f64,
-    pub camera_noise_rad: f64,
-    pub baseline: Track,
-    pub model: Track,
-    pub evidence: Evidence,
-    /// The uncertain parameters as calibrated with the nominal cart (empty: no `uncertainty` block).
-    pub calibration: Calibration,
 }
 
 /// Horizons of the calibration past the stated cart's first disagreement (s): a cart's
@@ -467,6 +463,56 @@ fn calibrate_nominal(stated: &RollingCase, evidence: &Evidence, stated_track: &T
             .map_or(f64::INFINITY, |t| evidence.misfit_between(&t, f64::NEG_INFINITY, until).chi2)
     };
     calibration::calibrate_model(stated, &stated.uncertain, None, &horizons, false, &chi2)
+}
+
+/// `effect` with `params` on the cart `m` from rest until `until_s` (the nominal cart until the
+/// effect begins, as a fit runs it), each of its two runs within `allowance` evaluations; an
+/// altered run may cost [`BUDGET_FACTOR`] times `per_run` evaluations per sample of the record.
+fn with_effect(
+    m: &RollingCase,
+    effect: &dyn effects::Effect,
+    params: &[f64],
+    until_s: f64,
+    allowance: Option<usize>,
+    per_run: usize,
+) -> Option<Track> {
+    let mut nominal = m.nominal_until(until_s, allowance).ok()?;
+    let (alteration, onset) = effect.alteration(m, &nominal, params).ok()?;
+    nominal.evaluations = per_run;
+    let mut track = m.altered(&nominal, &alteration, onset, until_s, allowance).ok()?;
+    track.accel_unseen = effect.accel_unseen(m, &nominal, params, &track);
+    Some(track)
+}
+
+/// Horizons of the recalibration with a physics, past the window's start (s): the nominal
+/// calibration's, then the whole record.
+const JOINT_HORIZONS_S: [f64; 3] = [1.0, 3.0, 6.0];
+
+/// The uncertain parameters fitted again with a physics in place ([`verdict::recalibrate`]): each
+/// trial runs the cart from rest to the horizon, then the physics from its onset.
+fn recalibrate(
+    stated: &RollingCase,
+    calibration: &Calibration,
+    effect: &dyn effects::Effect,
+    fit: &fit::Fit,
+    evidence: &Evidence,
+    window: (f64, f64),
+    baseline: &Track,
+) -> (Calibration, Track, verdict::Misfit, usize) {
+    let horizons = JOINT_HORIZONS_S.map(|h| (window.0 + h).min(stated.end_s()));
+    let per_sample = baseline.evaluations as f64 / stated.samples() as f64;
+    let chi2 = |m: &RollingCase, until: f64| {
+        let samples = (until - m.t0_s) / m.dt_s + 1.0;
+        let allowance = (CALIBRATION_BUDGET_FACTOR * per_sample * samples).max(BUDGET_FLOOR * samples) as usize;
+        with_effect(m, effect, &fit.params, until, Some(allowance), baseline.evaluations)
+            .map_or(f64::INFINITY, |t| evidence.misfit_between(&t, f64::NEG_INFINITY, until).chi2)
+    };
+    let whole = |case: &RollingCase| {
+        let track = with_effect(case, effect, &fit.params, case.end_s(), None, baseline.evaluations)?;
+        let misfit = evidence.misfit(&track);
+        Some((track, misfit))
+    };
+    verdict::recalibrate(stated, calibration, &horizons, &chi2, whole, 1, (fit.track.clone(), fit.misfit))
 }
 
 pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiagnosis, String> {
@@ -518,40 +564,47 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
         effect: "none",
         params: Vec::new(),
         rmse: evidence.window_rmse(&baseline, window),
-        rmse_judged: evidence.window_rmse(&baseline, judged),
         bic: base_misfit.chi2 + calibration_price,
         score: 0.0,
         flagged: evidence.flagged(&baseline),
-        flagged_early: window.map_or(0, |w| flagged_early(&evidence, &baseline, w)),
         misfit: base_misfit,
         evaluations: 1,
         sentence: "the nominal 4WMC cart as the equipment file describes it".into(),
-        track: baseline.clone(),
+        prediction: baseline.clone(),
+        calibration: calibration.clone(),
+        extra: Judged {
+            rmse_judged: evidence.window_rmse(&baseline, judged),
+            flagged_early: window.map_or(0, |w| flagged_early(&evidence, &baseline, w)),
+        },
     };
-    let done = |verdict: &'static str,
+    let done = |verdict: Verdict,
                 window: Option<(f64, f64)>,
                 candidates: Vec<Candidate>,
                 model: Track,
                 explanation: String,
-                rmse_after: f64| RollingDiagnosis {
-        case: case.name.clone(),
-        mismatch: window.is_some(),
-        verdict,
-        window,
-        rmse_before: candidates[0].rmse,
-        rmse_after,
-        judged,
-        candidates,
-        explanation: explanation + &calibration.note(verdict == "none"),
-        predictable_until_s,
-        probe,
-        accel_noise_mps2: case.accel_noise_mps2,
-        camera_noise_m: case.camera_noise_m,
-        camera_noise_rad: case.camera_noise_rad,
-        baseline: baseline.clone(),
-        model,
-        evidence: evidence.clone(),
-        calibration: calibration.clone(),
+                rmse_after: f64| {
+        // The uncertain parameters as the accepted physics (or the nominal cart) fits them.
+        let calibration = candidates[usize::from(verdict.explained_by_physics())].calibration.clone();
+        RollingDiagnosis {
+            case: case.name.clone(),
+            mismatch: window.is_some(),
+            verdict,
+            window,
+            rmse_before: candidates[0].rmse,
+            rmse_after,
+            explanation: explanation + &calibration.note(verdict == Verdict::None),
+            candidates,
+            noise: Noise {
+                accel_mps2: case.accel_noise_mps2,
+                camera_m: Some(case.camera_noise_m),
+                camera_rad: case.camera_noise_rad,
+            },
+            predictability: Some(Predictability { predictable_until_s, probe, judged }),
+            baseline: baseline.clone(),
+            model,
+            evidence: evidence.clone(),
+            calibration,
+        }
     };
     let Some(window) = window else {
         let mut only = baseline_candidate(None);
@@ -561,7 +614,7 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
             "The nominal 4WMC cart explains {}'s records within their noise: no residual of the camera (noise {:.4} m, {:.4} rad) or the accelerometer (noise {:.3} m/s^2) stays beyond {:.0} sigma for longer than an isolated sample (noise-normalised RMS misfit {rmse:.2}; 1 is pure noise). No effect needs to be added.",
             case.name, case.camera_noise_m, case.camera_noise_rad, case.accel_noise_mps2, settings.exceedance_sigma
         );
-        return Ok(done("none", None, vec![only], baseline.clone(), text, rmse));
+        return Ok(done(Verdict::None, None, vec![only], baseline.clone(), text, rmse));
     };
     if let Some(parting) = predictable_until_s.filter(|p| *p < window.0) {
         let only = baseline_candidate(Some(window));
@@ -573,7 +626,7 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
             case.name,
             evidence.describe_disagreement(&baseline, window)
         );
-        return Ok(done("unexplained", Some(window), vec![only], baseline.clone(), text, rmse));
+        return Ok(done(Verdict::Unexplained, Some(window), vec![only], baseline.clone(), text, rmse));
     }
     let n = base_misfit.samples.max(1) as f64;
     let before = baseline_candidate(Some(window));
@@ -581,62 +634,59 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
         .par_iter()
         .map(|effect| {
             let fit = fit::fit(*effect, case, &baseline, &evidence, window, judged.map_or(window.1, |j| j.1));
+            let (calibration, track, misfit, runs) =
+                recalibrate(stated, &calibration, *effect, &fit, &evidence, window, &baseline);
+            // Every candidate pays for its own parameters and every calibrated one.
+            let price = calibration.prior_chi2() + calibration.parameters.len() as f64 * n.ln();
             Candidate {
                 effect: effect.name(),
                 params: effect.parameter_names().iter().copied().zip(fit.params.iter().copied()).collect(),
-                bic: fit.misfit.chi2 + effect.parameter_names().len() as f64 * n.ln() + calibration_price,
-                rmse: evidence.window_rmse(&fit.track, Some(window)),
-                rmse_judged: evidence.window_rmse(&fit.track, judged),
+                bic: misfit.chi2 + effect.parameter_names().len() as f64 * n.ln() + price,
+                rmse: evidence.window_rmse(&track, Some(window)),
                 score: 0.0,
-                flagged: evidence.flagged(&fit.track),
-                flagged_early: flagged_early(&evidence, &fit.track, window),
+                flagged: evidence.flagged(&track),
                 sentence: effect.explain(case, &baseline, &fit.params),
-                misfit: fit.misfit,
-                evaluations: fit.evaluations,
-                track: fit.track,
+                misfit,
+                evaluations: fit.evaluations + runs,
+                extra: Judged {
+                    rmse_judged: evidence.window_rmse(&track, judged),
+                    flagged_early: flagged_early(&evidence, &track, window),
+                },
+                prediction: track,
+                calibration,
             }
         })
         .collect();
     let mut candidates = vec![before];
     candidates.extend(fitted);
-    let best_bic = candidates.iter().map(|c| c.bic).fold(f64::INFINITY, f64::min);
-    let weights: Vec<f64> = candidates.iter().map(|c| (-(c.bic - best_bic) / 2.0).exp()).collect();
-    let total: f64 = weights.iter().sum();
-    for (c, w) in candidates.iter_mut().zip(weights) {
-        c.score = if total > 0.0 { w / total } else { 0.0 };
-    }
-    candidates[1..].sort_by(|a, b| a.bic.total_cmp(&b.bic));
+    verdict::rank(&mut candidates);
     // Disagreement left is counted over the first seconds after the window's start only: a
     // correct physics with parameters a hair off drifts away late (the cart is sensitive), a
     // wrong one, or a cause outside the library, leaves disagreement right after the onset.
-    let passes = |c: &Candidate, base: &Candidate| {
+    // The best by BIC that passes is accepted: a better-scoring fit that leaves the
+    // disagreement in place is not an explanation, and must not hide one that removes it.
+    let base = candidates[0].clone();
+    let choice = verdict::choose(&mut candidates, false, |c: &Candidate| {
         c.bic < base.bic
-            && c.cut_from(base) >= settings.min_improvement
-            && early_within_allowance(c.flagged_early, base.flagged_early)
-    };
-    // The best by BIC that passes: a better-scoring fit that leaves the disagreement in place
-    // is not an explanation, and must not hide one that removes it.
-    let accepted = (1..candidates.len()).find(|&i| passes(&candidates[i], &candidates[0]));
-    let passed_over: Vec<Candidate> = accepted.map_or_else(Vec::new, |i| candidates[1..i].to_vec());
-    if let Some(i) = accepted {
-        candidates[1..=i].rotate_right(1);
-    }
-    let (verdict, model, window) = match accepted {
-        Some(_) => {
-            let best = &candidates[1];
-            let onset = best.track.onset_s.unwrap_or(window.0);
-            (best.effect, best.track.clone(), (onset.min(window.0), window.1))
-        }
-        None => ("unexplained", baseline.clone(), window),
+            && c.cut_from(&base) >= settings.min_improvement
+            && early_within_allowance(c.extra.flagged_early, base.extra.flagged_early)
+    });
+    let (verdict, model, window) = if choice.accepted {
+        let best = &candidates[1];
+        let onset = best.prediction.onset_s.unwrap_or(window.0);
+        (choice.verdict(&candidates), best.prediction.clone(), (onset.min(window.0), window.1))
+    } else {
+        (Verdict::Unexplained, baseline.clone(), window)
     };
     for c in &mut candidates {
-        c.rmse = evidence.window_rmse(&c.track, Some(window));
+        c.rmse = evidence.window_rmse(&c.prediction, Some(window));
     }
-    let accepted = accepted.is_some();
+    let (accepted, passed_over) = (choice.accepted, &choice.passed_over);
     let rmse_after = if accepted { candidates[1].rmse } else { candidates[0].rmse };
     let judged = judged.filter(|j| j.1 < window.1);
     let text =
-        explain(case, &evidence, window, judged, &candidates, accepted, &passed_over, settings, predictable_until_s);
+        explain(case, &evidence, window, judged, &candidates, accepted, passed_over, settings, predictable_until_s)
+            + &choice.ambiguity(&candidates);
     Ok(done(verdict, Some(window), candidates, model, text, rmse_after))
 }
 
@@ -661,19 +711,19 @@ fn explain(
         window.1,
         case.name,
         base.rmse,
-        evidence.describe_disagreement(&base.track, window),
+        evidence.describe_disagreement(&base.prediction, window),
         predictable_until_s.map_or("to the end of the record".to_string(), |t| format!("until {t:.2} s"))
     );
     let judged_clause = |c: &Candidate| {
         judged.map_or(String::new(), |j| {
             format!(
                 "; where the nominal cart is predictable ({:.2} s to {:.2} s, what the {}× test judges), from {:.1} to {:.1}",
-                j.0, j.1, settings.min_improvement, base.rmse_judged, c.rmse_judged
+                j.0, j.1, settings.min_improvement, base.extra.rmse_judged, c.extra.rmse_judged
             )
         })
     };
     let beyond_noise = |c: &Candidate| {
-        let plain = base.rmse_judged / c.rmse_judged.max(1e-12);
+        let plain = base.extra.rmse_judged / c.extra.rmse_judged.max(1e-12);
         if c.cut_from(base) >= settings.min_improvement && plain < settings.min_improvement {
             format!(
                 "; it leaves sensor noise only: the misfit beyond the noise, √(RMS² − 1), is {:.0}× smaller",
@@ -733,7 +783,7 @@ fn shortfall(c: &Candidate, base: &Candidate, settings: &Settings) -> String {
     } else {
         format!(
             "{name} leaves {:.0} % of the nominal cart's disagreement in the window's first {FLAG_HORIZON_S:.0} s (at most {:.0} % allowed)",
-            100.0 * c.flagged_early as f64 / (base.flagged_early as f64).max(1.0),
+            100.0 * c.extra.flagged_early as f64 / (base.extra.flagged_early as f64).max(1.0),
             100.0 * MAX_LEFT_EARLY
         )
     }

@@ -1,0 +1,326 @@
+//! The diagnosis core both unit models share: the verdict, a fitted hypothesis ([`Candidate`]),
+//! the diagnosis of a unit ([`Diagnosis`]), how residuals flag a disagreement (clusters of
+//! exceedances, [`clustered`]), and how candidates are ranked and one accepted ([`rank`],
+//! [`choose`]), generic over the unit model ([`Model`]). Each model keeps its simulation, its
+//! evidence (what its sensors are and how a prediction meets them) and its physics library.
+
+use serde::{Serialize, Serializer};
+
+use super::calibration::{self, Calibration, UnitModel};
+
+/// What a diagnosis concludes about a unit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Verdict {
+    /// The (calibrated) nominal model explains the records within their noise.
+    None,
+    /// This physics of the model's library explains the disagreement.
+    Physics(&'static str),
+    /// The records disagree and no physics of the library explains it.
+    Unexplained,
+    /// Two physics explain it about equally well (the explanation names both).
+    Ambiguous,
+}
+
+impl Verdict {
+    /// The contract's word: `none`, the effect's name, `unexplained` or `ambiguous`.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Verdict::None => "none",
+            Verdict::Physics(name) => name,
+            Verdict::Unexplained => "unexplained",
+            Verdict::Ambiguous => "ambiguous",
+        }
+    }
+
+    /// Whether the records were explained by a physics (one named, or two about equally well).
+    pub fn explained_by_physics(&self) -> bool {
+        matches!(self, Verdict::Physics(_) | Verdict::Ambiguous)
+    }
+}
+
+impl std::fmt::Display for Verdict {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl Serialize for Verdict {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.as_str())
+    }
+}
+
+/// −2 log-likelihood (up to a constant) of the records under a prediction.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Misfit {
+    /// Σ ((observed − predicted)/σ)² over the compared values (plus any price of a prediction's
+    /// own uncertainty).
+    pub chi2: f64,
+    pub samples: usize,
+}
+
+/// A unit model the diagnosis runs on: its nominal parameters ([`UnitModel`]), what it predicts
+/// the sensors saw, and the few figures only it reports.
+pub trait Model: UnitModel + Send {
+    /// What the model says the sensors saw.
+    type Prediction: Clone + std::fmt::Debug + Send + Sync;
+    /// The records a prediction is judged against.
+    type Evidence: Clone + std::fmt::Debug + Send + Sync;
+    /// Figures of a candidate only this model has.
+    type CandidateExtra: Clone + std::fmt::Debug + Send + Sync;
+}
+
+/// One fitted hypothesis: the nominal model (`none`) or the nominal model with one effect.
+#[derive(Debug, Clone)]
+pub struct Candidate<M: Model> {
+    pub effect: &'static str,
+    pub params: Vec<(&'static str, f64)>,
+    pub misfit: Misfit,
+    /// Noise-normalised RMS residual inside the window.
+    pub rmse: f64,
+    pub bic: f64,
+    /// exp(−ΔBIC/2), normalised over the candidates: how strongly the data prefer it.
+    pub score: f64,
+    /// Samples its residuals still flag (beyond the threshold, clustered) in the whole record.
+    pub flagged: usize,
+    pub evaluations: usize,
+    /// One clause for the explanation, with the fitted values in engineering terms.
+    pub sentence: String,
+    pub prediction: M::Prediction,
+    /// The uncertain parameters as fitted with this hypothesis.
+    pub calibration: Calibration,
+    pub extra: M::CandidateExtra,
+}
+
+impl<M: Model> Candidate<M> {
+    /// "mass change" for `mass_change`.
+    pub fn name(&self) -> String {
+        self.effect.replace('_', " ")
+    }
+}
+
+/// The sensors' noise (standard deviations) the misfits are normalised by.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Noise {
+    pub accel_mps2: f64,
+    /// The camera's position noise (a rolling unit's platform; None: the camera sees an angle).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub camera_m: Option<f64>,
+    pub camera_rad: f64,
+}
+
+/// Until when the nominal model is predictable, and the span the improvement test judges.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Predictability {
+    /// Until when the nominal model is predictable at the probe the records allow (None: to the end).
+    pub predictable_until_s: Option<f64>,
+    /// The twins' probe that decided it (0: no twins, nothing to explain).
+    #[serde(rename = "twin_probe")]
+    pub probe: f64,
+    /// The span the improvement test judges (None: no window).
+    #[serde(serialize_with = "serialize_span")]
+    pub judged: Option<(f64, f64)>,
+}
+
+/// A time span as the contract writes it: `{"start_s": a, "end_s": b}`, or null.
+pub fn serialize_span<S: Serializer>(span: &Option<(f64, f64)>, serializer: S) -> Result<S::Ok, S::Error> {
+    #[derive(Serialize)]
+    struct Span {
+        start_s: f64,
+        end_s: f64,
+    }
+    span.map(|(start_s, end_s)| Span { start_s, end_s }).serialize(serializer)
+}
+
+/// The diagnosis of one unit.
+#[derive(Debug, Clone)]
+pub struct Diagnosis<M: Model> {
+    pub case: String,
+    /// The records disagree with the calibrated nominal model.
+    pub mismatch: bool,
+    pub verdict: Verdict,
+    pub window: Option<(f64, f64)>,
+    pub rmse_before: f64,
+    pub rmse_after: f64,
+    /// The baseline first, then the effects by BIC (the accepted one second).
+    pub candidates: Vec<Candidate<M>>,
+    pub explanation: String,
+    pub noise: Noise,
+    /// The model's own predictability, where the diagnosis measures it (the rolling cart).
+    pub predictability: Option<Predictability>,
+    pub baseline: M::Prediction,
+    /// The accepted model's prediction (the baseline's for `none` and `unexplained`).
+    pub model: M::Prediction,
+    pub evidence: M::Evidence,
+    /// The uncertain parameters as the accepted model (or the calibrated nominal) fits them.
+    pub calibration: Calibration,
+}
+
+/// The uncertain parameters fitted again with a physics in place (its fitted parameters held
+/// inside `chi2` and `whole`), from the nominal calibration's values over growing `horizons`:
+/// the better of the two by posterior over the whole record, as (calibration, prediction,
+/// misfit, model runs spent). `whole` runs the physics on a calibrated unit over the whole
+/// record (`whole_runs` model runs), `kept` is the physics on the nominal calibration.
+pub fn recalibrate<M: Model>(
+    stated: &M,
+    calibration: &Calibration,
+    horizons: &[f64],
+    chi2: &(dyn Fn(&M, f64) -> f64 + Sync),
+    whole: impl Fn(&M) -> Option<(M::Prediction, Misfit)>,
+    whole_runs: usize,
+    kept: (M::Prediction, Misfit),
+) -> (Calibration, M::Prediction, Misfit, usize) {
+    if calibration.is_empty() {
+        return (calibration.clone(), kept.0, kept.1, 0);
+    }
+    let joint =
+        calibration::calibrate_model(stated, &calibration.parameters, Some(&calibration.fitted), horizons, false, chi2);
+    let Some((prediction, misfit)) = joint.apply(stated).ok().and_then(|unit| whole(&unit)) else {
+        return (calibration.clone(), kept.0, kept.1, 0);
+    };
+    let spent = joint.evaluations + whole_runs;
+    if misfit.chi2 + joint.prior_chi2() < kept.1.chi2 + calibration.prior_chi2() {
+        (joint, prediction, misfit, spent)
+    } else {
+        (calibration.clone(), kept.0, kept.1, spent)
+    }
+}
+
+/// Samples closer than this (s) form one cluster of exceedances.
+pub const CLUSTER_S: f64 = 0.1;
+/// Exceedances a cluster needs: 5 accelerometer samples (of 20 at 200 Hz) or 2 camera samples
+/// (of 3 at 30 Hz), so isolated noise peaks and lone outliers never flag.
+pub const ACCEL_CLUSTER: usize = 5;
+pub const CAMERA_CLUSTER: usize = 2;
+
+/// The members of clusters among a sensor's exceedance times (ascending): `needed` of them
+/// within [`CLUSTER_S`] flag all of them.
+pub fn clustered(exceeding: &[f64], needed: usize) -> impl Iterator<Item = f64> + '_ {
+    let mut marked = vec![false; exceeding.len()];
+    for i in 0..exceeding.len() {
+        let j = exceeding[i..].partition_point(|t| *t < exceeding[i] + CLUSTER_S) + i;
+        if j - i >= needed {
+            marked[i..j].iter_mut().for_each(|m| *m = true);
+        }
+    }
+    exceeding.iter().zip(marked).filter(|(_, m)| *m).map(|(t, _)| *t)
+}
+
+/// The start of the first cluster among exceedance times (ascending).
+pub fn first_cluster(exceeding: &[f64], needed: usize) -> Option<f64> {
+    (0..exceeding.len())
+        .find(|&i| exceeding[i..].partition_point(|t| *t < exceeding[i] + CLUSTER_S) >= needed)
+        .map(|i| exceeding[i])
+}
+
+/// From the first to the last of some times: where a prediction disagrees with the records.
+pub fn span(times: &[f64]) -> Option<(f64, f64)> {
+    let first = times.iter().copied().fold(f64::INFINITY, f64::min);
+    let last = times.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    (first <= last).then_some((first, last))
+}
+
+/// Scores every candidate (exp(−ΔBIC/2), normalised) and orders them: the baseline stays
+/// first, the effects follow by BIC.
+pub fn rank<M: Model>(candidates: &mut [Candidate<M>]) {
+    let best_bic = candidates.iter().map(|c| c.bic).fold(f64::INFINITY, f64::min);
+    let weights: Vec<f64> = candidates.iter().map(|c| (-(c.bic - best_bic) / 2.0).exp()).collect();
+    let total: f64 = weights.iter().sum();
+    for (c, w) in candidates.iter_mut().zip(weights) {
+        c.score = if total > 0.0 { w / total } else { 0.0 };
+    }
+    if candidates.len() > 1 {
+        candidates[1..].sort_by(|a, b| a.bic.total_cmp(&b.bic));
+    }
+}
+
+/// Two explanations whose BIC differ by less than this are about equally good (Kass & Raftery:
+/// "not worth more than a bare mention"): the verdict is `ambiguous`, naming both.
+pub const AMBIGUOUS_BIC: f64 = 2.0;
+
+/// Which ranked effect is accepted: the best by BIC among those that `pass` (with
+/// `best_only`, the best by BIC or none). The accepted one is moved second (right after the
+/// baseline). Also says which effects with a lower BIC did not pass, and the next effect that
+/// passes as well when its BIC is less than [`AMBIGUOUS_BIC`] higher (then the verdict is
+/// `ambiguous`).
+pub fn choose<M: Model>(
+    candidates: &mut [Candidate<M>],
+    best_only: bool,
+    pass: impl Fn(&Candidate<M>) -> bool,
+) -> Choice<M> {
+    let searched = if best_only { candidates.len().min(2) } else { candidates.len() };
+    let Some(i) = (1..searched).find(|&i| pass(&candidates[i])) else {
+        return Choice { accepted: false, passed_over: Vec::new(), rival: None };
+    };
+    let passed_over = candidates[1..i].to_vec();
+    candidates[1..=i].rotate_right(1);
+    let rival = (i + 1..candidates.len())
+        .find(|&j| pass(&candidates[j]))
+        .map(|j| (j, candidates[j].bic - candidates[1].bic))
+        .filter(|(_, margin)| *margin < AMBIGUOUS_BIC);
+    Choice { accepted: true, passed_over, rival }
+}
+
+/// What [`choose`] decided.
+pub struct Choice<M: Model> {
+    /// Whether an effect was accepted (it is then `candidates[1]`).
+    pub accepted: bool,
+    /// Effects with a lower BIC that did not pass.
+    pub passed_over: Vec<Candidate<M>>,
+    /// A rival that passes as well, about as good: its index and BIC margin.
+    pub rival: Option<(usize, f64)>,
+}
+
+impl<M: Model> Choice<M> {
+    /// The verdict of a disagreement: the accepted physics, `ambiguous` or `unexplained`.
+    pub fn verdict(&self, candidates: &[Candidate<M>]) -> Verdict {
+        match (self.accepted, self.rival) {
+            (false, _) => Verdict::Unexplained,
+            (true, Some(_)) => Verdict::Ambiguous,
+            (true, None) => Verdict::Physics(candidates[1].effect),
+        }
+    }
+
+    /// The sentence of an `ambiguous` verdict (empty otherwise).
+    pub fn ambiguity(&self, candidates: &[Candidate<M>]) -> String {
+        let Some((j, margin)) = self.rival else { return String::new() };
+        let (best, rival) = (&candidates[1], &candidates[j]);
+        format!(
+            " But {} ({}) explains the records about equally well (BIC {margin:.1} higher, less than {AMBIGUOUS_BIC}): the records cannot tell {} from {}; the verdict is ambiguous between them.",
+            rival.name(),
+            rival.sentence,
+            best.name(),
+            rival.name(),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clusters_need_enough_exceedances_close_together() {
+        // Five within 0.1 s flag all five; two isolated ones flag nothing.
+        let times = [1.0, 1.02, 1.04, 1.06, 1.08, 2.0, 3.0];
+        assert_eq!(clustered(&times, 5).collect::<Vec<_>>(), [1.0, 1.02, 1.04, 1.06, 1.08]);
+        assert_eq!(first_cluster(&times, 5), Some(1.0));
+        assert_eq!(first_cluster(&times, 2), Some(1.0));
+        assert_eq!(first_cluster(&times[5..], 2), None);
+        assert_eq!(span(&[3.0, 1.0, 2.0]), Some((1.0, 3.0)));
+        assert_eq!(span(&[]), None);
+    }
+
+    #[test]
+    fn verdicts_read_as_the_contract_writes_them() {
+        for (v, s) in [
+            (Verdict::None, "\"none\""),
+            (Verdict::Physics("mass_change"), "\"mass_change\""),
+            (Verdict::Unexplained, "\"unexplained\""),
+            (Verdict::Ambiguous, "\"ambiguous\""),
+        ] {
+            assert_eq!(serde_json::to_string(&v).unwrap(), s);
+        }
+        assert!(Verdict::Ambiguous.explained_by_physics() && !Verdict::Unexplained.explained_by_physics());
+    }
+}
