@@ -215,7 +215,9 @@ pub(super) fn fold(
         let rows: Vec<[String; 3]> = flagged_rows.into_iter().map(|(r, f, why)| [r, f, why]).collect();
         engine_table(FLAGGED_UNIT, text_table(staging, name, info, &stage.params, FLAGGED, &FLAGGED_COLUMNS, &rows)?);
     }
-    if info.inputs == InputKind::Sources && skips && failed == 0 {
+    // A pipeline's record-reading stage says how every record fared, failed ones included (a
+    // failed unit's old files stay; the table is new). A one-stage command says it on stderr.
+    if info.inputs == InputKind::Sources && plan.file.command.is_none() {
         status_rows.sort();
         engine_table(
             STATUS_UNIT,
