@@ -397,7 +397,11 @@ mod tests {
             record("motion=FB-3", UnitOutcome::Failed { reason: "bad row".into() }),
         ];
         let folded = fold(&plan, &plan.stages["load"], Some(&entry), records, &[], false, &staging).unwrap();
-        assert_eq!(folded.install.keys().collect::<Vec<_>>(), ["load/figures/FB-2.png"]);
+        // The status table is new: every record's, the failed one's too.
+        assert_eq!(folded.install.keys().collect::<Vec<_>>(), ["load/figures/FB-2.png", "load/status/data.parquet"]);
+        let status = crate::io::parquet::read_table(&staging.join("status/data.parquet")).unwrap();
+        let crate::table::ColumnData::Str(what) = &status.column("status").unwrap().data else { panic!("text") };
+        assert_eq!(what, &["loaded", "loaded", "failed"]);
         assert_eq!(folded.install["load/figures/FB-2.png"], staging.join("figures/FB-2.png"));
         assert_eq!(folded.remove.iter().collect::<Vec<_>>(), ["load/records/motion=FB-2/data.parquet"]);
         let new = folded.entry.unwrap();
@@ -406,7 +410,8 @@ mod tests {
         assert_eq!(new.units["motion=FB-2"].key, "key:motion=FB-2");
         assert!(!folded.complete, "a failed unit: the stage is not complete");
         assert_eq!(folded.failed.len(), 1);
-        assert_eq!(folded.produced.len(), 2, "downstream reads FB-1's table and FB-2's figure, not FB-3's");
+        let produced: Vec<&String> = folded.produced.keys().collect();
+        assert_eq!(produced.len(), 3, "FB-1's table, FB-2's figure and the status table, not FB-3's: {produced:?}");
     }
 
     #[test]
@@ -422,7 +427,8 @@ mod tests {
         assert!(!complete.entry.unwrap().units.contains_key("motion=FB-3"));
         // An upstream unit failed: the record may only look gone; its files and entry stay.
         let tainted = fold(&plan, stage, Some(&entry), cached(), &gone, true, &staging).unwrap();
-        assert!(tainted.remove.is_empty() && tainted.install.is_empty());
+        assert!(tainted.remove.is_empty());
+        assert_eq!(tainted.install.keys().collect::<Vec<_>>(), ["load/status/data.parquet"]);
         assert_eq!(tainted.entry.unwrap().units["motion=FB-3"], entry.units["motion=FB-3"]);
     }
 
@@ -446,7 +452,7 @@ mod tests {
         assert!(folded.complete);
         assert_eq!(
             folded.install.keys().collect::<Vec<_>>(),
-            ["load/.shakeflow-stage", "load/records/motion=FB-1/data.parquet"]
+            ["load/.shakeflow-stage", "load/records/motion=FB-1/data.parquet", "load/status/data.parquet"]
         );
         assert_eq!(ownership::read_marker(&staging).unwrap().stage, "load");
     }
