@@ -12,7 +12,7 @@ use crate::pipeline::params;
 use crate::pipeline::plan::Plan;
 use crate::pipeline::progress::Reporter;
 use crate::pipeline::sources;
-use crate::pipeline::spec::{PipelineFile, RecordFormat, SourceSpec};
+use crate::pipeline::spec::{OnError, PipelineFile, RecordFormat, SourceSpec};
 use crate::stages::{self, InputKind, InputPart};
 
 #[derive(Parser)]
@@ -391,32 +391,56 @@ pub fn main() -> anyhow::Result<ExitCode> {
             if !skip_inputs {
                 let mut columns = BTreeMap::new();
                 for (name, source) in &plan.file.spec.inputs {
-                    let folders = source.format.names_folders();
-                    let files = match sources::resolve(&plan.file.base_dir(), &source.path, &source.partition, folders)
-                    {
+                    // The files as the run finds them (a `components:` record's files share a partition).
+                    let files = match executor::source_files(&plan, name, source) {
                         Ok(files) => files,
                         Err(e) => {
-                            errors.push(
-                                plan.file
-                                    .error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message))
-                                    .hint(e.hint.unwrap_or_default()),
-                            );
+                            errors.push(e);
                             continue;
                         }
                     };
                     println!("source {name:<16} {} file(s)", files.len());
                     input_files.extend(files.iter().map(|f| f.path.clone()));
-                    match check_first_record(&plan, name, source, files.first()) {
-                        Ok(Some(names)) => {
-                            columns.insert(name.clone(), names);
+                    // Under `on_error: skip` a bad record is noted (the run lists it and goes on);
+                    // the source itself is wrong when none of its first records loads.
+                    let skip = source.on_error == OnError::Skip;
+                    let mut problems = Vec::new();
+                    if let Some(components) = &source.components {
+                        for problem in incomplete_records(name, components, &files) {
+                            problems.push(
+                                plan.file
+                                    .error_at(&["inputs", name, "components"], problem)
+                                    .hint("add the missing file, or set `on_error: skip` to run the others and list it in the status table"),
+                            );
                         }
-                        Ok(None) => {}
-                        Err(e) => errors.push(e),
+                    }
+                    let mut tried = Vec::new();
+                    let mut loaded = false;
+                    for record in records_of(source, &files).into_iter().take(if skip { 5 } else { 1 }) {
+                        match check_record(&plan, name, source, &record) {
+                            Ok(names) => {
+                                columns.extend(names.map(|names| (name.clone(), names)));
+                                loaded = true;
+                                break;
+                            }
+                            Err(e) => tried.push(e),
+                        }
                     }
                     if source.format.is_record() {
-                        errors.extend(
+                        problems.extend(
                             files.iter().skip(1).filter_map(|f| check_record_header(name, source, &f.path).err()),
                         );
+                    }
+                    match skip {
+                        true => {
+                            let (notes, refused) = if loaded { (tried, Vec::new()) } else { (Vec::new(), tried) };
+                            for mut note in problems.into_iter().chain(notes) {
+                                note.hint = None;
+                                println!("note: {note}; `run` will skip that record (on_error: skip)");
+                            }
+                            errors.extend(refused);
+                        }
+                        false => errors.extend(problems.into_iter().chain(tried)),
                     }
                 }
                 errors.extend(plan.column_errors(&columns));
@@ -691,51 +715,94 @@ fn check_record_header(name: &str, source: &SourceSpec, path: &Path) -> Result<(
     Ok(())
 }
 
-/// `validate` reads a record source's first file as `load` would, so a misspelt column, a wrong
-/// `header_lines` or unit shows now rather than in the middle of a run; the columns `load` makes
-/// of it are returned (None: not a record source, or no file).
-fn check_first_record(
+/// `validate` reads a record of a source (its first; under `on_error: skip` the first that loads)
+/// as `load` would, so a misspelt column, a wrong `header_lines` or unit, components on two
+/// clocks show now rather than in the middle of a run; the columns `load` makes of it are
+/// returned (None: not a record source).
+fn check_record(
     plan: &Plan,
     name: &str,
     source: &SourceSpec,
-    first: Option<&sources::MatchedFile>,
+    files: &[&sources::MatchedFile],
 ) -> Result<Option<Vec<String>>, crate::error::UserError> {
-    let Some(file) = first else { return Ok(None) };
     if !source.format.is_record() {
         return Ok(None);
     }
-    let part = InputPart {
-        partition: file.partition.clone(),
-        path: file.path.clone(),
-        label: file_label(&file.path),
-        hash: String::new(),
-    };
-    stages::load::load_record(source, &part)
-        .map(|table| Some(table.column_names().into_iter().map(String::from).collect()))
-        .map_err(|mut e| {
-            let position = e.message.split('`').nth(1).and_then(|column| {
-                let output =
-                    source.columns.iter().find(|(_, c)| c.file_column() == column).map(|(out, _)| out.as_str());
-                match output {
-                    Some(out) => {
-                        crate::pipeline::locate::key_position(&plan.file.text, &["inputs", name, "columns", out])
-                    }
-                    None if source.time_column.as_deref() == Some(column) => {
-                        crate::pipeline::locate::key_position(&plan.file.text, &["inputs", name, "time_column"])
-                    }
-                    None => None,
-                }
-            });
-            e.message = format!("source `{name}`, read as `load` would: {}", e.message);
-            if let Some((line, column)) = position {
-                e.hint = Some(format!(
-                    "{} (the column is named at {}:{line}:{column})",
-                    e.hint.clone().unwrap_or_default(),
-                    plan.file.path.display()
-                ));
-            }
-            e
+    let parts: Vec<InputPart> = files
+        .iter()
+        .map(|file| InputPart {
+            partition: file.partition.clone(),
+            path: file.path.clone(),
+            label: file_label(&file.path),
+            hash: String::new(),
         })
+        .collect();
+    // A `components:` record is its files together, its clocks and axes checked as `load` does.
+    let loaded = match source.components {
+        Some(_) => stages::load::load_record_group(source, name, &plan.file.base_dir(), &parts),
+        None => stages::load::load_record(source, &parts[0]),
+    };
+    loaded.map(|table| Some(table.column_names().into_iter().map(String::from).collect())).map_err(|mut e| {
+        let position = e.message.split('`').nth(1).and_then(|column| {
+            let output = source.columns.iter().find(|(_, c)| c.file_column() == column).map(|(out, _)| out.as_str());
+            match output {
+                Some(out) => crate::pipeline::locate::key_position(&plan.file.text, &["inputs", name, "columns", out]),
+                None if source.time_column.as_deref() == Some(column) => {
+                    crate::pipeline::locate::key_position(&plan.file.text, &["inputs", name, "time_column"])
+                }
+                None => None,
+            }
+        });
+        e.message = format!("source `{name}`, read as `load` would: {}", e.message);
+        if let Some((line, column)) = position {
+            e.hint = Some(format!(
+                "{} (the column is named at {}:{line}:{column})",
+                e.hint.clone().unwrap_or_default(),
+                plan.file.path.display()
+            ));
+        }
+        e
+    })
+}
+
+/// A source's records in the order of their files: a `components:` record is the files that
+/// share its partition, any other record one file.
+fn records_of<'f>(source: &SourceSpec, files: &'f [sources::MatchedFile]) -> Vec<Vec<&'f sources::MatchedFile>> {
+    if source.components.is_none() {
+        return files.iter().map(|f| vec![f]).collect();
+    }
+    let mut records: indexmap::IndexMap<&crate::pipeline::layout::Partition, Vec<&sources::MatchedFile>> =
+        indexmap::IndexMap::new();
+    for file in files {
+        records.entry(&file.partition).or_default().push(file);
+    }
+    records.into_values().collect()
+}
+
+/// The records of a `components:` source with fewer files than the axes it `require`s, each said
+/// with its files: `run` would refuse them (a record's axes come from its files' headers, read
+/// by `run`; a count needs none).
+fn incomplete_records(
+    name: &str,
+    components: &crate::pipeline::spec::Components,
+    files: &[sources::MatchedFile],
+) -> Vec<String> {
+    let mut records: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    for file in files {
+        records.entry(stages::partition_path(&file.partition)).or_default().push(file_label(&file.path));
+    }
+    records
+        .into_iter()
+        .filter(|(_, files)| files.len() < components.require.len())
+        .map(|(record, files)| {
+            format!(
+                "source `{name}`: record `{record}` has {} component file(s) ({}), fewer than the {} axes `components: require` asks for",
+                files.len(),
+                files.join(", "),
+                components.require.len()
+            )
+        })
+        .collect()
 }
 
 /// A run-independent name for a file: its file name.

@@ -25,7 +25,7 @@ pub struct BaselineParams {
 
 static INFO: StageInfo = StageInfo {
     name: "baseline",
-    version: 4,
+    version: 5,
     summary: "Remove a least-squares polynomial trend (default cubic) from each channel; no filtering, peaks kept.",
     inputs: InputKind::Datasets,
     outputs: &[OutputInfo {
@@ -101,7 +101,7 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
     }
     for name in wanted {
         match table.column(name) {
-            Some(c) if c.as_f64().is_some() => {}
+            Some(c) if matches!(c.data, ColumnData::F64(_) | ColumnData::OptF64(_)) => {}
             Some(_) => return Err(format!("column `{name}` is not a float column")),
             None => return Err(format!("no column `{name}`; columns: {}", table.column_names().join(", "))),
         }
@@ -115,13 +115,19 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
     let mut fits = serde_json::Map::new();
     for column in &table.columns {
         let selected = column.name != TIME_COLUMN
-            && matches!(column.data, ColumnData::F64(_))
+            && matches!(column.data, ColumnData::F64(_) | ColumnData::OptF64(_))
             && (wanted.is_empty() || wanted.contains(&column.name));
         if !selected {
             columns.push(column.clone());
             continue;
         }
-        let values = column.as_f64().expect("selected columns are float");
+        // A channel shorter than its record (`load` pads it with nulls past its end) is fitted
+        // and corrected over its own samples; its nulls stay.
+        let (values, padded) = match &column.data {
+            ColumnData::F64(v) => (std::borrow::Cow::Borrowed(v.as_slice()), false),
+            ColumnData::OptF64(v) => (std::borrow::Cow::Owned(own_samples(&column.name, v)?), true),
+            _ => unreachable!("selected columns are float"),
+        };
         if let Some(i) = values.iter().position(|v| !v.is_finite()) {
             return Err(format!(
                 "column `{}` has a non-finite value at sample {}; load it with `gaps: interpolate`",
@@ -129,7 +135,18 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
                 i + 1
             ));
         }
-        let (corrected, fit) = basis.remove(values);
+        let shorter;
+        let basis = match values.len() {
+            n if n == time.len() => &basis,
+            n if n > order => {
+                shorter = PolynomialBasis::new(&time[..n], order);
+                &shorter
+            }
+            n => {
+                return Err(format!("column `{}`: {n} samples are too few for an order-{order} baseline", column.name))
+            }
+        };
+        let (corrected, fit) = basis.remove(&values);
         if corrected.iter().chain(&fit.coefficients).any(|v| !v.is_finite()) {
             let peak = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             return Err(format!(
@@ -139,22 +156,31 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
         }
         let rms_removed =
             (values.iter().zip(&corrected).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / values.len() as f64).sqrt();
-        fits.insert(
-            column.name.clone(),
-            json!({
-                "polyfit_coefficients": fit.monomial_coefficients(),
-                "scaled_coefficients": fit.coefficients,
-                "center_s": fit.center,
-                "half_span_s": fit.half_span,
-                "rms_removed": rms_removed,
-                "unit": column.unit,
-            }),
-        );
+        let mut fit_json = json!({
+            "polyfit_coefficients": fit.monomial_coefficients(),
+            "scaled_coefficients": fit.coefficients,
+            "center_s": fit.center,
+            "half_span_s": fit.half_span,
+            "rms_removed": rms_removed,
+            "unit": column.unit,
+        });
+        if padded {
+            fit_json["samples"] = json!(values.len());
+        }
+        fits.insert(column.name.clone(), fit_json);
+        let data = match padded {
+            false => ColumnData::F64(corrected),
+            true => {
+                let mut kept: Vec<Option<f64>> = corrected.into_iter().map(Some).collect();
+                kept.resize(time.len(), None);
+                ColumnData::OptF64(kept)
+            }
+        };
         columns.push(Column {
             name: column.name.clone(),
             unit: column.unit.clone(),
             description: format!("{} (order-{order} polynomial baseline removed)", column.description),
-            data: ColumnData::F64(corrected),
+            data,
         });
     }
     out.extend(columns);
@@ -163,6 +189,20 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
         json!({"order": order, "basis": "polyfit_coefficients: numpy.polyfit order (highest power first, t in s)", "fits": fits}).to_string(),
     );
     Ok(out)
+}
+
+/// A nullable channel's own samples: the values before its first null, which must be the
+/// padding past its end (no value after it).
+fn own_samples(name: &str, values: &[Option<f64>]) -> Result<Vec<f64>, String> {
+    let n = values.iter().position(Option::is_none).unwrap_or(values.len());
+    if let Some(k) = values[n..].iter().position(Option::is_some) {
+        return Err(format!(
+            "column `{name}` has a missing value at sample {} followed by values (sample {}): a baseline needs the channel's samples without gaps",
+            n + 1,
+            n + k + 1
+        ));
+    }
+    Ok(values[..n].iter().map(|v| v.expect("before the first null")).collect())
 }
 
 #[cfg(test)]
@@ -186,6 +226,38 @@ mod tests {
         assert!(e.contains("1e308 m/s^2"), "{e}");
         let fine = correct(&table((0..200).map(|k| (k as f64 * 0.3).sin() * 1e150).collect()), 3, &[]).unwrap();
         assert!(fine.f64_column("ax_mps2").unwrap().iter().all(|v| v.is_finite()));
+    }
+
+    /// A channel 50 samples shorter than its record (null past its end, as `load` pads it): a
+    /// cubic trend over its own 150 samples is removed exactly there, the nulls stay; a column
+    /// with a value after a null is refused, naming both samples.
+    #[test]
+    fn a_null_padded_channel_is_corrected_over_its_own_samples() {
+        let mut t = table((0..200).map(|k| (k as f64 * 0.3).sin()).collect());
+        let trend = |k: usize| {
+            let x = k as f64 * 0.01;
+            0.4 - 2.0 * x + 0.7 * x * x - 0.3 * x * x * x
+        };
+        let padded: Vec<Option<f64>> = (0..200).map(|k| (k < 150).then(|| trend(k))).collect();
+        t.push(Column {
+            name: "az_mps2".into(),
+            unit: "m/s^2".into(),
+            description: String::new(),
+            data: ColumnData::OptF64(padded.clone()),
+        });
+        let out = correct(&t, 3, &[]).unwrap();
+        let ColumnData::OptF64(az) = &out.column("az_mps2").unwrap().data else { panic!("az stays nullable") };
+        assert!(az[..150].iter().all(|v| v.is_some_and(|v| v.abs() < 1e-12)), "{az:?}");
+        assert!(az[150..].iter().all(Option::is_none));
+        assert!(out.metadata["shakeflow.baseline"].contains("\"samples\":150"));
+        let mut gap = padded;
+        gap[160] = Some(1.0);
+        t.columns[2].data = ColumnData::OptF64(gap);
+        let e = correct(&t, 3, &[]).unwrap_err();
+        assert!(
+            e.contains("column `az_mps2` has a missing value at sample 151 followed by values (sample 161)"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -122,6 +122,17 @@ struct Group<'a> {
     parts: Vec<&'a InputPart>,
 }
 
+/// A `components:` record read as `load` reads it (`validate` reads the first one so): its
+/// files, one per component, parsed, checked to share one clock, and joined.
+pub fn load_record_group(
+    spec: &SourceSpec,
+    source: &str,
+    base_dir: &std::path::Path,
+    parts: &[InputPart],
+) -> Result<Table, UserError> {
+    load_group(&Group { spec, source, base_dir, parts: parts.iter().collect() })
+}
+
 /// A `components:` record: its files read, checked to share one clock, and joined.
 fn load_group(group: &Group<'_>) -> Result<Table, UserError> {
     let raws: Vec<RawRecord> = group.parts.par_iter().map(|part| parse(group.spec, part)).collect::<Result<_, _>>()?;

@@ -331,11 +331,28 @@ fn a_missing_component_is_refused_naming_the_files() {
     );
     assert!(err.contains("no `z` component among its 2 file(s) (components EW, NS)"), "{err}");
     assert!(!dir.path().join("out/load/records").exists());
+    // `validate` finds it before anything runs, at the source's `components:` line.
+    let out = shakeflow(&["validate", "pipeline.yaml"], dir.path());
+    assert_eq!(out.status.code(), Some(1), "{}", common::stdout(&out));
+    let err = stderr(&out);
+    assert!(err.contains("pipeline.yaml:7:"), "{err}");
+    assert!(
+        err.contains("record `station=AOM0051801241951` has 2 component file(s) (AOM0051801241951.EW, AOM0051801241951.NS), fewer than the 3 axes"),
+        "{err}"
+    );
     // Skipped instead, it is listed with the reason and the run goes on (exit 2).
     let (out, dir) = knet_run_failing(|knet| std::fs::remove_file(knet.join("AOM0051801241951.UD")).unwrap(), "skip");
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     let flagged = shakeflow::io::parquet::read_table(&dir.path().join("out/load/flagged/data.parquet")).unwrap();
     assert_eq!(flagged.num_rows(), 1);
+    // … and `validate` notes it; with no other record that loads, the source is refused.
+    let out = shakeflow(&["validate", "pipeline.yaml"], dir.path());
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let said = common::stdout(&out);
+    assert!(
+        said.contains("fewer than the 3 axes `components: require` asks for; `run` will skip that record"),
+        "{said}"
+    );
 }
 
 #[test]
@@ -348,6 +365,12 @@ fn components_on_different_clocks_are_refused_naming_the_files() {
     let err = stderr(&out);
     assert!(err.contains("its `EW` file starts at 2018/01/24 19:51:40, its `UD` file at 2018/01/24 19:51:41"), "{err}");
     assert!(err.contains("AOM0051801241951.UD"), "{err}");
+    // `validate` reads the first record's files together, as `load` does.
+    let out = shakeflow(&["validate", "pipeline.yaml"], _dir.path());
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr(&out);
+    assert!(err.contains("source `knet`, read as `load` would: record `AOM0051801241951`"), "{err}");
+    assert!(err.contains("its `EW` file starts at 2018/01/24 19:51:40, its `UD` file at 2018/01/24 19:51:41"), "{err}");
 
     let (out, _dir) = knet_run_failing(
         |knet| {
@@ -457,6 +480,37 @@ fn the_status_table_lists_every_record_and_the_report_shows_it() {
     assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
     assert!(common::stdout(&out).contains("cached") || stderr(&out).contains("cached"), "{}", stderr(&out));
     expected(&status_rows(root));
+}
+
+/// Without `on_error: skip`, a record that cannot be read fails its unit: the run exits 1, the
+/// other records are committed, and the status table lists it `failed` with the reader's
+/// file:line:column; mended, the next run loads it and the table says so.
+#[test]
+fn a_failed_record_is_listed_failed_and_the_others_are_committed() {
+    let dir = crate::tempdir::tempdir().unwrap();
+    let root = dir.path();
+    archive(root);
+    let smc = root.join("archive/other/0111a.smc");
+    let good = std::fs::read_to_string(&smc).unwrap();
+    std::fs::write(&smc, good.replacen("-2.2223E+0", "-2.2x23E+0", 1)).unwrap();
+    std::fs::write(root.join("pipeline.yaml"), PIPELINE).unwrap();
+    let out = shakeflow(&["run", "pipeline.yaml"], root);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let rows = status_rows(root);
+    assert_eq!(rows.len(), 14, "{rows:?}");
+    let failed: Vec<&[String; 4]> = rows.iter().filter(|r| r[1] == "failed").collect();
+    assert_eq!(failed.len(), 1, "{rows:?}");
+    assert_eq!(failed[0][0], "file=0111a.smc");
+    assert!(failed[0][3].contains("0111a.smc:36:11"), "{:?}", failed[0]);
+    assert!(rows.iter().filter(|r| r[1] != "failed").all(|r| r[1] == "loaded" || r[1] == "flagged"), "{rows:?}");
+    assert!(root.join("out/load/records/station=AOM0051801241951/data.parquet").is_file());
+    assert!(!root.join("out/load/records/file=0111a.smc").exists());
+    std::fs::write(&smc, good).unwrap();
+    let out = shakeflow(&["run", "pipeline.yaml"], root);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let rows = status_rows(root);
+    assert!(rows.iter().any(|r| r[0] == "file=0111a.smc" && r[1] == "loaded"), "{rows:?}");
+    assert!(rows.iter().all(|r| r[1] != "failed"), "{rows:?}");
 }
 
 /// No reader stops early without a word: each shared file with one more value line at its end

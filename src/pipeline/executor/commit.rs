@@ -215,7 +215,9 @@ pub(super) fn fold(
         let rows: Vec<[String; 3]> = flagged_rows.into_iter().map(|(r, f, why)| [r, f, why]).collect();
         engine_table(FLAGGED_UNIT, text_table(staging, name, info, &stage.params, FLAGGED, &FLAGGED_COLUMNS, &rows)?);
     }
-    if info.inputs == InputKind::Sources && skips && failed == 0 {
+    // A pipeline's record-reading stage says how every record fared, failed ones included (a
+    // failed unit's old files stay; the table is new). A one-stage command says it on stderr.
+    if info.inputs == InputKind::Sources && plan.file.command.is_none() {
         status_rows.sort();
         engine_table(
             STATUS_UNIT,
@@ -397,7 +399,11 @@ mod tests {
             record("motion=FB-3", UnitOutcome::Failed { reason: "bad row".into() }),
         ];
         let folded = fold(&plan, &plan.stages["load"], Some(&entry), records, &[], false, &staging).unwrap();
-        assert_eq!(folded.install.keys().collect::<Vec<_>>(), ["load/figures/FB-2.png"]);
+        // The status table is new: every record's, the failed one's too.
+        assert_eq!(folded.install.keys().collect::<Vec<_>>(), ["load/figures/FB-2.png", "load/status/data.parquet"]);
+        let status = crate::io::parquet::read_table(&staging.join("status/data.parquet")).unwrap();
+        let crate::table::ColumnData::Str(what) = &status.column("status").unwrap().data else { panic!("text") };
+        assert_eq!(what, &["loaded", "loaded", "failed"]);
         assert_eq!(folded.install["load/figures/FB-2.png"], staging.join("figures/FB-2.png"));
         assert_eq!(folded.remove.iter().collect::<Vec<_>>(), ["load/records/motion=FB-2/data.parquet"]);
         let new = folded.entry.unwrap();
@@ -406,7 +412,8 @@ mod tests {
         assert_eq!(new.units["motion=FB-2"].key, "key:motion=FB-2");
         assert!(!folded.complete, "a failed unit: the stage is not complete");
         assert_eq!(folded.failed.len(), 1);
-        assert_eq!(folded.produced.len(), 2, "downstream reads FB-1's table and FB-2's figure, not FB-3's");
+        let produced: Vec<&String> = folded.produced.keys().collect();
+        assert_eq!(produced.len(), 3, "FB-1's table, FB-2's figure and the status table, not FB-3's: {produced:?}");
     }
 
     #[test]
@@ -422,7 +429,8 @@ mod tests {
         assert!(!complete.entry.unwrap().units.contains_key("motion=FB-3"));
         // An upstream unit failed: the record may only look gone; its files and entry stay.
         let tainted = fold(&plan, stage, Some(&entry), cached(), &gone, true, &staging).unwrap();
-        assert!(tainted.remove.is_empty() && tainted.install.is_empty());
+        assert!(tainted.remove.is_empty());
+        assert_eq!(tainted.install.keys().collect::<Vec<_>>(), ["load/status/data.parquet"]);
         assert_eq!(tainted.entry.unwrap().units["motion=FB-3"], entry.units["motion=FB-3"]);
     }
 
@@ -446,7 +454,7 @@ mod tests {
         assert!(folded.complete);
         assert_eq!(
             folded.install.keys().collect::<Vec<_>>(),
-            ["load/.shakeflow-stage", "load/records/motion=FB-1/data.parquet"]
+            ["load/.shakeflow-stage", "load/records/motion=FB-1/data.parquet", "load/status/data.parquet"]
         );
         assert_eq!(ownership::read_marker(&staging).unwrap().stage, "load");
     }

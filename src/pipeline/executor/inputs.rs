@@ -79,7 +79,7 @@ pub(super) fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSo
 
 /// The files a source reads, with their partitions: its path matched as a pattern (a command's
 /// names one file or folder literally); a case is its folder, a dataset folder its parts.
-fn source_files(plan: &Plan, name: &str, spec: &SourceSpec) -> Result<Vec<sources::MatchedFile>, UserError> {
+pub fn source_files(plan: &Plan, name: &str, spec: &SourceSpec) -> Result<Vec<sources::MatchedFile>, UserError> {
     let base = plan.file.base_dir();
     let files = match plan.file.command {
         Some(_) => {

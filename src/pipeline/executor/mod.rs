@@ -35,6 +35,7 @@ pub mod slurm;
 mod test_support;
 
 pub use assess::{StatusLine, UnitStatus};
+pub use inputs::source_files;
 pub use local::Local;
 
 use self::assess::{predict, Known, RealDisk};
