@@ -3,37 +3,38 @@
 //! confirmed by a lasting drop of the amplitude to about the floor's vertical level.
 
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
+use std::sync::LazyLock;
 
-use super::{split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use super::{split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::signal::toppling::{detect_toppling, detect_toppling_on, DetectOptions, TimeBase};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct DetectToppling;
 
-/// The parameters `INFO` declares, typed.
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct DetectTopplingParams {
-    /// `top` or `top -> floor vertical`, read by `split_pair`.
-    pub channels: Vec<String>,
-    pub sta_lta_on: f64,
-    pub drop_ratio: f64,
+crate::stage_params! {
+    /// The parameters of `detect_toppling`.
+    pub struct DetectTopplingParams {
+        // `top` or `top -> floor vertical`, read by `split_pair`.
+        /// top accelerometer columns, each optionally `-> floor vertical column` for the cross-check
+        pub channels: Vec<String> [],
+        /// trigger level of sqrt(STA/LTA) on the signal's 5 ms difference
+        pub sta_lta_on: f64 [default = 8.0, range = (1.0, 1e6)],
+        /// post-impact RMS must stay below this fraction of the pre-impact RMS
+        pub drop_ratio: f64 [default = 0.35, range = (0.0, 1.0)],
+    }
 }
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "detect_toppling",
     version: 2,
     summary: "Toppling impacts from top accelerometers: STA/LTA spike confirmed by a lasting amplitude drop; optional floor-vertical cross-check.",
     inputs: InputKind::Datasets,
     outputs: &[OutputInfo { name: "events", description: "per channel: toppled, impact_time_s, peak_mps2, confidence, and why", kind: OutputKind::Table }],
-    params: &[
-        ParamSpec { name: "channels", kind: ParamKind::StrList, default: None, unit: "", description: "top accelerometer columns, each optionally `-> floor vertical column` for the cross-check", range: None },
-        ParamSpec { name: "sta_lta_on", kind: ParamKind::Float, default: Some("8.0"), unit: "", description: "trigger level of sqrt(STA/LTA) on the signal's 5 ms difference", range: Some((1.0, 1e6)) },
-        ParamSpec { name: "drop_ratio", kind: ParamKind::Float, default: Some("0.35"), unit: "", description: "post-impact RMS must stay below this fraction of the pre-impact RMS", range: Some((0.0, 1.0)) },
-    ],
-};
+    params: DetectTopplingParams::specs(),
+}
+});
 
 impl Stage for DetectToppling {
     fn info(&self) -> &'static StageInfo {

@@ -3,38 +3,40 @@
 //! overturn / no overturn by maximum likelihood.
 
 use std::sync::Arc;
+use std::sync::LazyLock;
 
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 
-use super::simulate_toppling::{model_from_params, rocking_params, simulate_record, RockingParams};
-use super::{partition_values, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use super::simulate_toppling::{model_from_params, simulate_record, RockingParams};
+use super::{partition_values, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::stats::fragility::{fit_lognormal, FitOutcome, LognormalFit};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct TopplingFragility;
 
-/// The parameters `INFO` declares, typed.
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct TopplingFragilityParams {
-    #[serde(flatten)]
-    pub model: RockingParams,
-    pub im: Intensity,
-    pub scales: Vec<f64>,
-    pub im_levels: Vec<f64>,
+crate::stage_params! {
+    /// The parameters of `toppling_fragility`.
+    pub struct TopplingFragilityParams {
+        #[flatten]
+        pub model: RockingParams,
+        /// intensity measure: peak floor acceleration (m/s^2) or peak floor velocity (m/s, trapezoidal integral of
+        /// the horizontal record)
+        pub im: Intensity [default = "pfa"],
+        /// scale factors applied to every record (horizontal and vertical alike); or use im_levels
+        pub scales: Vec<f64> [default = [], range = (0.0, 1e3)],
+        /// target intensities (m/s^2 for pfa, m/s for pfv): each record is scaled to each level
+        pub im_levels: Vec<f64> [default = [], range = (0.0, 1e3)],
+    }
 }
 
-/// `im`: the intensity measure.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Intensity {
-    Pfa,
-    Pfv,
+crate::choice! {
+    /// `im`: the intensity measure.
+    pub enum Intensity { Pfa = "pfa", Pfv = "pfv" }
 }
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "toppling_fragility",
     version: 3,
     summary: "Overturning fragility of one unit: floor records scaled over intensities, all runs simulated in parallel, lognormal curve (median, beta) by maximum likelihood.",
@@ -44,12 +46,9 @@ static INFO: StageInfo = StageInfo {
         OutputInfo { name: "fragility", description: "one row: im_measure, median, beta, log_likelihood, n_runs, n_overturned, note", kind: OutputKind::Table },
         OutputInfo { name: "figures", description: "fragility.png: the fitted curve, every run at 0 (stood) or 1 (overturned) and the overturned fraction per level; pfa in g", kind: OutputKind::Files },
     ],
-    params: rocking_params![
-        ParamSpec { name: "im", kind: ParamKind::Choice(&["pfa", "pfv"]), default: Some("\"pfa\""), unit: "", description: "intensity measure: peak floor acceleration (m/s^2) or peak floor velocity (m/s, trapezoidal integral of the horizontal record)", range: None },
-        ParamSpec { name: "scales", kind: ParamKind::FloatList(None), default: Some("[]"), unit: "", description: "scale factors applied to every record (horizontal and vertical alike); or use im_levels", range: Some((0.0, 1e3)) },
-        ParamSpec { name: "im_levels", kind: ParamKind::FloatList(None), default: Some("[]"), unit: "", description: "target intensities (m/s^2 for pfa, m/s for pfv): each record is scaled to each level", range: Some((0.0, 1e3)) },
-    ],
-};
+    params: TopplingFragilityParams::specs(),
+}
+});
 
 impl Stage for TopplingFragility {
     fn info(&self) -> &'static StageInfo {
