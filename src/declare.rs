@@ -1,15 +1,17 @@
 //! Parameters declared once: the typed struct is the declaration.
 //!
-//! [`stage_params!`](crate::stage_params) writes a stage's parameter struct (serde, with
-//! `deny_unknown_fields`) and, from the same lines, the [`ParamSpec`] list the engine checks,
+//! [`stage_params!`](crate::stage_params) writes a stage's parameter struct (serde) and, from the
+//! same lines, the [`ParamSpec`] list the engine checks,
 //! defaults and hashes (`pipeline::params::normalize`), which `shakeflow stages`, `--set` and the
 //! JSON Schema read too. It sits below `io` and `pipeline` (it imports nothing of the crate), so an
 //! equipment file's keys (`io::equipment`) are declared by the same struct the stages flatten. Each field says its type, and in brackets its default (a JSON value as
 //! pipelines write it; none: the parameter is required), `unit`, `range` (inclusive) and, where
 //! the type does not say it, `kind`; its doc comment is the description users see. A field marked
 //! `#[flatten]` takes another declared struct's parameters in its place (the rocking unit shared by
-//! two stages, the `mcap` switch), a struct declared `#[flattened]` (it leaves refusing unknown
-//! keys to the outer one). [`choice!`](crate::choice) declares a choice parameter's enum
+//! two stages, the `mcap` switch). The structs do not refuse unknown keys themselves (serde's
+//! `deny_unknown_fields` breaks under nested `flatten`): the engine refuses a key the declaration
+//! lacks before any struct is read (`params::normalize`), and `params::check_typed` proves at
+//! planning that the struct reads the normalised parameters back exactly. [`choice!`](crate::choice) declares a choice parameter's enum
 //! with the names pipelines write.
 //!
 //! ```ignore
@@ -118,12 +120,8 @@ impl<T: ParamType> ParamType for Option<T> {
 /// Declares a stage's parameter struct and its [`Declared`] list (module docs).
 #[macro_export]
 macro_rules! stage_params {
-    // A struct only ever flattened into others: the outer struct refuses unknown keys.
-    ($(#[doc = $doc:literal])* #[flattened] $(#[$attr:meta])* $vis:vis struct $name:ident { $($body:tt)* }) => {
-        $crate::stage_params!(@field [[] $(#[doc = $doc])* $(#[$attr])* $vis struct $name] [] [] $($body)*);
-    };
     ($(#[$attr:meta])* $vis:vis struct $name:ident { $($body:tt)* }) => {
-        $crate::stage_params!(@field [[#[serde(deny_unknown_fields)]] $(#[$attr])* $vis struct $name] [] [] $($body)*);
+        $crate::stage_params!(@field [$(#[$attr])* $vis struct $name] [] [] $($body)*);
     };
     // A flattened struct: its parameters here.
     (@field $head:tt [$($fields:tt)*] [$($specs:tt)*]
@@ -154,10 +152,9 @@ macro_rules! stage_params {
             }))]
             $($rest)*);
     };
-    (@field [[$($deny:tt)*] $(#[$attr:meta])* $vis:vis struct $name:ident] [$($fields:tt)*] [$($specs:tt)*]) => {
+    (@field [$(#[$attr:meta])* $vis:vis struct $name:ident] [$($fields:tt)*] [$($specs:tt)*]) => {
         $(#[$attr])*
         #[derive(Debug, serde::Deserialize, serde::Serialize)]
-        $($deny)*
         $vis struct $name { $($fields)* }
 
         impl $crate::declare::Declared for $name {
@@ -203,12 +200,20 @@ mod tests {
     }
 
     crate::stage_params! {
-        #[flattened]
         struct Inner {
             /// a trapezoid's
             /// base
             #[serde(rename = "B1_m")]
             b1_m: Option<f64> [default = null, unit = "m", range = (1e-6, 1e3)],
+        }
+    }
+
+    crate::stage_params! {
+        struct Middle {
+            /// a middle value
+            x: f64 [default = 1.0],
+            #[flatten]
+            inner: Inner,
         }
     }
 
@@ -223,7 +228,7 @@ mod tests {
             preset: Option<String> [default = null, kind = ParamKind::Choice(&["PS2", "PB1"])],
             scale: f64 [default = -1.5],
             #[flatten]
-            inner: Inner,
+            middle: Middle,
             #[flatten]
             mcap: Mcap,
         }
@@ -233,7 +238,7 @@ mod tests {
     fn a_struct_declares_its_parameters_in_order_with_their_docs_defaults_and_kinds() {
         let specs = Example::specs();
         let names: Vec<&str> = specs.iter().map(|s| s.name).collect();
-        assert_eq!(names, ["order", "columns", "theta_zero", "steer0_deg", "preset", "scale", "B1_m", "mcap"]);
+        assert_eq!(names, ["order", "columns", "theta_zero", "steer0_deg", "preset", "scale", "x", "B1_m", "mcap"]);
         let by = |n: &str| *specs.iter().find(|s| s.name == n).unwrap();
         assert_eq!(
             (by("order").kind, by("order").default, by("order").range, by("order").description),

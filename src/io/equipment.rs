@@ -30,7 +30,6 @@ crate::stage_params! {
     /// A rocking block's geometry and mass: the model keys of an equipment file, and the same
     /// parameters of the rocking stages (`simulate_toppling`, `toppling_fragility` flatten it), where
     /// they override a preset and the equipment file.
-    #[flattened]
     #[derive(Clone, Default, PartialEq)]
     pub struct RockingGeometry {
         /// block shape; overrides preset and equipment file

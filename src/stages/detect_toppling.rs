@@ -3,11 +3,13 @@
 //! confirmed by a lasting drop of the amplitude to about the floor's vertical level.
 
 use rayon::prelude::*;
+use std::path::Path;
 use std::sync::LazyLock;
 
 use super::{split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::pipeline::params::{self, ParamError, Params};
 use crate::signal::toppling::{detect_toppling, detect_toppling_on, DetectOptions, TimeBase};
+use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct DetectToppling;
@@ -64,6 +66,10 @@ impl Stage for DetectToppling {
             );
         }
         (None, errors)
+    }
+
+    fn summary(&self, stage_dir: &Path) -> Option<String> {
+        summary_line(stage_dir).ok()
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
@@ -165,4 +171,20 @@ fn detect(table: &Table, channels: &[(String, Option<String>)], opts: &DetectOpt
         data: ColumnData::Str(why),
     });
     Ok(events)
+}
+
+/// The line `shakeflow run` prints: "toppled: 3 of 48 channel records (FB-4 ps2_top_ax, …)"
+fn summary_line(dir: &Path) -> anyhow::Result<String> {
+    let events = summary::read(dir, "events")?;
+    let (records, channels) = (events.record_labels()?, summary::texts(&events.frame, "channel")?);
+    let toppled = summary::flags(&events.frame, "toppled")?;
+    let which: Vec<String> = (0..toppled.len())
+        .filter(|&i| toppled[i])
+        .map(|i| if records[i].is_empty() { channels[i].clone() } else { format!("{} {}", records[i], channels[i]) })
+        .collect();
+    let mut line = format!("toppling detected in {} of {} channel records", which.len(), toppled.len());
+    if !which.is_empty() {
+        line += &format!(" ({})", summary::some_of(&which, 6));
+    }
+    Ok(line)
 }

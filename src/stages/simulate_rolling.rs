@@ -14,6 +14,7 @@ use crate::physics::rolling::{
     Stribeck,
 };
 use crate::pipeline::params::{self, ParamError, ParamKind, Params};
+use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct SimulateRolling;
@@ -21,7 +22,6 @@ pub struct SimulateRolling;
 crate::stage_params! {
     /// The model keys, typed: what a preset, an equipment file or the stage's own values give, None
     /// where one does not.
-    #[flattened]
     #[derive(Default, Clone)]
     pub struct RollingModel {
         /// platform length 2a (body x; caster pivots at its corners)
@@ -173,6 +173,10 @@ impl Stage for SimulateRolling {
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
+    }
+
+    fn summary(&self, stage_dir: &Path) -> Option<String> {
+        summary_line(stage_dir).ok()
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
@@ -677,6 +681,39 @@ fn read_equipment(path: &Path) -> Result<RollingModel, ParamError> {
                 refuse("equipment", format!("equipment file `{shown}`{at}: {message}"), e.hint)
             })?;
     params::typed(&normalized)
+}
+
+/// The line `shakeflow run` prints: "10 records: peak displacement 0.412 m (FB-4), started rolling in 9, 14 caster flips"
+fn summary_line(dir: &Path) -> anyhow::Result<String> {
+    let events = summary::read(dir, "events")?;
+    let (records, kinds) = (events.record_labels()?, summary::texts(&events.frame, "event")?);
+    let displacement = summary::floats(&events.frame, "displacement_m")?;
+    let mut peak: Option<(f64, &str)> = None;
+    let mut rolled = std::collections::BTreeSet::new();
+    for ((kind, record), d) in kinds.iter().zip(&records).zip(&displacement) {
+        match kind.as_str() {
+            "peak_displacement" => {
+                if let Some(d) = d.filter(|d| peak.is_none_or(|(p, _)| *d > p)) {
+                    peak = Some((d, record));
+                }
+            }
+            "breakaway" => {
+                rolled.insert(record);
+            }
+            _ => {}
+        }
+    }
+    let all: std::collections::BTreeSet<&String> = records.iter().collect();
+    let flips = kinds.iter().filter(|k| *k == "flip").count();
+    let mut line = format!("{} records", all.len());
+    if let Some((d, record)) = peak {
+        line += &format!(": peak displacement {d:.3} m");
+        if !record.is_empty() {
+            line += &format!(" ({record})");
+        }
+    }
+    line += &format!(", started rolling in {}, {flips} caster flips", rolled.len());
+    Ok(line)
 }
 
 #[cfg(test)]

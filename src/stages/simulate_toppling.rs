@@ -12,6 +12,7 @@ use crate::error::UserError;
 use crate::io::equipment::{self, RockingGeometry, ShapeChoice};
 use crate::physics::rocking::{self, Anchorage, Block, Excitation, IsolatedBase, Method, Options, Response, Shape};
 use crate::pipeline::params::{self, ParamError, ParamKind, Params};
+use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct SimulateToppling;
@@ -19,7 +20,6 @@ pub struct SimulateToppling;
 crate::stage_params! {
     /// The parameters that describe the unit and the model, shared with `toppling_fragility`
     /// (flattened into each stage's parameters).
-    #[flattened]
     pub struct RockingParams {
         // A row of `rocking::PRESETS` (the table is the list, so it stays a name).
         /// a unit of the study (Table 5 rectangles PS2, PB1 and their trapezoids; WSU1 from Table 2)
@@ -109,6 +109,10 @@ impl Stage for SimulateToppling {
     /// `horizontal` and `vertical` must be columns of the floor records.
     fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {
         (None, floor_column_errors(params, input))
+    }
+
+    fn summary(&self, stage_dir: &Path) -> Option<String> {
+        summary_line(stage_dir).ok()
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
@@ -423,4 +427,18 @@ pub fn floor_column_errors(params: &Params, input: Option<&[String]>) -> Vec<Par
     };
     let wanted = [("horizontal", Some(p.horizontal.as_str())), ("vertical", p.vertical.as_deref())];
     wanted.into_iter().filter_map(|(key, column)| super::require_column(key, column?, input).err()).collect()
+}
+
+/// The line `shakeflow run` prints: "overturned in 2 of 12 records (FB-5, FB-6)"
+fn summary_line(dir: &Path) -> anyhow::Result<String> {
+    let events = summary::read(dir, "events")?;
+    let (records, kinds) = (events.record_labels()?, summary::texts(&events.frame, "event")?);
+    let overturned = summary::flags(&events.frame, "overturned")?;
+    let summaries: Vec<usize> = (0..kinds.len()).filter(|&i| kinds[i] == "summary").collect();
+    let which: Vec<String> = summaries.iter().filter(|&&i| overturned[i]).map(|&i| records[i].clone()).collect();
+    let mut line = format!("overturned in {} of {} records", which.len(), summaries.len());
+    if !which.is_empty() {
+        line += &format!(" ({})", summary::some_of(&which, 6));
+    }
+    Ok(line)
 }

@@ -2,6 +2,7 @@
 //! intensities, every run simulated (in parallel), and a lognormal fragility curve fitted to
 //! overturn / no overturn by maximum likelihood.
 
+use std::path::Path;
 use std::sync::Arc;
 use std::sync::LazyLock;
 
@@ -11,6 +12,7 @@ use super::simulate_toppling::{model_from_params, simulate_record, RockingParams
 use super::{partition_values, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::pipeline::params::{self, ParamError, Params};
 use crate::stats::fragility::{fit_lognormal, FitOutcome, LognormalFit};
+use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct TopplingFragility;
@@ -62,6 +64,10 @@ impl Stage for TopplingFragility {
     /// `horizontal` and `vertical` must be columns of the floor records.
     fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {
         (None, super::simulate_toppling::floor_column_errors(params, input))
+    }
+
+    fn summary(&self, stage_dir: &Path) -> Option<String> {
+        summary_line(stage_dir).ok()
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
@@ -348,4 +354,30 @@ fn figure(
         spans: Vec::new(),
     }];
     render_png(title, &panels, 1000, 600)
+}
+
+/// The line `shakeflow run` prints: "3/10 records overturned at some level (41/240 runs); median 0.58 g, β 0.50"
+fn summary_line(dir: &Path) -> anyhow::Result<String> {
+    let runs = summary::read(dir, "runs")?.frame;
+    let fit = summary::read(dir, "fragility")?.frame;
+    let (records, overturned) = (summary::texts(&runs, "record")?, summary::flags(&runs, "overturned")?);
+    let all: std::collections::BTreeSet<&String> = records.iter().collect();
+    let toppled: std::collections::BTreeSet<&String> =
+        records.iter().zip(&overturned).filter(|(_, &o)| o).map(|(r, _)| r).collect();
+    let mut line = format!(
+        "{}/{} records overturned at some level ({}/{} runs)",
+        toppled.len(),
+        all.len(),
+        overturned.iter().filter(|&&o| o).count(),
+        overturned.len()
+    );
+    let measure = summary::texts(&fit, "im_measure")?.pop().unwrap_or_default();
+    match (summary::floats(&fit, "median")?.pop().flatten(), summary::floats(&fit, "beta")?.pop().flatten()) {
+        (Some(median), Some(beta)) if measure == "pfa" => {
+            line += &format!("; median {:.2} g ({median:.3} m/s^2), β {beta:.2}", median / summary::G)
+        }
+        (Some(median), Some(beta)) => line += &format!("; median {median:.3} m/s, β {beta:.2}"),
+        _ => line += &format!("; no curve: {}", summary::texts(&fit, "note")?.pop().unwrap_or_default()),
+    }
+    Ok(line)
 }
