@@ -252,12 +252,15 @@ mod tests {
         assert_eq!(by("scale").default, Some("-1.5"));
         assert_eq!(by("B1_m").description, "a trapezoid's base");
         assert_eq!(by("mcap").default, Some("false"));
-        // What the engine normalises reads back into the struct exactly.
-        let params =
-            normalize(specs, "example", [("columns", json!("a")), ("theta_zero", json!("first_frame"))]).unwrap();
+        // What the engine normalises reads back into the struct exactly, through nested flattening.
+        let given = [("columns", json!("a")), ("theta_zero", json!("first_frame")), ("B1_m", json!(0.4))];
+        let params = normalize(specs, "example", given).unwrap();
         check_typed::<Example>(&params).unwrap();
         let typed: Example = crate::pipeline::params::typed(&params).unwrap();
-        assert_eq!((typed.order, typed.theta_zero, typed.inner.b1_m, typed.scale), (3, Zero::FirstFrame, None, -1.5));
+        assert_eq!((typed.order, typed.theta_zero, typed.scale), (3, Zero::FirstFrame, -1.5));
+        assert_eq!((typed.middle.x, typed.middle.inner.b1_m), (1.0, Some(0.4)));
+        // A key the declaration lacks is the engine's to refuse, before the struct is read.
+        assert!(normalize(specs, "example", [("B_1m", json!(1))]).unwrap_err().hint.contains("did you mean `B1_m`"));
         assert!(!typed.mcap.mcap && typed.steer0_deg.is_none() && typed.preset.is_none() && typed.columns == ["a"]);
     }
 }
