@@ -319,7 +319,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
             // One line of results per stage that has one (fragility, detections, verdicts, …).
             for (name, stage) in &plan.stages {
                 let dir = plan.stage_dir(name);
-                if let Some(line) = crate::summary::stage_line(&dir, stage.stage.info().name) {
+                if let Some(line) = stage.stage.summary(&dir) {
                     reporter.line(&format!("  {name}: {line}"));
                 }
             }

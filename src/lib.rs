@@ -6,6 +6,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod cli;
+pub mod declare;
 pub mod demo;
 pub mod diagnose;
 pub mod error;

@@ -10,6 +10,7 @@ use crate::diagnose::{Case, Observed};
 use crate::error::UserError;
 use crate::io::equipment::{
     declared_model, parse_rocking_equipment, parse_rolling_equipment, read_equipment_text, uncertainty_key_position,
+    ShapeChoice,
 };
 use crate::io::records::{read_delimited, DelimitedOptions};
 use crate::physics::rocking::{Block, Shape};
@@ -87,24 +88,20 @@ pub fn read_case(dir: &Path) -> Result<Case, UserError> {
         value
             .ok_or_else(|| UserError::new(format!("the equipment file does not give `{key}`")).in_file(&equipment_path))
     };
-    let shape = match equipment.shape.as_deref().unwrap_or("rectangular") {
-        "rectangular" => Shape::Rectangular {
-            b_m: number(equipment.b_m, "B_m")?,
-            h_m: number(equipment.h_m, "H_m")?,
-            f: equipment.f.unwrap_or(0.0),
+    let geometry = &equipment.geometry;
+    let shape = match geometry.shape.unwrap_or(ShapeChoice::Rectangular) {
+        ShapeChoice::Rectangular => Shape::Rectangular {
+            b_m: number(geometry.b_m, "B_m")?,
+            h_m: number(geometry.h_m, "H_m")?,
+            f: geometry.f.unwrap_or(0.0),
         },
-        "trapezoidal" => Shape::Trapezoidal {
-            b1_m: number(equipment.b1_m, "B1_m")?,
-            b2_m: number(equipment.b2_m, "B2_m")?,
-            h_m: number(equipment.h_m, "H_m")?,
+        ShapeChoice::Trapezoidal => Shape::Trapezoidal {
+            b1_m: number(geometry.b1_m, "B1_m")?,
+            b2_m: number(geometry.b2_m, "B2_m")?,
+            h_m: number(geometry.h_m, "H_m")?,
         },
-        other => {
-            return Err(UserError::new(format!("unknown shape `{other}`"))
-                .in_file(&equipment_path)
-                .hint("shape is rectangular or trapezoidal"))
-        }
     };
-    let block = Block::new(shape, equipment.mass_kg.unwrap_or(1.0), equipment.g_mps2.unwrap_or(crate::units::G0))
+    let block = Block::new(shape, geometry.mass_kg.unwrap_or(1.0), geometry.g_mps2.unwrap_or(crate::units::G0))
         .map_err(|e| UserError::new(format!("invalid unit: {e}")).in_file(&equipment_path))?;
     let floor_path = dir.join(FLOOR);
     let floor = columns(&floor_path, &["time_s", "ax_mps2", "az_mps2"], true)?.expect("required");
@@ -138,7 +135,7 @@ pub fn read_case(dir: &Path) -> Result<Case, UserError> {
         ))
         .hint(LAYOUT_HINT));
     }
-    let sensors = equipment.sensors.as_ref();
+    let sensors = equipment.about.sensors.as_ref();
     let mut case = Case {
         name: dir.file_name().map_or_else(|| dir.display().to_string(), |n| n.to_string_lossy().into_owned()),
         block,
@@ -153,7 +150,7 @@ pub fn read_case(dir: &Path) -> Result<Case, UserError> {
         camera_noise_rad: sensor_number(sensors, "camera", "noise_sd_rad").unwrap_or(DEFAULT_CAMERA_NOISE_RAD),
         uncertain: Vec::new(),
     };
-    case.uncertain = uncertain(&case, equipment.uncertainty.as_ref(), &equipment_path, &text)?;
+    case.uncertain = uncertain(&case, equipment.about.uncertainty.as_ref(), &equipment_path, &text)?;
     Ok(case)
 }
 

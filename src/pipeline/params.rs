@@ -9,49 +9,8 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 use serde_json::{Map, Value};
 
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum ParamKind {
-    Float,
-    Int,
-    Bool,
-    Str,
-    Choice(&'static [&'static str]),
-    /// A list of names (e.g. columns); empty means "all".
-    StrList,
-    /// A list of numbers (e.g. scale factors), of exactly this many when given.
-    FloatList(Option<usize>),
-    /// A file path, relative to the pipeline file; the file's content is part of the cache key,
-    /// so editing the file reruns the stage.
-    Path,
-}
-
-impl ParamKind {
-    pub fn describe(&self) -> String {
-        match self {
-            ParamKind::Float => "number".into(),
-            ParamKind::Int => "integer".into(),
-            ParamKind::Bool => "true|false".into(),
-            ParamKind::Str => "text".into(),
-            ParamKind::Choice(options) => options.join("|"),
-            ParamKind::StrList => "list of names".into(),
-            ParamKind::FloatList(Some(n)) => format!("list of {n} numbers"),
-            ParamKind::FloatList(None) => "list of numbers".into(),
-            ParamKind::Path => "file path (relative to the pipeline file)".into(),
-        }
-    }
-}
-
-#[derive(Debug, Clone, Copy)]
-pub struct ParamSpec {
-    pub name: &'static str,
-    pub kind: ParamKind,
-    /// JSON literal of the default; `None` makes the parameter required.
-    pub default: Option<&'static str>,
-    pub unit: &'static str,
-    pub description: &'static str,
-    /// Inclusive numeric bounds, checked on Float and Int.
-    pub range: Option<(f64, f64)>,
-}
+// Declared beside the stage's parameter struct (`crate::declare`), which io's equipment files use too.
+pub use crate::declare::{ParamKind, ParamSpec};
 
 pub type Params = Map<String, Value>;
 

@@ -155,6 +155,13 @@ pub trait Stage: Sync + Send {
     fn output_columns(&self, _params: &Params, _input: Option<&[String]>) -> ColumnCheck {
         (None, Vec::new())
     }
+
+    /// The stage's results in one line, read from its committed output folder `stage_dir`
+    /// (`shakeflow run` prints it after the run); None: nothing to say in one line, or its
+    /// outputs cannot be read.
+    fn summary(&self, _stage_dir: &Path) -> Option<String> {
+        None
+    }
 }
 
 /// A stage's output columns (None: not known) and the parameters naming columns its input lacks.

@@ -2,28 +2,31 @@
 //! from each channel, keeping peaks (no filtering). Fitted coefficients go into the metadata.
 
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use std::sync::LazyLock;
+
+use super::{Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::io::records::printable;
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::signal::baseline::PolynomialBasis;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct Baseline;
 
-/// The parameters `INFO` declares, typed.
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct BaselineParams {
-    pub order: usize,
-    pub columns: Vec<String>,
-    /// Read by the engine's sink.
-    pub mcap: bool,
+crate::stage_params! {
+    /// The parameters of `baseline`.
+    pub struct BaselineParams {
+        /// polynomial order (3: the study's cubic; 1: linear detrend; 0: mean)
+        pub order: usize [default = 3, range = (0.0, 9.0)],
+        /// channels to correct; empty: every float column except time_s
+        pub columns: Vec<String> [default = []],
+        #[flatten]
+        pub mcap: super::Mcap,
+    }
 }
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| StageInfo {
     name: "baseline",
     version: 5,
     summary: "Remove a least-squares polynomial trend (default cubic) from each channel; no filtering, peaks kept.",
@@ -33,26 +36,8 @@ static INFO: StageInfo = StageInfo {
         description: "the input tables with each selected channel baseline-corrected",
         kind: OutputKind::TimeSeries,
     }],
-    params: &[
-        ParamSpec {
-            name: "order",
-            kind: ParamKind::Int,
-            default: Some("3"),
-            unit: "",
-            description: "polynomial order (3: the study's cubic; 1: linear detrend; 0: mean)",
-            range: Some((0.0, 9.0)),
-        },
-        ParamSpec {
-            name: "columns",
-            kind: ParamKind::StrList,
-            default: Some("[]"),
-            unit: "",
-            description: "channels to correct; empty: every float column except time_s",
-            range: None,
-        },
-        super::MCAP_PARAM,
-    ],
-};
+    params: BaselineParams::specs(),
+});
 
 impl Stage for Baseline {
     fn info(&self) -> &'static StageInfo {

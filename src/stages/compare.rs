@@ -3,25 +3,28 @@
 //! units are reconciled through the columns' `unit` metadata, and the RMS and largest errors are
 //! reported per column pair, with a PNG overlay.
 
-use serde::{Deserialize, Serialize};
+use std::sync::LazyLock;
 
-use super::{partition_path, split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{partition_path, split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct Compare;
 
-/// The parameters `INFO` declares, typed.
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct CompareParams {
-    pub pairs: Vec<String>,
-    pub relative: bool,
+crate::stage_params! {
+    /// The parameters of `compare`.
+    pub struct CompareParams {
+        /// `measured_column -> reference_column` pairs; the first input is measured, the second the reference
+        pub pairs: Vec<String> [],
+        /// compare changes from the first sample where both are known (for displacements measured from a start)
+        pub relative: bool [default = false],
+    }
 }
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "compare",
     version: 2,
     summary: "Errors of measured time series against a reference (interpolated onto the measured times, units reconciled): RMS and largest error per column pair, and a PNG overlay.",
@@ -30,11 +33,9 @@ static INFO: StageInfo = StageInfo {
         OutputInfo { name: "errors", description: "per pair: measured, reference, unit, samples, missing, rms_error, max_abs_error, reference_rms", kind: OutputKind::Table },
         OutputInfo { name: "figures", description: "<partition or compare>.png: measured over reference, and their difference", kind: OutputKind::Files },
     ],
-    params: &[
-        ParamSpec { name: "pairs", kind: ParamKind::StrList, default: None, unit: "", description: "`measured_column -> reference_column` pairs; the first input is measured, the second the reference", range: None },
-        ParamSpec { name: "relative", kind: ParamKind::Bool, default: Some("false"), unit: "", description: "compare changes from the first sample where both are known (for displacements measured from a start)", range: None },
-    ],
-};
+    params: CompareParams::specs(),
+}
+});
 
 impl Stage for Compare {
     fn info(&self) -> &'static StageInfo {

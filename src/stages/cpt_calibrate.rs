@@ -4,13 +4,13 @@
 //! control points whose residual stands out.
 
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 use serde_json::json;
+use std::sync::LazyLock;
 
-use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{partition_path, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::control_points::read_control_points;
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::pipeline::spec::RecordFormat;
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
@@ -18,33 +18,31 @@ use crate::vision::calibrate::{calibrate, expected_rms_px, Calibration, Calibrat
 
 pub struct CptCalibrate;
 
-/// The parameters `INFO` declares, typed.
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct CptCalibrateParams {
-    pub distortion: DistortionChoice,
-    pub skew: Skew,
-    pub outlier_sigma: f64,
+crate::stage_params! {
+    /// The parameters of `cpt_calibrate`.
+    pub struct CptCalibrateParams {
+        /// radial lens distortion to fit (none: the study's pinhole P)
+        pub distortion: DistortionChoice [default = "none"],
+        /// zero: no skew (OpenCV's model; one parameter fewer, noticeably more accurate with few points); free: the
+        /// study's 11-parameter P
+        pub skew: Skew [default = "zero"],
+        /// flag points whose leave-one-out prediction error exceeds this many robust noise sigmas (and 0.5 px)
+        pub outlier_sigma: f64 [default = 3.5, range = (1.0, 100.0)],
+    }
 }
 
-/// `distortion`: the radial terms fitted.
-#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum DistortionChoice {
-    None,
-    K1,
-    K1k2,
+crate::choice! {
+    /// `distortion`: the radial terms fitted.
+    pub enum DistortionChoice { None = "none", K1 = "k1", K1k2 = "k1k2" }
 }
 
-/// `skew`: the study's free skew, or none.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Skew {
-    Free,
-    Zero,
+crate::choice! {
+    /// `skew`: the study's free skew, or none.
+    pub enum Skew { Free = "free", Zero = "zero" }
 }
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "cpt_calibrate",
     version: 2,
     summary: "Camera calibration from control points (X_mm, Y_mm, Z_mm, u_px, v_px; ≥ 8, not coplanar): normalised DLT, Levenberg–Marquardt on the reprojection error, optional radial distortion k1 (k2).",
@@ -54,12 +52,9 @@ static INFO: StageInfo = StageInfo {
         OutputInfo { name: "residuals", description: "per control point: u_res_px, v_res_px, dist_px, loo_dist_px (its distance when fitted without it), outlier", kind: OutputKind::Table },
         OutputInfo { name: "figures", description: "calibration.png: control points with magnified residuals, and residual per point", kind: OutputKind::Files },
     ],
-    params: &[
-        ParamSpec { name: "distortion", kind: ParamKind::Choice(&["none", "k1", "k1k2"]), default: Some("\"none\""), unit: "", description: "radial lens distortion to fit (none: the study's pinhole P)", range: None },
-        ParamSpec { name: "skew", kind: ParamKind::Choice(&["free", "zero"]), default: Some("\"zero\""), unit: "", description: "zero: no skew (OpenCV's model; one parameter fewer, noticeably more accurate with few points); free: the study's 11-parameter P", range: None },
-        ParamSpec { name: "outlier_sigma", kind: ParamKind::Float, default: Some("3.5"), unit: "", description: "flag points whose leave-one-out prediction error exceeds this many robust noise sigmas (and 0.5 px)", range: Some((1.0, 100.0)) },
-    ],
-};
+    params: CptCalibrateParams::specs(),
+}
+});
 
 impl Stage for CptCalibrate {
     fn info(&self) -> &'static StageInfo {

@@ -3,15 +3,15 @@
 //! rocking angle θ (rocking units), ready for the diagnosis (`time_s`, `theta_rad`).
 
 use std::sync::Arc;
+use std::sync::LazyLock;
 
 use std::collections::BTreeMap;
 
-use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{partition_path, Declared, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
 use crate::vision::camera::Camera;
@@ -20,27 +20,32 @@ use crate::vision::project::{backproject, pair_motion, Plane};
 
 pub struct CptProject;
 
-/// The parameters `INFO` declares, typed.
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct CptProjectParams {
-    /// `a,b,c,d`, read by `parse_plane`.
-    pub plane: String,
-    pub points: Vec<String>,
-    pub unit_motion: UnitMotion,
-    pub theta_zero: ThetaZero,
-    pub min_ray_angle_deg: f64,
-    /// Read by the engine's sink.
-    pub mcap: bool,
+crate::stage_params! {
+    /// The parameters of `cpt_project`.
+    pub struct CptProjectParams {
+        // `a,b,c,d`, read by `parse_plane`.
+        /// the plane the points move in, `a,b,c,d` for aX + bY + cZ + d = 0 (Eq. 3, world mm); its normal (a, b, c)
+        /// orients rotations (right-handed)
+        pub plane: String [unit = "mm"],
+        /// tracked points on this plane (default: all M… points); for unit_motion, the first two give the unit's
+        /// segment
+        pub points: Vec<String> [default = []],
+        /// rolling: midpoint translation and yaw about the plane normal; rocking: θ about the plane normal (top
+        /// toward +X positive for a +Y normal) and midpoint translation
+        pub unit_motion: UnitMotion [default = "none"],
+        /// rocking: θ from the first frame's pose, or from upright (the two points one above the other, the first
+        /// lower)
+        pub theta_zero: ThetaZero [default = "first_frame"],
+        /// refuse pixels whose camera ray meets the plane at a smaller angle
+        pub min_ray_angle_deg: f64 [default = 2.0, unit = "deg", range = (0.0, 90.0)],
+        #[flatten]
+        pub mcap: super::Mcap,
+    }
 }
 
-/// `unit_motion`: what the first two points' motion is made into.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum UnitMotion {
-    None,
-    Rolling,
-    Rocking,
+crate::choice! {
+    /// `unit_motion`: what the first two points' motion is made into.
+    pub enum UnitMotion { None = "none", Rolling = "rolling", Rocking = "rocking" }
 }
 
 impl std::fmt::Display for UnitMotion {
@@ -49,15 +54,13 @@ impl std::fmt::Display for UnitMotion {
     }
 }
 
-/// `theta_zero`: where a rocking unit's θ is measured from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ThetaZero {
-    FirstFrame,
-    Upright,
+crate::choice! {
+    /// `theta_zero`: where a rocking unit's θ is measured from.
+    pub enum ThetaZero { FirstFrame = "first_frame", Upright = "upright" }
 }
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "cpt_project",
     version: 2,
     summary: "Back-project tracked pixels onto a plane aX + bY + cZ + d = 0 (Eq. 4) with a cpt_calibrate camera; for two points on one unit, its translation and in-plane rotation (rolling) or rocking angle θ (rocking).",
@@ -67,15 +70,9 @@ static INFO: StageInfo = StageInfo {
         OutputInfo { name: "motion", description: "rolling: time_s, dx_mm, dy_mm, dz_mm, yaw_rad; rocking: time_s, theta_rad, dx_mm, dy_mm, dz_mm (empty when unit_motion is none)", kind: OutputKind::TimeSeries },
         OutputInfo { name: "figures", description: "motion.png: the unit's recovered motion", kind: OutputKind::Files },
     ],
-    params: &[
-        ParamSpec { name: "plane", kind: ParamKind::Str, default: None, unit: "mm", description: "the plane the points move in, `a,b,c,d` for aX + bY + cZ + d = 0 (Eq. 3, world mm); its normal (a, b, c) orients rotations (right-handed)", range: None },
-        ParamSpec { name: "points", kind: ParamKind::StrList, default: Some("[]"), unit: "", description: "tracked points on this plane (default: all M… points); for unit_motion, the first two give the unit's segment", range: None },
-        ParamSpec { name: "unit_motion", kind: ParamKind::Choice(&["none", "rolling", "rocking"]), default: Some("\"none\""), unit: "", description: "rolling: midpoint translation and yaw about the plane normal; rocking: θ about the plane normal (top toward +X positive for a +Y normal) and midpoint translation", range: None },
-        ParamSpec { name: "theta_zero", kind: ParamKind::Choice(&["first_frame", "upright"]), default: Some("\"first_frame\""), unit: "", description: "rocking: θ from the first frame's pose, or from upright (the two points one above the other, the first lower)", range: None },
-        ParamSpec { name: "min_ray_angle_deg", kind: ParamKind::Float, default: Some("2.0"), unit: "deg", description: "refuse pixels whose camera ray meets the plane at a smaller angle", range: Some((0.0, 90.0)) },
-        super::MCAP_PARAM,
-    ],
-};
+    params: CptProjectParams::specs(),
+}
+});
 
 impl Stage for CptProject {
     fn info(&self) -> &'static StageInfo {

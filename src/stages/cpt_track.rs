@@ -3,13 +3,13 @@
 //! template, sub-pixel refinement, template refresh only when the score drops, lost points
 //! reported as NaN with a status, optional camera-shake correction from stationary points.
 
-use serde::{Deserialize, Serialize};
 use serde_json::json;
+use std::sync::LazyLock;
 
-use super::{partition_path, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{partition_path, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::frames::FrameReader;
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::pipeline::spec::RecordFormat;
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
@@ -18,45 +18,58 @@ use crate::vision::track::{NamedPoint, SequenceTracker, Status, TemplatePolicy, 
 
 pub struct CptTrack;
 
-/// The parameters `INFO` declares, typed.
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct CptTrackParams {
-    /// `u,v;u,v` or `M1=u,v;…`, read by `parse_points`.
-    pub points: String,
-    pub reference_points: String,
-    pub fps: Option<f64>,
-    pub window_px: usize,
-    pub search_px: usize,
-    pub score: ScoreChoice,
-    pub template: TemplateChoice,
-    pub subpixel: bool,
-    pub refresh_below: f64,
-    pub lost_below: f64,
-    pub max_jump_px: f64,
-    pub occluded_above: f64,
-    pub min_contrast: f64,
-    /// Read by the engine's sink.
-    pub mcap: bool,
+crate::stage_params! {
+    /// The parameters of `cpt_track`.
+    pub struct CptTrackParams {
+        // `u,v;u,v` or `M1=u,v;…`, read by `parse_points`.
+        /// start points in the first frame, `u,v;u,v` or `M1=u,v;M2=u,v` (u right, v down; unnamed points are M1, M2,
+        /// …)
+        pub points: String [unit = "px"],
+        /// stationary points (R1, R2, … unless named) whose mean apparent motion (camera shake) is subtracted from
+        /// the points
+        pub reference_points: String [default = "", unit = "px"],
+        /// frame rate: required for a frames folder; for a video, overrides the container's presentation times
+        pub fps: Option<f64> [default = null, unit = "Hz", range = (1e-6, 1e7)],
+        /// side of the square template (the study's m)
+        pub window_px: usize [default = 20, unit = "px", range = (5.0, 200.0)],
+        /// side of the square search region around the predicted position
+        pub search_px: usize [default = 60, unit = "px", range = (7.0, 1000.0)],
+        /// zncc: zero-mean normalised cross-correlation (ignores lighting gain and offset); ssd: the study's sum of
+        /// squared differences
+        pub score: ScoreChoice [default = "zncc"],
+        /// reference: match the first frame's template, refresh only when the score drops; every_frame: the study's
+        /// re-cut each frame (drifts)
+        pub template: TemplateChoice [default = "reference"],
+        /// sub-pixel positions (quadratic peak + ECC refinement); false: whole pixels, as the study
+        pub subpixel: bool [default = true],
+        /// ZNCC below which the template is refreshed (and a lost point must reach to be re-acquired)
+        pub refresh_below: f64 [default = 0.8, range = (-1.0, 1.0)],
+        /// ZNCC below which a point is lost
+        pub lost_below: f64 [default = 0.5, range = (-1.0, 1.0)],
+        /// a match farther than this from the predicted position counts as lost
+        pub max_jump_px: f64 [default = 15.0, unit = "px", range = (0.0, 1e6)],
+        /// a point counts as lost (occluded) when the match's residual energy around it (the central half of the
+        /// window) exceeds this multiple of the template's signal energy there
+        pub occluded_above: f64 [default = 0.7, range = (0.0, 1e6)],
+        /// warn when a template's standard deviation is below this
+        pub min_contrast: f64 [default = 8.0, unit = "grey levels", range = (0.0, 255.0)],
+        #[flatten]
+        pub mcap: super::Mcap,
+    }
 }
 
-/// `score`: the matching criterion.
-#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum ScoreChoice {
-    Zncc,
-    Ssd,
+crate::choice! {
+    /// `score`: the matching criterion.
+    pub enum ScoreChoice { Zncc = "zncc", Ssd = "ssd" }
 }
 
-/// `template`: which template a point is matched against.
-#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum TemplateChoice {
-    Reference,
-    EveryFrame,
+crate::choice! {
+    /// `template`: which template a point is matched against.
+    pub enum TemplateChoice { Reference = "reference", EveryFrame = "every_frame" }
 }
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "cpt_track",
     version: 3,
     summary: "Track points through an image sequence (PNG/JPEG folder, or a video through ffmpeg): ZNCC or SSD template matching against a reference template, sub-pixel, lost points flagged, optional camera-shake correction.",
@@ -65,23 +78,9 @@ static INFO: StageInfo = StageInfo {
         OutputInfo { name: "tracks", description: "per frame and point: frame, time_s, point, u_px, v_px, score, status (NaN positions when lost)", kind: OutputKind::TimeSeries },
         OutputInfo { name: "figures", description: "tracks.png: u, v and score of every point over time", kind: OutputKind::Files },
     ],
-    params: &[
-        ParamSpec { name: "points", kind: ParamKind::Str, default: None, unit: "px", description: "start points in the first frame, `u,v;u,v` or `M1=u,v;M2=u,v` (u right, v down; unnamed points are M1, M2, …)", range: None },
-        ParamSpec { name: "reference_points", kind: ParamKind::Str, default: Some("\"\""), unit: "px", description: "stationary points (R1, R2, … unless named) whose mean apparent motion (camera shake) is subtracted from the points", range: None },
-        ParamSpec { name: "fps", kind: ParamKind::Float, default: Some("null"), unit: "Hz", description: "frame rate: required for a frames folder; for a video, overrides the container's presentation times", range: Some((1e-6, 1e7)) },
-        ParamSpec { name: "window_px", kind: ParamKind::Int, default: Some("20"), unit: "px", description: "side of the square template (the study's m)", range: Some((5.0, 200.0)) },
-        ParamSpec { name: "search_px", kind: ParamKind::Int, default: Some("60"), unit: "px", description: "side of the square search region around the predicted position", range: Some((7.0, 1000.0)) },
-        ParamSpec { name: "score", kind: ParamKind::Choice(&["zncc", "ssd"]), default: Some("\"zncc\""), unit: "", description: "zncc: zero-mean normalised cross-correlation (ignores lighting gain and offset); ssd: the study's sum of squared differences", range: None },
-        ParamSpec { name: "template", kind: ParamKind::Choice(&["reference", "every_frame"]), default: Some("\"reference\""), unit: "", description: "reference: match the first frame's template, refresh only when the score drops; every_frame: the study's re-cut each frame (drifts)", range: None },
-        ParamSpec { name: "subpixel", kind: ParamKind::Bool, default: Some("true"), unit: "", description: "sub-pixel positions (quadratic peak + ECC refinement); false: whole pixels, as the study", range: None },
-        ParamSpec { name: "refresh_below", kind: ParamKind::Float, default: Some("0.8"), unit: "", description: "ZNCC below which the template is refreshed (and a lost point must reach to be re-acquired)", range: Some((-1.0, 1.0)) },
-        ParamSpec { name: "lost_below", kind: ParamKind::Float, default: Some("0.5"), unit: "", description: "ZNCC below which a point is lost", range: Some((-1.0, 1.0)) },
-        ParamSpec { name: "max_jump_px", kind: ParamKind::Float, default: Some("15.0"), unit: "px", description: "a match farther than this from the predicted position counts as lost", range: Some((0.0, 1e6)) },
-        ParamSpec { name: "occluded_above", kind: ParamKind::Float, default: Some("0.7"), unit: "", description: "a point counts as lost (occluded) when the match's residual energy around it (the central half of the window) exceeds this multiple of the template's signal energy there", range: Some((0.0, 1e6)) },
-        ParamSpec { name: "min_contrast", kind: ParamKind::Float, default: Some("8.0"), unit: "grey levels", description: "warn when a template's standard deviation is below this", range: Some((0.0, 255.0)) },
-        super::MCAP_PARAM,
-    ],
-};
+    params: CptTrackParams::specs(),
+}
+});
 
 /// Frames decoded per batch: enough to keep every core decoding.
 const BATCH: usize = 16;

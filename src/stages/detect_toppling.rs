@@ -3,37 +3,40 @@
 //! confirmed by a lasting drop of the amplitude to about the floor's vertical level.
 
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
+use std::path::Path;
+use std::sync::LazyLock;
 
-use super::{split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use super::{split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::signal::toppling::{detect_toppling, detect_toppling_on, DetectOptions, TimeBase};
+use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct DetectToppling;
 
-/// The parameters `INFO` declares, typed.
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct DetectTopplingParams {
-    /// `top` or `top -> floor vertical`, read by `split_pair`.
-    pub channels: Vec<String>,
-    pub sta_lta_on: f64,
-    pub drop_ratio: f64,
+crate::stage_params! {
+    /// The parameters of `detect_toppling`.
+    pub struct DetectTopplingParams {
+        // `top` or `top -> floor vertical`, read by `split_pair`.
+        /// top accelerometer columns, each optionally `-> floor vertical column` for the cross-check
+        pub channels: Vec<String> [],
+        /// trigger level of sqrt(STA/LTA) on the signal's 5 ms difference
+        pub sta_lta_on: f64 [default = 8.0, range = (1.0, 1e6)],
+        /// post-impact RMS must stay below this fraction of the pre-impact RMS
+        pub drop_ratio: f64 [default = 0.35, range = (0.0, 1.0)],
+    }
 }
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "detect_toppling",
     version: 2,
     summary: "Toppling impacts from top accelerometers: STA/LTA spike confirmed by a lasting amplitude drop; optional floor-vertical cross-check.",
     inputs: InputKind::Datasets,
     outputs: &[OutputInfo { name: "events", description: "per channel: toppled, impact_time_s, peak_mps2, confidence, and why", kind: OutputKind::Table }],
-    params: &[
-        ParamSpec { name: "channels", kind: ParamKind::StrList, default: None, unit: "", description: "top accelerometer columns, each optionally `-> floor vertical column` for the cross-check", range: None },
-        ParamSpec { name: "sta_lta_on", kind: ParamKind::Float, default: Some("8.0"), unit: "", description: "trigger level of sqrt(STA/LTA) on the signal's 5 ms difference", range: Some((1.0, 1e6)) },
-        ParamSpec { name: "drop_ratio", kind: ParamKind::Float, default: Some("0.35"), unit: "", description: "post-impact RMS must stay below this fraction of the pre-impact RMS", range: Some((0.0, 1.0)) },
-    ],
-};
+    params: DetectTopplingParams::specs(),
+}
+});
 
 impl Stage for DetectToppling {
     fn info(&self) -> &'static StageInfo {
@@ -63,6 +66,10 @@ impl Stage for DetectToppling {
             );
         }
         (None, errors)
+    }
+
+    fn summary(&self, stage_dir: &Path) -> Option<String> {
+        summary_line(stage_dir).ok()
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
@@ -164,4 +171,20 @@ fn detect(table: &Table, channels: &[(String, Option<String>)], opts: &DetectOpt
         data: ColumnData::Str(why),
     });
     Ok(events)
+}
+
+/// The line `shakeflow run` prints: "toppled: 3 of 48 channel records (FB-4 ps2_top_ax, …)"
+fn summary_line(dir: &Path) -> anyhow::Result<String> {
+    let events = summary::read(dir, "events")?;
+    let (records, channels) = (events.record_labels()?, summary::texts(&events.frame, "channel")?);
+    let toppled = summary::flags(&events.frame, "toppled")?;
+    let which: Vec<String> = (0..toppled.len())
+        .filter(|&i| toppled[i])
+        .map(|i| if records[i].is_empty() { channels[i].clone() } else { format!("{} {}", records[i], channels[i]) })
+        .collect();
+    let mut line = format!("toppling detected in {} of {} channel records", which.len(), toppled.len());
+    if !which.is_empty() {
+        line += &format!(" ({})", summary::some_of(&which, 6));
+    }
+    Ok(line)
 }

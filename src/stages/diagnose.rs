@@ -71,6 +71,10 @@ impl Stage for Diagnose {
         params::check_typed::<DiagnoseParams>(params)
     }
 
+    fn summary(&self, stage_dir: &std::path::Path) -> Option<String> {
+        crate::summary::verdicts(stage_dir).ok()
+    }
+
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let settings = settings(ctx.params)?;
         let parts: Vec<_> = ctx.inputs.iter().flat_map(|i| i.parts()).collect();

@@ -3,12 +3,12 @@
 //! time-series tables, one per file, partitioned as the source's path template says.
 
 use std::collections::{BTreeMap, HashMap};
+use std::sync::LazyLock;
 
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use super::{InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
+use super::{Declared, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
 use crate::error::{did_you_mean_hint, UserError};
 use crate::io::records::{self, DelimitedOptions, RawRecord};
 use crate::pipeline::params::{self, ParamError, Params};
@@ -19,12 +19,13 @@ use crate::units;
 
 pub struct Load;
 
-/// `load` takes no parameters (a source's reading options live in its spec).
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct LoadParams {}
+crate::stage_params! {
+    /// `load` takes no parameters (a source's reading options live in its spec).
+    pub struct LoadParams {}
+}
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "load",
     version: 3,
     summary: "Read record files into SI time-series tables: checks sampling, gaps and point counts, converts units.",
@@ -46,8 +47,9 @@ static INFO: StageInfo = StageInfo {
             kind: OutputKind::Table,
         },
     ],
-    params: &[],
-};
+    params: LoadParams::specs(),
+}
+});
 
 impl Stage for Load {
     fn info(&self) -> &'static StageInfo {

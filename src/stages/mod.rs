@@ -5,8 +5,7 @@
 
 use std::collections::BTreeMap;
 
-use serde::{Deserialize, Serialize};
-
+pub use crate::declare::Declared;
 use crate::pipeline::params::{ParamError, ParamSpec};
 // The contract lives in the engine (`pipeline::stage`); stage files name it from here.
 pub use crate::pipeline::stage::{
@@ -43,13 +42,23 @@ pub const MCAP_PARAM: ParamSpec = ParamSpec {
     range: None,
 };
 
-/// `method` of the rocking stages and `integrator` of `simulate_rolling`: adaptive Dormand–Prince
-/// 5(4) or fixed-step RK4.
-#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Integrator {
-    Adaptive,
-    Rk4,
+/// The `mcap` switch of every stage with a time-series output (flattened into its parameters).
+#[derive(Debug, serde::Deserialize, serde::Serialize)]
+pub struct Mcap {
+    /// Read by the engine's sink.
+    pub mcap: bool,
+}
+
+impl Declared for Mcap {
+    fn declare(out: &mut Vec<ParamSpec>) {
+        out.push(MCAP_PARAM);
+    }
+}
+
+crate::choice! {
+    /// `method` of the rocking stages and `integrator` of `simulate_rolling`: adaptive
+    /// Dormand–Prince 5(4) or fixed-step RK4.
+    pub enum Integrator { Adaptive = "adaptive", Rk4 = "rk4" }
 }
 
 /// The file stem of a per-record figure: the partition path with `/` as `_` (`motion=FB-4`), or
@@ -143,39 +152,15 @@ mod tests {
         }
     }
 
-    /// Every stage type's parameter struct and its declaration agree (`params::check_typed`, as
-    /// the planner checks them): on the declared defaults (required parameters given a sample
-    /// value), on every option of every choice, and on a value for every parameter whose default
-    /// is null.
+    /// Every stage type's declared defaults (required parameters given a sample value) read into
+    /// its parameter struct: a default written as a value its field's type cannot take fails here.
     #[test]
-    fn every_stage_parameter_struct_agrees_with_its_declaration() {
+    fn every_stage_takes_its_own_defaults() {
         for stage in registry().0 {
             let info = stage.info();
-            let required: Vec<(&str, Value)> =
-                info.params.iter().filter(|p| p.default.is_none()).map(|p| (p.name, sample(p))).collect();
-            let mut cases = vec![required.clone()];
-            for spec in info.params {
-                let mut values: Vec<Value> = match spec.kind {
-                    ParamKind::Choice(options) => options.iter().map(|o| json!(o)).collect(),
-                    _ => Vec::new(),
-                };
-                if spec.default == Some("null") {
-                    values.push(sample(spec));
-                }
-                for value in values {
-                    let mut given: Vec<(&str, Value)> =
-                        required.iter().filter(|(k, _)| *k != spec.name).cloned().collect();
-                    given.push((spec.name, value));
-                    cases.push(given);
-                }
-            }
-            for given in cases {
-                let params = normalize(info.params, info.name, given.clone())
-                    .unwrap_or_else(|e| panic!("{}: {given:?}: {}", info.name, e.message));
-                if let Err(e) = stage.check_params(&params) {
-                    panic!("{}: {given:?}: {}", info.name, e.message);
-                }
-            }
+            let required = info.params.iter().filter(|p| p.default.is_none()).map(|p| (p.name, sample(p)));
+            let params = normalize(info.params, info.name, required).unwrap_or_else(|e| panic!("{}: {e}", info.name));
+            stage.check_params(&params).unwrap_or_else(|e| panic!("{}: {e}", info.name));
         }
     }
 
@@ -183,7 +168,7 @@ mod tests {
     /// whose struct and declaration drifted apart.
     struct Drifted;
 
-    #[derive(Deserialize, Serialize)]
+    #[derive(serde::Deserialize, serde::Serialize)]
     #[serde(deny_unknown_fields)]
     struct DriftedParams {
         order: usize,
@@ -256,5 +241,85 @@ mod tests {
             }
             assert!(readme.contains(&format!("`{}`", info.name)), "README.md does not name the stage `{}`", info.name);
         }
+    }
+}
+
+/// Each stage type's one line of results (`Stage::summary`), on outputs written as the stage writes them.
+#[cfg(test)]
+mod summary_tests {
+    use super::registry;
+    use std::path::Path;
+
+    fn stage_line(dir: &Path, stage_type: &str) -> Option<String> {
+        registry().find(stage_type).expect("a stage type").summary(dir)
+    }
+    use crate::table::{Column, ColumnData, Table};
+
+    /// One part of `<stage>/<output>` as a stage writes it (provenance, partition metadata).
+    fn part(dir: &Path, output: &str, partition: &str, columns: Vec<Column>) {
+        let mut t = Table::new();
+        t.extend(columns);
+        for (k, v) in [("shakeflow.stage", "s"), ("shakeflow.output", output), ("shakeflow.partition", partition)] {
+            t.metadata.insert(k.into(), v.into());
+        }
+        let folder = dir.join(output).join(partition);
+        std::fs::create_dir_all(&folder).unwrap();
+        crate::io::parquet::write_table(&folder.join("data.parquet"), &t).unwrap();
+    }
+
+    fn text(name: &str, v: &[&str]) -> Column {
+        Column {
+            name: name.into(),
+            unit: String::new(),
+            description: "d".into(),
+            data: ColumnData::Str(v.iter().map(|s| s.to_string()).collect()),
+        }
+    }
+
+    fn flag(name: &str, v: &[bool]) -> Column {
+        Column { name: name.into(), unit: String::new(), description: "d".into(), data: ColumnData::Bool(v.to_vec()) }
+    }
+
+    #[test]
+    fn detections_name_the_records_and_channels_that_toppled() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        part(dir.path(), "events", "motion=FB-4", vec![text("channel", &["a", "b"]), flag("toppled", &[true, false])]);
+        part(dir.path(), "events", "motion=FB-5", vec![text("channel", &["a", "b"]), flag("toppled", &[false, true])]);
+        assert_eq!(
+            stage_line(dir.path(), "detect_toppling").unwrap(),
+            "toppling detected in 2 of 4 channel records (FB-4 a, FB-5 b)"
+        );
+    }
+
+    #[test]
+    fn toppling_counts_the_summary_rows_only() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let kinds = ["uplift", "impact", "overturn", "summary"];
+        part(dir.path(), "events", "record=A", vec![text("event", &kinds), flag("overturned", &[true; 4])]);
+        part(dir.path(), "events", "record=B", vec![text("event", &["summary"]), flag("overturned", &[false])]);
+        assert_eq!(stage_line(dir.path(), "simulate_toppling").unwrap(), "overturned in 1 of 2 records (A)");
+    }
+
+    #[test]
+    fn verdicts_are_counted_and_rolling_peaks_named() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        part(dir.path(), "diagnosis", "", vec![text("verdict", &["sliding", "none", "sliding"])]);
+        assert_eq!(stage_line(dir.path(), "diagnose").unwrap(), "3 cases: none 1, sliding 2");
+        let events =
+            |kinds: &[&str], d: &[f64]| vec![text("event", kinds), Column::f64("displacement_m", "m", "d", d.to_vec())];
+        part(
+            dir.path(),
+            "events",
+            "motion=FB-1",
+            events(&["breakaway", "flip", "peak_displacement"], &[0.0, 0.1, 0.25]),
+        );
+        part(dir.path(), "events", "motion=FB-2", events(&["peak_displacement"], &[0.0]));
+        assert_eq!(
+            stage_line(dir.path(), "simulate_rolling").unwrap(),
+            "2 records: peak displacement 0.250 m (FB-1), started rolling in 1, 1 caster flips"
+        );
+        // Types without a line, and outputs that are not there, say nothing.
+        assert_eq!(stage_line(dir.path(), "baseline"), None);
+        assert_eq!(stage_line(&dir.path().join("absent"), "diagnose"), None);
     }
 }

@@ -11,33 +11,38 @@ mod html;
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
+use std::sync::LazyLock;
 
 use rayon::prelude::*;
 use serde::de::DeserializeOwned;
-use serde::{Deserialize, Serialize};
 
 use super::simulate_rolling::SimulateRollingParams;
 use super::simulate_toppling::{RockingParams, SimulateTopplingParams};
 use super::transfer_function::TransferFunctionParams;
 use super::{
-    figure_stem, partition_values, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo,
-    StageInput,
+    figure_stem, partition_values, Declared, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext,
+    StageInfo, StageInput,
 };
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::table::{Column, ColumnData, Table};
 
 pub struct Report;
 
-/// The parameters `INFO` declares, typed.
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct ReportParams {
-    pub unit_suffix: String,
-    pub figure_motion: String,
-    pub title: String,
+crate::stage_params! {
+    /// The parameters of `report`.
+    pub struct ReportParams {
+        /// channel suffix removed to name the unit (PS2_top_ax_mps2 → PS2)
+        pub unit_suffix: String [default = "_top_ax_mps2"],
+        /// motion whose time histories the figures show (with transfer_function.spectra and synchronize.records
+        /// inputs)
+        pub figure_motion: String [default = "FB-4"],
+        /// heading of index.html
+        pub title: String [default = "Study report"],
+    }
 }
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "report",
     version: 3,
     summary: "Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time, confidence); rolling units' peak displacement, yaw and caster flips per motion; the study report index.html.",
@@ -48,33 +53,9 @@ static INFO: StageInfo = StageInfo {
         OutputInfo { name: "figures", description: "<unit>.png: floor vs top acceleration in `figure_motion`, transfer functions in their band with the picked peaks, coherence", kind: OutputKind::Files },
         OutputInfo { name: "index.html", description: "the study report for a browser: summary, per unit its frequencies, toppling events, simulations, fragility, rolling results and figures, the diagnosis, provenance (figures linked relatively: open it where `run` wrote it)", kind: OutputKind::Page },
     ],
-    params: &[
-        ParamSpec {
-            name: "unit_suffix",
-            kind: ParamKind::Str,
-            default: Some("\"_top_ax_mps2\""),
-            unit: "",
-            description: "channel suffix removed to name the unit (PS2_top_ax_mps2 → PS2)",
-            range: None,
-        },
-        ParamSpec {
-            name: "figure_motion",
-            kind: ParamKind::Str,
-            default: Some("\"FB-4\""),
-            unit: "",
-            description: "motion whose time histories the figures show (with transfer_function.spectra and synchronize.records inputs)",
-            range: None,
-        },
-        ParamSpec {
-            name: "title",
-            kind: ParamKind::Str,
-            default: Some("\"Study report\""),
-            unit: "",
-            description: "heading of index.html",
-            range: None,
-        },
-    ],
-};
+    params: ReportParams::specs(),
+}
+});
 
 /// The inputs `report` reads, sorted by what they hold.
 #[derive(Default)]

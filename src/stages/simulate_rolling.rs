@@ -3,44 +3,69 @@
 //! Table 4 `preset`, then an `equipment` file of the same keys, then the stage's own values.
 
 use std::path::{Path, PathBuf};
+use std::sync::LazyLock;
 
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 use serde_json::{json, Map, Value};
 
-use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::physics::rolling::{
     self, simulate, Cart, EventKind, Excitation, Friction, FrictionLaw, LateralSlip, Method, Options, Response,
     Stribeck,
 };
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use crate::pipeline::params::{self, ParamError, ParamKind, Params};
+use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct SimulateRolling;
 
-/// The model keys (the first `MODEL_KEYS` specs), typed: what a preset, an equipment file or the
-/// stage's own values give, None where one does not.
-#[derive(Debug, Default, Clone, Deserialize, Serialize)]
-pub struct RollingModel {
-    pub length_m: Option<f64>,
-    pub width_m: Option<f64>,
-    pub platform_mass_kg: Option<f64>,
-    pub wheel_diameter_m: Option<f64>,
-    pub wheel_width_m: Option<f64>,
-    pub wheel_mass_kg: Option<f64>,
-    pub yaw0_deg: Option<f64>,
-    pub steer0_deg: Option<[f64; 4]>,
-    pub mu_s_roll: Option<f64>,
-    pub mu_s_swivel: Option<f64>,
-    pub mu_k_roll: Option<f64>,
-    pub mu_k_swivel: Option<f64>,
-    pub beta_spm: Option<f64>,
-    pub gamma_n: Option<f64>,
-    pub p: Option<f64>,
-    pub trail_m: Option<f64>,
-    pub swivel_arm_m: Option<f64>,
-    pub friction_eps: Option<f64>,
-    pub friction_eps_swivel: Option<f64>,
+crate::stage_params! {
+    /// The model keys, typed: what a preset, an equipment file or the stage's own values give, None
+    /// where one does not.
+    #[derive(Default, Clone)]
+    pub struct RollingModel {
+        /// platform length 2a (body x; caster pivots at its corners)
+        pub length_m: Option<f64> [default = null, unit = "m", range = (0.0, 100.0)],
+        /// platform width 2b (body y)
+        pub width_m: Option<f64> [default = null, unit = "m", range = (0.0, 100.0)],
+        /// platform mass m_p (centre of mass at the platform's centre)
+        pub platform_mass_kg: Option<f64> [default = null, unit = "kg", range = (0.0, 1e6)],
+        /// caster wheel diameter
+        pub wheel_diameter_m: Option<f64> [default = null, unit = "m", range = (0.0, 10.0)],
+        /// caster wheel width
+        pub wheel_width_m: Option<f64> [default = null, unit = "m", range = (0.0, 10.0)],
+        /// mass of one caster wheel
+        pub wheel_mass_kg: Option<f64> [default = null, unit = "kg", range = (0.0, 1e4)],
+        /// initial yaw θ of the platform's length axis from floor X (null: 0)
+        pub yaw0_deg: Option<f64> [default = null, unit = "deg", range = (-360.0, 360.0)],
+        /// initial steering angles δ from the length axis, wheels 1 (+a,+b) front left, 2 (−a,+b) rear left, 3
+        /// (−a,−b) rear right, 4 (+a,−b) front right; δ = 0 trails for motion toward +x (null: 0)
+        pub steer0_deg: Option<[f64; 4]> [default = null, unit = "deg", range = (-360.0, 360.0)],
+        /// static rolling friction coefficient μ_sφ (Eq. 13)
+        pub mu_s_roll: Option<f64> [default = null, range = (0.0, 10.0)],
+        /// static swivel friction coefficient μ_sδ (Eq. 14)
+        pub mu_s_swivel: Option<f64> [default = null, range = (0.0, 10.0)],
+        /// kinetic rolling friction coefficient μ_kφ
+        pub mu_k_roll: Option<f64> [default = null, range = (0.0, 10.0)],
+        /// kinetic swivel friction coefficient μ_kδ
+        pub mu_k_swivel: Option<f64> [default = null, range = (0.0, 10.0)],
+        /// Stribeck transition sharpness β (on sliding speeds)
+        pub beta_spm: Option<f64> [default = null, unit = "s/m", range = (0.0, 1e6)],
+        /// viscous friction term γ_n (for p = 1)
+        pub gamma_n: Option<f64> [default = null, unit = "s/m", range = (0.0, 1e6)],
+        /// velocity exponent of the viscous term (null: 1)
+        pub p: Option<f64> [default = null, range = (0.0, 10.0)],
+        /// caster trail d (the study gives none; null: 0.3 × wheel diameter, at least 5 mm; 0 needs lateral_slip)
+        pub trail_m: Option<f64> [default = null, unit = "m", range = (0.0, 10.0)],
+        /// lever arm ρ of the swivel friction torque μ_δ N ρ (null: 0.02, a swivel bearing's radius; 1 reproduces the
+        /// study's numbers literally)
+        pub swivel_arm_m: Option<f64> [default = null, unit = "m", range = (0.0, 10.0)],
+        /// ε of the rolling friction's regularised sign tanh(v/ε) (null: 1e-4)
+        pub friction_eps: Option<f64> [default = null, unit = "m/s", range = (0.0, 1.0)],
+        /// ε_sw of the swivel friction's regularised sign tanh(δ̇/ε_sw) (null: 1e-3, from a convergence study:
+        /// docs/models/rolling.md)
+        pub friction_eps_swivel: Option<f64> [default = null, unit = "rad/s", range = (0.0, 10.0)],
+    }
 }
 
 impl RollingModel {
@@ -70,197 +95,56 @@ impl RollingModel {
     }
 }
 
-/// The parameters `PARAMS` declares, typed (`report` reads `figure` from the events' provenance).
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct SimulateRollingParams {
-    #[serde(flatten)]
-    pub model: RollingModel,
-    /// A row of `rolling::PRESETS` (the table is the list, so it stays a name).
-    pub preset: Option<String>,
-    pub equipment: Option<PathBuf>,
-    pub unit: Option<String>,
-    pub x_channel: String,
-    pub y_channel: String,
-    pub friction_law: FrictionLawChoice,
-    pub lateral_slip: bool,
-    pub mu_lateral: f64,
-    pub lateral_eps: f64,
-    pub integrator: super::Integrator,
-    pub rtol: f64,
-    pub atol: f64,
-    pub rk4_dt_s: f64,
-    pub figure: bool,
-    /// Read by the engine's sink.
-    pub mcap: bool,
+crate::stage_params! {
+    /// The parameters of `simulate_rolling` (`report` reads `figure` from the events' provenance).
+    pub struct SimulateRollingParams {
+        #[flatten]
+        pub model: RollingModel,
+        // A row of `rolling::PRESETS` (the table is the list, so it stays a name).
+        /// Table 4 of the study: the model keys of the stretcher PS1, patient bed PB2, metal cart MC2 or ultrasound
+        /// imager UI3
+        pub preset: Option<String> [default = null, kind = ParamKind::Choice(rolling::PRESETS)],
+        /// YAML file of model keys (length_m … friction_eps_swivel), over the preset; the stage's own values win
+        pub equipment: Option<PathBuf> [default = null],
+        /// name of the unit in tables and figures (null: the preset, the equipment file's stem, or `cart`)
+        pub unit: Option<String> [default = null],
+        /// input column of the floor acceleration along X (E-W)
+        pub x_channel: String [default = "ax_mps2", unit = "m/s^2"],
+        /// input column of the floor acceleration along Y (N-S)
+        pub y_channel: String [default = "ay_mps2", unit = "m/s^2"],
+        /// regularised: tanh(v/ε) sign everywhere (resting becomes a creep); stick_slip: the cart rests exactly while
+        /// static friction holds it and breaks away exactly where it cannot
+        pub friction_law: FrictionLawChoice [default = "regularised"],
+        /// let the wheels slip sideways against a regularised Coulomb force (each caster heading becomes free; allows
+        /// trail_m = 0)
+        pub lateral_slip: bool [default = false],
+        /// sideways friction coefficient of the wheels (lateral_slip)
+        pub mu_lateral: f64 [default = 0.5, range = (0.0, 10.0)],
+        /// ε of the sideways friction tanh(v/ε) (lateral_slip; smaller is stiffer and slower)
+        pub lateral_eps: f64 [default = 0.001, unit = "m/s", range = (0.0, 1.0)],
+        /// adaptive: Dormand–Prince 5(4); rk4: classical RK4 at rk4_dt_s (the study's)
+        pub integrator: super::Integrator [default = "adaptive"],
+        /// relative tolerance of the adaptive integrator (1e-10: converged on the shared real records,
+        /// docs/convergence.md)
+        pub rtol: f64 [default = 1e-10, range = (1e-14, 1e-2)],
+        /// absolute tolerance on positions (m) and angles (rad); ten times it on velocities
+        pub atol: f64 [default = 1e-12, unit = "m", range = (1e-16, 1e-2)],
+        /// RK4 step (integrator: rk4)
+        pub rk4_dt_s: f64 [default = 1e-4, unit = "s", range = (1e-7, 1.0)],
+        /// draw a PNG per record like the study's Figure 11
+        pub figure: bool [default = true],
+        #[flatten]
+        pub mcap: super::Mcap,
+    }
 }
 
-/// `friction_law`.
-#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum FrictionLawChoice {
-    Regularised,
-    StickSlip,
+crate::choice! {
+    /// `friction_law`.
+    pub enum FrictionLawChoice { Regularised = "regularised", StickSlip = "stick_slip" }
 }
 
-/// The model's keys: what a preset or an equipment file may give (the first `MODEL_KEYS` specs).
-const MODEL_KEYS: usize = 19;
-const MAX_LENGTH_M: f64 = 100.0;
-
-const fn model_key(name: &'static str, unit: &'static str, description: &'static str, max: f64) -> ParamSpec {
-    ParamSpec { name, kind: ParamKind::Float, default: Some("null"), unit, description, range: Some((0.0, max)) }
-}
-
-static PARAMS: [ParamSpec; MODEL_KEYS + 15] = [
-    model_key("length_m", "m", "platform length 2a (body x; caster pivots at its corners)", MAX_LENGTH_M),
-    model_key("width_m", "m", "platform width 2b (body y)", MAX_LENGTH_M),
-    model_key("platform_mass_kg", "kg", "platform mass m_p (centre of mass at the platform's centre)", 1e6),
-    model_key("wheel_diameter_m", "m", "caster wheel diameter", 10.0),
-    model_key("wheel_width_m", "m", "caster wheel width", 10.0),
-    model_key("wheel_mass_kg", "kg", "mass of one caster wheel", 1e4),
-    ParamSpec {
-        name: "yaw0_deg",
-        kind: ParamKind::Float,
-        default: Some("null"),
-        unit: "deg",
-        description: "initial yaw θ of the platform's length axis from floor X (null: 0)",
-        range: Some((-360.0, 360.0)),
-    },
-    ParamSpec {
-        name: "steer0_deg",
-        kind: ParamKind::FloatList(Some(4)),
-        default: Some("null"),
-        unit: "deg",
-        description: "initial steering angles δ from the length axis, wheels 1 (+a,+b) front left, 2 (−a,+b) rear left, 3 (−a,−b) rear right, 4 (+a,−b) front right; δ = 0 trails for motion toward +x (null: 0)",
-        range: Some((-360.0, 360.0)),
-    },
-    model_key("mu_s_roll", "", "static rolling friction coefficient μ_sφ (Eq. 13)", 10.0),
-    model_key("mu_s_swivel", "", "static swivel friction coefficient μ_sδ (Eq. 14)", 10.0),
-    model_key("mu_k_roll", "", "kinetic rolling friction coefficient μ_kφ", 10.0),
-    model_key("mu_k_swivel", "", "kinetic swivel friction coefficient μ_kδ", 10.0),
-    model_key("beta_spm", "s/m", "Stribeck transition sharpness β (on sliding speeds)", 1e6),
-    model_key("gamma_n", "s/m", "viscous friction term γ_n (for p = 1)", 1e6),
-    model_key("p", "", "velocity exponent of the viscous term (null: 1)", 10.0),
-    model_key("trail_m", "m", "caster trail d (the study gives none; null: 0.3 × wheel diameter, at least 5 mm; 0 needs lateral_slip)", 10.0),
-    model_key("swivel_arm_m", "m", "lever arm ρ of the swivel friction torque μ_δ N ρ (null: 0.02, a swivel bearing's radius; 1 reproduces the study's numbers literally)", 10.0),
-    model_key("friction_eps", "m/s", "ε of the rolling friction's regularised sign tanh(v/ε) (null: 1e-4)", 1.0),
-    model_key("friction_eps_swivel", "rad/s", "ε_sw of the swivel friction's regularised sign tanh(δ̇/ε_sw) (null: 1e-3, from a convergence study: docs/models/rolling.md)", 10.0),
-    ParamSpec {
-        name: "preset",
-        kind: ParamKind::Choice(rolling::PRESETS),
-        default: Some("null"),
-        unit: "",
-        description: "Table 4 of the study: the model keys of the stretcher PS1, patient bed PB2, metal cart MC2 or ultrasound imager UI3",
-        range: None,
-    },
-    ParamSpec {
-        name: "equipment",
-        kind: ParamKind::Path,
-        default: Some("null"),
-        unit: "",
-        description: "YAML file of model keys (length_m … friction_eps_swivel), over the preset; the stage's own values win",
-        range: None,
-    },
-    ParamSpec {
-        name: "unit",
-        kind: ParamKind::Str,
-        default: Some("null"),
-        unit: "",
-        description: "name of the unit in tables and figures (null: the preset, the equipment file's stem, or `cart`)",
-        range: None,
-    },
-    ParamSpec {
-        name: "x_channel",
-        kind: ParamKind::Str,
-        default: Some("\"ax_mps2\""),
-        unit: "m/s^2",
-        description: "input column of the floor acceleration along X (E-W)",
-        range: None,
-    },
-    ParamSpec {
-        name: "y_channel",
-        kind: ParamKind::Str,
-        default: Some("\"ay_mps2\""),
-        unit: "m/s^2",
-        description: "input column of the floor acceleration along Y (N-S)",
-        range: None,
-    },
-    ParamSpec {
-        name: "friction_law",
-        kind: ParamKind::Choice(&["regularised", "stick_slip"]),
-        default: Some("\"regularised\""),
-        unit: "",
-        description: "regularised: tanh(v/ε) sign everywhere (resting becomes a creep); stick_slip: the cart rests exactly while static friction holds it and breaks away exactly where it cannot",
-        range: None,
-    },
-    ParamSpec {
-        name: "lateral_slip",
-        kind: ParamKind::Bool,
-        default: Some("false"),
-        unit: "",
-        description: "let the wheels slip sideways against a regularised Coulomb force (each caster heading becomes free; allows trail_m = 0)",
-        range: None,
-    },
-    ParamSpec {
-        name: "mu_lateral",
-        kind: ParamKind::Float,
-        default: Some("0.5"),
-        unit: "",
-        description: "sideways friction coefficient of the wheels (lateral_slip)",
-        range: Some((0.0, 10.0)),
-    },
-    ParamSpec {
-        name: "lateral_eps",
-        kind: ParamKind::Float,
-        default: Some("0.001"),
-        unit: "m/s",
-        description: "ε of the sideways friction tanh(v/ε) (lateral_slip; smaller is stiffer and slower)",
-        range: Some((0.0, 1.0)),
-    },
-    ParamSpec {
-        name: "integrator",
-        kind: ParamKind::Choice(&["adaptive", "rk4"]),
-        default: Some("\"adaptive\""),
-        unit: "",
-        description: "adaptive: Dormand–Prince 5(4); rk4: classical RK4 at rk4_dt_s (the study's)",
-        range: None,
-    },
-    ParamSpec {
-        name: "rtol",
-        kind: ParamKind::Float,
-        default: Some("1e-10"),
-        unit: "",
-        description: "relative tolerance of the adaptive integrator (1e-10: converged on the shared real records, docs/convergence.md)",
-        range: Some((1e-14, 1e-2)),
-    },
-    ParamSpec {
-        name: "atol",
-        kind: ParamKind::Float,
-        default: Some("1e-12"),
-        unit: "m",
-        description: "absolute tolerance on positions (m) and angles (rad); ten times it on velocities",
-        range: Some((1e-16, 1e-2)),
-    },
-    ParamSpec {
-        name: "rk4_dt_s",
-        kind: ParamKind::Float,
-        default: Some("1e-4"),
-        unit: "s",
-        description: "RK4 step (integrator: rk4)",
-        range: Some((1e-7, 1.0)),
-    },
-    ParamSpec {
-        name: "figure",
-        kind: ParamKind::Bool,
-        default: Some("true"),
-        unit: "",
-        description: "draw a PNG per record like the study's Figure 11",
-        range: None,
-    },
-    super::MCAP_PARAM,
-];
-
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "simulate_rolling",
     version: 3,
     summary: "Rolling, turning and pivot steering of equipment on four swivel casters under the two horizontal floor components (the study's 4WMC, made well posed).",
@@ -270,8 +154,9 @@ static INFO: StageInfo = StageInfo {
         OutputInfo { name: "events", description: "breakaway, rest and caster flip times, the peak displacement and the peak yaw: time_s, event, caster, displacement_m, yaw_rad, delta_rad", kind: OutputKind::Table },
         OutputInfo { name: "figures", description: "<partition>.png: floor inputs, x/y displacement, yaw with the four caster angles, and the x–y orbit (the study's Figure 11)", kind: OutputKind::Files },
     ],
-    params: &PARAMS,
-};
+    params: SimulateRollingParams::specs(),
+}
+});
 
 impl Stage for SimulateRolling {
     fn info(&self) -> &'static StageInfo {
@@ -288,6 +173,10 @@ impl Stage for SimulateRolling {
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
+    }
+
+    fn summary(&self, stage_dir: &Path) -> Option<String> {
+        summary_line(stage_dir).ok()
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
@@ -756,7 +645,7 @@ fn read_equipment(path: &Path) -> Result<RollingModel, ParamError> {
     let shown = normal.display();
     let hint = format!(
         "an equipment file holds model keys only: {}",
-        PARAMS[..MODEL_KEYS].iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+        RollingModel::specs().iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
     );
     let text = std::fs::read_to_string(path)
         .map_err(|e| refuse("equipment", format!("cannot read the equipment file `{shown}`: {e}"), hint.clone()))?;
@@ -779,7 +668,7 @@ fn read_equipment(path: &Path) -> Result<RollingModel, ParamError> {
         given.push((key.to_string(), params::yaml_to_json(value)));
     }
     let normalized =
-        params::normalize(&PARAMS[..MODEL_KEYS], "equipment file", given.iter().map(|(k, v)| (k.as_str(), v.clone())))
+        params::normalize(RollingModel::specs(), "equipment file", given.iter().map(|(k, v)| (k.as_str(), v.clone())))
             .map_err(|e| {
                 let at = e
                     .key
@@ -792,6 +681,39 @@ fn read_equipment(path: &Path) -> Result<RollingModel, ParamError> {
                 refuse("equipment", format!("equipment file `{shown}`{at}: {message}"), e.hint)
             })?;
     params::typed(&normalized)
+}
+
+/// The line `shakeflow run` prints: "10 records: peak displacement 0.412 m (FB-4), started rolling in 9, 14 caster flips"
+fn summary_line(dir: &Path) -> anyhow::Result<String> {
+    let events = summary::read(dir, "events")?;
+    let (records, kinds) = (events.record_labels()?, summary::texts(&events.frame, "event")?);
+    let displacement = summary::floats(&events.frame, "displacement_m")?;
+    let mut peak: Option<(f64, &str)> = None;
+    let mut rolled = std::collections::BTreeSet::new();
+    for ((kind, record), d) in kinds.iter().zip(&records).zip(&displacement) {
+        match kind.as_str() {
+            "peak_displacement" => {
+                if let Some(d) = d.filter(|d| peak.is_none_or(|(p, _)| *d > p)) {
+                    peak = Some((d, record));
+                }
+            }
+            "breakaway" => {
+                rolled.insert(record);
+            }
+            _ => {}
+        }
+    }
+    let all: std::collections::BTreeSet<&String> = records.iter().collect();
+    let flips = kinds.iter().filter(|k| *k == "flip").count();
+    let mut line = format!("{} records", all.len());
+    if let Some((d, record)) = peak {
+        line += &format!(": peak displacement {d:.3} m");
+        if !record.is_empty() {
+            line += &format!(" ({record})");
+        }
+    }
+    line += &format!(", started rolling in {}, {flips} caster flips", rolled.len());
+    Ok(line)
 }
 
 #[cfg(test)]
@@ -809,10 +731,10 @@ mod tests {
     /// An equipment file is read as `RollingModel`: its fields are exactly the model keys.
     #[test]
     fn the_model_struct_is_the_model_keys() {
-        let none = params::normalize(&PARAMS[..MODEL_KEYS], "equipment file", []).unwrap();
+        let none = params::normalize(RollingModel::specs(), "equipment file", []).unwrap();
         params::check_typed::<RollingModel>(&none).unwrap();
         let given = [("steer0_deg", json!([80, 0, 0, 80])), ("p", json!(2))];
-        let some = params::normalize(&PARAMS[..MODEL_KEYS], "equipment file", given).unwrap();
+        let some = params::normalize(RollingModel::specs(), "equipment file", given).unwrap();
         params::check_typed::<RollingModel>(&some).unwrap();
         assert_eq!(params::typed::<RollingModel>(&some).unwrap().steer0_deg, Some([80.0, 0.0, 0.0, 80.0]));
     }

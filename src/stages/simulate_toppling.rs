@@ -3,112 +3,83 @@
 //! and a figure per record.
 
 use std::path::{Path, PathBuf};
+use std::sync::LazyLock;
 
 use rayon::prelude::*;
-use serde::de::IntoDeserializer;
-use serde::{Deserialize, Serialize};
 
-use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
-use crate::io::equipment;
+use crate::io::equipment::{self, RockingGeometry, ShapeChoice};
 use crate::physics::rocking::{self, Anchorage, Block, Excitation, IsolatedBase, Method, Options, Response, Shape};
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use crate::pipeline::params::{self, ParamError, ParamKind, Params};
+use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct SimulateToppling;
 
-/// Parameters that describe the unit and the model, shared with `toppling_fragility`.
-macro_rules! rocking_params {
-    ($($extra:expr),* $(,)?) => {
-        &[
-            ParamSpec { name: "preset", kind: ParamKind::Choice(crate::physics::rocking::PRESETS), default: Some("null"), unit: "", description: "a unit of the study (Table 5 rectangles PS2, PB1 and their trapezoids; WSU1 from Table 2)", range: None },
-            ParamSpec { name: "equipment", kind: ParamKind::Path, default: Some("null"), unit: "", description: "a YAML file with shape, B_m, H_m, f, mass_kg (B1_m, B2_m), like the cases' equipment.yaml; overrides the preset", range: None },
-            ParamSpec { name: "shape", kind: ParamKind::Choice(&["rectangular", "trapezoidal"]), default: Some("null"), unit: "", description: "block shape; overrides preset and equipment file", range: None },
-            ParamSpec { name: "B_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "rectangle: base width B (in the shaking plane)", range: Some((1e-6, 1e3)) },
-            ParamSpec { name: "H_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "height H", range: Some((1e-6, 1e3)) },
-            ParamSpec { name: "f", kind: ParamKind::Float, default: Some("null"), unit: "", description: "rectangle: centre of mass above mid-height, as a fraction of H (Table 5's f)", range: Some((-0.5, 0.5)) },
-            ParamSpec { name: "B1_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "trapezoid: base (short side) B1", range: Some((1e-6, 1e3)) },
-            ParamSpec { name: "B2_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "trapezoid: top B2", range: Some((1e-6, 1e3)) },
-            ParamSpec { name: "mass_kg", kind: ParamKind::Float, default: Some("null"), unit: "kg", description: "mass (the rocking response does not depend on it; reported)", range: Some((1e-9, 1e9)) },
-            ParamSpec { name: "g_mps2", kind: ParamKind::Float, default: Some("null"), unit: "m/s^2", description: "gravity; null: the equipment file's g_mps2, else standard gravity 9.80665", range: Some((0.1, 100.0)) },
-            ParamSpec { name: "horizontal", kind: ParamKind::Str, default: Some("\"ax_mps2\""), unit: "", description: "input column: in-plane horizontal floor acceleration (m/s^2)", range: None },
-            ParamSpec { name: "vertical", kind: ParamKind::Str, default: Some("null"), unit: "", description: "input column: vertical floor acceleration (m/s^2, up); null: none", range: None },
-            ParamSpec { name: "restitution", kind: ParamKind::Float, default: Some("null"), unit: "", description: "coefficient of restitution; null: Eq. 24, e = 1 - (mRB/I0) sin(alpha)", range: Some((0.0, 1.0)) },
-            ParamSpec { name: "anchor_strength", kind: ParamKind::Float, default: Some("null"), unit: "", description: "tension anchors at both base corners, strength F/W; null: free-standing", range: Some((1e-6, 100.0)) },
-            ParamSpec { name: "anchor_ductility", kind: ParamKind::Float, default: Some("5.0"), unit: "", description: "anchor elongation at fracture over elongation at yield (mu)", range: Some((1.0, 1e3)) },
-            ParamSpec { name: "anchor_yield_rotation_rad", kind: ParamKind::Float, default: Some("0.001"), unit: "rad", description: "block rotation at which a slack anchor yields (sets the anchor stiffness)", range: Some((1e-7, 0.5)) },
-            ParamSpec { name: "isolation_period_s", kind: ParamKind::Float, default: Some("null"), unit: "s", description: "linear isolated base under the block (period T_b); null: on the floor", range: Some((1e-3, 100.0)) },
-            ParamSpec { name: "isolation_damping", kind: ParamKind::Float, default: Some("0.1"), unit: "", description: "damping ratio of the isolated base", range: Some((0.0, 0.99)) },
-            ParamSpec { name: "isolation_mass_ratio", kind: ParamKind::Float, default: Some("null"), unit: "", description: "isolated base: its mass over the block's, m_b/m; the base carries the block's reaction and impacts conserve the system's momentum (docs/models/toppling.md); null: the limit m_b >> m, a prescribed base motion", range: Some((1e-6, 1e9)) },
-            ParamSpec { name: "sensor_height_m", kind: ParamKind::Float, default: Some("null"), unit: "m", description: "height of the top accelerometer; null: the top of the block", range: Some((0.0, 1e3)) },
-            ParamSpec { name: "method", kind: ParamKind::Choice(&["adaptive", "rk4"]), default: Some("\"adaptive\""), unit: "", description: "adaptive Dormand-Prince 5(4) with located events, or the study's fixed-step RK4", range: None },
-            ParamSpec { name: "rtol", kind: ParamKind::Float, default: Some("1e-11"), unit: "", description: "relative tolerance of the adaptive integrator (absolute: 1e-2 rtol rad)", range: Some((1e-14, 1e-2)) },
-            ParamSpec { name: "rk4_dt_s", kind: ParamKind::Float, default: Some("0.0001"), unit: "s", description: "RK4 step (the study's 1e-4 s)", range: Some((1e-7, 0.1)) },
-            ParamSpec { name: "rest_amplitude_rad", kind: ParamKind::Float, default: Some("1e-7"), unit: "rad", description: "an impact whose rebound would rock the block less than this (free rocking) puts it back at rest", range: Some((0.0, 0.1)) },
-            $($extra),*
-        ]
-    };
-}
-pub(crate) use rocking_params;
-
-/// The parameters `rocking_params!` declares, typed: flattened into the parameter struct of each
-/// stage that declares them (no `deny_unknown_fields` here: the stage's struct refuses what
-/// neither takes).
-#[derive(Debug, Deserialize, Serialize)]
-pub struct RockingParams {
-    /// A row of `rocking::PRESETS` (the table is the list, so it stays a name).
-    pub preset: Option<String>,
-    pub equipment: Option<PathBuf>,
-    pub shape: Option<ShapeChoice>,
-    #[serde(rename = "B_m")]
-    pub b_m: Option<f64>,
-    #[serde(rename = "H_m")]
-    pub h_m: Option<f64>,
-    pub f: Option<f64>,
-    #[serde(rename = "B1_m")]
-    pub b1_m: Option<f64>,
-    #[serde(rename = "B2_m")]
-    pub b2_m: Option<f64>,
-    pub mass_kg: Option<f64>,
-    pub g_mps2: Option<f64>,
-    pub horizontal: String,
-    pub vertical: Option<String>,
-    pub restitution: Option<f64>,
-    pub anchor_strength: Option<f64>,
-    pub anchor_ductility: f64,
-    pub anchor_yield_rotation_rad: f64,
-    pub isolation_period_s: Option<f64>,
-    pub isolation_damping: f64,
-    pub isolation_mass_ratio: Option<f64>,
-    pub sensor_height_m: Option<f64>,
-    pub method: super::Integrator,
-    pub rtol: f64,
-    pub rk4_dt_s: f64,
-    pub rest_amplitude_rad: f64,
+crate::stage_params! {
+    /// The parameters that describe the unit and the model, shared with `toppling_fragility`
+    /// (flattened into each stage's parameters).
+    pub struct RockingParams {
+        // A row of `rocking::PRESETS` (the table is the list, so it stays a name).
+        /// a unit of the study (Table 5 rectangles PS2, PB1 and their trapezoids; WSU1 from Table 2)
+        pub preset: Option<String> [default = null, kind = ParamKind::Choice(crate::physics::rocking::PRESETS)],
+        /// a YAML file with shape, B_m, H_m, f, mass_kg (B1_m, B2_m), like the cases' equipment.yaml; overrides the
+        /// preset
+        pub equipment: Option<PathBuf> [default = null],
+        #[flatten]
+        pub geometry: RockingGeometry,
+        /// input column: in-plane horizontal floor acceleration (m/s^2)
+        pub horizontal: String [default = "ax_mps2"],
+        /// input column: vertical floor acceleration (m/s^2, up); null: none
+        pub vertical: Option<String> [default = null],
+        /// coefficient of restitution; null: Eq. 24, e = 1 - (mRB/I0) sin(alpha)
+        pub restitution: Option<f64> [default = null, range = (0.0, 1.0)],
+        /// tension anchors at both base corners, strength F/W; null: free-standing
+        pub anchor_strength: Option<f64> [default = null, range = (1e-6, 100.0)],
+        /// anchor elongation at fracture over elongation at yield (mu)
+        pub anchor_ductility: f64 [default = 5.0, range = (1.0, 1e3)],
+        /// block rotation at which a slack anchor yields (sets the anchor stiffness)
+        pub anchor_yield_rotation_rad: f64 [default = 0.001, unit = "rad", range = (1e-7, 0.5)],
+        /// linear isolated base under the block (period T_b); null: on the floor
+        pub isolation_period_s: Option<f64> [default = null, unit = "s", range = (1e-3, 100.0)],
+        /// damping ratio of the isolated base
+        pub isolation_damping: f64 [default = 0.1, range = (0.0, 0.99)],
+        /// isolated base: its mass over the block's, m_b/m; the base carries the block's reaction and impacts
+        /// conserve the system's momentum (docs/models/toppling.md); null: the limit m_b >> m, a prescribed base
+        /// motion
+        pub isolation_mass_ratio: Option<f64> [default = null, range = (1e-6, 1e9)],
+        /// height of the top accelerometer; null: the top of the block
+        pub sensor_height_m: Option<f64> [default = null, unit = "m", range = (0.0, 1e3)],
+        /// adaptive Dormand-Prince 5(4) with located events, or the study's fixed-step RK4
+        pub method: super::Integrator [default = "adaptive"],
+        /// relative tolerance of the adaptive integrator (absolute: 1e-2 rtol rad)
+        pub rtol: f64 [default = 1e-11, range = (1e-14, 1e-2)],
+        /// RK4 step (the study's 1e-4 s)
+        pub rk4_dt_s: f64 [default = 0.0001, unit = "s", range = (1e-7, 0.1)],
+        /// an impact whose rebound would rock the block less than this (free rocking) puts it back at rest
+        pub rest_amplitude_rad: f64 [default = 1e-7, unit = "rad", range = (0.0, 0.1)],
+    }
 }
 
-/// `shape` (and an equipment file's `shape`).
-#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum ShapeChoice {
-    Rectangular,
-    Trapezoidal,
+crate::stage_params! {
+    /// The parameters of `simulate_toppling`.
+    pub struct SimulateTopplingParams {
+        #[flatten]
+        pub model: RockingParams,
+        /// initial rotation (free-rocking tests); 0: at rest
+        pub initial_theta_rad: f64 [default = 0.0, unit = "rad", range = (-1.5, 1.5)],
+        // Draw the PNG per record (`report` links it when it was drawn).
+        /// draw a PNG per record (floor and top acceleration, θ with the events); false: tables only, as a script
+        /// calling the stage per record wants
+        pub figure: bool [default = true],
+        #[flatten]
+        pub mcap: super::Mcap,
+    }
 }
 
-/// The parameters `INFO` declares, typed.
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct SimulateTopplingParams {
-    #[serde(flatten)]
-    pub model: RockingParams,
-    pub initial_theta_rad: f64,
-    /// Draw the PNG per record (`report` links it when it was drawn).
-    pub figure: bool,
-    /// Read by the engine's sink.
-    pub mcap: bool,
-}
-
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "simulate_toppling",
     version: 3,
     summary: "The study's 2D rigid-block toppling model on floor records: rest, uplift (Eq. 20/21), rocking (Eq. 22), impacts (Eq. 24), overturning; adaptive integration with located events.",
@@ -118,12 +89,9 @@ static INFO: StageInfo = StageInfo {
         OutputInfo { name: "events", description: "per record: uplifts, impacts, returns to rest, anchor yield/fracture, overturn; the last row (event = summary) and every row carry overturned, overturn_time_s, overturn_side", kind: OutputKind::Table },
         OutputInfo { name: "figures", description: "<record>.png: floor and top acceleration, theta with the events marked", kind: OutputKind::Files },
     ],
-    params: rocking_params![
-        ParamSpec { name: "initial_theta_rad", kind: ParamKind::Float, default: Some("0.0"), unit: "rad", description: "initial rotation (free-rocking tests); 0: at rest", range: Some((-1.5, 1.5)) },
-        ParamSpec { name: "figure", kind: ParamKind::Bool, default: Some("true"), unit: "", description: "draw a PNG per record (floor and top acceleration, θ with the events); false: tables only, as a script calling the stage per record wants", range: None },
-        super::MCAP_PARAM,
-    ],
-};
+    params: SimulateTopplingParams::specs(),
+}
+});
 
 impl Stage for SimulateToppling {
     fn info(&self) -> &'static StageInfo {
@@ -141,6 +109,10 @@ impl Stage for SimulateToppling {
     /// `horizontal` and `vertical` must be columns of the floor records.
     fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {
         (None, floor_column_errors(params, input))
+    }
+
+    fn summary(&self, stage_dir: &Path) -> Option<String> {
+        summary_line(stage_dir).ok()
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
@@ -219,65 +191,45 @@ pub fn simulate_record(
 /// The block and model options from the parameters: a preset, then an equipment file, then
 /// the explicit geometry parameters, each overriding the one before.
 pub fn model_from_params(p: &RockingParams, equipment_file: Option<&Path>) -> Result<(Block, Options), UserError> {
-    let mut geometry = equipment::RockingEquipment::default();
+    let mut geometry = RockingGeometry::default();
     if let Some(name) = &p.preset {
         let (shape, mass) = rocking::preset(name).expect("presets are checked as a choice");
         geometry.mass_kg = Some(mass);
         match shape {
             Shape::Rectangular { b_m, h_m, f } => {
                 (geometry.shape, geometry.b_m, geometry.h_m, geometry.f) =
-                    (Some("rectangular".into()), Some(b_m), Some(h_m), Some(f));
+                    (Some(ShapeChoice::Rectangular), Some(b_m), Some(h_m), Some(f));
             }
             Shape::Trapezoidal { b1_m, b2_m, h_m } => {
                 (geometry.shape, geometry.b1_m, geometry.b2_m, geometry.h_m) =
-                    (Some("trapezoidal".into()), Some(b1_m), Some(b2_m), Some(h_m));
+                    (Some(ShapeChoice::Trapezoidal), Some(b1_m), Some(b2_m), Some(h_m));
             }
         }
     }
     if let Some(path) = equipment_file {
-        let file = equipment::read_rocking_equipment(path)?;
-        let keep = |a: Option<f64>, b: Option<f64>| b.or(a);
-        geometry = equipment::RockingEquipment {
-            shape: file.shape.or(geometry.shape),
-            b_m: keep(geometry.b_m, file.b_m),
-            h_m: keep(geometry.h_m, file.h_m),
-            f: keep(geometry.f, file.f),
-            b1_m: keep(geometry.b1_m, file.b1_m),
-            b2_m: keep(geometry.b2_m, file.b2_m),
-            mass_kg: keep(geometry.mass_kg, file.mass_kg),
-            g_mps2: file.g_mps2,
-            ..Default::default()
-        };
+        geometry = equipment::read_rocking_equipment(path)?.geometry.over(geometry);
     }
-    let shape = match (p.shape, geometry.shape.as_deref()) {
-        (Some(shape), _) => Some(shape),
-        (None, Some(name)) => {
-            Some(ShapeChoice::deserialize(name.into_deserializer()).map_err(|_: serde::de::value::Error| {
-                UserError::new(format!("unknown shape `{name}`")).hint("shape is rectangular or trapezoidal")
-            })?)
-        }
-        (None, None) => None,
-    };
+    let geometry = p.geometry.clone().over(geometry);
     let missing = |key: &str| {
         UserError::new(format!("the block needs `{key}`")).hint(
             "set `preset`, an `equipment` file, or the geometry parameters (see `shakeflow stages simulate_toppling`)",
         )
     };
-    let shape = match shape {
+    let shape = match geometry.shape {
         Some(ShapeChoice::Rectangular) => Shape::Rectangular {
-            b_m: p.b_m.or(geometry.b_m).ok_or_else(|| missing("B_m"))?,
-            h_m: p.h_m.or(geometry.h_m).ok_or_else(|| missing("H_m"))?,
-            f: p.f.or(geometry.f).unwrap_or(0.0),
+            b_m: geometry.b_m.ok_or_else(|| missing("B_m"))?,
+            h_m: geometry.h_m.ok_or_else(|| missing("H_m"))?,
+            f: geometry.f.unwrap_or(0.0),
         },
         Some(ShapeChoice::Trapezoidal) => Shape::Trapezoidal {
-            b1_m: p.b1_m.or(geometry.b1_m).ok_or_else(|| missing("B1_m"))?,
-            b2_m: p.b2_m.or(geometry.b2_m).ok_or_else(|| missing("B2_m"))?,
-            h_m: p.h_m.or(geometry.h_m).ok_or_else(|| missing("H_m"))?,
+            b1_m: geometry.b1_m.ok_or_else(|| missing("B1_m"))?,
+            b2_m: geometry.b2_m.ok_or_else(|| missing("B2_m"))?,
+            h_m: geometry.h_m.ok_or_else(|| missing("H_m"))?,
         },
         None => return Err(missing("shape")),
     };
-    let mass = p.mass_kg.or(geometry.mass_kg).unwrap_or(1.0);
-    let g = p.g_mps2.or(geometry.g_mps2).unwrap_or(crate::units::G0);
+    let mass = geometry.mass_kg.unwrap_or(1.0);
+    let g = geometry.g_mps2.unwrap_or(crate::units::G0);
     let block = Block::new(shape, mass, g).map_err(|e| UserError::new(format!("invalid block: {e}")))?;
     let options = Options {
         restitution: p.restitution,
@@ -475,4 +427,18 @@ pub fn floor_column_errors(params: &Params, input: Option<&[String]>) -> Vec<Par
     };
     let wanted = [("horizontal", Some(p.horizontal.as_str())), ("vertical", p.vertical.as_deref())];
     wanted.into_iter().filter_map(|(key, column)| super::require_column(key, column?, input).err()).collect()
+}
+
+/// The line `shakeflow run` prints: "overturned in 2 of 12 records (FB-5, FB-6)"
+fn summary_line(dir: &Path) -> anyhow::Result<String> {
+    let events = summary::read(dir, "events")?;
+    let (records, kinds) = (events.record_labels()?, summary::texts(&events.frame, "event")?);
+    let overturned = summary::flags(&events.frame, "overturned")?;
+    let summaries: Vec<usize> = (0..kinds.len()).filter(|&i| kinds[i] == "summary").collect();
+    let which: Vec<String> = summaries.iter().filter(|&&i| overturned[i]).map(|&i| records[i].clone()).collect();
+    let mut line = format!("overturned in {} of {} records", which.len(), summaries.len());
+    if !which.is_empty() {
+        line += &format!(" ({})", summary::some_of(&which, 6));
+    }
+    Ok(line)
 }

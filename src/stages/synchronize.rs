@@ -11,34 +11,42 @@
 
 use std::path::Path;
 use std::sync::Arc;
+use std::sync::LazyLock;
 
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 
-use super::{partition_path, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use super::{partition_path, Declared, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::signal::resample_bandlimited::Resampler;
 use crate::signal::sync::estimate_lag;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct Synchronize;
 
-/// The parameters `INFO` declares, typed.
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct SynchronizeParams {
-    pub reference_channel: String,
-    /// `key=value` or empty, read by `reference_select`.
-    pub reference_select: String,
-    pub target_channel: String,
-    pub join: String,
-    pub known_lag_s: Option<f64>,
-    pub max_lag_s: f64,
-    /// Read by the engine's sink.
-    pub mcap: bool,
+crate::stage_params! {
+    /// The parameters of `synchronize`.
+    pub struct SynchronizeParams {
+        /// channel of the reference records the lag is measured against
+        pub reference_channel: String [default = "ax_mps2"],
+        // `key=value` or empty, read by `reference_select`.
+        /// which reference record is the clock reference when several share the join key, as key=value (e.g. floor=5)
+        pub reference_select: String [default = ""],
+        /// channel of the target records that sees the same motion as the reference channel (e.g. a DAQ2 copy of a
+        /// floor channel)
+        pub target_channel: String [],
+        /// partition key that pairs target and reference records
+        pub join: String [default = "motion"],
+        /// use this lag instead of estimating it (positive: target lags reference)
+        pub known_lag_s: Option<f64> [default = null, unit = "s", range = (-3600.0, 3600.0)],
+        /// largest lag searched, either sign
+        pub max_lag_s: f64 [default = 5.0, unit = "s", range = (0.0, 3600.0)],
+        #[flatten]
+        pub mcap: super::Mcap,
+    }
 }
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "synchronize",
     version: 4,
     summary: "Align a second DAQ with the reference DAQ: band-limited resampling, FFT cross-correlation lag (sub-sample), shift onto the reference clock.",
@@ -47,16 +55,9 @@ static INFO: StageInfo = StageInfo {
         OutputInfo { name: "records", description: "reference channels and aligned target channels on the reference time base", kind: OutputKind::TimeSeries },
         OutputInfo { name: "lags", description: "estimated (or given) lag per target record: channel, lag_s, lag_uncertainty_s, correlation", kind: OutputKind::Table },
     ],
-    params: &[
-        ParamSpec { name: "reference_channel", kind: ParamKind::Str, default: Some("\"ax_mps2\""), unit: "", description: "channel of the reference records the lag is measured against", range: None },
-        ParamSpec { name: "reference_select", kind: ParamKind::Str, default: Some("\"\""), unit: "", description: "which reference record is the clock reference when several share the join key, as key=value (e.g. floor=5)", range: None },
-        ParamSpec { name: "target_channel", kind: ParamKind::Str, default: None, unit: "", description: "channel of the target records that sees the same motion as the reference channel (e.g. a DAQ2 copy of a floor channel)", range: None },
-        ParamSpec { name: "join", kind: ParamKind::Str, default: Some("\"motion\""), unit: "", description: "partition key that pairs target and reference records", range: None },
-        ParamSpec { name: "known_lag_s", kind: ParamKind::Float, default: Some("null"), unit: "s", description: "use this lag instead of estimating it (positive: target lags reference)", range: Some((-3600.0, 3600.0)) },
-        ParamSpec { name: "max_lag_s", kind: ParamKind::Float, default: Some("5.0"), unit: "s", description: "largest lag searched, either sign", range: Some((0.0, 3600.0)) },
-        super::MCAP_PARAM,
-    ],
-};
+    params: SynchronizeParams::specs(),
+}
+});
 
 impl Stage for Synchronize {
     fn info(&self) -> &'static StageInfo {

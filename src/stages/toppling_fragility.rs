@@ -2,39 +2,43 @@
 //! intensities, every run simulated (in parallel), and a lognormal fragility curve fitted to
 //! overturn / no overturn by maximum likelihood.
 
+use std::path::Path;
 use std::sync::Arc;
+use std::sync::LazyLock;
 
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 
-use super::simulate_toppling::{model_from_params, rocking_params, simulate_record, RockingParams};
-use super::{partition_values, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use super::simulate_toppling::{model_from_params, simulate_record, RockingParams};
+use super::{partition_values, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::stats::fragility::{fit_lognormal, FitOutcome, LognormalFit};
+use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct TopplingFragility;
 
-/// The parameters `INFO` declares, typed.
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct TopplingFragilityParams {
-    #[serde(flatten)]
-    pub model: RockingParams,
-    pub im: Intensity,
-    pub scales: Vec<f64>,
-    pub im_levels: Vec<f64>,
+crate::stage_params! {
+    /// The parameters of `toppling_fragility`.
+    pub struct TopplingFragilityParams {
+        #[flatten]
+        pub model: RockingParams,
+        /// intensity measure: peak floor acceleration (m/s^2) or peak floor velocity (m/s, trapezoidal integral of
+        /// the horizontal record)
+        pub im: Intensity [default = "pfa"],
+        /// scale factors applied to every record (horizontal and vertical alike); or use im_levels
+        pub scales: Vec<f64> [default = [], range = (0.0, 1e3)],
+        /// target intensities (m/s^2 for pfa, m/s for pfv): each record is scaled to each level
+        pub im_levels: Vec<f64> [default = [], range = (0.0, 1e3)],
+    }
 }
 
-/// `im`: the intensity measure.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Intensity {
-    Pfa,
-    Pfv,
+crate::choice! {
+    /// `im`: the intensity measure.
+    pub enum Intensity { Pfa = "pfa", Pfv = "pfv" }
 }
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "toppling_fragility",
     version: 3,
     summary: "Overturning fragility of one unit: floor records scaled over intensities, all runs simulated in parallel, lognormal curve (median, beta) by maximum likelihood.",
@@ -44,12 +48,9 @@ static INFO: StageInfo = StageInfo {
         OutputInfo { name: "fragility", description: "one row: im_measure, median, beta, log_likelihood, n_runs, n_overturned, note", kind: OutputKind::Table },
         OutputInfo { name: "figures", description: "fragility.png: the fitted curve, every run at 0 (stood) or 1 (overturned) and the overturned fraction per level; pfa in g", kind: OutputKind::Files },
     ],
-    params: rocking_params![
-        ParamSpec { name: "im", kind: ParamKind::Choice(&["pfa", "pfv"]), default: Some("\"pfa\""), unit: "", description: "intensity measure: peak floor acceleration (m/s^2) or peak floor velocity (m/s, trapezoidal integral of the horizontal record)", range: None },
-        ParamSpec { name: "scales", kind: ParamKind::FloatList(None), default: Some("[]"), unit: "", description: "scale factors applied to every record (horizontal and vertical alike); or use im_levels", range: Some((0.0, 1e3)) },
-        ParamSpec { name: "im_levels", kind: ParamKind::FloatList(None), default: Some("[]"), unit: "", description: "target intensities (m/s^2 for pfa, m/s for pfv): each record is scaled to each level", range: Some((0.0, 1e3)) },
-    ],
-};
+    params: TopplingFragilityParams::specs(),
+}
+});
 
 impl Stage for TopplingFragility {
     fn info(&self) -> &'static StageInfo {
@@ -63,6 +64,10 @@ impl Stage for TopplingFragility {
     /// `horizontal` and `vertical` must be columns of the floor records.
     fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {
         (None, super::simulate_toppling::floor_column_errors(params, input))
+    }
+
+    fn summary(&self, stage_dir: &Path) -> Option<String> {
+        summary_line(stage_dir).ok()
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
@@ -349,4 +354,30 @@ fn figure(
         spans: Vec::new(),
     }];
     render_png(title, &panels, 1000, 600)
+}
+
+/// The line `shakeflow run` prints: "3/10 records overturned at some level (41/240 runs); median 0.58 g, β 0.50"
+fn summary_line(dir: &Path) -> anyhow::Result<String> {
+    let runs = summary::read(dir, "runs")?.frame;
+    let fit = summary::read(dir, "fragility")?.frame;
+    let (records, overturned) = (summary::texts(&runs, "record")?, summary::flags(&runs, "overturned")?);
+    let all: std::collections::BTreeSet<&String> = records.iter().collect();
+    let toppled: std::collections::BTreeSet<&String> =
+        records.iter().zip(&overturned).filter(|(_, &o)| o).map(|(r, _)| r).collect();
+    let mut line = format!(
+        "{}/{} records overturned at some level ({}/{} runs)",
+        toppled.len(),
+        all.len(),
+        overturned.iter().filter(|&&o| o).count(),
+        overturned.len()
+    );
+    let measure = summary::texts(&fit, "im_measure")?.pop().unwrap_or_default();
+    match (summary::floats(&fit, "median")?.pop().flatten(), summary::floats(&fit, "beta")?.pop().flatten()) {
+        (Some(median), Some(beta)) if measure == "pfa" => {
+            line += &format!("; median {:.2} g ({median:.3} m/s^2), β {beta:.2}", median / summary::G)
+        }
+        (Some(median), Some(beta)) => line += &format!("; median {median:.3} m/s, β {beta:.2}"),
+        _ => line += &format!("; no curve: {}", summary::texts(&fit, "note")?.pop().unwrap_or_default()),
+    }
+    Ok(line)
 }

@@ -3,49 +3,50 @@
 //! half-power damping estimate, like Table 3 of the study.
 
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
+use std::sync::LazyLock;
 
-use super::{split_pair, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use super::{split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::signal::welch::{identify_peak, transfer_function, Detrend, WelchOptions, Window};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
 pub struct TransferFunction;
 
-/// The parameters `INFO` declares, typed (`report` reads the band from the spectra's provenance).
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct TransferFunctionParams {
-    /// `input -> output`, read by `split_pair`.
-    pub pairs: Vec<String>,
-    pub band_min_hz: f64,
-    pub band_max_hz: f64,
-    pub window: WindowChoice,
-    pub segment_s: Option<f64>,
-    pub overlap: f64,
-    pub detrend: DetrendChoice,
-    pub coherence_threshold: f64,
+crate::stage_params! {
+    /// The parameters of `transfer_function`.
+    pub struct TransferFunctionParams {
+        // `input -> output`, read by `split_pair`.
+        /// input -> output column pairs, e.g. `floor4_ax_mps2 -> PB1_top_ax_mps2`
+        pub pairs: Vec<String> [],
+        /// lower end of the band searched for the peak
+        pub band_min_hz: f64 [default = 1.0, unit = "Hz", range = (0.0, 1e6)],
+        /// upper end of the band searched for the peak
+        pub band_max_hz: f64 [default = 20.0, unit = "Hz", range = (0.0, 1e6)],
+        /// segment window (hamming: MATLAB's symmetric hamming(L); hann: scipy's periodic hann)
+        pub window: WindowChoice [default = "hamming"],
+        /// segment length; null: MATLAB's default of 8 segments with 50 % overlap
+        pub segment_s: Option<f64> [default = null, unit = "s", range = (0.0, 1e6)],
+        /// segment overlap as a fraction (with segment_s)
+        pub overlap: f64 [default = 0.5, range = (0.0, 0.95)],
+        /// per-segment detrending (MATLAB tfestimate: none)
+        pub detrend: DetrendChoice [default = "none"],
+        /// peaks with lower coherence are flagged low_coherence
+        pub coherence_threshold: f64 [default = 0.5, range = (0.0, 1.0)],
+    }
 }
 
-/// `window`: the segment window.
-#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum WindowChoice {
-    Hamming,
-    Hann,
-    Boxcar,
+crate::choice! {
+    /// `window`: the segment window.
+    pub enum WindowChoice { Hamming = "hamming", Hann = "hann", Boxcar = "boxcar" }
 }
 
-/// `detrend`: per-segment detrending.
-#[derive(Debug, Clone, Copy, Deserialize, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum DetrendChoice {
-    None,
-    Constant,
-    Linear,
+crate::choice! {
+    /// `detrend`: per-segment detrending.
+    pub enum DetrendChoice { None = "none", Constant = "constant", Linear = "linear" }
 }
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "transfer_function",
     version: 2,
     summary: "Welch transfer functions H1, H2 and coherence (MATLAB tfestimate defaults) and the identified fundamental frequency with half-power damping.",
@@ -54,17 +55,9 @@ static INFO: StageInfo = StageInfo {
         OutputInfo { name: "identified", description: "per pair: frequency_hz, damping_ratio, peak_gain, coherence, low_coherence, note", kind: OutputKind::Table },
         OutputInfo { name: "spectra", description: "per pair and frequency: |H1|, phase, |H2|, coherence", kind: OutputKind::Table },
     ],
-    params: &[
-        ParamSpec { name: "pairs", kind: ParamKind::StrList, default: None, unit: "", description: "input -> output column pairs, e.g. `floor4_ax_mps2 -> PB1_top_ax_mps2`", range: None },
-        ParamSpec { name: "band_min_hz", kind: ParamKind::Float, default: Some("1.0"), unit: "Hz", description: "lower end of the band searched for the peak", range: Some((0.0, 1e6)) },
-        ParamSpec { name: "band_max_hz", kind: ParamKind::Float, default: Some("20.0"), unit: "Hz", description: "upper end of the band searched for the peak", range: Some((0.0, 1e6)) },
-        ParamSpec { name: "window", kind: ParamKind::Choice(&["hamming", "hann", "boxcar"]), default: Some("\"hamming\""), unit: "", description: "segment window (hamming: MATLAB's symmetric hamming(L); hann: scipy's periodic hann)", range: None },
-        ParamSpec { name: "segment_s", kind: ParamKind::Float, default: Some("null"), unit: "s", description: "segment length; null: MATLAB's default of 8 segments with 50 % overlap", range: Some((0.0, 1e6)) },
-        ParamSpec { name: "overlap", kind: ParamKind::Float, default: Some("0.5"), unit: "", description: "segment overlap as a fraction (with segment_s)", range: Some((0.0, 0.95)) },
-        ParamSpec { name: "detrend", kind: ParamKind::Choice(&["none", "constant", "linear"]), default: Some("\"none\""), unit: "", description: "per-segment detrending (MATLAB tfestimate: none)", range: None },
-        ParamSpec { name: "coherence_threshold", kind: ParamKind::Float, default: Some("0.5"), unit: "", description: "peaks with lower coherence are flagged low_coherence", range: Some((0.0, 1.0)) },
-    ],
-};
+    params: TransferFunctionParams::specs(),
+}
+});
 
 impl Stage for TransferFunction {
     fn info(&self) -> &'static StageInfo {
