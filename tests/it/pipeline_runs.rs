@@ -156,7 +156,7 @@ fn single_stage_runs_on_files_without_a_pipeline() {
 #[test]
 fn stages_lists_parameters_with_defaults() {
     let text = stdout(&shakeflow(&["stages"], std::path::Path::new(".")));
-    assert!(text.contains("baseline (version 4)") && text.contains("- order: integer (default 3)"), "{text}");
+    assert!(text.contains("baseline (version 5)") && text.contains("- order: integer (default 3)"), "{text}");
 }
 
 #[test]

@@ -63,7 +63,11 @@ fn a_failed_record_fails_its_unit_only_and_the_rest_is_committed() {
     assert!(log.contains("baseline           not run: the run stopped at a failed unit"), "{log}");
     assert!(root.join("out/load/records/motion=FB-1/data.parquet").is_file(), "the finished record is committed");
     assert!(!root.join("out/load/records/motion=FB-2").exists());
-    assert_eq!(units_of(&lockfile(root), "load"), ["motion=FB-1"]);
+    // The engine's status table (its unit `(status)`) lists FB-2 failed.
+    assert_eq!(units_of(&lockfile(root), "load"), ["(status)", "motion=FB-1"]);
+    let status = shakeflow::io::parquet::read_table(&root.join("out/load/status/data.parquet")).unwrap();
+    let shakeflow::table::ColumnData::Str(what) = &status.column("status").unwrap().data else { panic!("text") };
+    assert_eq!(what, &["loaded", "failed"]);
 
     // --keep-going runs what does not depend on the failure: baseline of FB-1.
     let out = run(root, &["--keep-going"]);

@@ -199,6 +199,8 @@ pub(super) fn fold(
         InputRef::Source(s) => plan.file.spec.inputs[s].on_error == OnError::Skip,
         InputRef::Stage { .. } => false,
     });
+    // Whether every unit that ran failed: the stage's files and tables then stay as they were.
+    let only_failures = failed > 0 && folded.install.is_empty() && folded.remove.is_empty();
     // The engine's tables: made anew by every run of the stage, installed when they changed.
     let mut engine_table = |unit: &str, (file, hash): (String, String)| {
         let old = entry.and_then(|e| e.units.get(unit));
@@ -216,8 +218,14 @@ pub(super) fn fold(
         engine_table(FLAGGED_UNIT, text_table(staging, name, info, &stage.params, FLAGGED, &FLAGGED_COLUMNS, &rows)?);
     }
     // A pipeline's record-reading stage says how every record fared, failed ones included (a
-    // failed unit's old files stay; the table is new). A one-stage command says it on stderr.
-    if info.inputs == InputKind::Sources && plan.file.command.is_none() {
+    // failed unit's old files stay; the table is new) — unless every unit that ran failed: such a
+    // run changes nothing and names its failures, as a one-stage command does on stderr.
+    if only_failures {
+        if let Some(old) = entry.and_then(|e| e.units.get(STATUS_UNIT)) {
+            new_entry.units.insert(STATUS_UNIT.into(), old.clone());
+            folded.produced.extend(cached_files(old, &stage_dir));
+        }
+    } else if info.inputs == InputKind::Sources && plan.file.command.is_none() {
         status_rows.sort();
         engine_table(
             STATUS_UNIT,
