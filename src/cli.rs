@@ -404,9 +404,10 @@ pub fn main() -> anyhow::Result<ExitCode> {
                     // Under `on_error: skip` a bad record is noted (the run lists it and goes on);
                     // the source itself is wrong when none of its first records loads.
                     let skip = source.on_error == OnError::Skip;
+                    let records = records_of(source, &files);
                     let mut problems = Vec::new();
                     if let Some(components) = &source.components {
-                        for problem in incomplete_records(name, components, &files) {
+                        for problem in incomplete_records(name, components, &records) {
                             problems.push(
                                 plan.file
                                     .error_at(&["inputs", name, "components"], problem)
@@ -416,8 +417,8 @@ pub fn main() -> anyhow::Result<ExitCode> {
                     }
                     let mut tried = Vec::new();
                     let mut loaded = false;
-                    for record in records_of(source, &files).into_iter().take(if skip { 5 } else { 1 }) {
-                        match check_record(&plan, name, source, &record) {
+                    for record in records.iter().take(if skip { 5 } else { 1 }) {
+                        match check_record(&plan, name, source, record) {
                             Ok(names) => {
                                 columns.extend(names.map(|names| (name.clone(), names)));
                                 loaded = true;
@@ -785,21 +786,19 @@ fn records_of<'f>(source: &SourceSpec, files: &'f [sources::MatchedFile]) -> Vec
 fn incomplete_records(
     name: &str,
     components: &crate::pipeline::spec::Components,
-    files: &[sources::MatchedFile],
+    records: &[Vec<&sources::MatchedFile>],
 ) -> Vec<String> {
-    let mut records: BTreeMap<String, Vec<String>> = BTreeMap::new();
-    for file in files {
-        records.entry(stages::partition_path(&file.partition)).or_default().push(file_label(&file.path));
-    }
+    let wanted = components.require.len();
     records
-        .into_iter()
-        .filter(|(_, files)| files.len() < components.require.len())
-        .map(|(record, files)| {
+        .iter()
+        .filter(|files| files.len() < wanted)
+        .map(|files| {
+            let labels: Vec<String> = files.iter().map(|f| file_label(&f.path)).collect();
             format!(
-                "source `{name}`: record `{record}` has {} component file(s) ({}), fewer than the {} axes `components: require` asks for",
+                "source `{name}`: record `{}` has {} component file(s) ({}), fewer than the {wanted} axes `components: require` asks for",
+                stages::partition_path(&files[0].partition),
                 files.len(),
-                files.join(", "),
-                components.require.len()
+                labels.join(", "),
             )
         })
         .collect()
