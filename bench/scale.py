@@ -106,6 +106,18 @@ def units_ran(lines):
     return sum(int(m.group(1)) for _, l in lines for m in [re.search(r"done in .*?: (\d+) unit\(s\) ran", l)] if m)
 
 
+def commit_steps(out: pathlib.Path, job: str):
+    """The commit job's own log (`commit job: <step> (at S s, C s CPU)`): seconds to the commit's
+    end and to the end of its clean-up (the `keep: false` files and the tasks' manifests), and
+    CPU seconds."""
+    steps = {}
+    for log in (out / ".shakeflow/slurm").glob(f"*/logs/*_{job}_0.out"):
+        for m in re.finditer(r"commit job: (.*) \(at ([\d.]+) s, ([\d.]+) s CPU\)", log.read_text(errors="replace")):
+            steps[m.group(1)] = (float(m.group(2)), float(m.group(3)))
+    nan = (float("nan"), float("nan"))
+    return steps.get("committed", nan)[0], steps.get("results and manifests removed", nan)[0], steps.get("retries decided", nan)[1]
+
+
 def slurm_times(job, env):
     out = subprocess.run(["scontrol", "-o", "show", "job", job], env=env, capture_output=True, text=True).stdout
     fields = dict(kv.split("=", 1) for kv in out.split() if "=" in kv)
@@ -130,10 +142,11 @@ def main():
     if len(growth) > 1:
         print("\ngrowth with the archive (local executor):")
         print(f"{'tests':>6} {'units':>6} {'wall s':>8} {'commit s':>9} {'no-op s':>8} {'ms/unit':>8} "
-              f"{'state KB/task':>14} {'memo KB':>8} {'most entries':>13}")
+              f"{'state KB/task':>14} {'memo KB':>8} {'most entries':>13} {'Slurm commit job s':>19}")
         for tests, r in growth:
             print(f"{tests:6d} {r['units']:6d} {r['wall']:8.2f} {r['commit']:9.2f} {r['noop']:8.2f} "
-                  f"{1000 * r['noop'] / max(r['checked'], 1):8.3f} {r['state'] / 1e3:14.1f} {r['memo'] / 1e3:8.1f} {r['most'][0]:13d}")
+                  f"{1000 * r['noop'] / max(r['checked'], 1):8.3f} {r['state'] / 1e3:14.1f} {r['memo'] / 1e3:8.1f} {r['most'][0]:13d} "
+                  f"{r.get('slurm_commit', float('nan')):19.0f}")
 
 
 def measure(a, tests):
@@ -222,6 +235,7 @@ def measure(a, tests):
                 bytes=n_bytes,
                 lock=sum(len(b) for b in state_files(cluster / "out").values()),
                 commit=slurm_times(commit_job, env),
+                steps=commit_steps(cluster / "out", commit_job),
                 tasks=tasks,
                 submit=submit,
                 same=same,
@@ -244,6 +258,12 @@ def measure(a, tests):
             f"overhead over local {(s['wall'] - l['wall']) / max(s['tasks'], 1):.2f} s per task; "
             f"state (root and state files) {'identical to' if s['same'] else 'DIFFERENT from'} the local run's"
         )
+        committed, cleaned, cpu = s["steps"]
+        print(
+            f"commit job (its log): committed at {committed:.2f} s, clean-up done at {cleaned:.2f} s, "
+            f"{cpu:.2f} s CPU"
+        )
+        report["local"]["slurm_commit"] = s["commit"]
     print("no-op reruns: " + ", ".join(f"{w:.2f} s" for w in noops) + f"; status {status_wall:.2f} s")
     r = report["local"]
     print(
