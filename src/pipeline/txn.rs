@@ -3,12 +3,13 @@
 //! A transaction is a folder `<root>/.shakeflow/txn-<token>/` of the lease holder:
 //!
 //! 1. stages write their outputs under `new/<entry>/`;
-//! 2. the new state is written in the transaction, forced to disk: the state files of the stages
-//!    that changed under `state/`, and the new lockfile, naming them, as `shakeflow.lock`;
+//! 2. the new state is written in the transaction: the state files of the stages that changed
+//!    under `state/`, and the new lockfile, naming them, as `shakeflow.lock`;
 //! 3. the journal (entries to install and to remove, state files to install and to retire,
-//!    whether a lockfile comes) is written to
-//!    `journal.tmp`, forced to disk, and renamed to `journal`. **That rename is the commit
-//!    point**: before it, the transaction never happened; after it, it has;
+//!    whether a lockfile comes) is written to `journal.tmp`; the files of steps 2 and 3 are
+//!    forced to disk together (one flush of the file system's journal, not one each), then
+//!    `journal.tmp` is renamed to `journal`. **That rename is the commit point**: before it,
+//!    the transaction never happened; after it, it has;
 //! 4. roll forward, each step idempotent: each entry `<root>/<e>` moves to `old/<e>`, then
 //!    `new/<e>` to `<root>/<e>`; each new state file moves to `<root>/.shakeflow/state/`; the
 //!    lockfile moves to `<root>/shakeflow.lock`; the state files only the old lockfile named are
