@@ -948,3 +948,32 @@ pub fn progress(output_dir: &Path) -> Vec<String> {
     }
     lines
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_committed_runs_results_and_manifests_go_and_its_logs_and_run_file_stay() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let run_dir = dir.path();
+        for shard in 0..20 {
+            let records = run_dir.join(format!("results/load/{shard}/records/motion=T-{shard}/floor=4"));
+            std::fs::create_dir_all(&records).unwrap();
+            std::fs::write(records.join("data.parquet"), b"table").unwrap();
+            std::fs::create_dir_all(run_dir.join("manifests/load")).unwrap();
+            std::fs::write(run_dir.join(format!("manifests/load/{shard}.json")), b"{}").unwrap();
+        }
+        std::fs::create_dir_all(run_dir.join("logs")).unwrap();
+        std::fs::write(run_dir.join("logs/run_1_0.out"), b"log").unwrap();
+        std::fs::write(run_dir.join(RUN_FILE), b"{}").unwrap();
+        remove_run_outputs(run_dir);
+        let mut left: Vec<String> = std::fs::read_dir(run_dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(left, ["logs", RUN_FILE]);
+        assert!(run_dir.join("logs/run_1_0.out").is_file());
+    }
+}
