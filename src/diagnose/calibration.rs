@@ -334,7 +334,7 @@ pub fn calibrate(
         .reduce(|a, b| if b.0 < a.0 { b } else { a })
         .map(|b| b.1)
         .unwrap_or_else(|| vec![0.0; dim]);
-    Calibration { parameters: parameters.to_vec(), fitted: to_values(&best), evaluations: seen.len() }
+    Calibration { parameters: parameters.to_vec(), fitted: to_values(&best), evaluations: seen.runs() }
 }
 
 /// [`calibrate`] of a unit model: the parameters its predictions depend on are fitted

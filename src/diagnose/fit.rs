@@ -166,7 +166,7 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
         .reduce(|a, b| if b.0 < a.0 { b } else { a })
         .unwrap_or_else(|| (f64::INFINITY, scored[order[0]].1.clone(), failed(case)));
     let misfit = evidence.misfit(&prediction);
-    Fit { params, misfit, prediction, evaluations: evaluations.into_inner() + objective.seen.len() }
+    Fit { params, misfit, prediction, evaluations: evaluations.into_inner() + objective.seen.runs() }
 }
 
 impl Space<'_> {

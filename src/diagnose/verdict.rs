@@ -225,7 +225,7 @@ impl<V: Clone> Memo<V> {
     }
 
     /// The distinct points run.
-    pub fn len(&self) -> usize {
+    pub fn runs(&self) -> usize {
         self.0.lock().expect("no search panics holding it").len()
     }
 }

@@ -301,7 +301,7 @@ pub fn fit(
         (params, track)
     };
     let misfit = evidence.misfit(&track);
-    let evaluations = evaluations.load(Ordering::Relaxed) + objective.seen.len();
+    let evaluations = evaluations.load(Ordering::Relaxed) + objective.seen.runs();
     Fit { params, misfit, track, evaluations }
 }
 
