@@ -18,6 +18,8 @@ use argmin::solver::neldermead::NelderMead;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::verdict::Memo;
+
 /// Calibrated values are kept within this many sd of the stated value.
 pub const BOUND_SD: f64 = 5.0;
 /// A fitted value farther than this many sd from the stated one is a finding (`within: false`).
@@ -273,7 +275,7 @@ pub fn calibrate(
     explore: bool,
     chi2: &Objective<'_>,
 ) -> Calibration {
-    let evaluations = std::sync::atomic::AtomicUsize::new(0);
+    let seen = Memo::default();
     let dim = parameters.len();
     if dim == 0 {
         return Calibration::default();
@@ -283,15 +285,16 @@ pub fn calibrate(
         parameters.iter().zip(z).map(|(p, &z)| (p.stated + z * p.sd).clamp(p.bounds.0, p.bounds.1)).collect()
     };
     let posterior = |z: &[f64], until: f64| -> f64 {
-        evaluations.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let values = to_values(z);
-        let outside: f64 = parameters.iter().zip(z).zip(&values).map(|((p, &z), &v)| (z - p.z(v)).abs()).sum();
-        let c = chi2(&values, until);
-        if c.is_finite() {
-            c + prior_chi2(parameters, &values) + outside * outside * 100.0
-        } else {
-            f64::INFINITY
-        }
+        seen.get_or(z, until, || {
+            let values = to_values(z);
+            let outside: f64 = parameters.iter().zip(z).zip(&values).map(|((p, &z), &v)| (z - p.z(v)).abs()).sum();
+            let c = chi2(&values, until);
+            if c.is_finite() {
+                c + prior_chi2(parameters, &values) + outside * outside * 100.0
+            } else {
+                f64::INFINITY
+            }
+        })
     };
     let first = *horizons.first().unwrap_or(&f64::INFINITY);
     let initial: Vec<f64> = start.map_or(vec![0.0; dim], |s| parameters.iter().zip(s).map(|(p, &v)| p.z(v)).collect());
@@ -331,7 +334,7 @@ pub fn calibrate(
         .reduce(|a, b| if b.0 < a.0 { b } else { a })
         .map(|b| b.1)
         .unwrap_or_else(|| vec![0.0; dim]);
-    Calibration { parameters: parameters.to_vec(), fitted: to_values(&best), evaluations: evaluations.into_inner() }
+    Calibration { parameters: parameters.to_vec(), fitted: to_values(&best), evaluations: seen.runs() }
 }
 
 /// [`calibrate`] of a unit model: the parameters its predictions depend on are fitted

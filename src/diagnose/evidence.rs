@@ -156,13 +156,18 @@ impl Evidence {
         spread.z(s.value, at(&p.theta_rad, s), self.camera_sigma)
     }
 
-    /// Normalised residuals of the valid samples, as (time, z, ln(sd/σ)).
-    fn normalised<'a>(&'a self, p: &'a Prediction) -> impl Iterator<Item = (f64, f64, f64)> + 'a {
-        let accel = self.accel.iter().filter(|s| s.valid).map(move |s| {
+    /// Normalised residuals of the valid samples at times `inside` admits, as (time, z,
+    /// ln(sd/σ)): a sample outside is never compared, so a prediction need not reach it.
+    fn normalised<'a>(
+        &'a self,
+        p: &'a Prediction,
+        inside: impl Fn(f64) -> bool + Copy + 'a,
+    ) -> impl Iterator<Item = (f64, f64, f64)> + 'a {
+        let accel = self.accel.iter().filter(move |s| s.valid && inside(s.t)).map(move |s| {
             let (z, log_ratio) = self.accel_z(p, s);
             (s.t, z, log_ratio)
         });
-        let camera = self.camera.iter().filter(|s| s.valid).map(move |s| {
+        let camera = self.camera.iter().filter(move |s| s.valid && inside(s.t)).map(move |s| {
             let (z, log_ratio) = self.camera_z(p, s);
             (s.t, z, log_ratio)
         });
@@ -177,7 +182,7 @@ impl Evidence {
     /// prediction admits its own uncertainty, the price of it (2 ln(sd/σ)).
     pub fn misfit_until(&self, p: &Prediction, t_end: f64) -> Misfit {
         let (mut chi2, mut samples) = (0.0, 0);
-        for (_, z, log_ratio) in self.normalised(p).filter(|(t, _, _)| *t <= t_end) {
+        for (_, z, log_ratio) in self.normalised(p, move |t| t <= t_end) {
             chi2 += z * z + 2.0 * log_ratio;
             samples += 1;
         }
@@ -186,11 +191,8 @@ impl Evidence {
 
     /// Noise-normalised RMS residual inside `window` (everywhere when None); 1 is pure noise.
     pub fn window_rmse(&self, p: &Prediction, window: Option<(f64, f64)>) -> f64 {
-        let inside = |t: f64| window.is_none_or(|(a, b)| t >= a && t <= b);
-        let (sum, count) = self
-            .normalised(p)
-            .filter(|(t, _, _)| inside(*t))
-            .fold((0.0, 0usize), |(s, c), (_, z, _)| (s + z * z, c + 1));
+        let inside = move |t: f64| window.is_none_or(|(a, b)| t >= a && t <= b);
+        let (sum, count) = self.normalised(p, inside).fold((0.0, 0usize), |(s, c), (_, z, _)| (s + z * z, c + 1));
         if count == 0 {
             return 0.0;
         }

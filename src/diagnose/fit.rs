@@ -18,7 +18,7 @@ use rayon::prelude::*;
 use super::effects::Effect;
 use super::evidence::Evidence;
 use super::{Case, Prediction};
-use crate::diagnose::verdict::Misfit;
+use crate::diagnose::verdict::{Memo, Misfit};
 
 /// Grid points a local search starts from.
 const STARTS: usize = 4;
@@ -43,16 +43,19 @@ struct Objective<'a> {
     effect: &'a dyn Effect,
     case: &'a Case,
     evidence: &'a Evidence,
-    evaluations: &'a AtomicUsize,
+    /// The misfits already computed, by parameters and horizon: a search asks again for points
+    /// it has seen (a simplex's start, a zoom's centre), and a run is deterministic.
+    seen: Memo<f64>,
 }
 
 impl Objective<'_> {
+    /// χ² of the records up to `until` under the effect with `params`, from a run cut shortly
+    /// after `until` ([`Case::until`]).
     fn chi2(&self, params: &[f64], until: f64) -> f64 {
-        self.evaluations.fetch_add(1, Ordering::Relaxed);
-        match self.effect.predict(self.case, params) {
+        self.seen.get_or(params, until, || match self.effect.predict(&self.case.until(until), params) {
             Ok(prediction) => self.evidence.misfit_until(&prediction, until).chi2,
             Err(_) => f64::INFINITY,
-        }
+        })
     }
 }
 
@@ -109,8 +112,9 @@ impl CostFunction for Scaled<'_> {
 }
 
 pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, f64)) -> Fit {
+    // Whole-record runs, besides the objective's.
     let evaluations = AtomicUsize::new(0);
-    let objective = Objective { effect, case, evidence, evaluations: &evaluations };
+    let objective = Objective { effect, case, evidence, seen: Memo::default() };
     let bounds = effect.bounds(case, window);
     let horizons = HORIZONS.map(|(h, span, levels)| (window.0 + h, span, levels));
     let grid = effect.grid(case, window);
@@ -138,6 +142,13 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
             found
         })
         .collect();
+    // Each distinct optimum once (the first of equals wins a tie either way).
+    let optima = optima.into_iter().fold(Vec::new(), |mut distinct: Vec<Vec<f64>>, o| {
+        if !distinct.contains(&o) {
+            distinct.push(o);
+        }
+        distinct
+    });
     // Judged on the whole record with each prediction's chaotic sensitivity as its uncertainty.
     let judged: Vec<(f64, Vec<f64>, Prediction)> = optima
         .into_par_iter()
@@ -155,7 +166,7 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
         .reduce(|a, b| if b.0 < a.0 { b } else { a })
         .unwrap_or_else(|| (f64::INFINITY, scored[order[0]].1.clone(), failed(case)));
     let misfit = evidence.misfit(&prediction);
-    Fit { params, misfit, prediction, evaluations: evaluations.into_inner() }
+    Fit { params, misfit, prediction, evaluations: evaluations.into_inner() + objective.seen.runs() }
 }
 
 impl Space<'_> {

@@ -25,7 +25,7 @@ use rayon::prelude::*;
 use super::effects::Effect;
 use super::evidence::Evidence;
 use super::{early_within_allowance, flagged_early, RollingCase, Track};
-use crate::diagnose::verdict::Misfit;
+use crate::diagnose::verdict::{Memo, Misfit};
 
 /// Grid points a local search starts from (the best; and the best of a family, a step or a
 /// gradual change, that none of them is in).
@@ -79,17 +79,28 @@ struct Objective<'a> {
     case: &'a RollingCase,
     nominal: &'a Track,
     evidence: &'a Evidence,
+    /// Whole-record runs (the objective's are counted by `seen`).
     evaluations: &'a AtomicUsize,
+    /// The misfits of the runs already made, with what each spent (None: it failed): asked
+    /// again, a run that succeeded within less than what the allowance has left would succeed
+    /// again, identically, and is charged what it spent then.
+    seen: Memo<Option<(f64, usize)>>,
 }
 
 impl Objective<'_> {
     /// The effect's run until `until`, within `allowance` (None: failed, or nothing left).
     fn track(&self, params: &[f64], until: f64, allowance: &Allowance) -> Option<Track> {
+        if allowance.left() > 0 {
+            self.evaluations.fetch_add(1, Ordering::Relaxed);
+        }
+        self.run(params, until, allowance)
+    }
+
+    fn run(&self, params: &[f64], until: f64, allowance: &Allowance) -> Option<Track> {
         let left = allowance.left();
         if left == 0 {
             return None;
         }
-        self.evaluations.fetch_add(1, Ordering::Relaxed);
         let (alteration, onset) = self.effect.alteration(self.case, self.nominal, params).ok()?;
         let run = self.case.altered(self.nominal, &alteration, onset, until, Some(left));
         allowance.spend(run.as_ref().map_or_else(|(_, spent)| *spent, |t| t.evaluations));
@@ -99,8 +110,20 @@ impl Objective<'_> {
     }
 
     fn chi2(&self, params: &[f64], until: f64, allowance: &Allowance) -> f64 {
-        self.track(params, until, allowance)
-            .map_or(f64::INFINITY, |t| self.evidence.misfit_between(&t, f64::NEG_INFINITY, until).chi2)
+        let left = allowance.left();
+        if let Some(Some((chi2, spent))) = self.seen.get(params, until) {
+            if spent < left {
+                allowance.spend(spent);
+                return chi2;
+            }
+        }
+        if left == 0 {
+            return f64::INFINITY;
+        }
+        let track = self.run(params, until, allowance);
+        let chi2 = track.map(|t| self.evidence.misfit_between(&t, f64::NEG_INFINITY, until).chi2);
+        self.seen.insert(params, until, chi2.map(|c| (c, left - allowance.left())));
+        chi2.unwrap_or(f64::INFINITY)
     }
 }
 
@@ -211,7 +234,7 @@ pub fn fit(
     refine_until: f64,
 ) -> Fit {
     let evaluations = AtomicUsize::new(0);
-    let objective = Objective { effect, case, nominal, evidence, evaluations: &evaluations };
+    let objective = Objective { effect, case, nominal, evidence, evaluations: &evaluations, seen: Memo::default() };
     let bounds = effect.bounds(case, nominal, window);
     let discrete = effect.discrete();
     let continuous: Vec<usize> = (0..bounds.len()).filter(|&i| !discrete.get(i).copied().unwrap_or(false)).collect();
@@ -278,7 +301,8 @@ pub fn fit(
         (params, track)
     };
     let misfit = evidence.misfit(&track);
-    Fit { params, misfit, track, evaluations: evaluations.into_inner() }
+    let evaluations = evaluations.load(Ordering::Relaxed) + objective.seen.runs();
+    Fit { params, misfit, track, evaluations }
 }
 
 /// What a model that cannot run predicts: nothing (every residual is NaN, never accepted).
