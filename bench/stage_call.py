@@ -88,10 +88,10 @@ def main():
             scipy_runs.append((time.perf_counter() - started, time.process_time() - cpu))
         scipy_s = medians(scipy_runs)
         print(f"one `stage simulate_toppling` call (PS2, Chi-Chi TCU078-E x 0.9), median of {args.repeat}")
-        print(f"{'':42}{'wall ms':>9}{'CPU ms':>9}{'scipy / this, wall':>20}{'CPU':>6}")
+        print(f"{'':42}{'wall ms':>9}{'CPU ms':>9}{'scipy / this, wall':>20}{'CPU':>8}")
 
         def row(label, this):
-            ratio = f"{scipy_s[0] / this[0]:>20.1f}{scipy_s[1] / this[1]:>6.1f}"
+            ratio = f"{scipy_s[0] / this[0]:>20.1f}{scipy_s[1] / this[1]:>8.1f}"
             print(f"{label:42}{1e3 * this[0]:>9.1f}{1e3 * this[1]:>9.1f}{ratio}")
 
         print(f"{'process start (shakeflow --version)':42}{1e3 * start[0]:>9.1f}{1e3 * start[1]:>9.1f}")
