@@ -743,8 +743,9 @@ fn check_record(
         Some(_) => stages::load::load_record_group(source, name, &plan.file.base_dir(), &parts),
         None => stages::load::load_record(source, &parts[0]),
     };
-    loaded.map(|table| Some(table.column_names().into_iter().map(String::from).collect())).map_err(|mut e| {
-        let position = e.message.split('`').nth(1).and_then(|column| {
+    loaded.map(|table| Some(table.column_names().into_iter().map(String::from).collect())).map_err(|refused| {
+        let mut e = refused.error;
+        let position = refused.column.as_deref().and_then(|column| {
             let output = source.columns.iter().find(|(_, c)| c.file_column() == column).map(|(out, _)| out.as_str());
             match output {
                 Some(out) => crate::pipeline::locate::key_position(&plan.file.text, &["inputs", name, "columns", out]),

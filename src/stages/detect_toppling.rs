@@ -2,6 +2,7 @@
 //! by eye): a spike far above the preceding shaking (STA/LTA on the signal's difference),
 //! confirmed by a lasting drop of the amplitude to about the floor's vertical level.
 
+use super::error::{float_column, StageError};
 use rayon::prelude::*;
 use std::path::Path;
 use std::sync::LazyLock;
@@ -87,13 +88,9 @@ impl Stage for DetectToppling {
     }
 }
 
-fn detect(table: &Table, channels: &[(String, Option<String>)], opts: &DetectOptions) -> Result<Table, String> {
-    let time = table.f64_column(TIME_COLUMN).ok_or("no time_s column")?;
-    let column = |name: &str| {
-        table
-            .f64_column(name)
-            .ok_or_else(|| format!("no float column `{name}`; columns: {}", table.column_names().join(", ")))
-    };
+fn detect(table: &Table, channels: &[(String, Option<String>)], opts: &DetectOptions) -> Result<Table, StageError> {
+    let time = table.f64_column(TIME_COLUMN).ok_or_else(|| StageError::Record("no time_s column".into()))?;
+    let column = |name: &str| float_column(table, name);
     let finite = |v: f64| v.is_finite().then_some(v);
     let (mut names, mut toppled, mut times, mut peaks, mut confidence, mut pre, mut post, mut why) =
         (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
@@ -107,7 +104,7 @@ fn detect(table: &Table, channels: &[(String, Option<String>)], opts: &DetectOpt
             let vertical = vertical.as_deref().map(column).transpose()?;
             Ok((column(top)?, vertical))
         })
-        .collect::<Result<Vec<_>, String>>()?;
+        .collect::<Result<Vec<_>, StageError>>()?;
     let detected: Vec<_> = inputs
         .par_iter()
         .map(|&(top_ax, vertical)| match &base {

@@ -86,7 +86,7 @@ impl Stage for Load {
         }
         ctx.sink.set_total(jobs.len() + groups.len());
         groups.into_par_iter().try_for_each(|(_, group)| {
-            let mut table = load_group(&group).map_err(anyhow::Error::new)?;
+            let mut table = load_group(&group).map_err(|e| anyhow::Error::new(e.error))?;
             table.metadata.insert("shakeflow.source".into(), group.source.to_string());
             let joined =
                 |field: fn(&InputPart) -> &str| group.parts.iter().map(|p| field(p)).collect::<Vec<_>>().join(", ");
@@ -104,7 +104,7 @@ impl Stage for Load {
             debug_assert!(jobs.iter().all(|job| job.2.path == path));
             let raw = parse(jobs[0].0, jobs[0].2).map_err(anyhow::Error::new)?;
             jobs.into_par_iter().try_for_each(|(spec, source, part)| {
-                let mut table = load_parsed(spec, part, &raw).map_err(anyhow::Error::new)?;
+                let mut table = load_parsed(spec, part, &raw).map_err(|e| anyhow::Error::new(e.error))?;
                 table.metadata.insert("shakeflow.source".into(), source.to_string());
                 table.metadata.extend(super::record_provenance(part));
                 ctx.sink.write("records", &part.partition, table)
@@ -131,12 +131,12 @@ pub fn load_record_group(
     source: &str,
     base_dir: &std::path::Path,
     parts: &[InputPart],
-) -> Result<Table, UserError> {
+) -> Result<Table, RecordError> {
     load_group(&Group { spec, source, base_dir, parts: parts.iter().collect() })
 }
 
 /// A `components:` record: its files read, checked to share one clock, and joined.
-fn load_group(group: &Group<'_>) -> Result<Table, UserError> {
+fn load_group(group: &Group<'_>) -> Result<Table, RecordError> {
     let raws: Vec<RawRecord> = group.parts.par_iter().map(|part| parse(group.spec, part)).collect::<Result<_, _>>()?;
     let merged = merge_components(group, raws)?;
     load_parsed(group.spec, group.parts[0], &merged)
@@ -390,21 +390,48 @@ pub fn delimited_options(spec: &SourceSpec) -> Option<DelimitedOptions> {
 }
 
 /// Reads one file as the source spec says; every refusal names the file and, where it can, the line.
-pub fn load_record(spec: &SourceSpec, part: &InputPart) -> Result<Table, UserError> {
+pub fn load_record(spec: &SourceSpec, part: &InputPart) -> Result<Table, RecordError> {
     load_parsed(spec, part, &parse(spec, part)?)
 }
 
+/// `load`'s refusal of a record: the error its user sees and the file column it is about, where
+/// it is about one (`validate` points at the line of the pipeline that names that column).
+#[derive(Debug, thiserror::Error)]
+#[error("{error}")]
+pub struct RecordError {
+    pub error: UserError,
+    pub column: Option<String>,
+}
+
+impl RecordError {
+    fn about(column: &str, error: UserError) -> Self {
+        RecordError { error, column: Some(column.to_string()) }
+    }
+}
+
+impl From<UserError> for RecordError {
+    fn from(error: UserError) -> Self {
+        RecordError { error, column: None }
+    }
+}
+
+impl From<RecordError> for UserError {
+    fn from(e: RecordError) -> Self {
+        e.error
+    }
+}
+
 /// [`load_record`] of a file already parsed as `spec` says.
-fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Table, UserError> {
+fn load_parsed(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Table, RecordError> {
     // Messages quote the file's column names: their control characters are escaped.
     table_of(spec, part, raw).map_err(|mut e| {
-        e.message = records::printable(&e.message).into_owned();
-        e.hint = e.hint.map(|h| records::printable(&h).into_owned());
+        e.error.message = records::printable(&e.error.message).into_owned();
+        e.error.hint = e.error.hint.map(|h| records::printable(&h).into_owned());
         e
     })
 }
 
-fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Table, UserError> {
+fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Table, RecordError> {
     let path = part.path.as_path();
     let err = |message: String| UserError::new(message).in_file(path);
     let format = read_as(spec, raw);
@@ -414,24 +441,30 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
     let all: Vec<&records::RawChannel> = raw.channels.iter().collect();
     let (explicit_time, channels) = if let Some(name) = &spec.time_column {
         let index = all.iter().position(|c| &c.name == name).ok_or_else(|| {
-            missing_column(path, name, &all)
-                .hint("set `time_column` to one of the file's columns, or drop it and give `dt`")
+            RecordError::about(
+                name,
+                missing_column(path, name, &all)
+                    .hint("set `time_column` to one of the file's columns, or drop it and give `dt`"),
+            )
         })?;
         let channel = all[index];
         if let Some(other) = all.iter().skip(index + 1).find(|c| &c.name == name) {
-            return Err(repeated_column(path, spec, raw, channel, other)
-                .hint("`time_column` cannot tell them apart: rename one in the file"));
+            return Err(RecordError::about(
+                name,
+                repeated_column(path, spec, raw, channel, other)
+                    .hint("`time_column` cannot tell them apart: rename one in the file"),
+            ));
         }
-        let factor = time_factor(path, spec, raw, channel)?;
+        let factor = time_factor(path, spec, raw, channel).map_err(|e| RecordError::about(name, e))?;
         let time: Vec<f64> = channel.values.iter().map(|v| v * factor).collect();
         if let Some(i) = overflowed(&channel.values, &time) {
-            return Err(err(format!(
+            return Err(RecordError::about(name, err(format!(
                 "the time column `{name}` overflows in unit conversion: its sample {} ({}) times {factor} is not a finite number of seconds",
                 i + 1,
                 short(channel.values[i])
             ))
             .at(channel.first_data_line.map(|l| (l + i, 1)))
-            .hint("the value is damaged, or `time_unit` is wrong"));
+            .hint("the value is damaged, or `time_unit` is wrong")));
         }
         let others = all.iter().enumerate().filter(|&(i, _)| i != index).map(|(_, c)| *c).collect();
         (Some((time, channel.first_data_line)), others)
@@ -447,13 +480,12 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
         spec.columns
             .iter()
             .map(|(out, cs)| {
-                let channel = channels
-                    .iter()
-                    .find(|c| c.name == cs.file_column())
-                    .ok_or_else(|| missing_column(path, cs.file_column(), &channels))?;
+                let channel = channels.iter().find(|c| c.name == cs.file_column()).ok_or_else(|| {
+                    RecordError::about(cs.file_column(), missing_column(path, cs.file_column(), &channels))
+                })?;
                 Ok((out.clone(), *channel, Some(cs)))
             })
-            .collect::<Result<_, UserError>>()?
+            .collect::<Result<_, RecordError>>()?
     };
     distinct_names(path, spec, raw, &selected)?;
     // Channels of one file may differ in length (CSMIP, COSMOS, GeoNet): the table takes the
@@ -476,24 +508,26 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
         .collect();
     if let Some((time, line)) = &explicit_time {
         if let Some((out, channel, _)) = selected.iter().find(|s| s.1.values.len() != time.len()) {
-            return Err(err(format!(
+            return Err(RecordError::about(&channel.name, err(format!(
                 "channel `{}` (column `{out}`) has {} samples but the time column {}: which time goes with which sample is unknown",
                 channel.name,
                 channel.values.len(),
                 time.len()
             ))
             .at(line.map(|l| (l, 1)))
-            .hint("a record with its own time column needs as many values in every channel: repair the file"));
+            .hint("a record with its own time column needs as many values in every channel: repair the file")));
         }
     }
     if n < 2 {
-        return Err(err(format!("the record has {n} sample(s); at least 2 are needed")));
+        return Err(err(format!("the record has {n} sample(s); at least 2 are needed")).into());
     }
     let mut metadata = BTreeMap::new();
     let (t0, dt, resampled_from) = match &explicit_time {
         Some((time, first_line)) => {
             if let Some(i) = time.iter().position(|v| !v.is_finite()) {
-                return Err(err("the time column has a missing value".into()).at(first_line.map(|l| (l + i, 1))));
+                return Err(err("the time column has a missing value".into())
+                    .at(first_line.map(|l| (l + i, 1)))
+                    .into());
             }
             match crate::table::uniform_step(time) {
                 Ok(dt) => (time[0], dt, None),
@@ -506,7 +540,7 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
                             crate::table::typical_step(time)
                         ))
                         .at(first_line.map(|l| (l + bad + 1, 1)))
-                        .hint("fix the file, or set `non_uniform: resample` on the source to resample linearly onto the median step"));
+                        .hint("fix the file, or set `non_uniform: resample` on the source to resample linearly onto the median step").into());
                     }
                     NonUniformPolicy::Resample => {
                         let dt = median_step(time).ok_or_else(|| err("time does not increase".into()))?;
@@ -528,7 +562,8 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
         return Err(err(format!(
             "the sample interval {dt} s over {n} samples from t = {t0} s does not give finite, increasing times"
         ))
-        .hint("the time column, DT or `dt` is damaged or in the wrong unit"));
+        .hint("the time column, DT or `dt` is damaged or in the wrong unit")
+        .into());
     }
 
     let n_out = match &resampled_from {
@@ -542,7 +577,7 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
                     "resampling onto the median step ({dt} s) would turn {n} samples spanning {} s into {span:e}: more than {MAX_RESAMPLING_GROWTH} times as many",
                     time[n - 1] - t0
                 ))
-                .hint("the time column has a damaged value or a gap far longer than the record; repair it"));
+                .hint("the time column has a damaged value or a gap far longer than the record; repair it").into());
             }
             span as usize + 1
         }
@@ -565,22 +600,22 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
         let unit_name = match calibration {
             Some(c) => {
                 if let Some(physical) = file_unit.as_deref().filter(|u| units::raw_unit(u).is_none()) {
-                    return Err(err(format!(
+                    return Err(RecordError::about(&channel.name, err(format!(
                         "column `{}` is calibrated by line {} of `{}`, but the file says it is already in `{physical}`",
                         channel.name,
                         c.line,
                         spec.calibration.as_deref().unwrap_or_default()
                     ))
                     .at(unit_at())
-                    .hint("calibrate raw channels only (V, mV, counts): remove its row from the table"));
+                    .hint("calibrate raw channels only (V, mV, counts): remove its row from the table")));
                 }
                 c.unit.clone()
             }
             None => match declared.or(file_unit.clone()) {
                 Some(unit) => unit,
                 None => {
-                    return Err(err(format!("the unit of column `{}` is not known", channel.name))
-                        .hint("set `unit:` on the source (e.g. `unit: g`) or on the column, or `units_row:` where the file has one"))
+                    return Err(RecordError::about(&channel.name, err(format!("the unit of column `{}` is not known", channel.name))
+                        .hint("set `unit:` on the source (e.g. `unit: g`) or on the column, or `units_row:` where the file has one")))
                 }
             },
         };
@@ -589,14 +624,17 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
                 Some(table) => format!("the calibration table `{table}` has no row for it"),
                 None => "the source has no `calibration:` table".to_string(),
             };
-            return Err(err(format!("column `{}` is raw data in {raw_unit}: {table}", channel.name))
+            return Err(RecordError::about(&channel.name, err(format!("column `{}` is raw data in {raw_unit}: {table}", channel.name))
                 .at(unit_at())
-                .hint("add a row `channel,sensitivity,unit,offset` for it to the sensitivity table (docs/formats.md, NEES), or leave the column out with `columns:`"));
+                .hint("add a row `channel,sensitivity,unit,offset` for it to the sensitivity table (docs/formats.md, NEES), or leave the column out with `columns:`")));
         }
         let conversion = units::conversion(&unit_name).ok_or_else(|| {
-            err(format!("unknown unit `{unit_name}` for column `{}`", channel.name))
-                .at(unit_at().filter(|_| calibration.is_none()))
-                .hint(format!("known units: {}", units::known_units().join(", ")))
+            RecordError::about(
+                &channel.name,
+                err(format!("unknown unit `{unit_name}` for column `{}`", channel.name))
+                    .at(unit_at().filter(|_| calibration.is_none()))
+                    .hint(format!("known units: {}", units::known_units().join(", "))),
+            )
         })?;
         let factor = conversion.factor * spec.scale * detail.and_then(|d| d.scale).unwrap_or(1.0);
         let mut values: Vec<f64> = match calibration {
@@ -604,7 +642,7 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
             None => channel.values.iter().map(|v| v * factor).collect(),
         };
         if let Some(i) = overflowed(&channel.values, &values) {
-            return Err(err(format!(
+            return Err(RecordError::about(&channel.name, err(format!(
                 "column `{}` overflows in unit conversion: sample {} ({} {unit_name}) times {factor} is not a finite number of {}",
                 channel.name,
                 i + 1,
@@ -613,21 +651,21 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
             ))
             .in_file(channel_file(raw, channel).map_or(path, std::path::Path::new))
             .at(channel.first_data_line.filter(|_| explicit_time.is_some() || format != RecordFormat::At2).map(|l| (l + i, 1)))
-            .hint("the value is damaged, or the unit or `scale` is wrong; it is not a missing value, so `gaps: interpolate` does not fill it"));
+            .hint("the value is damaged, or the unit or `scale` is wrong; it is not a missing value, so `gaps: interpolate` does not fill it")));
         }
         let missing = values.iter().filter(|v| !v.is_finite()).count();
         if missing > 0 {
             match spec.gaps {
                 GapPolicy::Error => {
                     let first = values.iter().position(|v| !v.is_finite()).expect("counted above");
-                    return Err(err(format!(
+                    return Err(RecordError::about(&channel.name, err(format!(
                         "column `{}` has {missing} missing value(s) (empty or NaN); the first is sample {}",
                         channel.name,
                         first + 1
                     ))
                     .in_file(channel_file(raw, channel).map_or(path, std::path::Path::new))
                     .at(channel.first_data_line.filter(|_| explicit_time.is_some() || format != RecordFormat::At2).map(|l| (l + first, 1)))
-                    .hint("repair the file, or set `gaps: interpolate` on the source to fill gaps linearly (reported in the artifact)"));
+                    .hint("repair the file, or set `gaps: interpolate` on the source to fill gaps linearly (reported in the artifact)")));
                 }
                 GapPolicy::Interpolate => {
                     resample::fill_gaps_linear(&mut values);
@@ -646,8 +684,11 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
             } else {
                 "gap filling or resampling left it undefined"
             };
-            return Err(err(format!("column `{}`: output sample {} is not finite: {cause}", channel.name, i + 1))
-                .hint("check the column in the file, or leave it out with `columns:`"));
+            return Err(RecordError::about(
+                &channel.name,
+                err(format!("column `{}`: output sample {} is not finite: {cause}", channel.name, i + 1))
+                    .hint("check the column in the file, or leave it out with `columns:`"),
+            ));
         }
         // True for every record of the dataset (readers of a partitioned dataset show one part's
         // field metadata for all); which file and column it came from is this file's metadata.
@@ -780,29 +821,29 @@ fn distinct_names(
     spec: &SourceSpec,
     raw: &RawRecord,
     selected: &[(String, &records::RawChannel, Option<&ColumnSpec>)],
-) -> Result<(), UserError> {
+) -> Result<(), RecordError> {
     let mut seen: HashMap<&str, &records::RawChannel> = HashMap::with_capacity(selected.len());
     for (out, channel, column_spec) in selected {
         if out == TIME_COLUMN {
-            let what = if column_spec.is_some() {
-                format!("the output column `{TIME_COLUMN}` under `columns:`")
+            let (what, about) = if column_spec.is_some() {
+                (format!("the output column `{TIME_COLUMN}` under `columns:`"), None)
             } else {
-                format!("the file's column `{}`", channel.name)
+                (format!("the file's column `{}`", channel.name), Some(channel.name.clone()))
             };
-            return Err(UserError::new(format!(
-                "{what} would collide with the time column `{TIME_COLUMN}` that `load` writes"
-            ))
-            .in_file(path)
-            .at(name_line(spec, raw, channel).map(|l| (l, 1)))
-            .hint(format!(
+            let error =
+                UserError::new(format!("{what} would collide with the time column `{TIME_COLUMN}` that `load` writes"))
+                    .in_file(path)
+                    .at(name_line(spec, raw, channel).map(|l| (l, 1)))
+                    .hint(format!(
                 "if it holds the time, set `time_column: {}` on the source; else give it another name with `columns:`",
                 channel.name
-            )));
+            ));
+            return Err(RecordError { error, column: about });
         }
         if let Some(first) = seen.insert(out.as_str(), channel) {
-            return Err(repeated_column(path, spec, raw, first, channel).hint(
+            return Err(RecordError::about(&channel.name, repeated_column(path, spec, raw, first, channel).hint(
                 "pick the channels with `columns:` (output name: file column), leaving out the repeated name, or rename one in the file",
-            ));
+            )));
         }
     }
     // A selected file column given twice in the file: `columns:` would silently take the first.
@@ -810,8 +851,11 @@ fn distinct_names(
     for channel in &raw.channels {
         if let Some(first) = by_name.insert(channel.name.as_str(), channel) {
             if selected.iter().any(|(_, c, s)| s.is_some() && c.name == channel.name) {
-                return Err(repeated_column(path, spec, raw, first, channel)
-                    .hint("`columns:` cannot tell them apart: rename one in the file"));
+                return Err(RecordError::about(
+                    &channel.name,
+                    repeated_column(path, spec, raw, first, channel)
+                        .hint("`columns:` cannot tell them apart: rename one in the file"),
+                ));
             }
         }
     }

@@ -20,6 +20,7 @@ pub mod cpt_project;
 pub mod cpt_track;
 pub mod detect_toppling;
 pub mod diagnose;
+pub mod error;
 pub mod load;
 pub mod report;
 pub mod simulate_rolling;

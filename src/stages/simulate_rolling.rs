@@ -253,21 +253,9 @@ impl Setup {
             trail_m: m.trail_m.unwrap_or_else(|| Cart::default_trail_m(diameter)),
             swivel_arm_m: m.swivel_arm_m.unwrap_or(rolling::DEFAULT_SWIVEL_ARM_M),
         };
-        cart.check(lateral_slip).map_err(|message| {
-            let key = [
-                "trail_m",
-                "length_m",
-                "width_m",
-                "platform_mass_kg",
-                "wheel_diameter_m",
-                "wheel_width_m",
-                "wheel_mass_kg",
-                "swivel_arm_m",
-            ]
-            .into_iter()
-            .find(|k| message.starts_with(k) || (*k == "trail_m" && message.contains("trail")))
-            .unwrap_or("length_m");
-            refuse(key, format!("`simulate_rolling`: {message}"), "see `shakeflow stages simulate_rolling`")
+        cart.check(lateral_slip).map_err(|e| {
+            let key = e.parameter().unwrap_or("length_m");
+            refuse(key, format!("`simulate_rolling`: {e}"), "see `shakeflow stages simulate_rolling`")
         })?;
         let p = m.p.unwrap_or(1.0);
         let (beta, gamma) = (required(m.beta_spm, "beta_spm")?, required(m.gamma_n, "gamma_n")?);
@@ -290,10 +278,10 @@ impl Setup {
             eps_swivel_radps: m.friction_eps_swivel.unwrap_or(rolling::DEFAULT_FRICTION_EPS_SWIVEL_RADPS),
             law,
         };
-        friction.check().map_err(|m| {
+        friction.check().map_err(|e| {
             refuse(
-                if m.starts_with("friction_eps_swivel") { "friction_eps_swivel" } else { "friction_eps" },
-                format!("`simulate_rolling`: {m}"),
+                e.parameter().unwrap_or("friction_eps"),
+                format!("`simulate_rolling`: {e}"),
                 "friction values must be zero or positive, ε positive",
             )
         })?;

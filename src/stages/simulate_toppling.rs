@@ -2,6 +2,7 @@
 //! driven by floor records: θ(t), θ̇(t) and what a top accelerometer would record, the events,
 //! and a figure per record.
 
+use super::error::{float_column, StageError};
 use std::path::{Path, PathBuf};
 use std::sync::LazyLock;
 
@@ -164,19 +165,15 @@ pub fn simulate_record(
     options: &Options,
     horizontal: &str,
     vertical: Option<&str>,
-) -> Result<(Floor, Response), String> {
-    let column = |name: &str| {
-        table
-            .f64_column(name)
-            .map(<[f64]>::to_vec)
-            .ok_or_else(|| format!("no float column `{name}`; columns: {}", table.column_names().join(", ")))
-    };
+) -> Result<(Floor, Response), StageError> {
+    let column = |name: &str| float_column(table, name).map(<[f64]>::to_vec);
     let time = column(TIME_COLUMN)?;
     if time.len() < 2 {
-        return Err("the record has fewer than 2 samples".into());
+        return Err(StageError::Record("the record has fewer than 2 samples".into()));
     }
-    let dt = crate::table::uniform_step(&time)
-        .map_err(|i| format!("time is not uniformly sampled after t = {} s; resample it first", time[i]))?;
+    let dt = crate::table::uniform_step(&time).map_err(|i| {
+        StageError::Record(format!("time is not uniformly sampled after t = {} s; resample it first", time[i]))
+    })?;
     let floor = Floor { horizontal: column(horizontal)?, vertical: vertical.map(column).transpose()?, time };
     let excitation = Excitation {
         t0_s: floor.time[0],

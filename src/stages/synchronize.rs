@@ -9,6 +9,7 @@
 //! (prefixed by their partition, e.g. `floor4_ax_mps2`) and the aligned target channels over the
 //! time both cover.
 
+use super::error::StageError;
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::LazyLock;
@@ -71,9 +72,9 @@ impl Stage for Synchronize {
     /// `reference_select` is checked with the pipeline, so `validate` points at its line.
     fn check(&self, params: &Params, _base_dir: &Path) -> Result<(), ParamError> {
         let p: SynchronizeParams = params::typed(params)?;
-        reference_select(&p.reference_select).map(|_| ()).map_err(|message| ParamError {
+        reference_select(&p.reference_select).map(|_| ()).map_err(|e| ParamError {
             key: Some("reference_select".into()),
-            message,
+            message: e.to_string(),
             hint: "name a partition of the reference records, e.g. `floor=5`".into(),
         })
     }
@@ -146,13 +147,13 @@ impl Stage for Synchronize {
 }
 
 /// `reference_select` as (key, value); `None` when it is empty (a single reference record).
-fn reference_select(select: &str) -> Result<Option<(&str, &str)>, String> {
+fn reference_select(select: &str) -> Result<Option<(&str, &str)>, StageError> {
     if select.is_empty() {
         return Ok(None);
     }
     match select.split_once('=') {
         Some((key, value)) if !key.is_empty() && !value.is_empty() => Ok(Some((key, value))),
-        _ => Err(format!("`reference_select` must look like key=value, not `{select}`")),
+        _ => Err(StageError::Record(format!("`reference_select` must look like key=value, not `{select}`"))),
     }
 }
 
@@ -171,10 +172,10 @@ fn prefix(part: &InputPart, join: &str) -> String {
     part.partition.iter().filter(|(k, _)| k != join).map(|(k, v)| format!("{k}{v}")).collect::<Vec<_>>().join("_")
 }
 
-fn sample_rate(table: &Table) -> Result<(f64, f64), String> {
-    let time = table.f64_column(TIME_COLUMN).ok_or("no time_s column")?;
+fn sample_rate(table: &Table) -> Result<(f64, f64), StageError> {
+    let time = table.f64_column(TIME_COLUMN).ok_or_else(|| StageError::Record("no time_s column".into()))?;
     if time.len() < 2 {
-        return Err("fewer than 2 samples".into());
+        return Err(StageError::Record("fewer than 2 samples".into()));
     }
     Ok((time[0], crate::table::sample_rate(time)))
 }
@@ -185,23 +186,23 @@ fn align(
     references: &[(String, Arc<Table>)],
     target: &Table,
     p: &SynchronizeParams,
-) -> Result<(Table, Table), String> {
+) -> Result<(Table, Table), StageError> {
     let (reference_channel, target_channel) = (p.reference_channel.as_str(), p.target_channel.as_str());
     let (t0, fs) = sample_rate(clock)?;
     let (_, fs_target) = sample_rate(target)?;
     let reference = clock.f64_column(reference_channel).ok_or_else(|| {
-        format!(
+        StageError::Record(format!(
             "the clock reference has no float column `{reference_channel}`; columns: {}",
             clock.column_names().join(", ")
-        )
+        ))
     })?;
     let float_columns: Vec<(&Column, &[f64])> =
         target.columns.iter().filter(|c| c.name != TIME_COLUMN).filter_map(|c| c.as_f64().map(|v| (c, v))).collect();
     let sync_position = float_columns.iter().position(|(c, _)| c.name == target_channel).ok_or_else(|| {
-        format!(
+        StageError::Record(format!(
             "the target has no float channel `{target_channel}` (other than `{TIME_COLUMN}`); columns: {}",
             target.column_names().join(", ")
-        )
+        ))
     })?;
     let values: Vec<&[f64]> = float_columns.iter().map(|(_, v)| *v).collect();
     let resampler = Resampler::new(fs_target, fs);
@@ -210,7 +211,7 @@ fn align(
         Some(lag) => (lag, 0.0, None, "known"),
         None => {
             let sync = resampler.resample(values[sync_position]);
-            let e = estimate_lag(reference, &sync, fs, Some(p.max_lag_s)).map_err(|e| e.to_string())?;
+            let e = estimate_lag(reference, &sync, fs, Some(p.max_lag_s))?;
             (e.lag_s, e.uncertainty_s, Some(e.correlation), "estimated")
         }
     };
@@ -220,8 +221,9 @@ fn align(
         float_columns.iter().map(|(c, _)| *c).zip(resampler.grid(&values, lag_s, n_target)).collect();
     let n_reference = references.iter().map(|(_, t)| t.num_rows()).min().unwrap_or(0);
     let valid = |k: usize| target_columns.iter().all(|(_, v)| k < v.len() && v[k].is_finite());
-    let first =
-        (0..n_reference).find(|&k| valid(k)).ok_or("the target and reference records do not overlap in time")?;
+    let first = (0..n_reference)
+        .find(|&k| valid(k))
+        .ok_or_else(|| StageError::Record("the target and reference records do not overlap in time".into()))?;
     let last = (first..n_reference).take_while(|&k| valid(k)).last().expect("first is valid");
     let range = first..last + 1;
 

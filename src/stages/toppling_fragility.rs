@@ -2,6 +2,7 @@
 //! intensities, every run simulated (in parallel), and a lognormal fragility curve fitted to
 //! overturn / no overturn by maximum likelihood.
 
+use super::error::{float_column, StageError};
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::LazyLock;
@@ -246,12 +247,10 @@ impl Stage for TopplingFragility {
 }
 
 /// PFA, or PFV from the trapezoidal integral of the (baseline-corrected) horizontal record.
-fn intensity(table: &Table, horizontal: &str, velocity: bool) -> Result<f64, String> {
-    let a = table
-        .f64_column(horizontal)
-        .ok_or_else(|| format!("no float column `{horizontal}`; columns: {}", table.column_names().join(", ")))?;
+fn intensity(table: &Table, horizontal: &str, velocity: bool) -> Result<f64, StageError> {
+    let a = float_column(table, horizontal)?;
     let im = if velocity {
-        let t = table.f64_column(TIME_COLUMN).ok_or("no time_s column")?;
+        let t = table.f64_column(TIME_COLUMN).ok_or_else(|| StageError::Record("no time_s column".into()))?;
         let mut v = 0.0_f64;
         let mut peak = 0.0_f64;
         for k in 1..a.len() {
@@ -265,7 +264,7 @@ fn intensity(table: &Table, horizontal: &str, velocity: bool) -> Result<f64, Str
     if im > 0.0 && im.is_finite() {
         Ok(im)
     } else {
-        Err(format!("`{horizontal}` has no motion to scale (intensity {im})"))
+        Err(StageError::Record(format!("`{horizontal}` has no motion to scale (intensity {im})")))
     }
 }
 

@@ -2,6 +2,7 @@
 //! MATLAB `tfestimate` computes them) and the fundamental frequency picked from |H1| with a
 //! half-power damping estimate, like Table 3 of the study.
 
+use super::error::{float_column, StageError};
 use rayon::prelude::*;
 use std::sync::LazyLock;
 
@@ -96,7 +97,7 @@ impl Stage for TransferFunction {
     }
 }
 
-fn options(p: &TransferFunctionParams, n: usize, fs: f64) -> Result<WelchOptions, String> {
+fn options(p: &TransferFunctionParams, n: usize, fs: f64) -> Result<WelchOptions, StageError> {
     let window = match p.window {
         WindowChoice::Hamming => Window::HammingSymmetric,
         WindowChoice::Hann => Window::Hann,
@@ -112,7 +113,9 @@ fn options(p: &TransferFunctionParams, n: usize, fs: f64) -> Result<WelchOptions
         Some(seconds) => {
             let segment_len = (seconds * fs).round() as usize;
             if segment_len < 8 || segment_len > n {
-                return Err(format!("segment_s = {seconds} s gives {segment_len} samples; the record has {n}"));
+                return Err(StageError::Record(format!(
+                    "segment_s = {seconds} s gives {segment_len} samples; the record has {n}"
+                )));
             }
             let overlap = ((p.overlap * segment_len as f64).floor() as usize).min(segment_len - 1);
             WelchOptions { window, segment_len, overlap, detrend, nfft: None }
@@ -123,27 +126,27 @@ fn options(p: &TransferFunctionParams, n: usize, fs: f64) -> Result<WelchOptions
     Ok(opts)
 }
 
-fn analyse(table: &Table, pairs: &[(String, String)], p: &TransferFunctionParams) -> Result<(Table, Table), String> {
-    let time = table.f64_column(TIME_COLUMN).ok_or("no time_s column")?;
+fn analyse(
+    table: &Table,
+    pairs: &[(String, String)],
+    p: &TransferFunctionParams,
+) -> Result<(Table, Table), StageError> {
+    let time = table.f64_column(TIME_COLUMN).ok_or_else(|| StageError::Record("no time_s column".into()))?;
     let n = time.len();
     if n < 16 {
-        return Err(format!("{n} samples are too few for a transfer function"));
+        return Err(StageError::Record(format!("{n} samples are too few for a transfer function")));
     }
     let fs = crate::table::sample_rate(time);
     let opts = options(p, n, fs)?;
     let band = (p.band_min_hz, p.band_max_hz);
-    let column = |name: &str| {
-        table
-            .f64_column(name)
-            .ok_or_else(|| format!("no float column `{name}`; columns: {}", table.column_names().join(", ")))
-    };
+    let column = |name: &str| float_column(table, name);
     let (mut outputs, mut inputs, mut freq, mut damping, mut gain, mut coh, mut low, mut notes) =
         (vec![], vec![], vec![], vec![], vec![], vec![], vec![], vec![]);
     let (mut s_out, mut s_freq, mut s_h1, mut s_phase, mut s_h2, mut s_coh) =
         (vec![], vec![], vec![], vec![], vec![], vec![]);
     for (input, output) in pairs {
         let tf = transfer_function(column(input)?, column(output)?, fs, &opts)
-            .map_err(|e| format!("{input} -> {output}: {e}"))?;
+            .map_err(|e| StageError::Record(format!("{input} -> {output}: {e}")))?;
         for (k, &f) in tf.freqs_hz.iter().enumerate() {
             s_out.push(output.clone());
             s_freq.push(f);

@@ -157,7 +157,7 @@ impl UnitModel for RollingCase {
             _ => return Err(format!("`{key}` is not a parameter of this cart")),
         }
         self.cart.check(false)?;
-        self.friction.check()
+        Ok(self.friction.check()?)
     }
 
     fn physical_range(&self, key: &str) -> (f64, f64) {

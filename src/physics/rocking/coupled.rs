@@ -18,6 +18,7 @@ use super::{
     chatter, initial_side, sensor_acceleration, Block, EventKind, Excitation, IsolatedBase, Options, Phase, Response,
     MAX_TRANSITIONS_PER_SAMPLE,
 };
+use crate::physics::error::PhysicsError;
 use crate::physics::hybrid::{self, rebounds, Course, Equations, Hybrid, Now, Segment};
 use crate::physics::ode::{Stats, Stepper};
 
@@ -128,7 +129,7 @@ pub(super) fn simulate<S: Stepper<4>>(
     iso: &IsolatedBase,
     mass_ratio: f64,
     stepper: S,
-) -> Result<Response, String> {
+) -> Result<Response, PhysicsError> {
     let omega = std::f64::consts::TAU / iso.period_s;
     let system = System { block, k: omega * omega, c: 2.0 * iso.damping_ratio * omega, mu: 1.0 / (1.0 + mass_ratio) };
     let restitution = options
@@ -165,9 +166,9 @@ struct Coupled<'a> {
 impl<'a> Hybrid<4, 2> for Coupled<'a> {
     type Transition = Transition;
     type Equations = Phase<System<'a>, Regime>;
-    type Error = String;
+    type Error = PhysicsError;
 
-    fn course(&mut self, now: Now, y: &[f64; 4]) -> Result<Course<Transition, Self::Equations>, String> {
+    fn course(&mut self, now: Now, y: &[f64; 4]) -> Result<Course<Transition, Self::Equations>, PhysicsError> {
         let (k, t) = (now.k, now.t);
         let seg = self.excitation.segment(k);
         if self.regime == Regime::Rest {
@@ -226,7 +227,7 @@ impl<'a> Hybrid<4, 2> for Coupled<'a> {
         }
     }
 
-    fn chatter(&self, t: f64, _: &Stats) -> String {
+    fn chatter(&self, t: f64, _: &Stats) -> PhysicsError {
         chatter("impact", t, self.options.rest_amplitude_rad)
     }
 
@@ -377,9 +378,9 @@ mod tests {
         let floor = vec![0.0; 10];
         let exc = Excitation { t0_s: 0.0, dt_s: 0.01, horizontal_mps2: &floor, vertical_mps2: None };
         let with_friction = Options { friction: Some(Friction::coulomb(0.3)), ..isolated(Some(1.0)) };
-        let message = simulate(&block, &exc, &with_friction).unwrap_err();
+        let message = simulate(&block, &exc, &with_friction).unwrap_err().to_string();
         assert!(message.contains("does not combine with an isolated base"), "{message}");
-        let message = simulate(&block, &exc, &isolated(Some(-1.0))).unwrap_err();
+        let message = simulate(&block, &exc, &isolated(Some(-1.0))).unwrap_err().to_string();
         assert!(message.contains("mass ratio"), "{message}");
     }
 }

@@ -25,6 +25,7 @@
 //!
 //! The model is mass-independent (only I₀/m enters); the mass is kept for reports.
 
+use crate::physics::error::PhysicsError;
 use crate::physics::hybrid::{Clock, Segment};
 use crate::physics::ode::{Dopri5, Either, Rk4, Stats};
 use crate::physics::sdof::Sdof;
@@ -68,12 +69,12 @@ pub struct Block {
 }
 
 impl Block {
-    pub fn new(shape: Shape, mass_kg: f64, g_mps2: f64) -> Result<Self, String> {
-        let positive = |name: &str, v: f64| {
+    pub fn new(shape: Shape, mass_kg: f64, g_mps2: f64) -> Result<Self, PhysicsError> {
+        let positive = |name: &'static str, v: f64| {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(format!("{name} must be a positive number, got {v}"))
+                Err(PhysicsError::NotPositive { name, value: v })
             }
         };
         positive("mass_kg", mass_kg)?;
@@ -84,7 +85,9 @@ impl Block {
                 positive("H_m", h_m)?;
                 let hc = h_m * (0.5 + f);
                 if !(hc > 0.0 && hc < h_m) {
-                    return Err(format!("f = {f} puts the centre of mass outside the block (0 < H/2 + fH < H)"));
+                    return Err(PhysicsError::Parameter(format!(
+                        "f = {f} puts the centre of mass outside the block (0 < H/2 + fH < H)"
+                    )));
                 }
                 // Centroidal inertia of the uniform rectangle; f shifts the CM, not the inertia
                 // (the convention of the study's Table 5 and of the demo cases).
@@ -435,8 +438,8 @@ struct Phase<Mo, R> {
 }
 
 /// The error of a run whose `what` (impacts, stick-slip) kept switching near `t`.
-fn chatter(what: &str, t: f64, rest_amplitude_rad: f64) -> String {
-    format!("{what} chatter near t = {t:.4} s did not settle; raise `rest_amplitude_rad` (now {rest_amplitude_rad})")
+fn chatter(what: &'static str, t_s: f64, rest_amplitude_rad: f64) -> PhysicsError {
+    PhysicsError::Chatter { what, t_s, rest_amplitude_rad }
 }
 
 /// The most negative of `margins` (a condition that no longer holds), if any is negative.
@@ -468,12 +471,14 @@ fn stepper<const N: usize>(method: Method, scale: [f64; N], dt_s: f64) -> Either
 }
 
 /// Simulates the block under the floor motion; outputs are on the input time base.
-pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -> Result<Response, String> {
+pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -> Result<Response, PhysicsError> {
     check_floor(block, excitation)?;
     let dt = excitation.dt_s;
     if let Some(e) = options.restitution {
         if !(0.0..=1.0).contains(&e) {
-            return Err(format!("the coefficient of restitution must be within 0..1, got {e}"));
+            return Err(PhysicsError::Parameter(format!(
+                "the coefficient of restitution must be within 0..1, got {e}"
+            )));
         }
     }
     if let Some(f) = options.friction {
@@ -488,7 +493,7 @@ pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -
             && o.angle_rad < block.lie_angle_rad
             && (0.0..=1.0).contains(&o.restitution))
         {
-            return Err(format!("the obstacle needs side ±1, an angle between 0 and the lying angle and a restitution in 0..1, got {o:?}"));
+            return Err(PhysicsError::Parameter(format!("the obstacle needs side ±1, an angle between 0 and the lying angle and a restitution in 0..1, got {o:?}")));
         }
     }
     let base_ax = match options.isolated_base {
@@ -506,42 +511,45 @@ pub fn simulate(block: &Block, excitation: &Excitation<'_>, options: &Options) -
 }
 
 /// Refuses a floor record the models cannot run on.
-fn check_floor(block: &Block, excitation: &Excitation<'_>) -> Result<(), String> {
+fn check_floor(block: &Block, excitation: &Excitation<'_>) -> Result<(), PhysicsError> {
     let n = excitation.horizontal_mps2.len();
     let dt = excitation.dt_s;
     if n < 2 {
-        return Err(format!("the floor record has {n} sample(s); at least 2 are needed"));
+        return Err(PhysicsError::TooFewSamples(n));
     }
     if !(dt.is_finite() && dt > 0.0) {
-        return Err(format!("the sample interval must be positive, got {dt} s"));
+        return Err(PhysicsError::SampleInterval(dt));
     }
     if let Some(v) = excitation.vertical_mps2 {
         if v.len() != n {
-            return Err(format!("horizontal and vertical records differ in length ({n} vs {})", v.len()));
+            return Err(PhysicsError::Floor(format!(
+                "horizontal and vertical records differ in length ({n} vs {})",
+                v.len()
+            )));
         }
     }
     for k in 0..n {
         let (ax, av) = (excitation.horizontal_mps2[k], excitation.vertical(k));
         if !ax.is_finite() || !av.is_finite() {
-            return Err(format!("sample {k} (t = {} s) is not a finite number", excitation.t0_s + k as f64 * dt));
+            return Err(PhysicsError::NotFinite { sample: k, t_s: excitation.t0_s + k as f64 * dt });
         }
         if block.g_mps2 + av <= 0.0 {
-            return Err(format!(
+            return Err(PhysicsError::Floor(format!(
                 "at t = {} s the floor falls faster than gravity (vertical {av} m/s^2): the block would fly, which the model does not cover",
                 excitation.t0_s + k as f64 * dt
-            ));
+            )));
         }
     }
     Ok(())
 }
 
 /// Refuses friction coefficients out of order and what the sliding block does not combine with.
-fn check_friction(f: &Friction, options: &Options) -> Result<(), String> {
+fn check_friction(f: &Friction, options: &Options) -> Result<(), PhysicsError> {
     if !(f.static_mu.is_finite() && f.kinetic_mu > 0.0 && f.kinetic_mu <= f.static_mu) {
-        return Err(format!(
+        return Err(PhysicsError::Parameter(format!(
             "friction needs 0 < μ_k ≤ μ_s (finite), got μ_s = {}, μ_k = {}",
             f.static_mu, f.kinetic_mu
-        ));
+        )));
     }
     let other = [
         (options.anchorage.is_some(), "anchorage"),
@@ -550,22 +558,24 @@ fn check_friction(f: &Friction, options: &Options) -> Result<(), String> {
         (options.mass_change.is_some(), "a mass change"),
     ];
     if let Some((_, what)) = other.iter().find(|(given, _)| *given) {
-        return Err(format!("the sliding block (friction) does not combine with {what}"));
+        return Err(PhysicsError::Parameter(format!("the sliding block (friction) does not combine with {what}")));
     }
     Ok(())
 }
 
 /// Checks the isolated base; returns its mass ratio when the base is coupled to the block.
-fn check_isolated_base(iso: &IsolatedBase, options: &Options) -> Result<Option<f64>, String> {
+fn check_isolated_base(iso: &IsolatedBase, options: &Options) -> Result<Option<f64>, PhysicsError> {
     if !(iso.period_s > 0.0 && (0.0..1.0).contains(&iso.damping_ratio)) {
-        return Err(format!(
+        return Err(PhysicsError::Parameter(format!(
             "the isolated base needs a positive period and a damping ratio in [0, 1), got T_b = {} s, ξ = {}",
             iso.period_s, iso.damping_ratio
-        ));
+        )));
     }
     let Some(ratio) = iso.mass_ratio else { return Ok(None) };
     if !(ratio.is_finite() && ratio > 0.0) {
-        return Err(format!("the base's mass ratio m_b/m must be a positive number, got {ratio}"));
+        return Err(PhysicsError::Parameter(format!(
+            "the base's mass ratio m_b/m must be a positive number, got {ratio}"
+        )));
     }
     let other = [
         (options.anchorage.is_some(), "anchorage"),
@@ -573,9 +583,9 @@ fn check_isolated_base(iso: &IsolatedBase, options: &Options) -> Result<Option<f
         (options.mass_change.is_some(), "a mass change"),
     ];
     if let Some((_, what)) = other.iter().find(|(given, _)| *given) {
-        return Err(format!(
+        return Err(PhysicsError::Parameter(format!(
             "the coupled isolated base (a base mass ratio) does not combine with {what}; leave the mass ratio out for a prescribed base motion"
-        ));
+        )));
     }
     Ok(Some(ratio))
 }

@@ -7,6 +7,7 @@ use super::{
     chatter, initial_side, sensor_acceleration, Block, EventKind, Excitation, MassChange, Options, Response,
     MAX_TRANSITIONS_PER_SAMPLE,
 };
+use crate::physics::error::PhysicsError;
 use crate::physics::hybrid::{self, rebounds, Course, Equations, Hybrid, Now, Segment};
 use crate::physics::ode::{Stats, Stepper};
 
@@ -178,13 +179,13 @@ pub(super) fn simulate<S: Stepper<2>>(
     base_ax: &[f64],
     options: &Options,
     stepper: S,
-) -> Result<Response, String> {
+) -> Result<Response, PhysicsError> {
     let anchor = match options.anchorage {
         Some(a) => {
             if !(a.strength_ratio > 0.0 && a.ductility >= 1.0 && a.yield_rotation_rad > 0.0) {
-                return Err(format!(
+                return Err(PhysicsError::Parameter(format!(
                     "the anchorage needs F/W > 0, ductility ≥ 1 and a positive yield rotation, got {a:?}"
-                ));
+                )));
             }
             let yield_m = 2.0 * block.half_base_m * a.yield_rotation_rad.sin();
             Some(AnchorLaw { strength_ratio: a.strength_ratio, yield_m, fracture_m: a.ductility * yield_m })
@@ -290,7 +291,7 @@ fn heel(side: i8) -> usize {
 impl Hybrid<2, 6> for Toppling<'_> {
     type Transition = Transition;
     type Equations = RockingOnSide;
-    type Error = String;
+    type Error = PhysicsError;
 
     /// A mass change splits the interval: the phase ends there and the block changes.
     fn limit(&self, t: f64, t_end: f64) -> f64 {
@@ -300,7 +301,7 @@ impl Hybrid<2, 6> for Toppling<'_> {
         }
     }
 
-    fn course(&mut self, now: Now, y: &[f64; 2]) -> Result<Course<Transition, RockingOnSide>, String> {
+    fn course(&mut self, now: Now, y: &[f64; 2]) -> Result<Course<Transition, RockingOnSide>, PhysicsError> {
         let Now { k, t, limit } = now;
         if t >= limit {
             return Ok(Course::Switch { at: t, transition: Transition::MassChange });
@@ -372,7 +373,7 @@ impl Hybrid<2, 6> for Toppling<'_> {
         }
     }
 
-    fn chatter(&self, t: f64, _: &Stats) -> String {
+    fn chatter(&self, t: f64, _: &Stats) -> PhysicsError {
         chatter("impact", t, self.options.rest_amplitude_rad)
     }
 

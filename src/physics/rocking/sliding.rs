@@ -28,6 +28,7 @@ use super::{
     chatter, initial_side, most_negative, sensor_acceleration, Block, EventKind, Excitation, Friction, Options, Phase,
     Response, MAX_TRANSITIONS_PER_SAMPLE,
 };
+use crate::physics::error::PhysicsError;
 use crate::physics::hybrid::{self, rebounds, Course, Equations, Hybrid, Now, Segment};
 use crate::physics::ode::{Stats, Stepper};
 
@@ -247,7 +248,7 @@ pub(super) fn simulate<S: Stepper<4>>(
     options: &Options,
     friction: Friction,
     stepper: S,
-) -> Result<Response, String> {
+) -> Result<Response, PhysicsError> {
     let y = [options.initial_theta_rad, options.initial_theta_dot_radps, 0.0, 0.0];
     let mut sliding = Sliding {
         model: Model { block, friction },
@@ -330,9 +331,9 @@ impl Sliding<'_> {
 impl<'a> Hybrid<4, 4> for Sliding<'a> {
     type Transition = Transition;
     type Equations = Phase<Model<'a>, Regime>;
-    type Error = String;
+    type Error = PhysicsError;
 
-    fn course(&mut self, now: Now, y: &[f64; 4]) -> Result<Course<Transition, Self::Equations>, String> {
+    fn course(&mut self, now: Now, y: &[f64; 4]) -> Result<Course<Transition, Self::Equations>, PhysicsError> {
         let (k, t) = (now.k, now.t);
         let seg = self.excitation.segment(k);
         if let Some(transition) = self.at_once(&seg, t, y) {
@@ -343,9 +344,9 @@ impl<'a> Hybrid<4, 4> for Sliding<'a> {
             let (theta_ddot, w) = self.model.slide_rocking(side, dir, y, ag, av);
             let (_, normal) = self.model.contact(side, y, theta_ddot, ag + w, av);
             if normal < 0.0 {
-                return Err(format!(
+                return Err(PhysicsError::Stopped(format!(
                     "at t = {t:.4} s the block would leave the floor (free flight), which the sliding model does not cover"
-                ));
+                )));
             }
         }
         Ok(match self.regime {
@@ -402,7 +403,7 @@ impl<'a> Hybrid<4, 4> for Sliding<'a> {
         }
     }
 
-    fn chatter(&self, t: f64, _: &Stats) -> String {
+    fn chatter(&self, t: f64, _: &Stats) -> PhysicsError {
         chatter("impact or stick-slip", t, self.options.rest_amplitude_rad)
     }
 
@@ -743,11 +744,13 @@ mod tests {
         let floor = vec![0.0; 10];
         let exc = Excitation { t0_s: 0.0, dt_s: 0.01, horizontal_mps2: &floor, vertical_mps2: None };
         let with = |friction| Options { friction: Some(friction), ..Options::default() };
-        let message =
-            simulate(&block, &exc, &with(Friction { static_mu: 0.2, kinetic_mu: 0.3, coupled: true })).unwrap_err();
+        let message = simulate(&block, &exc, &with(Friction { static_mu: 0.2, kinetic_mu: 0.3, coupled: true }))
+            .unwrap_err()
+            .to_string();
         assert!(message.contains("μ_k ≤ μ_s"), "{message}");
         let obstacle = Some(super::super::Obstacle { side: 1, angle_rad: 0.1, restitution: 0.5 });
-        let message = simulate(&block, &exc, &Options { obstacle, ..with(Friction::coulomb(0.3)) }).unwrap_err();
+        let message =
+            simulate(&block, &exc, &Options { obstacle, ..with(Friction::coulomb(0.3)) }).unwrap_err().to_string();
         assert!(message.contains("does not combine with an obstacle"), "{message}");
     }
 }

@@ -13,6 +13,7 @@
 //! ṙᵢ = ω k×rᵢ, ȧᵢᵀν = (bᵢᵀν)²/d − ω²(rᵢ·eᵢ), ḃᵢᵀν = −(aᵢᵀν)(bᵢᵀν)/d − ω²(rᵢ·nᵢ).
 
 use super::{Cart, Friction, LateralSlip, PIVOT_SIGNS};
+use crate::physics::error::PhysicsError;
 
 /// What the nominal cart leaves out: the diagnosis's rolling effects, each a physics added to
 /// the no-slip model ([`NoSlip::altered`]).
@@ -274,7 +275,12 @@ impl NoSlip {
     /// loads (a rigid platform on four equal supports: Nᵢ = m_w g + W/4 (1 + c_x sᵢₓ/a + c_y sᵢᵧ/b));
     /// one wheel locked (it drags with μ Nᵢ and no longer spins); one swivel jammed (δ̇ⱼ ≡ 0, a
     /// constraint on ν, or held by a friction lock); a wall struck by the platform's corners.
-    pub fn altered(cart: &Cart, friction: &Friction, g_mps2: f64, alteration: &Alteration) -> Result<Self, String> {
+    pub fn altered(
+        cart: &Cart,
+        friction: &Friction,
+        g_mps2: f64,
+        alteration: &Alteration,
+    ) -> Result<Self, PhysicsError> {
         let mut model = NoSlip::new(cart, friction, g_mps2);
         model.alteration = *alteration;
         let dv = &mut model.derived;
@@ -282,10 +288,10 @@ impl NoSlip {
             let m = dv.platform_mass_kg + change.dm_kg;
             let inertia = dv.platform_inertia + change.dm_kg * (change.at_m[0].powi(2) + change.at_m[1].powi(2));
             if !(m > 0.0 && inertia > 0.0 && change.at_m.iter().all(|v| v.is_finite())) {
-                return Err(format!(
+                return Err(PhysicsError::Parameter(format!(
                     "a mass change of {} kg at ({}, {}) m leaves no platform",
                     change.dm_kg, change.at_m[0], change.at_m[1]
-                ));
+                )));
             }
             model.first_moment = change.at_m.map(|v| change.dm_kg * v);
             let centre = model.first_moment.map(|s| s / m);
@@ -293,12 +299,12 @@ impl NoSlip {
                 let share = 0.25 * (1.0 + centre[0] * sx / dv.half_length_m + centre[1] * sy / dv.half_width_m);
                 model.loads[i] = (dv.wheel_mass_kg + m * share) * g_mps2;
                 if model.loads[i] <= 0.0 {
-                    return Err(format!(
+                    return Err(PhysicsError::Parameter(format!(
                         "the centre of mass at ({}, {}) m lifts wheel {}",
                         centre[0],
                         centre[1],
                         i + 1
-                    ));
+                    )));
                 }
             }
             dv.platform_mass_kg = m;
@@ -307,27 +313,30 @@ impl NoSlip {
         }
         if let Some(brake) = alteration.brake {
             if brake.caster > 3 || !(brake.mu.is_finite() && brake.mu >= 0.0) {
-                return Err(format!("a brake needs a caster 0..3 and μ ≥ 0, got {} and {}", brake.caster, brake.mu));
+                return Err(PhysicsError::Parameter(format!(
+                    "a brake needs a caster 0..3 and μ ≥ 0, got {} and {}",
+                    brake.caster, brake.mu
+                )));
             }
             model.k_roll[brake.caster] = dv.wheel_mass_kg;
         }
         if let Some(jam) = alteration.jam {
             if jam.caster > 3 || jam.mu.is_some_and(|mu| !(mu.is_finite() && mu > 0.0)) {
-                return Err(format!(
+                return Err(PhysicsError::Parameter(format!(
                     "a jammed swivel needs a caster 0..3 and a lock's μ > 0, got {} and {:?}",
                     jam.caster, jam.mu
-                ));
+                )));
             }
         }
         if !(alteration.ramp_s.is_finite() && alteration.ramp_s >= 0.0) {
-            return Err(format!("a ramp lasts 0 s or more, got {} s", alteration.ramp_s));
+            return Err(PhysicsError::Parameter(format!("a ramp lasts 0 s or more, got {} s", alteration.ramp_s)));
         }
         if let Some(wall) = alteration.wall {
             if wall.axis > 1 || !(wall.restitution > 0.0 && wall.restitution <= 1.0 && wall.contact_s > 0.0) {
-                return Err(format!(
+                return Err(PhysicsError::Parameter(format!(
                     "a wall needs axis 0 or 1, 0 < e ≤ 1 and a positive contact time, got {}, {}, {}",
                     wall.axis, wall.restitution, wall.contact_s
-                ));
+                )));
             }
         }
         Ok(model)

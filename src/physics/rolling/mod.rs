@@ -31,6 +31,7 @@ mod simulate;
 #[cfg(test)]
 mod tests;
 
+pub use crate::physics::error::PhysicsError;
 pub use dynamics::{Alteration, Brake, Dynamics, Jam, MassChange, NoSlip, Power, Slip, Wall, JAM_EPS_RADPS};
 pub use simulate::{simulate, simulate_altered, Event, EventKind, Excitation, Response};
 
@@ -75,7 +76,7 @@ impl Cart {
     }
 
     /// Checks the numbers; a zero trail is only meaningful with lateral slip.
-    pub fn check(&self, lateral_slip: bool) -> Result<(), String> {
+    pub fn check(&self, lateral_slip: bool) -> Result<(), PhysicsError> {
         let positive = [
             ("length_m", self.length_m),
             ("width_m", self.width_m),
@@ -86,17 +87,23 @@ impl Cart {
         ];
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!("{name} must be a positive number, got {v}"));
+                return Err(PhysicsError::NotPositive { name, value: v });
             }
         }
         if !(self.swivel_arm_m.is_finite() && self.swivel_arm_m >= 0.0) {
-            return Err(format!("swivel_arm_m must be zero or positive, got {}", self.swivel_arm_m));
+            return Err(PhysicsError::Invalid {
+                parameter: "swivel_arm_m",
+                message: format!("swivel_arm_m must be zero or positive, got {}", self.swivel_arm_m),
+            });
         }
         if !(self.trail_m.is_finite() && self.trail_m >= 0.0) {
-            return Err(format!("trail_m must be zero or positive, got {}", self.trail_m));
+            return Err(PhysicsError::Invalid {
+                parameter: "trail_m",
+                message: format!("trail_m must be zero or positive, got {}", self.trail_m),
+            });
         }
         if self.trail_m == 0.0 && !lateral_slip {
-            return Err("a caster with zero trail has nothing that turns it, and four of them over-constrain the platform unless the wheels may slip sideways: give a trail_m > 0 (default 0.3 × wheel diameter) or set lateral_slip: true".into());
+            return Err(PhysicsError::Invalid { parameter: "trail_m", message: "a caster with zero trail has nothing that turns it, and four of them over-constrain the platform unless the wheels may slip sideways: give a trail_m > 0 (default 0.3 × wheel diameter) or set lateral_slip: true".into() });
         }
         Ok(())
     }
@@ -136,15 +143,20 @@ impl Stribeck {
         self.mu_k + (self.mu_s - self.mu_k) * sech + viscous
     }
 
-    fn check(&self, what: &str) -> Result<(), String> {
+    fn check(&self, what: &str) -> Result<(), PhysicsError> {
         for (name, v) in [("mu_s", self.mu_s), ("mu_k", self.mu_k), ("beta", self.beta_spm), ("gamma_n", self.gamma_n)]
         {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("{what} friction: {name} must be zero or positive, got {v}"));
+                return Err(PhysicsError::Parameter(format!(
+                    "{what} friction: {name} must be zero or positive, got {v}"
+                )));
             }
         }
         if !(self.p.is_finite() && self.p > 0.0) {
-            return Err(format!("{what} friction: the velocity exponent p must be positive, got {}", self.p));
+            return Err(PhysicsError::Parameter(format!(
+                "{what} friction: the velocity exponent p must be positive, got {}",
+                self.p
+            )));
         }
         Ok(())
     }
@@ -176,14 +188,20 @@ pub struct Friction {
 }
 
 impl Friction {
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), PhysicsError> {
         self.roll.check("rolling")?;
         self.swivel.check("swivel")?;
         if !(self.eps_mps.is_finite() && self.eps_mps > 0.0) {
-            return Err(format!("friction_eps must be a positive speed, got {}", self.eps_mps));
+            return Err(PhysicsError::Invalid {
+                parameter: "friction_eps",
+                message: format!("friction_eps must be a positive speed, got {}", self.eps_mps),
+            });
         }
         if !(self.eps_swivel_radps.is_finite() && self.eps_swivel_radps > 0.0) {
-            return Err(format!("friction_eps_swivel must be a positive rate, got {}", self.eps_swivel_radps));
+            return Err(PhysicsError::Invalid {
+                parameter: "friction_eps_swivel",
+                message: format!("friction_eps_swivel must be a positive rate, got {}", self.eps_swivel_radps),
+            });
         }
         Ok(())
     }

@@ -3,6 +3,7 @@
 //! moment the cart slows enough to stick or the floor breaks it away) and what it records at each
 //! sample; the floor is linear between samples, so every output lands on the input time base.
 
+use crate::physics::error::PhysicsError;
 use std::f64::consts::PI;
 
 use super::dynamics::{Alteration, Dynamics, NoSlip, Slip};
@@ -151,22 +152,22 @@ pub fn simulate(
     friction: &Friction,
     excitation: &Excitation<'_>,
     options: &Options,
-) -> Result<Response, String> {
+) -> Result<Response, PhysicsError> {
     let n = excitation.ax_mps2.len();
     if n < 2 {
-        return Err(format!("the floor record has {n} sample(s); at least 2 are needed"));
+        return Err(PhysicsError::TooFewSamples(n));
     }
     if excitation.ay_mps2.len() != n {
-        return Err(format!("the X and Y floor records differ in length ({n} vs {})", excitation.ay_mps2.len()));
+        return Err(PhysicsError::Floor(format!(
+            "the X and Y floor records differ in length ({n} vs {})",
+            excitation.ay_mps2.len()
+        )));
     }
     if !(excitation.dt_s.is_finite() && excitation.dt_s > 0.0) {
-        return Err(format!("the sample interval must be positive, got {} s", excitation.dt_s));
+        return Err(PhysicsError::SampleInterval(excitation.dt_s));
     }
     if let Some(k) = (0..n).find(|&k| !(excitation.ax_mps2[k].is_finite() && excitation.ay_mps2[k].is_finite())) {
-        return Err(format!(
-            "sample {k} (t = {} s) is not a finite number",
-            excitation.t0_s + k as f64 * excitation.dt_s
-        ));
+        return Err(PhysicsError::NotFinite { sample: k, t_s: excitation.t0_s + k as f64 * excitation.dt_s });
     }
     cart.check(options.lateral_slip.is_some())?;
     friction.check()?;
@@ -181,13 +182,13 @@ pub fn simulate(
         }
         Some(lateral) => {
             if friction.law == FrictionLaw::StickSlip {
-                return Err("the exact stick-slip law is available for the no-slip model only; use the regularised law with lateral slip".into());
+                return Err(PhysicsError::Parameter("the exact stick-slip law is available for the no-slip model only; use the regularised law with lateral slip".into()));
             }
             if !(lateral.mu.is_finite() && lateral.mu > 0.0 && lateral.eps_mps.is_finite() && lateral.eps_mps > 0.0) {
-                return Err(format!(
+                return Err(PhysicsError::Parameter(format!(
                     "lateral slip needs a positive friction coefficient and ε, got μ = {}, ε = {}",
                     lateral.mu, lateral.eps_mps
-                ));
+                )));
             }
             let model = Slip::new(cart, friction, &lateral, options.g_mps2);
             dispatch(&model, y0, excitation, friction, options.method)
@@ -223,13 +224,17 @@ pub fn simulate_altered(
     budget: Option<usize>,
 ) -> Result<Response, (String, usize)> {
     let n = excitation.ax_mps2.len();
-    let refused = |e: String| (e, 0);
+    let refused = |e: PhysicsError| (e.to_string(), 0);
     if friction.law != FrictionLaw::Regularised || options.lateral_slip.is_some() {
-        return Err(refused("an altered cart runs the no-slip model with regularised friction only".into()));
+        return Err(refused(PhysicsError::Parameter(
+            "an altered cart runs the no-slip model with regularised friction only".into(),
+        )));
     }
     let k0 = start.map_or(0, |s| s.0);
     if !(k0 < end && end < n) || excitation.ay_mps2.len() != n {
-        return Err(refused(format!("cannot simulate samples {k0}..={end} of a {n}-sample floor record")));
+        return Err(refused(PhysicsError::Floor(format!(
+            "cannot simulate samples {k0}..={end} of a {n}-sample floor record"
+        ))));
     }
     cart.check(false).map_err(refused)?;
     friction.check().map_err(refused)?;
@@ -244,13 +249,13 @@ pub fn simulate_altered(
             y
         }
         Some((_, state)) => {
-            state.try_into().map_err(|_| refused(format!("a cart state has 10 values, got {}", state.len())))?
+            state.try_into().map_err(|_| (format!("a cart state has 10 values, got {}", state.len()), 0))?
         }
     };
     let mut response: Option<Response> = None;
     let mut used = 0;
     for (first, last, piece) in pieces(alteration, k0, end, excitation.dt_s) {
-        let model = NoSlip::altered(cart, friction, options.g_mps2, &piece).map_err(|e| (e, used))?;
+        let model = NoSlip::altered(cart, friction, options.g_mps2, &piece).map_err(|e| (e.to_string(), used))?;
         if start.is_some() || first > k0 {
             y = model.enter(&before, &y);
         }
@@ -263,8 +268,9 @@ pub fn simulate_altered(
         let mut run = Run::new(&model, &part, friction.law, friction.eps_mps);
         run.keep_states = true;
         run.budget = budget.map(|b| b.saturating_sub(used));
-        let next =
-            run.run(stepper(options.method, excitation.dt_s, run.budget), y).map_err(|(e, spent)| (e, used + spent))?;
+        let next = run
+            .run(stepper(options.method, excitation.dt_s, run.budget), y)
+            .map_err(|(e, spent)| (e.to_string(), used + spent))?;
         let state = next.states.last().ok_or(("an altered run kept no state".to_string(), used))?;
         y = state.as_slice().try_into().map_err(|_| ("an altered run kept a malformed state".to_string(), used))?;
         used += next.stats.rhs_evals;
@@ -297,7 +303,7 @@ fn dispatch<const N: usize, D: Dynamics<N>>(
     excitation: &Excitation<'_>,
     friction: &Friction,
     method: Method,
-) -> Result<Response, String> {
+) -> Result<Response, PhysicsError> {
     let run = Run::new(model, excitation, friction.law, friction.eps_mps);
     run.run(stepper(method, excitation.dt_s, None), y0).map_err(|(e, _)| e)
 }
@@ -450,9 +456,9 @@ impl<const N: usize, D: Dynamics<N>> Rolling<'_, '_, N, D> {
 impl<'r, 'a, const N: usize, D: Dynamics<N>> Hybrid<N, EVENTS> for Rolling<'r, 'a, N, D> {
     type Transition = Transition;
     type Equations = Moving<'r, 'a, N, D>;
-    type Error = (String, usize);
+    type Error = (PhysicsError, usize);
 
-    fn course(&mut self, now: Now, y: &[f64; N]) -> Result<Course<Transition, Self::Equations>, (String, usize)> {
+    fn course(&mut self, now: Now, y: &[f64; N]) -> Result<Course<Transition, Self::Equations>, (PhysicsError, usize)> {
         let Now { k, t, limit } = now;
         let run = self.run;
         let seg = run.segment(k);
@@ -509,29 +515,31 @@ impl<'r, 'a, const N: usize, D: Dynamics<N>> Hybrid<N, EVENTS> for Rolling<'r, '
         (slow && run.holding_set(y).holds(&run.load(y, run.segment(k).at(t_end)))).then_some(Transition::Settle)
     }
 
-    fn check(&self, t_end: f64, y: &[f64; N], stats: &Stats) -> Result<(), (String, usize)> {
+    fn check(&self, t_end: f64, y: &[f64; N], stats: &Stats) -> Result<(), (PhysicsError, usize)> {
         if let Some(budget) = self.run.budget.filter(|b| stats.rhs_evals > *b) {
             return Err((
-                format!("the run needs more than {budget} evaluations by t = {t_end:.3} s (too stiff)"),
+                PhysicsError::Stopped(format!(
+                    "the run needs more than {budget} evaluations by t = {t_end:.3} s (too stiff)"
+                )),
                 stats.rhs_evals,
             ));
         }
         if !y.iter().all(|v| v.is_finite()) {
             return Err((
-                format!(
+                PhysicsError::Stopped(format!(
                     "the cart's state is no longer a number at t = {t_end:.3} s: the run diverged (too stiff a friction law or too large a change)"
-                ),
+                )),
                 stats.rhs_evals,
             ));
         }
         Ok(())
     }
 
-    fn chatter(&self, t: f64, stats: &Stats) -> (String, usize) {
+    fn chatter(&self, t: f64, stats: &Stats) -> (PhysicsError, usize) {
         (
-            format!(
+            PhysicsError::Stopped(format!(
                 "more than {MAX_TRANSITIONS_PER_SAMPLE} events within the sample at t = {t:.4} s: the run does not settle (raise friction_eps)"
-            ),
+            )),
             stats.rhs_evals,
         )
     }
@@ -567,7 +575,7 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
     }
 
     /// The run, or why it failed with the evaluations it had spent.
-    fn run<S: Stepper<N>>(&self, stepper: S, y: [f64; N]) -> Result<Response, (String, usize)> {
+    fn run<S: Stepper<N>>(&self, stepper: S, y: [f64; N]) -> Result<Response, (PhysicsError, usize)> {
         let t0 = self.excitation.t0_s;
         let mut rolling = Rolling {
             run: self,
