@@ -214,7 +214,7 @@ fn run(unit: &'static str, f: &FloorRecord, setting: Setting, floor_index: usize
             yaw_deg: f64::NAN,
             evals: 0,
             seconds,
-            error: Some(e),
+            error: Some(e.to_string()),
         },
     }
 }

@@ -744,7 +744,7 @@ fn check_record(
         None => stages::load::load_record(source, &parts[0]),
     };
     loaded.map(|table| Some(table.column_names().into_iter().map(String::from).collect())).map_err(|refused| {
-        let mut e = refused.error;
+        let mut e = *refused.error;
         let position = refused.column.as_deref().and_then(|column| {
             let output = source.columns.iter().find(|(_, c)| c.file_column() == column).map(|(out, _)| out.as_str());
             match output {

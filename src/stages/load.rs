@@ -86,7 +86,7 @@ impl Stage for Load {
         }
         ctx.sink.set_total(jobs.len() + groups.len());
         groups.into_par_iter().try_for_each(|(_, group)| {
-            let mut table = load_group(&group).map_err(|e| anyhow::Error::new(e.error))?;
+            let mut table = load_group(&group).map_err(|e| anyhow::Error::new(*e.error))?;
             table.metadata.insert("shakeflow.source".into(), group.source.to_string());
             let joined =
                 |field: fn(&InputPart) -> &str| group.parts.iter().map(|p| field(p)).collect::<Vec<_>>().join(", ");
@@ -104,7 +104,7 @@ impl Stage for Load {
             debug_assert!(jobs.iter().all(|job| job.2.path == path));
             let raw = parse(jobs[0].0, jobs[0].2).map_err(anyhow::Error::new)?;
             jobs.into_par_iter().try_for_each(|(spec, source, part)| {
-                let mut table = load_parsed(spec, part, &raw).map_err(|e| anyhow::Error::new(e.error))?;
+                let mut table = load_parsed(spec, part, &raw).map_err(|e| anyhow::Error::new(*e.error))?;
                 table.metadata.insert("shakeflow.source".into(), source.to_string());
                 table.metadata.extend(super::record_provenance(part));
                 ctx.sink.write("records", &part.partition, table)
@@ -399,25 +399,26 @@ pub fn load_record(spec: &SourceSpec, part: &InputPart) -> Result<Table, RecordE
 #[derive(Debug, thiserror::Error)]
 #[error("{error}")]
 pub struct RecordError {
-    pub error: UserError,
+    /// Boxed: a `UserError` (message, file, position, hint) is large, and this is every reader's `Err`.
+    pub error: Box<UserError>,
     pub column: Option<String>,
 }
 
 impl RecordError {
     fn about(column: &str, error: UserError) -> Self {
-        RecordError { error, column: Some(column.to_string()) }
+        RecordError { error: Box::new(error), column: Some(column.to_string()) }
     }
 }
 
 impl From<UserError> for RecordError {
     fn from(error: UserError) -> Self {
-        RecordError { error, column: None }
+        RecordError { error: Box::new(error), column: None }
     }
 }
 
 impl From<RecordError> for UserError {
     fn from(e: RecordError) -> Self {
-        e.error
+        *e.error
     }
 }
 
@@ -838,7 +839,7 @@ fn distinct_names(
                 "if it holds the time, set `time_column: {}` on the source; else give it another name with `columns:`",
                 channel.name
             ));
-            return Err(RecordError { error, column: about });
+            return Err(RecordError { error: Box::new(error), column: about });
         }
         if let Some(first) = seen.insert(out.as_str(), channel) {
             return Err(RecordError::about(&channel.name, repeated_column(path, spec, raw, first, channel).hint(
