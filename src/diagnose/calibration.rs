@@ -18,7 +18,7 @@ use argmin::solver::neldermead::NelderMead;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::verdict::Memo;
+use super::memo::Memo;
 
 /// Calibrated values are kept within this many sd of the stated value.
 pub const BOUND_SD: f64 = 5.0;

@@ -18,7 +18,8 @@ use rayon::prelude::*;
 use super::effects::Effect;
 use super::evidence::Evidence;
 use super::{Case, Prediction};
-use crate::diagnose::verdict::{Memo, Misfit};
+use crate::diagnose::memo::Memo;
+use crate::diagnose::verdict::Misfit;
 
 /// Grid points a local search starts from.
 const STARTS: usize = 4;

@@ -22,6 +22,7 @@ pub mod contract;
 pub mod effects;
 pub mod evidence;
 pub mod fit;
+pub mod memo;
 pub mod rolling;
 pub mod verdict;
 

@@ -25,7 +25,8 @@ use rayon::prelude::*;
 use super::effects::Effect;
 use super::evidence::Evidence;
 use super::{early_within_allowance, flagged_early, RollingCase, Track};
-use crate::diagnose::verdict::{Memo, Misfit};
+use crate::diagnose::memo::Memo;
+use crate::diagnose::verdict::Misfit;
 
 /// Grid points a local search starts from (the best; and the best of a family, a step or a
 /// gradual change, that none of them is in).
