@@ -100,3 +100,35 @@ fn mc2_converges_as_both_regularisations_shrink() {
         }
     }
 }
+
+/// Issue 35's slow isolated floor: PB2 creeping on Loma Prieta GIL067 through the isolated demo
+/// building (floor 4, 0.15 g, 40 s), shakeflow at its defaults against the notes' peer over the
+/// whole record. The smooth drift once reported (0.1 mm at 10 s … 3.4 cm at 38 s) was the peer's:
+/// one DOP853 run across the floor's samples resolves the jump of the floor's slope at each only
+/// to first order, whatever its tolerance (1e-9 m by 4 s at rtol 1e-12, which this creeping motion
+/// amplifies ~10⁷-fold by 38 s); integrated sample by sample, as shakeflow does, it follows
+/// shakeflow (docs/convergence.md). Measured here 3.2 mm at most (at the end); the same
+/// comparison through `shakeflow stage simulate_rolling` gives 0.82 mm — a difference between
+/// this in-process set-up and the stage's that is not yet explained (docs/convergence.md). The
+/// former peer run (one DOP853 run, rtol 1e-10) was 34 mm off: the bound discriminates.
+#[test]
+fn pb2_follows_the_notes_peer_over_a_slow_isolated_floor_record() {
+    let peer = peer_json("rolling_notes_gil067_isolated.json", "rolling_notes.py");
+    assert_eq!(peer["rtol"].as_f64(), Some(1e-12), "the stored peer run is the converged one");
+    assert!(peer["source"].as_str().unwrap().contains("--per-sample"), "the peer integrates sample by sample");
+    let floor = Floor::read_csv(&reference("rolling_floor_gil067_isolated.csv"));
+    let (cart, friction, options) = model_from_peer(&peer["model"], FrictionLaw::Regularised);
+    let ours = run(&floor, &cart, &friction, &options, Method::default());
+    let every = peer["every"].as_u64().unwrap() as usize;
+    let (t, x, y) = (series(&peer, "time_s"), series(&peer, "x_m"), series(&peer, "y_m"));
+    let (peak, peer_peak) = (ours.peak_displacement().0, peer["peak_displacement_m"].as_f64().unwrap());
+    let gap = |k: usize| (ours.x_m[k * every] - ours.x_m[0] - x[k]).hypot(ours.y_m[k * every] - ours.y_m[0] - y[k]);
+    let (worst, at) = (0..t.len()).map(|k| (gap(k), t[k])).fold((0.0, 0.0), |a, b| if b.0 > a.0 { b } else { a });
+    let early = (0..t.len()).filter(|&k| t[k] <= 10.0).map(gap).fold(0.0, f64::max);
+    println!("PB2 on GIL067 (isolated, 40 s): path within {early:.2e} m of the notes' peer over 10 s, {worst:.2e} m over the record (at {at:.1} s); peak {peak:.5} m vs {peer_peak:.5} m");
+    assert!(peer_peak > 0.5, "the record moves the cart: {peer_peak} m");
+    assert!((t[t.len() - 1] - 39.9).abs() < 0.1, "the peer covers the whole record");
+    assert!(early < 1e-6, "path differs from the peer by {early} m in the first 10 s");
+    assert!(worst < 4e-3, "path differs from the peer by {worst} m at {at} s");
+    assert!((peak - peer_peak).abs() < 1e-3, "peaks {peak} vs {peer_peak} m");
+}
