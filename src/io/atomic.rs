@@ -61,11 +61,17 @@ where
     result
 }
 
-/// Writes `bytes` to a file that must not exist yet and forces it to disk (a commit journal).
-pub fn write_new_durable(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+/// Writes `bytes` to a file that must not exist yet and returns it, not yet forced to disk (a
+/// caller with several such files forces them together: one flush of the file system's journal).
+pub fn write_new(path: &Path, bytes: &[u8]) -> std::io::Result<File> {
     let mut file = fs::OpenOptions::new().write(true).create_new(true).open(path)?;
     file.write_all(bytes)?;
-    file.sync_all()
+    Ok(file)
+}
+
+/// [`write_new`], forced to disk (a lease's holder).
+pub fn write_new_durable(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_new(path, bytes)?.sync_all()
 }
 
 #[cfg(test)]

@@ -124,16 +124,23 @@ impl Transaction {
                 let dir = self.dir.join(STATE_FILES);
                 fs::create_dir_all(&dir)?;
                 for (name, bytes) in &state.files {
-                    written.push(write_new(&dir.join(name), bytes).context("writing the new state")?);
+                    written
+                        .push(crate::io::atomic::write_new(&dir.join(name), bytes).context("writing the new state")?);
                 }
-                written.push(write_new(&self.dir.join(LOCK_FILE), &state.root).context("writing the new lockfile")?);
+                written.push(
+                    crate::io::atomic::write_new(&self.dir.join(LOCK_FILE), &state.root)
+                        .context("writing the new lockfile")?,
+                );
                 failpoint::hit("commit.lockfile_written")?;
                 journal.state = state.files.into_iter().map(|(name, _)| name).collect();
                 journal.retire = state.retired;
                 state_dir = Some(dir);
             }
             let tmp = self.dir.join("journal.tmp");
-            written.push(write_new(&tmp, &serde_json::to_vec_pretty(&journal)?).context("writing the commit journal")?);
+            written.push(
+                crate::io::atomic::write_new(&tmp, &serde_json::to_vec_pretty(&journal)?)
+                    .context("writing the commit journal")?,
+            );
             for file in &written {
                 file.sync_all().context("forcing the new state to disk")?;
             }
@@ -308,13 +315,6 @@ fn link_refused(link: &Path, state: &str) -> UserError {
          and rerun",
         link.display()
     ))
-}
-
-/// Writes `bytes` to a file that must not exist yet; the caller forces it to disk.
-fn write_new(path: &Path, bytes: &[u8]) -> std::io::Result<fs::File> {
-    let mut file = fs::OpenOptions::new().write(true).create_new(true).open(path)?;
-    std::io::Write::write_all(&mut file, bytes)?;
-    Ok(file)
 }
 
 /// Forces a folder's entries (renames into or out of it) to disk.
