@@ -107,14 +107,18 @@ fn mc2_converges_as_both_regularisations_shrink() {
 /// one DOP853 run across the floor's samples resolves the jump of the floor's slope at each only
 /// to first order, whatever its tolerance (1e-9 m by 4 s at rtol 1e-12, which this creeping motion
 /// amplifies ~10⁷-fold by 38 s); integrated sample by sample, as shakeflow does, it follows
-/// shakeflow (docs/convergence.md). Measured here 3.2 mm at most (at the end); the same
-/// comparison through `shakeflow stage simulate_rolling` gives 0.82 mm — a difference between
-/// this in-process set-up and the stage's that is not yet explained (docs/convergence.md). The
-/// former peer run (one DOP853 run, rtol 1e-10) was 34 mm off: the bound discriminates.
+/// shakeflow to 1.2e-9 m over the first 10 s and 2.4 mm over the record, 0.03 mm at the peak
+/// (docs/convergence.md: the 1 mm goal is not met, and the last millimetres are not explained;
+/// shakeflow's own default vs rtol 1e-12 differ by 0.044 mm at 38 s). The former peer run (one
+/// DOP853 run, rtol 1e-10) was 34 mm off: the bounds discriminate.
 #[test]
 fn pb2_follows_the_notes_peer_over_a_slow_isolated_floor_record() {
     let peer = peer_json("rolling_notes_gil067_isolated.json", "rolling_notes.py");
-    assert_eq!(peer["rtol"].as_f64(), Some(1e-12), "the stored peer run is the converged one");
+    assert_eq!(
+        (peer["rtol"].as_f64(), peer["atol"].as_f64()),
+        (Some(1e-12), Some(1e-15)),
+        "the stored peer run is the converged one"
+    );
     assert!(peer["source"].as_str().unwrap().contains("--per-sample"), "the peer integrates sample by sample");
     let floor = Floor::read_csv(&reference("rolling_floor_gil067_isolated.csv"));
     let (cart, friction, options) = model_from_peer(&peer["model"], FrictionLaw::Regularised);
@@ -128,7 +132,8 @@ fn pb2_follows_the_notes_peer_over_a_slow_isolated_floor_record() {
     println!("PB2 on GIL067 (isolated, 40 s): path within {early:.2e} m of the notes' peer over 10 s, {worst:.2e} m over the record (at {at:.1} s); peak {peak:.5} m vs {peer_peak:.5} m");
     assert!(peer_peak > 0.5, "the record moves the cart: {peer_peak} m");
     assert!((t[t.len() - 1] - 39.9).abs() < 0.1, "the peer covers the whole record");
-    assert!(early < 1e-6, "path differs from the peer by {early} m in the first 10 s");
-    assert!(worst < 4e-3, "path differs from the peer by {worst} m at {at} s");
-    assert!((peak - peer_peak).abs() < 1e-3, "peaks {peak} vs {peer_peak} m");
+    // Measured: 1.2e-9 m, 2.36e-3 m at 39.95 s, peaks 1.01344 vs 1.01341 m.
+    assert!(early < 1e-8, "path differs from the peer by {early} m in the first 10 s");
+    assert!(worst < 3e-3, "path differs from the peer by {worst} m at {at} s");
+    assert!((peak - peer_peak).abs() < 1e-4, "peaks {peak} vs {peer_peak} m");
 }

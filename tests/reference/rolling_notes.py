@@ -19,14 +19,14 @@ From the notes, literally:
 Pivot order (the notes' mirror-symmetry test): (+a,+b), (-a,+b), (-a,-b), (+a,-b).
 
     rolling_notes.py rolling_floor_rinaldi.csv --seconds 10 > rolling_notes_rinaldi.json
-    rolling_notes.py rolling_floor_gil067_isolated.csv --seconds 40 --rtol 1e-12 --unit PB2 --every 10 \
-        --per-sample > rolling_notes_gil067_isolated.json
+    rolling_notes.py rolling_floor_gil067_isolated.csv --seconds 40 --rtol 1e-12 --atol 1e-15 --unit PB2 \
+        --every 10 --per-sample > rolling_notes_gil067_isolated.json
 
 rolling_notes_rinaldi.json was made before --per-sample and the complex step (one DOP853 run over
 the record, J' by a central difference): within 3.5e-6 m of shakeflow over its 10 s. On a slow
 isolated floor that way left errors of 1e-9 m by 4 s that the creeping cart amplifies to
-centimetres by 38 s; sample by sample it follows shakeflow within 0.82 mm over the 40 s
-(docs/convergence.md).
+centimetres by 38 s; sample by sample it follows shakeflow within 1.2e-9 m over 10 s and 2.4 mm
+over the 40 s (docs/convergence.md).
 """
 import argparse
 import json
@@ -133,6 +133,7 @@ def main():
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--rtol", type=float, default=1e-9)
     ap.add_argument("--unit", choices=sorted(UNITS), default="MC2")
+    ap.add_argument("--atol", type=float, default=1e-11, help="absolute tolerance of every state (m, rad, m/s, rad/s)")
     ap.add_argument("--every", type=int, default=1, help="write every n-th sample of the trajectory")
     ap.add_argument("--per-sample", action="store_true",
                     help="integrate each sample interval on its own (the floor's slope jumps at every sample, "
@@ -159,19 +160,19 @@ def main():
         states = [y0]
         for k in range(len(t) - 1):
             piece = solve_ivp(lambda tt, yy: rhs(tt, yy, floor), (t[k], t[k + 1]), states[-1], method="DOP853",
-                              rtol=args.rtol, atol=1e-11)
+                              rtol=args.rtol, atol=args.atol)
             assert piece.status == 0, piece.message
             states.append(piece.y[:, -1])
         solution = np.array(states).T
     else:
         sol = solve_ivp(lambda tt, yy: rhs(tt, yy, floor), (t[0], t[-1]), y0, method="DOP853", rtol=args.rtol,
-                        atol=1e-11, t_eval=t, max_step=dt)
+                        atol=args.atol, t_eval=t, max_step=dt)
         assert sol.status == 0, sol.message
         solution = sol.y
     x, y, yaw = solution[0], solution[1], solution[2] - y0[2]
     k = slice(None, None, args.every)
     json.dump({"source": "tests/reference/rolling_notes.py " + " ".join(sys.argv[1:]), "model": spec,
-               "rtol": args.rtol, "seconds": time.perf_counter() - started, "every": args.every,
+               "rtol": args.rtol, "atol": args.atol, "seconds": time.perf_counter() - started, "every": args.every,
                "time_s": t[k].tolist(), "x_m": x[k].tolist(), "y_m": y[k].tolist(),
                "yaw_change_rad": yaw[k].tolist(), "steer_rad": solution[3:7, k].tolist(),
                "peak_displacement_m": float(np.max(np.hypot(x, y))),
