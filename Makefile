@@ -105,6 +105,7 @@ bench: release $(PY_STAMP)
 convergence:
 	$(CARGO) build --release --locked --example convergence
 	$(CARGO_TARGET_DIR)/release/examples/convergence --out docs/convergence
+	$(CARGO_TARGET_DIR)/release/examples/convergence --out docs/convergence --law stick_slip --sweeps friction_eps,friction_eps_swivel
 	$(CARGO_TARGET_DIR)/release/examples/convergence --out docs/convergence --rocking
 
 # Scale: the demo's per-record stages over a generated archive of TESTS tests, local and on the

@@ -13,7 +13,12 @@
 //! ζ 0.1, m_b/m = 1), with rtol 1e-10 … 1e-12, and says the same of peak |θ| (0.5 % of it and
 //! 0.5°) and of whether the block overturns.
 //!
-//! Usage: convergence [--out DIR] [--pfa-g G] [--units PS1,PB2,...] [--records ELC180,...] [--rocking]
+//! `--law stick_slip` runs the same sweeps with exact rest (`friction_law: stick_slip`) instead of
+//! the default regularised law, and writes its files with a `stick_slip_` prefix; `--sweeps
+//! friction_eps,friction_eps_swivel` runs only the sweeps named.
+//!
+//! Usage: convergence [--out DIR] [--pfa-g G] [--units PS1,PB2,...] [--records ELC180,...]
+//!   [--law regularised|stick_slip] [--sweeps rtol,friction_eps,friction_eps_swivel] [--rocking]
 //!   (`make convergence` writes docs/convergence/: results.csv, the figures and summary.md)
 
 use std::fmt::Write as _;
@@ -47,6 +52,18 @@ const EPS: [f64; 5] = [2e-4, 1e-4, 5e-5, 2.5e-5, 1.25e-5];
 const EPS_SW: [f64; 5] = [2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4];
 /// The tolerance at which the ε sweeps run (converged for every run of the tolerance sweep).
 const SWEEP_RTOL: f64 = 1e-10;
+/// The sweeps, by the setting's name.
+const SWEEPS: [&str; 3] = ["rtol", "friction_eps", "friction_eps_swivel"];
+
+/// The values of the sweep named `name`.
+fn sweep_values(name: &str) -> &'static [f64] {
+    match name {
+        "rtol" => &RTOLS,
+        "friction_eps" => &EPS,
+        "friction_eps_swivel" => &EPS_SW,
+        other => panic!("no sweep {other}: the sweeps are {SWEEPS:?}"),
+    }
+}
 
 struct Motion {
     name: &'static str,
@@ -178,10 +195,10 @@ struct Outcome {
     error: Option<String>,
 }
 
-fn run(unit: &'static str, f: &FloorRecord, setting: Setting, floor_index: usize) -> Outcome {
+fn run(unit: &'static str, f: &FloorRecord, setting: Setting, floor_index: usize, law: FrictionLaw) -> Outcome {
     let table = rolling::preset(unit).expect("a preset");
     let cart: Cart = table.cart(Cart::default_trail_m(table.wheel_diameter_m), rolling::DEFAULT_SWIVEL_ARM_M);
-    let mut friction: Friction = table.friction(rolling::DEFAULT_FRICTION_EPS_MPS, FrictionLaw::Regularised);
+    let mut friction: Friction = table.friction(rolling::DEFAULT_FRICTION_EPS_MPS, law);
     let (yaw0_rad, steer0_rad) = table.initial_pose();
     let mut rtol = SWEEP_RTOL;
     match setting {
@@ -255,11 +272,19 @@ fn main() {
             floors.push(floor(&m, base, pfa_g, paired));
         }
     }
+    let (law, prefix) = match arg(&args, "--law").as_deref() {
+        None | Some("regularised") => (FrictionLaw::Regularised, ""),
+        Some("stick_slip") => (FrictionLaw::StickSlip, "stick_slip_"),
+        Some(other) => panic!("--law takes regularised or stick_slip, not {other}"),
+    };
+    let sweeps: Vec<String> = arg(&args, "--sweeps")
+        .map_or_else(|| SWEEPS.iter().map(|s| s.to_string()).collect(), |l| l.split(',').map(String::from).collect());
     let settings: Vec<Setting> = RTOLS
         .iter()
         .map(|&v| Setting::Rtol(v))
         .chain(EPS.iter().map(|&v| Setting::Eps(v)))
         .chain(EPS_SW.iter().map(|&v| Setting::EpsSwivel(v)))
+        .filter(|s| sweeps.iter().any(|n| n == s.name()))
         .collect();
     let mut jobs: Vec<(&'static str, usize, Setting)> = Vec::new();
     for &u in &units {
@@ -270,7 +295,7 @@ fn main() {
         }
     }
     eprintln!("{} floors × {} units × {} settings = {} runs", floors.len(), units.len(), settings.len(), jobs.len());
-    let outcomes: Vec<Outcome> = jobs.par_iter().map(|&(u, f, s)| run(u, &floors[f], s, f)).collect();
+    let outcomes: Vec<Outcome> = jobs.par_iter().map(|&(u, f, s)| run(u, &floors[f], s, f, law)).collect();
     let mut csv = String::from(
         "unit,record,building,duration_s,setting,value,peak_displacement_m,peak_yaw_deg,rhs_evals,seconds,error\n",
     );
@@ -293,11 +318,11 @@ fn main() {
         )
         .unwrap();
     }
-    std::fs::write(out.join("results.csv"), csv).expect("results.csv");
-    let summary = summarise(&outcomes, &floors, &units);
-    std::fs::write(out.join("summary.md"), &summary).expect("summary.md");
+    std::fs::write(out.join(format!("{prefix}results.csv")), csv).expect("results.csv");
+    let summary = summarise(&outcomes, &floors, &units, &sweeps);
+    std::fs::write(out.join(format!("{prefix}summary.md")), &summary).expect("summary.md");
     print!("{summary}");
-    figures(&out, &outcomes, &floors);
+    figures(&out, &outcomes, &sweeps, prefix);
     eprintln!("{} runs in {:.0} s", outcomes.len(), started.elapsed().as_secs_f64());
 }
 
@@ -329,7 +354,7 @@ fn converged(a: &Outcome, b: &Outcome) -> bool {
     a.error.is_none() && b.error.is_none() && dp < PEAK_TOL && dy < YAW_TOL_DEG
 }
 
-fn summarise(outcomes: &[Outcome], floors: &[FloorRecord], units: &[&str]) -> String {
+fn summarise(outcomes: &[Outcome], floors: &[FloorRecord], units: &[&str], sweeps: &[String]) -> String {
     let mut s = String::new();
     writeln!(
         s,
@@ -344,7 +369,8 @@ fn summarise(outcomes: &[Outcome], floors: &[FloorRecord], units: &[&str]) -> St
         YAW_TOL_DEG
     )
     .unwrap();
-    for (name, values) in [("rtol", &RTOLS[..]), ("friction_eps", &EPS[..]), ("friction_eps_swivel", &EPS_SW[..])] {
+    for name in sweeps {
+        let (name, values) = (name.as_str(), sweep_values(name));
         writeln!(s, "\n`{name}` (others at their defaults, rtol {SWEEP_RTOL:e} for the ε sweeps):\n").unwrap();
         writeln!(
             s,
@@ -396,9 +422,10 @@ fn summarise(outcomes: &[Outcome], floors: &[FloorRecord], units: &[&str]) -> St
 }
 
 /// Per sweep, the worst move of each run (peak, %) at each setting, one point per run.
-fn figures(out: &Path, outcomes: &[Outcome], floors: &[FloorRecord]) {
-    let _ = floors;
-    for (name, values) in [("rtol", &RTOLS[..]), ("friction_eps", &EPS[..]), ("friction_eps_swivel", &EPS_SW[..])] {
+fn figures(out: &Path, outcomes: &[Outcome], sweeps: &[String], prefix: &str) {
+    let law = if prefix.is_empty() { "" } else { ", friction_law stick_slip" };
+    for name in sweeps {
+        let (name, values) = (name.as_str(), sweep_values(name));
         let mut xs = Vec::new();
         let mut peak_moves = Vec::new();
         let mut yaw_moves = Vec::new();
@@ -436,8 +463,9 @@ fn figures(out: &Path, outcomes: &[Outcome], floors: &[FloorRecord]) {
                 ..Panel::default()
             },
         ];
-        let png = render_png(&format!("rolling model: convergence in {name}"), &panels, 1000, 700).expect("a figure");
-        std::fs::write(out.join(format!("{name}.png")), png).expect("a figure file");
+        let png =
+            render_png(&format!("rolling model{law}: convergence in {name}"), &panels, 1000, 700).expect("a figure");
+        std::fs::write(out.join(format!("{prefix}{name}.png")), png).expect("a figure file");
     }
 }
 
