@@ -24,11 +24,13 @@ pub struct Unit {
 
 impl Unit {
     /// blake3 of type, version, params, select and input hashes: equal key, equal result.
-    pub fn key(&self, stage: &PlannedStage) -> String {
-        let info = stage.stage.info();
-        let material = json!({"type": info.name, "version": info.version, "params": stage.params,
-            "select": stage.select, "inputs": self.hashes});
-        hash::hash_bytes(material.to_string().as_bytes())
+    /// `prefix` is the stage's [`key_prefix`], encoded once for all its units.
+    pub fn key(&self, prefix: &str) -> String {
+        let mut material = String::with_capacity(prefix.len() + 64 * self.hashes.len());
+        material.push_str(prefix);
+        material.push_str(&serde_json::to_string(&self.hashes).expect("hashes are JSON"));
+        material.push('}');
+        hash::hash_bytes(material.as_bytes())
     }
 
     /// The source a per-record unit's record comes from, when it is a raw record file.
@@ -43,6 +45,15 @@ impl Unit {
             _ => None,
         })
     }
+}
+
+/// The JSON a unit's key hashes, up to its input hashes (which come last): `{"type":…,
+/// "version":…,"params":…,"select":…,"inputs":`. The same for every unit of a stage.
+pub fn key_prefix(stage: &PlannedStage) -> String {
+    let info = stage.stage.info();
+    let material = json!({"type": info.name, "version": info.version, "params": stage.params,
+        "select": stage.select, "inputs": null});
+    material.to_string().strip_suffix("null}").expect("`inputs` is the last key (preserve_order)").to_string()
 }
 
 /// How messages name a unit: `record motion=FB-4/floor=5`, or the whole stage.
@@ -60,14 +71,26 @@ pub fn split(
     inputs: &[StageInput],
     param_files: &BTreeMap<String, String>,
 ) -> anyhow::Result<Vec<Unit>> {
+    // How each source's files are read (`on_error` changes what a failure does, not what is
+    // read): encoded once per source, not once per unit.
+    let how: BTreeMap<String, String> = inputs
+        .iter()
+        .filter_map(|input| match input {
+            StageInput::Source { name, spec, .. } => {
+                let spec = crate::pipeline::spec::SourceSpec { on_error: Default::default(), ..spec.clone() };
+                let how = serde_json::to_string(&spec).expect("specs serialise");
+                Some((format!("source {name}"), hash::hash_bytes(how.as_bytes())))
+            }
+            StageInput::Dataset { .. } => None,
+        })
+        .collect();
     let unit = |id: String, inputs: Vec<StageInput>| {
         let mut hashes: BTreeMap<String, String> = param_files.clone();
         for input in &inputs {
-            if let StageInput::Source { name, spec, .. } = input {
-                // How a file is read; `on_error` changes what a failure does, not what is read.
-                let spec = crate::pipeline::spec::SourceSpec { on_error: Default::default(), ..spec.clone() };
-                let how = serde_json::to_string(&spec).expect("specs serialise");
-                hashes.insert(format!("source {name}"), hash::hash_bytes(how.as_bytes()));
+            if let StageInput::Source { name, .. } = input {
+                let label = format!("source {name}");
+                let hash = how[&label].clone();
+                hashes.insert(label, hash);
             }
             for part in input.parts() {
                 hashes.insert(part.label.clone(), part.hash.clone());

@@ -31,7 +31,7 @@ pub(super) struct RealDisk;
 
 impl Disk for RealDisk {
     fn hash(&self, path: &Path) -> Option<String> {
-        hash::hash_file(path).ok()
+        hash::hash_if_present(path)
     }
 
     fn exists(&self, path: &Path) -> bool {
@@ -316,10 +316,11 @@ pub(super) fn assess_stage(
     let stage_dir = plan.stage_dir(&stage.name);
     let forced = rerun.stages.contains(&stage.name);
     let remake = rerun.remake.get(&stage.name);
+    let key_prefix = units::key_prefix(stage);
     let units: Vec<(Unit, String, Vec<String>)> = split
         .into_par_iter()
         .map(|unit| {
-            let key = unit.key(stage);
+            let key = unit.key(&key_prefix);
             let mut reasons = common.clone();
             if forced {
                 reasons.push("forced".into());
@@ -355,6 +356,23 @@ mod tests {
         let mut lock = LockFile::empty();
         lock.stages.insert("load".into(), entry_after(plan, "load", &first, &mut disk));
         (lock, disk)
+    }
+
+    /// The key encoded from the stage's prefix is the key of the whole material encoded at once
+    /// (what every lockfile written so far holds).
+    #[test]
+    fn a_key_from_the_stage_prefix_is_the_key_of_the_whole_material() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let plan = plan(dir.path(), PIPELINE);
+        for stage in plan.stages.values() {
+            let hashes: BTreeMap<String, String> =
+                [("a/motion=X%20Y/data.parquet", "h\"1"), ("source s", "ü")].map(|(k, v)| (k.into(), v.into())).into();
+            let unit = Unit { id: "motion=X".into(), inputs: Vec::new(), hashes };
+            let info = stage.stage.info();
+            let whole = serde_json::json!({"type": info.name, "version": info.version, "params": stage.params,
+                "select": stage.select, "inputs": unit.hashes});
+            assert_eq!(unit.key(&units::key_prefix(stage)), hash::hash_bytes(whole.to_string().as_bytes()));
+        }
     }
 
     #[test]
