@@ -639,13 +639,19 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
         .par_iter()
         .map(|effect| {
             let fit = fit::fit(*effect, case, &baseline, &evidence, window, judged.map_or(window.1, |j| j.1));
-            let (calibration, track, misfit, runs) =
-                recalibrate(stated, &calibration, *effect, &fit, &evidence, window, &baseline);
+            // Its signature is judged on the calibrated cart, as fitted. An effect without one is
+            // never accepted (the best passing one is), so it is not recalibrated jointly: that
+            // costs more runs than its fit and could only change its BIC.
+            let (from, until) = verdict::signature_span(fit.track.onset_s, window);
+            let signature_chi2 = evidence.misfit_between(&baseline, from, until).chi2
+                - evidence.misfit_between(&fit.track, from, until).chi2;
+            let (calibration, track, misfit, runs) = if signature_chi2 >= verdict::SIGNATURE_CHI2 {
+                recalibrate(stated, &calibration, *effect, &fit, &evidence, window, &baseline)
+            } else {
+                (calibration.clone(), fit.track.clone(), fit.misfit, 0)
+            };
             // Every candidate pays for its own parameters and every calibrated one.
             let price = calibration.prior_chi2() + calibration.parameters.len() as f64 * n.ln();
-            let (from, until) = verdict::signature_span(track.onset_s, window);
-            let signature_chi2 = evidence.misfit_between(&baseline, from, until).chi2
-                - evidence.misfit_between(&track, from, until).chi2;
             Candidate {
                 effect: effect.name(),
                 params: effect.parameter_names().iter().copied().zip(fit.params.iter().copied()).collect(),
