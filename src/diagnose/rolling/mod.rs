@@ -774,6 +774,19 @@ fn explain(
                 passed_over.iter().map(|c| shortfall(c, base, settings)).collect::<Vec<_>>().join("; "),
             ));
         }
+    } else if best.bic < base.bic
+        && best.cut_from(base) >= settings.min_improvement
+        && early_within_allowance(best.extra.flagged_early, base.extra.flagged_early)
+    {
+        // It passes every test but its signature.
+        text.push_str(&format!(
+            " None of the library's effects explains it: the best, {} ({}), brings the misfit in that window to {:.1}{}, but {}. The disagreement is left to a smooth model discrepancy of the size above. Look for what the library does not model: a tilting floor, a sensor's slow drift, a model error.",
+            name(best),
+            best.sentence,
+            best.rmse,
+            judged_clause(best),
+            best.signature_shortfall()
+        ));
     } else {
         text.push_str(&format!(
             " None of the library's effects explains it: the best, {} ({}), leaves a misfit of {:.1} in that window{} (accepting a physics needs its misfit beyond the noise {}× smaller than the nominal cart's where the cart is predictable, and no lasting disagreement left). Look for what the library does not model: a sensor's timing or gain, a tilting floor, a neighbour that moves.",
