@@ -59,11 +59,28 @@ def _number(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
+# Runs a command and says on its last stderr line the CPU seconds (user + sys) it took: wall time
+# on a shared machine says little.
+CPU_WRAPPER = ("import resource, subprocess, sys\n"
+               "code = subprocess.run(sys.argv[1:]).returncode\n"
+               "u = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+               "print(f'cpu_seconds {u.ru_utime + u.ru_stime:.3f}', file=sys.stderr)\n"
+               "sys.exit(code)\n")
+
+
+def cpu_seconds(stderr: str) -> float | None:
+    """The CPU seconds CPU_WRAPPER reported (None: it did not)."""
+    lines = (stderr or "").strip().splitlines()
+    if lines and lines[-1].startswith("cpu_seconds "):
+        return float(lines[-1].split()[1])
+    return None
+
+
 def run_case(binary: str, case_dir: Path, out_dir: Path, timeout: float) -> dict:
     started = time.perf_counter()
     try:
-        proc = subprocess.run([binary, "diagnose", str(case_dir), "--out", str(out_dir)],
-                              capture_output=True, text=True, timeout=timeout)
+        proc = subprocess.run([sys.executable, "-c", CPU_WRAPPER, binary, "diagnose", str(case_dir),
+                               "--out", str(out_dir)], capture_output=True, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         return {"error": f"timed out after {timeout:.0f} s", "seconds": time.perf_counter() - started}
     except OSError as exc:
@@ -80,7 +97,7 @@ def run_case(binary: str, case_dir: Path, out_dir: Path, timeout: float) -> dict
     errors = contract_errors(diagnosis)
     if errors:
         return {"error": f"{path} breaks the contract: " + "; ".join(errors), "seconds": seconds}
-    return {"diagnosis": diagnosis, "seconds": seconds}
+    return {"diagnosis": diagnosis, "seconds": seconds, "cpu_seconds": cpu_seconds(proc.stderr)}
 
 
 def wilson(k: int, n: int, z: float = 1.959964) -> tuple[float, float] | None:
@@ -110,7 +127,8 @@ def score(cases: list[dict]) -> dict:
         effect, verdict = truth["effect"], diag["verdict"]
         confusion[effect][verdict] += 1
         row = {"case_id": c["case_id"], "effect": effect, "verdict": verdict, "mismatch": diag["mismatch"],
-               "correct": verdict == truth["expected_verdict"], "seconds": c["seconds"]}
+               "correct": verdict == truth["expected_verdict"], "seconds": c["seconds"],
+               "cpu_seconds": c.get("cpu_seconds")}
         if verdict in PHYSICS and truth.get("onset_s") is not None:
             if diag["window"] is None:
                 missing_window += 1
@@ -147,6 +165,7 @@ def score(cases: list[dict]) -> dict:
                             "fraction_rmse_after_le_third": (sum(r >= FIT_FACTOR for r in ratios) / len(ratios)
                                                              if ratios else None)},
         "seconds_per_case": summary(times),
+        "cpu_seconds_per_case": summary([c["cpu_seconds"] for c in cases if c.get("cpu_seconds") is not None]),
         "cases": per_case,
     }
 
@@ -191,6 +210,9 @@ def report(s: dict, failures: list[tuple[str, str]]):
           f"rmse_after <= rmse_before/{FIT_FACTOR:g}: {fmt(f['fraction_rmse_after_le_third'], '.2f')}")
     if tm:
         print(f"run time per case        median {tm['median']:.2f} s, max {tm['max']:.2f} s, mean {tm['mean']:.2f} s")
+    cpu = s.get("cpu_seconds_per_case")
+    if cpu:
+        print(f"CPU time per case        median {cpu['median']:.2f} s, max {cpu['max']:.2f} s, mean {cpu['mean']:.2f} s")
     for case_id, error in failures:
         print(f"FAILED {case_id}: {error}")
 
@@ -218,7 +240,9 @@ def main():
     def one(case_id):
         result = run_case(args.shakeflow, cases_dir / case_id, out / case_id, args.timeout)
         state = "FAILED" if "error" in result else result["diagnosis"]["verdict"]
-        print(f"  {case_id}  {result['seconds']:6.2f} s  {state}", flush=True)
+        cpu = result.get("cpu_seconds")
+        cpu = f"  {cpu:6.2f} s CPU" if cpu is not None else ""
+        print(f"  {case_id}  {result['seconds']:6.2f} s{cpu}  {state}", flush=True)
         return case_id, result
 
     with ThreadPoolExecutor(max(1, args.jobs)) as pool:

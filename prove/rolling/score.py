@@ -21,6 +21,9 @@ from pathlib import Path
 
 import yaml
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from score import CPU_WRAPPER, cpu_seconds  # noqa: E402  (prove/score.py)
+
 VERDICTS = ["none", "lateral_impact", "mass_change", "caster_brake", "swivel_jam", "ambiguous", "unexplained"]
 PHYSICS = {"lateral_impact", "mass_change", "caster_brake", "swivel_jam"}
 KEYS = ["mismatch", "verdict", "window", "rmse_before", "rmse_after", "candidates", "explanation"]
@@ -38,7 +41,8 @@ def wilson(k: int, n: int, z: float = 1.96):
 
 def run(binary: str, case: Path, out: Path):
     started = time.perf_counter()
-    proc = subprocess.run([binary, "diagnose", str(case), "--out", str(out)], capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-c", CPU_WRAPPER, binary, "diagnose", str(case), "--out", str(out)],
+                          capture_output=True, text=True)
     seconds = time.perf_counter() - started
     if proc.returncode != 0:
         raise SystemExit(f"{case.name}: shakeflow failed ({proc.returncode}):\n{proc.stderr}")
@@ -48,7 +52,7 @@ def run(binary: str, case: Path, out: Path):
         raise SystemExit(f"{case.name}: diagnosis.json breaks the contract (missing {missing}, verdict {d.get('verdict')})")
     if d["window"] is not None and not {"start_s", "end_s"} <= set(d["window"]):
         raise SystemExit(f"{case.name}: window lacks start_s/end_s")
-    return d, seconds
+    return d, seconds, cpu_seconds(proc.stderr)
 
 
 def main():
@@ -65,7 +69,7 @@ def main():
     with ThreadPoolExecutor(args.jobs) as pool:
         results = list(pool.map(lambda c: run(args.shakeflow, c, out_dir / "diagnosis" / c.name), cases))
     rows = []
-    for c, (d, seconds) in zip(cases, results):
+    for c, (d, seconds, cpu) in zip(cases, results):
         t = truths[c.name]
         start = d["window"]["start_s"] if d["window"] else None
         onset = t.get("onset_s")
@@ -74,6 +78,7 @@ def main():
             "correct": d["verdict"] == t["expected_verdict"], "onset_s": onset, "start_s": start,
             "onset_error_s": None if (start is None or onset is None) else abs(start - onset),
             "rmse_before": d["rmse_before"], "rmse_after": d["rmse_after"], "seconds": round(seconds, 2),
+            "cpu_seconds": cpu,
             "parameters": t.get("parameters"),
             "fitted": next((cand["params"] for cand in d["candidates"] if cand["effect"] == d["verdict"]), None),
         })
@@ -88,6 +93,8 @@ def main():
     onset_err = sorted(r["onset_error_s"] for r in named if r["onset_error_s"] is not None)
     ratios = sorted(r["rmse_before"] / max(r["rmse_after"], 1e-12) for r in rows if r["verdict"] in PHYSICS)
     secs = sorted(r["seconds"] for r in rows)
+    cpus = sorted(r["cpu_seconds"] for r in rows if r["cpu_seconds"] is not None)
+    wrong_physics = sum(r["verdict"] in PHYSICS and not r["correct"] for r in rows)
     med = lambda v: v[len(v) // 2] if v else None  # noqa: E731
     per_effect = {e: {"correct": sum(r["correct"] for r in rows if r["expected"] == e),
                       "cases": sum(r["expected"] == e for r in rows)} for e in VERDICTS}
@@ -102,6 +109,8 @@ def main():
         "rmse_improvement": {"median": med(ratios), "min": ratios[0] if ratios else None,
                              "all_at_least_3x": all(x >= 3 for x in ratios) if ratios else None},
         "seconds_per_case": {"median": med(secs), "max": secs[-1] if secs else None},
+        "cpu_seconds_per_case": {"median": med(cpus), "max": cpus[-1] if cpus else None},
+        "wrong_physics_named": wrong_physics,
         "rows": rows,
     }
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -115,9 +124,11 @@ def main():
     lo, hi = scores["accuracy_ci95"]
     print(f"accuracy {k}/{n} = {k / n:.3f} (95 % CI {lo:.2f}-{hi:.2f}); false alarms on none: {scores['false_alarms_on_none']}")
     for e, v in per_effect.items():
-        print(f"  {e:15} {v['correct']}/{v['cases']}")
+        if v["cases"]:
+            print(f"  {e:15} {v['correct']}/{v['cases']}  (95 % CI {v['ci95'][0]:.2f}-{v['ci95'][1]:.2f})")
     print(f"onset error of named physics: {scores['onset_error_s']}")
     print(f"rmse improvement where a physics is named: {scores['rmse_improvement']}")
+    print(f"wrong physics named: {wrong_physics}; CPU s per case: {scores['cpu_seconds_per_case']}")
     print(f"seconds per case: {scores['seconds_per_case']}")
     print(f"wrote {out_dir / 'scores.json'}")
 

@@ -6,7 +6,7 @@ use indexmap::IndexMap;
 use serde::Serialize;
 
 use super::calibration::{Calibration, Entry};
-use super::verdict::{serialize_span, Candidate, Diagnosis, Model, Noise, Predictability, Verdict};
+use super::verdict::{serialize_span, Candidate, Diagnosis, Discrepancy, Model, Noise, Predictability, Verdict};
 
 /// How `rmse_before`/`rmse_after` are computed, per model.
 pub trait Contracted: Model {
@@ -66,6 +66,10 @@ pub struct CandidateContract {
     pub explanation: String,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub calibration: Option<IndexMap<String, Entry>>,
+    /// χ² by which the records prefer it to the nominal model where it begins (not for the
+    /// nominal model).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub signature_chi2: Option<f64>,
 }
 
 /// `diagnosis.json`.
@@ -87,6 +91,7 @@ pub struct Contract {
     pub candidates: Vec<CandidateContract>,
     pub explanation: String,
     pub calibration: IndexMap<String, Entry>,
+    pub discrepancy: Discrepancy,
     pub shakeflow_version: &'static str,
 }
 
@@ -110,6 +115,7 @@ impl<M: Contracted> From<&Candidate<M>> for CandidateContract {
             onset_s: fields.onset_s,
             explanation: c.sentence.clone(),
             calibration: fields.calibration.then(|| calibration_entries(&c.calibration)),
+            signature_chi2: c.signature_chi2,
         }
     }
 }
@@ -130,6 +136,7 @@ impl<M: Contracted> From<&Diagnosis<M>> for Contract {
             candidates: d.candidates.iter().map(CandidateContract::from).collect(),
             explanation: d.explanation.clone(),
             calibration: calibration_entries(&d.calibration),
+            discrepancy: d.discrepancy.clone(),
             shakeflow_version: env!("CARGO_PKG_VERSION"),
         }
     }

@@ -181,8 +181,13 @@ impl Evidence {
     /// −2 log-likelihood (up to a constant) of the samples up to `t_end`: Σ z² plus, where the
     /// prediction admits its own uncertainty, the price of it (2 ln(sd/σ)).
     pub fn misfit_until(&self, p: &Prediction, t_end: f64) -> Misfit {
+        self.misfit_between(p, f64::NEG_INFINITY, t_end)
+    }
+
+    /// The misfit ([`Evidence::misfit_until`]) of the samples from `from` to `until` (s).
+    pub fn misfit_between(&self, p: &Prediction, from: f64, until: f64) -> Misfit {
         let (mut chi2, mut samples) = (0.0, 0);
-        for (_, z, log_ratio) in self.normalised(p, move |t| t <= t_end) {
+        for (_, z, log_ratio) in self.normalised(p, move |t| t >= from && t <= until) {
             chi2 += z * z + 2.0 * log_ratio;
             samples += 1;
         }
@@ -226,8 +231,9 @@ impl Evidence {
         span(&self.flagged_times(p))
     }
 
-    /// "the accelerometer by up to 3.2 m/s^2 and the camera by up to 0.12 rad".
-    pub fn describe_disagreement(&self, p: &Prediction, window: (f64, f64)) -> String {
+    /// The largest residual inside `window` per sensor, by the contract's key (a sensor without
+    /// a valid sample there is left out).
+    pub fn largest(&self, p: &Prediction, window: (f64, f64)) -> Vec<(&'static str, f64)> {
         let worst = |samples: &[Sample], series: &[f64]| {
             samples
                 .iter()
@@ -235,13 +241,22 @@ impl Evidence {
                 .map(|s| (s.value - at(series, s)).abs())
                 .fold(None, |m: Option<f64>, v| Some(m.map_or(v, |m| m.max(v))))
         };
-        let parts: Vec<String> = [
-            worst(&self.accel, &p.top_ax_mps2).map(|v| format!("the top accelerometer by up to {v:.2} m/s^2")),
-            worst(&self.camera, &p.theta_rad).map(|v| format!("the camera rotation by up to {v:.3} rad")),
-        ]
-        .into_iter()
-        .flatten()
-        .collect();
+        [("accel_mps2", worst(&self.accel, &p.top_ax_mps2)), ("camera_rad", worst(&self.camera, &p.theta_rad))]
+            .into_iter()
+            .filter_map(|(key, v)| Some((key, v?)))
+            .collect()
+    }
+
+    /// "the accelerometer by up to 3.2 m/s^2 and the camera by up to 0.12 rad".
+    pub fn describe_disagreement(&self, p: &Prediction, window: (f64, f64)) -> String {
+        let parts: Vec<String> = self
+            .largest(p, window)
+            .into_iter()
+            .map(|(key, v)| match key {
+                "accel_mps2" => format!("the top accelerometer by up to {v:.2} m/s^2"),
+                _ => format!("the camera rotation by up to {v:.3} rad"),
+            })
+            .collect();
         if parts.is_empty() {
             "though no valid sample falls inside it".into()
         } else {

@@ -418,6 +418,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
         evaluations: 1 + calibration.evaluations,
         sentence: "the nominal rigid-block model (Eq. 20-24) as the equipment file describes it".into(),
         prediction: baseline.clone(),
+        signature_chi2: None,
         calibration: calibration.clone(),
         extra: (),
     };
@@ -426,6 +427,11 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
         let mut only = baseline_candidate(None);
         only.score = 1.0;
         let rmse = only.rmse;
+        let discrepancy = verdict::Discrepancy::new(
+            std::slice::from_ref(&only),
+            rmse,
+            evidence.largest(&baseline, (f64::NEG_INFINITY, f64::INFINITY)),
+        );
         return Ok(Diagnosis {
             case: case.name.clone(),
             mismatch: false,
@@ -441,6 +447,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
             baseline,
             evidence,
             calibration,
+            discrepancy,
         });
     };
     let before = baseline_candidate(Some(window));
@@ -451,6 +458,9 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
             let (calibration, prediction, misfit, evaluations) =
                 recalibrate(stated, &calibration, *effect, &fit, &evidence, window);
             let k = effect.parameter_names().len();
+            let (from, until) = verdict::signature_span(effect.onset(&fit.params, &prediction), window);
+            let signature_chi2 = evidence.misfit_between(&baseline, from, until).chi2
+                - evidence.misfit_between(&prediction, from, until).chi2;
             Candidate {
                 effect: effect.name(),
                 params: effect.parameter_names().iter().copied().zip(fit.params.iter().copied()).collect(),
@@ -462,6 +472,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
                 misfit,
                 evaluations: fit.evaluations + evaluations,
                 prediction,
+                signature_chi2: Some(signature_chi2),
                 calibration,
                 extra: (),
             }
@@ -474,9 +485,10 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
     let flagged_before = candidates[0].flagged.max(1) as f64;
     // A model that has the unit fall when the records show it standing (or the reverse) is not
     // the explanation, however well its own chaotic spread covers the misfit. Only the best by
-    // BIC may be accepted.
+    // BIC may be accepted, and only when the records show its own signature where it begins.
     let choice = verdict::choose(&mut candidates, true, |c: &Candidate| {
         c.prediction.overturn.is_some() == evidence.observed_overturn
+            && c.shows_signature()
             && c.bic < base_bic
             && c.rmse * settings.min_improvement <= base_rmse
             && (c.flagged as f64) <= settings.max_remaining_flagged * flagged_before
@@ -521,6 +533,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
     }
     let accepted_calibration = if accepted { candidates[1].calibration.clone() } else { calibration };
     explanation.push_str(&accepted_calibration.note(false));
+    let discrepancy = verdict::Discrepancy::new(&candidates, rmse_after, evidence.largest(&model, window));
     Ok(Diagnosis {
         case: case.name.clone(),
         mismatch: true,
@@ -536,6 +549,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String>
         model,
         evidence,
         calibration: accepted_calibration,
+        discrepancy,
     })
 }
 
@@ -609,6 +623,14 @@ fn explain(
             best.sentence,
             if evidence.observed_overturn { "stay standing" } else { "overturn" },
             if evidence.observed_overturn { "fall" } else { "standing" },
+        ));
+    } else if !best.shows_signature() {
+        text.push_str(&format!(
+            " None of the library's effects explains it: the best, {} ({}), leaves a misfit of {:.1} in that window, but {}. The disagreement is left to a smooth model discrepancy of the size above. Look for what the library does not model there: a tilting floor, a drifting sensor, a model error.",
+            best.name(),
+            best.sentence,
+            best.rmse,
+            best.signature_shortfall()
         ));
     } else {
         text.push_str(&format!(

@@ -20,7 +20,7 @@ pub struct Diagnose;
 
 static INFO: StageInfo = StageInfo {
     name: "diagnose",
-    version: 14,
+    version: 15,
     summary: "Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt; rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted jointly with the nominal parameters the equipment file's `uncertainty` block says are known only roughly (calibrated first), ranked by BIC; `ambiguous` when two explain the records about equally well, or `unexplained`.",
     inputs: InputKind::Files(&[RecordFormat::Case]),
     outputs: &[

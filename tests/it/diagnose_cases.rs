@@ -57,6 +57,20 @@ fn demo_cases_get_their_concealed_verdicts() {
         let candidates = d["candidates"].as_array().unwrap();
         assert_eq!(candidates[0]["effect"], "none");
         assert_eq!(candidates.len(), 7, "the baseline and the six effects of the library");
+        // A named physics shows its own signature where it begins (the nominal model has none),
+        // and the file says what was left to a smooth model discrepancy.
+        let discrepancy = &d["discrepancy"];
+        let needed = discrepancy["signature_chi2_needed"].as_f64().expect("discrepancy.signature_chi2_needed");
+        assert!(candidates[0].get("signature_chi2").is_none());
+        for c in &candidates[1..] {
+            assert!(c["signature_chi2"].is_number(), "{id}: {} has no signature_chi2", c["effect"]);
+        }
+        if expected != "unexplained" {
+            let gain = candidates[1]["signature_chi2"].as_f64().unwrap();
+            assert!(gain >= needed, "{id}: the named physics's signature χ² {gain} < {needed}");
+        }
+        assert!(discrepancy["left_rmse"].as_f64().unwrap() >= 0.0 && discrepancy["without_signature"].is_array());
+        assert!(discrepancy["left_largest"]["accel_mps2"].is_number(), "{id}: {discrepancy}");
     }
     // The concealed parameters are recovered (truth/demo_02.yaml, truth/demo_04.yaml).
     let d: serde_json::Value =

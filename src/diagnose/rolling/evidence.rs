@@ -190,8 +190,9 @@ impl Evidence {
         }
     }
 
-    /// "the camera by up to 0.41 m and 0.12 rad and the accelerometer by up to 1.3 m/s^2".
-    pub fn describe_disagreement(&self, p: &Track, window: (f64, f64)) -> String {
+    /// The largest residual inside `window` per sensor, by the contract's key: the camera's
+    /// position (m) and yaw (rad), the accelerometer (m/s^2).
+    pub fn largest(&self, p: &Track, window: (f64, f64)) -> [(&'static str, f64); 3] {
         let inside = |s: &&Sample| s.valid && s.t >= window.0 && s.t <= window.1;
         let mut position: f64 = 0.0;
         let mut yaw: f64 = 0.0;
@@ -207,6 +208,12 @@ impl Evidence {
             .filter(|s| Self::accel_seen(p, s))
             .map(|s| (self.accel_z(p, s) * self.accel_sigma).abs())
             .fold(0.0, f64::max);
+        [("camera_m", position), ("camera_rad", yaw), ("accel_mps2", accel)]
+    }
+
+    /// "the camera by up to 0.41 m and 0.12 rad and the accelerometer by up to 1.3 m/s^2".
+    pub fn describe_disagreement(&self, p: &Track, window: (f64, f64)) -> String {
+        let [(_, position), (_, yaw), (_, accel)] = self.largest(p, window);
         format!("the camera by up to {position:.3} m and {yaw:.3} rad and the accelerometer by up to {accel:.2} m/s^2")
     }
 
