@@ -51,6 +51,12 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for Load {
+    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
+        &[("status", super::Shown::RecordStatus)]
+    }
+}
+
 impl Stage for Load {
     fn info(&self) -> &'static StageInfo {
         &INFO

@@ -158,6 +158,27 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for SimulateRolling {
+    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
+        &[("events", super::Shown::Rolling)]
+    }
+
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title: "the study's patient bed PB2 on four swivel casters under both horizontal components",
+            stages: "\
+simulate_rolling:
+  type: simulate_rolling
+  inputs: [load]
+  params:
+    preset: PB2
+    x_channel: ax_mps2
+    y_channel: ay_mps2
+",
+        }]
+    }
+}
+
 impl Stage for SimulateRolling {
     fn info(&self) -> &'static StageInfo {
         &INFO

@@ -94,6 +94,30 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for SimulateToppling {
+    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
+        &[("events", super::Shown::Rocking)]
+    }
+
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title: "the study's PS2 unit on the baseline-corrected record, both horizontal and vertical shaking",
+            stages: "\
+baseline:
+  type: baseline
+  inputs: [load]
+simulate_toppling:
+  type: simulate_toppling
+  inputs: [baseline]
+  params:
+    preset: PS2
+    horizontal: ax_mps2
+    vertical: az_mps2
+",
+        }]
+    }
+}
+
 impl Stage for SimulateToppling {
     fn info(&self) -> &'static StageInfo {
         &INFO

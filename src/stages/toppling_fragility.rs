@@ -53,6 +53,26 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for TopplingFragility {
+    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
+        &[("fragility", super::Shown::Fragility)]
+    }
+
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title: "PS2's overturning fragility from the record scaled to three intensities",
+            stages: "\
+toppling_fragility:
+  type: toppling_fragility
+  inputs: [load]
+  params:
+    preset: PS2
+    scales: [0.5, 1.0, 2.0]
+",
+        }]
+    }
+}
+
 impl Stage for TopplingFragility {
     fn info(&self) -> &'static StageInfo {
         &INFO
