@@ -550,7 +550,14 @@ impl Setup {
         t
     }
 
-    fn figure(&self, record: &str, time: &[f64], ax: &[f64], ay: &[f64], r: &Response) -> Result<Vec<u8>, String> {
+    fn figure(
+        &self,
+        record: &str,
+        time: &[f64],
+        ax: &[f64],
+        ay: &[f64],
+        r: &Response,
+    ) -> Result<Vec<u8>, crate::plot::PlotError> {
         use crate::plot::{render_png_with_side, unwrap_degrees, Marker, Panel, Series};
         // Casters swivel through whole turns: unwrapped, a turn past ±180° is no jump.
         let degrees = |v: &[f64]| unwrap_degrees(&v.iter().map(|x| x.to_degrees()).collect::<Vec<f64>>());

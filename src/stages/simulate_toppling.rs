@@ -398,7 +398,7 @@ fn events_table(r: &Response) -> Table {
     t
 }
 
-fn figure(title: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
+fn figure(title: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, crate::plot::PlotError> {
     use crate::plot::{render_png, Marker, Panel, Series};
     let mut markers: Vec<Marker> = r
         .events

@@ -324,7 +324,7 @@ fn figure(
     fit: Option<&LognormalFit>,
     by_velocity: bool,
     note: &str,
-) -> Result<Vec<u8>, String> {
+) -> Result<Vec<u8>, crate::plot::PlotError> {
     use crate::plot::{render_png, Panel, Series};
     // Accelerations are read in g on a fragility curve.
     let (x_label, per_unit) = if by_velocity {
