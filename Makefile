@@ -19,7 +19,7 @@ VENV_PY := $(VENV)/bin/python
 PY_STAMP := $(VENV)/.requirements-$(shell cksum < tests/reference/requirements.txt | cut -d' ' -f1)
 BIN := $(CARGO_TARGET_DIR)/release/shakeflow
 
-.PHONY: all demo test wheel wheel-dev bench bench-scale convergence prove prove-rolling prove-check release schema fmt lint clean help rolling-findings fuzz
+.PHONY: all demo test wheel wheel-dev bench bench-scale convergence prove prove-rolling prove-check release schema docs fmt lint clean help rolling-findings fuzz
 
 help:
 	@echo "make demo    build (release) and run the demo study: runs/demo-archive -> runs/demo"
@@ -32,6 +32,7 @@ help:
 	@echo "             [SEED=n] [PER_EFFECT=5] [PROVE_JOBS=2]; make prove-check re-checks the generator's physics"
 	@echo "make prove-rolling   the same for rolling units (prove/rolling/) [SEED=n] [ROLLING_PER_EFFECT=4]"
 	@echo "make schema  regenerate schemas/pipeline.schema.json from the stage registry"
+	@echo "make docs    regenerate docs/stages.md from the stage declarations"
 	@echo "make rolling-findings  the study's rolling findings on the demo archive, as tables (docs/models/rolling.md)"
 	@echo "make fuzz    coverage-guided fuzzing of every file reader and the pipeline parser (docs/fuzzing.md)"
 	@echo "             [FUZZ_SECONDS=120 per target] [FUZZ_TARGETS=\"at2 pipeline ...\"]"
@@ -139,6 +140,9 @@ prove-check: $(PY_STAMP)
 
 schema:
 	$(CARGO) run --quiet --locked -- schema > schemas/pipeline.schema.json
+
+docs:
+	$(CARGO) run --quiet --locked -- stages --markdown > docs/stages.md
 
 rolling-findings:
 	$(CARGO) test --release --locked --test it rolling_findings -- --nocapture

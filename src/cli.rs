@@ -136,6 +136,9 @@ enum Command {
     Stages {
         /// Show only this stage type.
         name: Option<String>,
+        /// Print docs/stages.md (every stage type as Markdown) instead: `make docs` writes it.
+        #[arg(long, conflicts_with = "name")]
+        markdown: bool,
     },
     /// Describe an artifact: a Parquet file (schema, units, statistics, provenance), an MCAP file, or a dataset folder.
     Inspect {
@@ -467,7 +470,11 @@ pub fn main() -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Stage { name, inputs, output, set } => run_single_stage(&name, &inputs, &output, &set),
-        Command::Stages { name } => {
+        Command::Stages { markdown: true, .. } => {
+            print!("{}", stages::reference::markdown());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Stages { name, .. } => {
             print!("{}", describe_stages(name.as_deref())?);
             Ok(ExitCode::SUCCESS)
         }
@@ -540,15 +547,7 @@ fn describe_stages(only: Option<&str>) -> anyhow::Result<String> {
     for stage in stages::registry().0.iter().filter(|s| only.is_none_or(|n| s.info().name == n)) {
         let info = stage.info();
         writeln!(out, "{} (version {})\n  {}", info.name, info.version, info.summary)?;
-        let reads = match info.inputs {
-            InputKind::Sources => "record sources declared under `inputs:`".to_string(),
-            InputKind::Datasets => "outputs of other stages".to_string(),
-            InputKind::Files(formats) => format!(
-                "`{}` sources declared under `inputs:`",
-                formats.iter().map(|f| f.name()).collect::<Vec<_>>().join("` or `")
-            ),
-        };
-        writeln!(out, "  reads: {reads}")?;
+        writeln!(out, "  reads: {}", stages::reference::reads(info))?;
         for o in info.outputs {
             let kind = o.kind.describe();
             writeln!(out, "  output `{}` ({kind}): {}", o.name, o.description)?;

@@ -95,11 +95,25 @@ const MARKER_COLOR: RGBColor = RGBColor(90, 90, 90);
 const OBSERVED_COLOR: RGBColor = RGBColor(20, 20, 20);
 const SPAN_COLOR: RGBColor = RGBColor(255, 236, 204);
 
+/// Why a figure could not be drawn.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PlotError {
+    #[error("figure size {width}x{height} is too small")]
+    TooSmall { width: u32, height: u32 },
+    #[error("figure size {width}x{height} with a {side_width} px side panel is too small")]
+    SideTooWide { width: u32, height: u32, side_width: u32 },
+    #[error("panel {panel} series '{label}': x has {x} points but y has {y}")]
+    Lengths { panel: usize, label: String, x: usize, y: usize },
+    /// The drawing library's error, as its `Debug` names it.
+    #[error("plot error: {0}")]
+    Drawing(String),
+}
+
 /// Render `panels` stacked vertically under an overall `title` into a PNG
 /// (RGB, 8 bit) of `width` x `height` pixels.
-pub fn render_png(title: &str, panels: &[Panel<'_>], width: u32, height: u32) -> Result<Vec<u8>, String> {
+pub fn render_png(title: &str, panels: &[Panel<'_>], width: u32, height: u32) -> Result<Vec<u8>, PlotError> {
     if width < 16 || height < 16 {
-        return Err(format!("figure size {width}x{height} is too small"));
+        return Err(PlotError::TooSmall { width, height });
     }
     render_canvas(title, panels.iter(), width, height, |root, body| {
         if !panels.is_empty() {
@@ -121,9 +135,9 @@ pub fn render_png_with_side(
     side_width: u32,
     width: u32,
     height: u32,
-) -> Result<Vec<u8>, String> {
+) -> Result<Vec<u8>, PlotError> {
     if width < 16 || height < 16 || side_width + 16 > width {
-        return Err(format!("figure size {width}x{height} with a {side_width} px side panel is too small"));
+        return Err(PlotError::SideTooWide { width, height, side_width });
     }
     render_canvas(title, panels.iter().chain(std::iter::once(side)), width, height, |root, body| {
         let (stack, right) = body.split_horizontally(width - side_width);
@@ -145,17 +159,12 @@ fn render_canvas<'p, 'd: 'p>(
     panels: impl Iterator<Item = &'p Panel<'d>>,
     width: u32,
     height: u32,
-    draw: impl for<'b> FnOnce(&Root<'b>, &Root<'b>) -> Result<(), String>,
-) -> Result<Vec<u8>, String> {
-    for (pi, p) in panels.enumerate() {
+    draw: impl for<'b> FnOnce(&Root<'b>, &Root<'b>) -> Result<(), PlotError>,
+) -> Result<Vec<u8>, PlotError> {
+    for (panel, p) in panels.enumerate() {
         for s in &p.series {
             if s.x.len() != s.y.len() {
-                return Err(format!(
-                    "panel {pi} series '{}': x has {} points but y has {}",
-                    s.label,
-                    s.x.len(),
-                    s.y.len()
-                ));
+                return Err(PlotError::Lengths { panel, label: s.label.clone(), x: s.x.len(), y: s.y.len() });
             }
         }
     }
@@ -172,7 +181,8 @@ fn render_canvas<'p, 'd: 'p>(
         draw(&root, &body)?;
         root.present().map_err(err)?;
     }
-    encode_png(&buf, width, height)
+    let (level, filter) = FIGURE_COMPRESSION;
+    Ok(encode_rgb_png(&buf, width, height, level, filter))
 }
 
 fn clone_panel<'a>(p: &Panel<'a>) -> Panel<'a> {
@@ -199,8 +209,8 @@ fn equal_aspect_ranges(p: &Panel<'_>, (w, h): (u32, u32)) -> ((f64, f64), (f64, 
     ((cx - hx, cx + hx), (cy - hy, cy + hy))
 }
 
-fn err<E: std::fmt::Debug>(e: E) -> String {
-    format!("plot error: {e:?}")
+fn err<E: std::fmt::Debug>(e: E) -> PlotError {
+    PlotError::Drawing(format!("{e:?}"))
 }
 
 /// The PNG row filter (one for every row).
@@ -219,11 +229,6 @@ pub enum RowFilter {
 /// figure no longer costs more than the simulation it shows; the png crate's fast mode is 4–25×
 /// the bytes.
 pub const FIGURE_COMPRESSION: (u32, RowFilter) = (1, RowFilter::None);
-
-fn encode_png(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>, String> {
-    let (level, filter) = FIGURE_COMPRESSION;
-    Ok(encode_rgb_png(rgb, width, height, level, filter))
-}
 
 /// An 8-bit RGB PNG of `rgb` (rows top to bottom), its pixels deflated by zlib at `level`
 /// (0–9) after `filter`: the three chunks written here, so the level is the caller's choice.
@@ -365,7 +370,7 @@ fn fmt_num(v: f64) -> String {
 
 type Root<'b> = DrawingArea<BitMapBackend<'b>, Shift>;
 
-fn draw_panel<'b>(root: &Root<'b>, area: &Root<'b>, p: &Panel<'_>) -> Result<(), String> {
+fn draw_panel<'b>(root: &Root<'b>, area: &Root<'b>, p: &Panel<'_>) -> Result<(), PlotError> {
     let ((x0, x1), (y0, y1)) = panel_ranges(p);
     if p.log_y {
         draw_panel_with(root, area, p, x0..x1, (y0..y1).log_scale())
@@ -380,7 +385,7 @@ fn draw_panel_with<'b, YR>(
     p: &Panel<'_>,
     xr: std::ops::Range<f64>,
     yr: YR,
-) -> Result<(), String>
+) -> Result<(), PlotError>
 where
     YR: AsRangedCoord<Value = f64>,
     YR::CoordDescType: Ranged<ValueType = f64> + ValueFormatter<f64>,
@@ -593,6 +598,23 @@ pub fn unwrap_degrees(angles: &[f64]) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The messages stages and users read, as they were when these errors were strings.
+    #[test]
+    fn errors_say_what_is_wrong_with_the_figure() {
+        assert_eq!(render_png("t", &[], 8, 100).unwrap_err().to_string(), "figure size 8x100 is too small");
+        let side = Panel::default();
+        assert_eq!(
+            render_png_with_side("t", &[], &side, 100, 110, 100).unwrap_err().to_string(),
+            "figure size 110x100 with a 100 px side panel is too small"
+        );
+        let panel = Panel { series: vec![Series::new("s", &[1.0, 2.0], &[1.0])], ..Panel::default() };
+        assert_eq!(
+            render_png("t", &[panel], 100, 100).unwrap_err().to_string(),
+            "panel 0 series 's': x has 2 points but y has 1"
+        );
+        assert_eq!(err("backend").to_string(), "plot error: \"backend\"");
+    }
 
     fn figure_bytes() -> Vec<u8> {
         let fs = 200.0;

@@ -160,7 +160,7 @@ fn natural_cmp(a: &str, b: &str) -> std::cmp::Ordering {
 /// Decodes one PNG or JPEG file to 8-bit gray.
 pub fn decode_image(path: &Path) -> Result<GrayImage, UserError> {
     let bytes = std::fs::read(path).map_err(|e| UserError::new(format!("cannot read the frame: {e}")).in_file(path))?;
-    let unreadable = |e: String| {
+    let unreadable = |e: DecodeError| {
         UserError::new(format!("cannot decode the frame: {e}"))
             .in_file(path)
             .hint("the file may be truncated or not the image its extension says; re-export the frame")
@@ -170,7 +170,7 @@ pub fn decode_image(path: &Path) -> Result<GrayImage, UserError> {
     } else if bytes.starts_with(&[0xFF, 0xD8]) {
         decode_jpeg(&bytes).map_err(unreadable)
     } else {
-        Err(unreadable("neither PNG nor JPEG data".into()))
+        Err(unreadable(DecodeError::NotAnImage))
     }
 }
 
@@ -179,12 +179,30 @@ fn luma(r: u8, g: u8, b: u8) -> u8 {
     ((u32::from(r) * 4899 + u32::from(g) * 9617 + u32::from(b) * 1868 + 8192) >> 14) as u8
 }
 
-fn decode_png(bytes: &[u8]) -> Result<GrayImage, String> {
+/// Why a frame's bytes are no image.
+#[derive(Debug, thiserror::Error)]
+enum DecodeError {
+    #[error("neither PNG nor JPEG data")]
+    NotAnImage,
+    #[error("{0}")]
+    Png(#[from] png::DecodingError),
+    #[error("palette PNG left unexpanded")]
+    Palette,
+    /// The JPEG decoder's error, as its `Debug` names it.
+    #[error("{0}")]
+    Jpeg(String),
+    #[error("no JPEG header")]
+    NoJpegHeader,
+    #[error("decoded {got} {what} for a {width}×{height} {image}")]
+    Size { got: usize, what: &'static str, width: usize, height: usize, image: &'static str },
+}
+
+fn decode_png(bytes: &[u8]) -> Result<GrayImage, DecodeError> {
     let mut decoder = png::Decoder::new(bytes);
     decoder.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
-    let mut reader = decoder.read_info().map_err(|e| e.to_string())?;
+    let mut reader = decoder.read_info()?;
     let mut buffer = vec![0; reader.output_buffer_size()];
-    let info = reader.next_frame(&mut buffer).map_err(|e| e.to_string())?;
+    let info = reader.next_frame(&mut buffer)?;
     let (w, h) = (info.width as usize, info.height as usize);
     let data = &buffer[..info.buffer_size()];
     let pixels = match info.color_type {
@@ -192,25 +210,25 @@ fn decode_png(bytes: &[u8]) -> Result<GrayImage, String> {
         png::ColorType::GrayscaleAlpha => data.chunks_exact(2).map(|p| p[0]).collect(),
         png::ColorType::Rgb => data.chunks_exact(3).map(|p| luma(p[0], p[1], p[2])).collect(),
         png::ColorType::Rgba => data.chunks_exact(4).map(|p| luma(p[0], p[1], p[2])).collect(),
-        png::ColorType::Indexed => return Err("palette PNG left unexpanded".into()),
+        png::ColorType::Indexed => return Err(DecodeError::Palette),
     };
     if pixels.len() != w * h {
-        return Err(format!("decoded {} pixels for a {w}×{h} image", pixels.len()));
+        return Err(DecodeError::Size { got: pixels.len(), what: "pixels", width: w, height: h, image: "image" });
     }
     Ok(GrayImage::new(w, h, pixels))
 }
 
-fn decode_jpeg(bytes: &[u8]) -> Result<GrayImage, String> {
+fn decode_jpeg(bytes: &[u8]) -> Result<GrayImage, DecodeError> {
     use zune_jpeg::zune_core::bytestream::ZCursor;
     use zune_jpeg::zune_core::colorspace::ColorSpace;
     use zune_jpeg::zune_core::options::DecoderOptions;
     let options = DecoderOptions::default().jpeg_set_out_colorspace(ColorSpace::Luma);
     let mut decoder = zune_jpeg::JpegDecoder::new_with_options(ZCursor::new(bytes), options);
-    let pixels = decoder.decode().map_err(|e| format!("{e:?}"))?;
-    let info = decoder.info().ok_or("no JPEG header")?;
+    let pixels = decoder.decode().map_err(|e| DecodeError::Jpeg(format!("{e:?}")))?;
+    let info = decoder.info().ok_or(DecodeError::NoJpegHeader)?;
     let (w, h) = (usize::from(info.width), usize::from(info.height));
     if pixels.len() != w * h {
-        return Err(format!("decoded {} bytes for a {w}×{h} gray image", pixels.len()));
+        return Err(DecodeError::Size { got: pixels.len(), what: "bytes", width: w, height: h, image: "gray image" });
     }
     Ok(GrayImage::new(w, h, pixels))
 }
@@ -386,6 +404,22 @@ fn frame_size(line: &str) -> Option<(usize, usize)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The messages users read (after "cannot decode the frame: "), as they were when these
+    /// errors were strings.
+    #[test]
+    fn decode_errors_say_what_was_wrong() {
+        assert_eq!(DecodeError::NotAnImage.to_string(), "neither PNG nor JPEG data");
+        assert_eq!(DecodeError::Palette.to_string(), "palette PNG left unexpanded");
+        assert_eq!(DecodeError::NoJpegHeader.to_string(), "no JPEG header");
+        let size = DecodeError::Size { got: 5, what: "pixels", width: 2, height: 3, image: "image" };
+        assert_eq!(size.to_string(), "decoded 5 pixels for a 2×3 image");
+        let size = DecodeError::Size { got: 5, what: "bytes", width: 2, height: 3, image: "gray image" };
+        assert_eq!(size.to_string(), "decoded 5 bytes for a 2×3 gray image");
+        let truncated = decode_png(b"\x89PNG\r\n\x1a\n").unwrap_err();
+        assert!(matches!(truncated, DecodeError::Png(_)), "{truncated:?}");
+        assert!(matches!(decode_jpeg(&[0xFF, 0xD8]).unwrap_err(), DecodeError::Jpeg(_) | DecodeError::NoJpegHeader));
+    }
 
     #[test]
     fn names_sort_naturally() {

@@ -39,6 +39,21 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| StageInfo {
     params: BaselineParams::specs(),
 });
 
+impl super::StageType for Baseline {
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title: "the study's cubic baseline removed from every channel of the loaded records",
+            stages: "\
+baseline:
+  type: baseline
+  inputs: [load]
+  params:
+    order: 3
+",
+        }]
+    }
+}
+
 impl Stage for Baseline {
     fn info(&self) -> &'static StageInfo {
         &INFO

@@ -37,6 +37,24 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for Compare {
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title: "what the cubic baseline changed: corrected against loaded accelerations",
+            stages: "\
+baseline:
+  type: baseline
+  inputs: [load]
+compare:
+  type: compare
+  inputs: [baseline, load]
+  params:
+    pairs: [ax_mps2 -> ax_mps2, az_mps2 -> az_mps2]
+",
+        }]
+    }
+}
+
 impl Stage for Compare {
     fn info(&self) -> &'static StageInfo {
         &INFO

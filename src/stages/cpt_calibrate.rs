@@ -56,6 +56,8 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for CptCalibrate {}
+
 impl Stage for CptCalibrate {
     fn info(&self) -> &'static StageInfo {
         &INFO

@@ -74,6 +74,8 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for CptProject {}
+
 impl Stage for CptProject {
     fn info(&self) -> &'static StageInfo {
         &INFO

@@ -85,6 +85,8 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 /// Frames decoded per batch: enough to keep every core decoding.
 const BATCH: usize = 16;
 
+impl super::StageType for CptTrack {}
+
 impl Stage for CptTrack {
     fn info(&self) -> &'static StageInfo {
         &INFO

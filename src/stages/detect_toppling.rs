@@ -39,6 +39,12 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for DetectToppling {
+    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
+        &[("events", super::Shown::Toppling)]
+    }
+}
+
 impl Stage for DetectToppling {
     fn info(&self) -> &'static StageInfo {
         &INFO

@@ -272,7 +272,7 @@ pub fn figure(d: &Diagnosis) -> Result<Vec<u8>, String> {
         Some((a, b)) => format!("case {}: {} (records and model disagree {a:.2}-{b:.2} s, shaded)", d.case, d.verdict),
         None => format!("case {}: the model agrees with the records", d.case),
     };
-    render_png(&title, &panels, 1400, 1100)
+    render_png(&title, &panels, 1400, 1100).map_err(|e| e.to_string())
 }
 
 /// What the stage writes of one case: the contract, the two tables and the figure.
@@ -415,5 +415,5 @@ fn rolling_figure(d: &RollingDiagnosis) -> Result<Vec<u8>, String> {
         Some((a, b)) => format!("{}: {} (mismatch {a:.2}-{b:.2} s, shaded)", d.case, d.verdict),
         None => format!("{}: no mismatch", d.case),
     };
-    render_png(&title, &panels, 1400, 1300)
+    render_png(&title, &panels, 1400, 1300).map_err(|e| e.to_string())
 }

@@ -51,6 +51,12 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for Load {
+    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
+        &[("status", super::Shown::RecordStatus)]
+    }
+}
+
 impl Stage for Load {
     fn info(&self) -> &'static StageInfo {
         &INFO
@@ -259,8 +265,9 @@ fn merge_components(group: &Group<'_>, raws: Vec<RawRecord>) -> Result<RawRecord
     }
     let channels: Vec<&records::RawChannel> = merged.channels.iter().collect();
     let single = (spec.component_as == Some(ComponentAs::Ay)).then_some('y');
-    let axes = records::roles::axes(&merged, &channels, single)
-        .map_err(|e| refuse(0, e, "say which component is which with `components: {axes: {H1: x, H2: y, UP: z}}`"))?;
+    let axes = records::roles::axes(&merged, &channels, single).map_err(|e| {
+        refuse(0, e.to_string(), "say which component is which with `components: {axes: {H1: x, H2: y, UP: z}}`")
+    })?;
     if let Some(missing) = components.require.iter().find(|a| !axes.contains(&a.letter())) {
         return Err(refuse(
             0,
@@ -474,7 +481,7 @@ fn table_of(spec: &SourceSpec, part: &InputPart, raw: &RawRecord) -> Result<Tabl
     };
     let selected: Vec<(String, &records::RawChannel, Option<&ColumnSpec>)> = if spec.columns.is_empty() {
         let names = default_names(spec, raw, &channels).map_err(|e| {
-            err(e).hint("map the channels yourself with `columns:` (output name → the file's channel name)")
+            err(e.to_string()).hint("map the channels yourself with `columns:` (output name → the file's channel name)")
         })?;
         channels.iter().zip(names).map(|(c, name)| (name, *c, None)).collect()
     } else {
@@ -896,7 +903,11 @@ fn name_line(spec: &SourceSpec, raw: &RawRecord, channel: &records::RawChannel) 
 /// quantity and axis (`ax_mps2`, `ay_mps2`, `az_mps2`; `records::roles` says which channel is
 /// which), so one source covers a suite of records whatever their files call the components;
 /// delimited and RENADIC files, and `component_as: label`, keep the file's names.
-fn default_names(spec: &SourceSpec, raw: &RawRecord, channels: &[&records::RawChannel]) -> Result<Vec<String>, String> {
+fn default_names(
+    spec: &SourceSpec,
+    raw: &RawRecord,
+    channels: &[&records::RawChannel],
+) -> Result<Vec<String>, records::roles::AxesError> {
     use RecordFormat::*;
     let by_axis = matches!(read_as(spec, raw), At2 | SimcenterJson | Cosmos | Dmg | Smc | Knet | Esm | Geonet);
     if !by_axis || spec.component_as == Some(ComponentAs::Label) {

@@ -20,7 +20,7 @@ use super::simulate_rolling::SimulateRollingParams;
 use super::simulate_toppling::{RockingParams, SimulateTopplingParams};
 use super::transfer_function::TransferFunctionParams;
 use super::{
-    figure_stem, partition_values, Declared, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext,
+    figure_stem, partition_values, Declared, InputKind, InputPart, OutputInfo, OutputKind, Shown, Stage, StageContext,
     StageInfo, StageInput,
 };
 use crate::pipeline::params::{self, ParamError, Params};
@@ -57,21 +57,93 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
-/// The inputs `report` reads, sorted by what they hold.
-#[derive(Default)]
-struct Inputs<'a> {
-    identified: Vec<&'a StageInput>,
-    events: Vec<&'a StageInput>,
-    spectra: Vec<&'a StageInput>,
-    records: Vec<&'a StageInput>,
-    rocking: Vec<&'a StageInput>,
-    fragility: Vec<&'a StageInput>,
-    rolling: Vec<&'a StageInput>,
-    diagnosis: Vec<&'a StageInput>,
-    status: Vec<&'a StageInput>,
+/// What the report does with each kind of output.
+impl Shown {
+    const ALL: [Shown; 9] = [
+        Shown::Frequencies,
+        Shown::Toppling,
+        Shown::Rocking,
+        Shown::Fragility,
+        Shown::Rolling,
+        Shown::Diagnosis,
+        Shown::Spectra,
+        Shown::Records,
+        Shown::RecordStatus,
+    ];
+
+    /// How the page names the kind when no input holds it (None: not listed).
+    fn absent_label(self) -> Option<&'static str> {
+        match self {
+            Shown::Frequencies => Some("frequencies"),
+            Shown::Toppling => Some("toppling in the records"),
+            Shown::Rocking => Some("rocking simulations"),
+            Shown::Fragility => Some("fragility"),
+            Shown::Rolling => Some("rolling simulations"),
+            Shown::Diagnosis => Some("diagnosis"),
+            Shown::Spectra | Shown::Records | Shown::RecordStatus => None,
+        }
+    }
+
+    /// The stage outputs (`stage_type.output`) of this kind, in the registry's order.
+    fn outputs(self) -> Vec<String> {
+        super::stage_types()
+            .iter()
+            .flat_map(|s| {
+                s.shown().iter().filter(move |(_, k)| *k == self).map(move |(o, _)| format!("{}.{o}", s.info().name))
+            })
+            .collect()
+    }
+
+    /// What the stage output `output` of the stage type `stage_type` shows (None: not shown).
+    fn of(stage_type: &str, output: &str) -> Option<Shown> {
+        let shown = super::stage_type(stage_type)?.shown();
+        shown.iter().find(|(o, _)| *o == output).map(|&(_, kind)| kind)
+    }
 }
 
-const READS: &str = "transfer_function.identified and .spectra, detect_toppling.events, synchronize.records (or another table of records with time_s), simulate_toppling.events, toppling_fragility.fragility, simulate_rolling.events, diagnose.diagnosis, load.status";
+/// The inputs `report` reads, sorted by what they hold.
+#[derive(Default)]
+struct Inputs<'a>(BTreeMap<Shown, Vec<&'a StageInput>>);
+
+impl<'a> Inputs<'a> {
+    fn of(&self, kind: Shown) -> &[&'a StageInput] {
+        self.0.get(&kind).map_or(&[], Vec::as_slice)
+    }
+}
+
+/// Every stage output `report` reads, for the error naming what it cannot show.
+fn reads() -> String {
+    let mut outputs: Vec<String> = super::stage_types()
+        .iter()
+        .flat_map(|s| s.shown().iter().map(move |(o, _)| format!("{}.{o}", s.info().name)))
+        .collect();
+    outputs.push("any other table of records with time_s".into());
+    outputs.join(", ")
+}
+
+impl super::StageType for Report {
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title:
+                "the study report of a rocking simulation: the unit's runs, what the report lacked, the records loaded",
+            stages: "\
+baseline:
+  type: baseline
+  inputs: [load]
+PS2:
+  type: simulate_toppling
+  inputs: [baseline]
+  params:
+    preset: PS2
+report:
+  type: report
+  inputs: [PS2.events, load.status]
+  params:
+    title: Rinaldi on PS2
+",
+        }]
+    }
+}
 
 impl Stage for Report {
     fn info(&self) -> &'static StageInfo {
@@ -90,36 +162,30 @@ impl Stage for Report {
             // An input with no records (nothing selected upstream) has nothing to show.
             let Some(first) = input.parts().first() else { continue };
             let table = ctx.read_table(first)?;
-            let meta = |key: &str| table.metadata.get(key).map_or("", String::as_str);
-            let list = match (meta("shakeflow.stage_type"), meta("shakeflow.output")) {
-                ("transfer_function", "identified") => &mut inputs.identified,
-                ("transfer_function", "spectra") => &mut inputs.spectra,
-                ("detect_toppling", "events") => &mut inputs.events,
-                ("simulate_toppling", "events") => &mut inputs.rocking,
-                ("toppling_fragility", "fragility") => &mut inputs.fragility,
-                ("simulate_rolling", "events") => &mut inputs.rolling,
-                ("diagnose", "diagnosis") => &mut inputs.diagnosis,
-                ("load", "status") => &mut inputs.status,
-                _ if table.column(crate::table::TIME_COLUMN).is_some() => &mut inputs.records,
-                (stage_type, output) => anyhow::bail!(
-                    "`report` cannot show `{}` (output `{output}` of a `{stage_type}` stage); it reads {READS}",
-                    input.name()
+            let (stage_type, output) = (meta(&table, "shakeflow.stage_type"), meta(&table, "shakeflow.output"));
+            let kind = match Shown::of(stage_type, output) {
+                Some(kind) => kind,
+                None if table.column(crate::table::TIME_COLUMN).is_some() => Shown::Records,
+                None => anyhow::bail!(
+                    "`report` cannot show `{}` (output `{output}` of a `{stage_type}` stage); it reads {}",
+                    input.name(),
+                    reads()
                 ),
             };
-            list.push(input);
+            inputs.0.entry(kind).or_default().push(input);
             note_provenance(&mut provenance, &table, input.name());
         }
         let mut rolling: RollingEvents = Vec::new();
-        for input in &inputs.rolling {
+        for input in inputs.of(Shown::Rolling) {
             rolling.extend(rolling_events(ctx, input)?);
         }
         ctx.sink.write("rolling", &Vec::new(), summarize_rolling(&rolling)?)?;
         ctx.sink.set_total(1);
-        let identified = read_every(ctx, &inputs.identified)?;
-        let events = read_every(ctx, &inputs.events)?;
+        let identified = read_every(ctx, inputs.of(Shown::Frequencies))?;
+        let events = read_every(ctx, inputs.of(Shown::Toppling))?;
         let suffix = p.unit_suffix.as_str();
         let mut drawn = Vec::new();
-        if let ([spectra, ..], [records, ..]) = (inputs.spectra.as_slice(), inputs.records.as_slice()) {
+        if let ([spectra, ..], [records, ..]) = (inputs.of(Shown::Spectra), inputs.of(Shown::Records)) {
             let motion = p.figure_motion.as_str();
             let spectra = read_all(ctx, spectra)?;
             let record = records.parts().iter().find(|p| motion_of(p) == motion).ok_or_else(|| {
@@ -238,7 +304,7 @@ fn study_page(
     drawn: &[String],
 ) -> anyhow::Result<html::Page> {
     let mut page = html::Page { tests: identified.iter().map(|(m, _)| m.clone()).collect(), ..html::Page::default() };
-    for input in &inputs.status {
+    for input in inputs.of(Shown::RecordStatus) {
         for part in input.parts() {
             let table = ctx.read_table(part)?;
             let stage = meta(&table, "shakeflow.stage").to_string();
@@ -281,7 +347,7 @@ fn study_page(
         let unit = unit_entry(&mut page.units, name, page.tests.len());
         unit.figure = Some(html::relative_url(&["figures", &format!("{name}.png")]));
     }
-    for input in &inputs.rocking {
+    for input in inputs.of(Shown::Rocking) {
         let mut runs: BTreeMap<String, (String, Vec<html::RockingRun>)> = BTreeMap::new();
         for part in input.parts() {
             let table = ctx.read_table(part)?;
@@ -302,7 +368,7 @@ fn study_page(
             unit_entry(&mut page.units, &unit, page.tests.len()).rocking.push(html::Rocking { stage, runs });
         }
     }
-    for input in &inputs.fragility {
+    for input in inputs.of(Shown::Fragility) {
         for part in input.parts() {
             let table = ctx.read_table(part)?;
             let fragility = html::Fragility {
@@ -344,20 +410,17 @@ fn study_page(
             None => unit.rolling.push(html::Rolling { stage, runs: vec![entry] }),
         }
     }
-    for input in &inputs.diagnosis {
+    for input in inputs.of(Shown::Diagnosis) {
         for part in input.parts() {
             page.cases.extend(cases(&*ctx.read_table(part)?)?);
         }
     }
-    let absent = [
-        (inputs.identified.is_empty(), "frequencies (transfer_function.identified)"),
-        (inputs.events.is_empty(), "toppling in the records (detect_toppling.events)"),
-        (inputs.rocking.is_empty(), "rocking simulations (simulate_toppling.events)"),
-        (inputs.fragility.is_empty(), "fragility (toppling_fragility.fragility)"),
-        (inputs.rolling.is_empty(), "rolling simulations (simulate_rolling.events)"),
-        (inputs.diagnosis.is_empty(), "diagnosis (diagnose.diagnosis)"),
-    ];
-    page.absent = absent.iter().filter(|a| a.0).map(|a| a.1).collect();
+    let shown: Vec<Shown> = inputs.0.keys().copied().collect();
+    page.absent = Shown::ALL
+        .into_iter()
+        .filter(|kind| !shown.contains(kind))
+        .filter_map(|kind| Some(format!("{} ({})", kind.absent_label()?, kind.outputs().join(", "))))
+        .collect();
     Ok(page)
 }
 
@@ -737,6 +800,22 @@ mod tests {
         assert_eq!(figure_band(&spectra), (1.5, 8.0));
         spectra.metadata.insert("shakeflow.params".into(), r#"{"band_max_hz":null}"#.into());
         assert_eq!(figure_band(&spectra), (0.0, 20.0));
+    }
+
+    /// The report routes on what each stage type says it shows: every kind is some stage's
+    /// output, and the page names a missing kind by the outputs that would fill it.
+    #[test]
+    fn the_report_reads_what_the_stages_say_it_shows() {
+        assert_eq!(Shown::of("transfer_function", "identified"), Some(Shown::Frequencies));
+        assert_eq!(Shown::of("simulate_toppling", "events"), Some(Shown::Rocking));
+        assert_eq!(Shown::of("detect_toppling", "events"), Some(Shown::Toppling));
+        assert_eq!(Shown::of("baseline", "records"), None);
+        assert_eq!(Shown::of("no_such_stage", "events"), None);
+        for kind in Shown::ALL {
+            assert!(!kind.outputs().is_empty(), "no stage output shows {kind:?}");
+        }
+        assert_eq!(Shown::Toppling.outputs(), ["detect_toppling.events"]);
+        assert!(reads().starts_with("load.status, synchronize.records, transfer_function.identified"), "{}", reads());
     }
 
     #[test]

@@ -158,6 +158,27 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for SimulateRolling {
+    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
+        &[("events", super::Shown::Rolling)]
+    }
+
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title: "the study's patient bed PB2 on four swivel casters under both horizontal components",
+            stages: "\
+simulate_rolling:
+  type: simulate_rolling
+  inputs: [load]
+  params:
+    preset: PB2
+    x_channel: ax_mps2
+    y_channel: ay_mps2
+",
+        }]
+    }
+}
+
 impl Stage for SimulateRolling {
     fn info(&self) -> &'static StageInfo {
         &INFO
@@ -529,7 +550,14 @@ impl Setup {
         t
     }
 
-    fn figure(&self, record: &str, time: &[f64], ax: &[f64], ay: &[f64], r: &Response) -> Result<Vec<u8>, String> {
+    fn figure(
+        &self,
+        record: &str,
+        time: &[f64],
+        ax: &[f64],
+        ay: &[f64],
+        r: &Response,
+    ) -> Result<Vec<u8>, crate::plot::PlotError> {
         use crate::plot::{render_png_with_side, unwrap_degrees, Marker, Panel, Series};
         // Casters swivel through whole turns: unwrapped, a turn past ±180° is no jump.
         let degrees = |v: &[f64]| unwrap_degrees(&v.iter().map(|x| x.to_degrees()).collect::<Vec<f64>>());

@@ -94,6 +94,30 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for SimulateToppling {
+    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
+        &[("events", super::Shown::Rocking)]
+    }
+
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title: "the study's PS2 unit on the baseline-corrected record, both horizontal and vertical shaking",
+            stages: "\
+baseline:
+  type: baseline
+  inputs: [load]
+simulate_toppling:
+  type: simulate_toppling
+  inputs: [baseline]
+  params:
+    preset: PS2
+    horizontal: ax_mps2
+    vertical: az_mps2
+",
+        }]
+    }
+}
+
 impl Stage for SimulateToppling {
     fn info(&self) -> &'static StageInfo {
         &INFO
@@ -374,7 +398,7 @@ fn events_table(r: &Response) -> Table {
     t
 }
 
-fn figure(title: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, String> {
+fn figure(title: &str, floor: &Floor, r: &Response) -> Result<Vec<u8>, crate::plot::PlotError> {
     use crate::plot::{render_png, Marker, Panel, Series};
     let mut markers: Vec<Marker> = r
         .events

@@ -60,6 +60,30 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for Synchronize {
+    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
+        &[("records", super::Shown::Records)]
+    }
+
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title:
+                "a second DAQ (here the same record loaded again, so the lag found is 0) put on the reference's clock",
+            stages: "\
+daq2:
+  type: load
+  inputs: [rinaldi]
+synchronize:
+  type: synchronize
+  inputs: [load, daq2]
+  params:
+    target_channel: ax_mps2
+    join: station
+",
+        }]
+    }
+}
+
 impl Stage for Synchronize {
     fn info(&self) -> &'static StageInfo {
         &INFO
@@ -307,4 +331,85 @@ fn align(
     lags.push(Column::f64("target_rate_hz", "Hz", "sample rate of the target before resampling", vec![fs_target]));
     lags.push(Column::f64("reference_rate_hz", "Hz", "sample rate of the common time base", vec![fs]));
     Ok((out, lags))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two wave packets (2 Hz and 3.3 Hz under Gaussian envelopes): band-limited, with one
+    /// cross-correlation peak.
+    fn motion(t: f64) -> f64 {
+        let packet = |f: f64, centre: f64, width: f64| {
+            (2.0 * std::f64::consts::PI * f * t).sin() * (-((t - centre) / width).powi(2)).exp()
+        };
+        packet(2.0, 5.0, 1.0) + 0.5 * packet(3.3, 7.0, 0.7)
+    }
+
+    /// The target DAQ's lag behind the reference, in seconds.
+    const LAG: f64 = 0.37;
+
+    fn late(t: f64) -> f64 {
+        motion(t - LAG)
+    }
+
+    fn top(t: f64) -> f64 {
+        2.0 * late(t)
+    }
+
+    type Channel = (&'static str, fn(f64) -> f64);
+
+    fn record(rate: f64, seconds: f64, channels: &[Channel]) -> Table {
+        let n = (rate * seconds) as usize;
+        let time: Vec<f64> = (0..n).map(|k| k as f64 / rate).collect();
+        let mut t = Table::new();
+        for (name, f) in channels {
+            t.push(Column::f64(name, "m/s^2", "d", time.iter().map(|&x| f(x)).collect()));
+        }
+        t.push(Column::f64(TIME_COLUMN, "s", "d", time));
+        t
+    }
+
+    fn params(known_lag_s: Option<f64>) -> SynchronizeParams {
+        SynchronizeParams {
+            reference_channel: "ax_mps2".into(),
+            reference_select: String::new(),
+            target_channel: "sync_ax_mps2".into(),
+            join: "motion".into(),
+            known_lag_s,
+            max_lag_s: 2.0,
+            mcap: super::super::Mcap { mcap: false },
+        }
+    }
+
+    /// A 100 Hz target recording the 200 Hz reference's motion 0.37 s late: the lag is found to
+    /// a millisecond, and the target's channels land on the reference clock (its copy of the
+    /// motion then matches the reference) beside the reference's own columns.
+    #[test]
+    fn a_late_slower_daq_is_put_on_the_reference_clock() {
+        let lag = LAG;
+        let reference_channels: [Channel; 1] = [("ax_mps2", motion)];
+        let target_channels: [Channel; 2] = [("sync_ax_mps2", late), ("top_ax_mps2", top)];
+        let reference = Arc::new(record(200.0, 12.0, &reference_channels));
+        let target = record(100.0, 12.0, &target_channels);
+        let references = [(String::new(), reference.clone())];
+        let (aligned, lags) = align(&reference, &references, &target, &params(None)).unwrap();
+        let found = lags.f64_column("lag_s").unwrap()[0];
+        assert!((found - lag).abs() < 1e-3, "lag {found}, made {lag}");
+        assert_eq!(aligned.column_names(), [TIME_COLUMN, "ax_mps2", "sync_ax_mps2", "top_ax_mps2"]);
+        let (time, synced) = (aligned.f64_column(TIME_COLUMN).unwrap(), aligned.f64_column("sync_ax_mps2").unwrap());
+        let worst = time.iter().zip(synced).map(|(&t, &v)| (v - motion(t)).abs()).fold(0.0, f64::max);
+        assert!(worst < 0.01, "aligned target off the reference by {worst} m/s^2");
+        // A lag given is used as it is, and said to be.
+        let (_, lags) = align(&reference, &references, &target, &params(Some(0.3))).unwrap();
+        assert_eq!(lags.f64_column("lag_s").unwrap()[0], 0.3);
+    }
+
+    #[test]
+    fn reference_select_is_key_equals_value() {
+        assert_eq!(reference_select("").unwrap(), None);
+        assert_eq!(reference_select("floor=5").unwrap(), Some(("floor", "5")));
+        let refused = reference_select("floor5").unwrap_err().to_string();
+        assert!(refused.contains("`reference_select` must look like key=value, not `floor5`"), "{refused}");
+    }
 }

@@ -53,6 +53,26 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for TopplingFragility {
+    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
+        &[("fragility", super::Shown::Fragility)]
+    }
+
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title: "PS2's overturning fragility from the record scaled to three intensities",
+            stages: "\
+toppling_fragility:
+  type: toppling_fragility
+  inputs: [load]
+  params:
+    preset: PS2
+    scales: [0.5, 1.0, 2.0]
+",
+        }]
+    }
+}
+
 impl Stage for TopplingFragility {
     fn info(&self) -> &'static StageInfo {
         &INFO
@@ -304,7 +324,7 @@ fn figure(
     fit: Option<&LognormalFit>,
     by_velocity: bool,
     note: &str,
-) -> Result<Vec<u8>, String> {
+) -> Result<Vec<u8>, crate::plot::PlotError> {
     use crate::plot::{render_png, Panel, Series};
     // Accelerations are read in g on a fragility curve.
     let (x_label, per_unit) = if by_velocity {

@@ -60,6 +60,12 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
+impl super::StageType for TransferFunction {
+    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
+        &[("identified", super::Shown::Frequencies), ("spectra", super::Shown::Spectra)]
+    }
+}
+
 impl Stage for TransferFunction {
     fn info(&self) -> &'static StageInfo {
         &INFO

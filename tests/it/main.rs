@@ -49,6 +49,7 @@ mod sdof_identification;
 mod slurm_client;
 mod slurm_executor;
 mod slurm_nodes;
+mod stage_examples;
 mod tidy;
 mod toppling_demo_archive;
 mod toppling_demo_cases;

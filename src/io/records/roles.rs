@@ -64,22 +64,27 @@ pub fn from_label(label: &str) -> Orientation {
     compass_azimuth(word).map_or(Orientation::Horizontal, Orientation::Azimuth)
 }
 
+/// Why a record's channels have no unambiguous axes: the channels at fault, by name.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum AxesError {
+    #[error("the record has {} vertical channels ({}): only one can be `z`", .0.len(), .0.join(", "))]
+    Verticals(Vec<String>),
+    #[error("the record has {} horizontal channels ({}): only two can be `x` and `y`", .0.len(), .0.join(", "))]
+    Horizontals(Vec<String>),
+}
+
 /// The axis (`'x'`, `'y'`, `'z'`) of each channel, in order. `single` is the axis a lone
-/// horizontal takes (default `'x'`). Errors say why no unambiguous assignment exists.
-pub fn axes(raw: &RawRecord, channels: &[&RawChannel], single: Option<char>) -> Result<Vec<char>, String> {
+/// horizontal takes (default `'x'`).
+pub fn axes(raw: &RawRecord, channels: &[&RawChannel], single: Option<char>) -> Result<Vec<char>, AxesError> {
     let orientations: Vec<Orientation> = channels.iter().map(|c| orientation(raw, c)).collect();
-    let verticals: Vec<&str> = channels
+    let verticals: Vec<String> = channels
         .iter()
         .zip(&orientations)
         .filter(|(_, o)| **o == Orientation::Vertical)
-        .map(|(c, _)| c.name.as_str())
+        .map(|(c, _)| c.name.clone())
         .collect();
     if verticals.len() > 1 {
-        return Err(format!(
-            "the record has {} vertical channels ({}): only one can be `z`",
-            verticals.len(),
-            verticals.join(", ")
-        ));
+        return Err(AxesError::Verticals(verticals));
     }
     let horizontals: Vec<usize> = (0..channels.len()).filter(|&k| orientations[k] != Orientation::Vertical).collect();
     let mut axes = vec!['z'; channels.len()];
@@ -100,12 +105,7 @@ pub fn axes(raw: &RawRecord, channels: &[&RawChannel], single: Option<char>) -> 
             axes[y] = 'y';
         }
         more => {
-            let names: Vec<&str> = more.iter().map(|&k| channels[k].name.as_str()).collect();
-            return Err(format!(
-                "the record has {} horizontal channels ({}): only two can be `x` and `y`",
-                more.len(),
-                names.join(", ")
-            ));
+            return Err(AxesError::Horizontals(more.iter().map(|&k| channels[k].name.clone()).collect()));
         }
     }
     Ok(axes)
@@ -140,9 +140,23 @@ mod tests {
         }
     }
 
-    fn axes_of(raw: &RawRecord, single: Option<char>) -> Result<String, String> {
+    fn axes_of(raw: &RawRecord, single: Option<char>) -> Result<String, AxesError> {
         let channels: Vec<&RawChannel> = raw.channels.iter().collect();
         axes(raw, &channels, single).map(|a| a.into_iter().collect())
+    }
+
+    /// The messages users read, as they were when these errors were strings.
+    #[test]
+    fn axes_errors_name_the_channels_at_fault() {
+        let names = |v: &[&str]| v.iter().map(|s| s.to_string()).collect();
+        assert_eq!(
+            AxesError::Verticals(names(&["UP", "HNZ"])).to_string(),
+            "the record has 2 vertical channels (UP, HNZ): only one can be `z`"
+        );
+        assert_eq!(
+            AxesError::Horizontals(names(&["a", "b", "c"])).to_string(),
+            "the record has 3 horizontal channels (a, b, c): only two can be `x` and `y`"
+        );
     }
 
     #[test]
@@ -183,8 +197,8 @@ mod tests {
     #[test]
     fn ambiguous_records_are_refused() {
         let raw = record(&[("a", Some("0")), ("b", Some("90")), ("c", Some("45"))]);
-        assert!(axes_of(&raw, None).unwrap_err().contains("3 horizontal channels (a, b, c)"));
+        assert_eq!(axes_of(&raw, None).unwrap_err(), AxesError::Horizontals(vec!["a".into(), "b".into(), "c".into()]));
         let raw = record(&[("a", Some("up")), ("b", Some("down"))]);
-        assert!(axes_of(&raw, None).unwrap_err().contains("2 vertical channels"));
+        assert_eq!(axes_of(&raw, None).unwrap_err(), AxesError::Verticals(vec!["a".into(), "b".into()]));
     }
 }

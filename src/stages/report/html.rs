@@ -18,7 +18,7 @@ pub struct Page {
     pub records: Vec<RecordStatus>,
     pub stages: Vec<Provenance>,
     /// Kinds of results the report had no input for (said on the page, not an error).
-    pub absent: Vec<&'static str>,
+    pub absent: Vec<String>,
 }
 
 #[derive(Debug, Default)]
