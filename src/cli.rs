@@ -278,7 +278,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
                         println!(
                             "would run {} {}: {}",
                             line.name,
-                            crate::pipeline::units::describe(&unit.id),
+                            crate::pipeline::work_units::describe(&unit.id),
                             unit.reasons.join("; ")
                         );
                     }
@@ -286,7 +286,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
                         println!(
                             "would remove {} {}: its record is gone from the inputs",
                             line.name,
-                            crate::pipeline::units::describe(unit)
+                            crate::pipeline::work_units::describe(unit)
                         );
                     }
                 }
@@ -361,7 +361,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
                     println!(
                         "{:<18} flagged {}: {}",
                         "",
-                        crate::pipeline::units::describe(&flagged.id),
+                        crate::pipeline::work_units::describe(&flagged.id),
                         flagged.reasons.join("; ")
                     );
                 }
@@ -669,7 +669,7 @@ fn run_command_plan(plan: &Plan, output: &Path) -> anyhow::Result<(ExitCode, boo
     let summary = result?;
     if !summary.failed.is_empty() {
         for failed in &summary.failed {
-            let unit = crate::pipeline::units::describe(&failed.unit);
+            let unit = crate::pipeline::work_units::describe(&failed.unit);
             eprintln!("error: stage `{}` {unit} failed: {}", failed.stage, failed.reason);
         }
         eprintln!("{} unit(s) failed; nothing was written: `{}` is as it was", summary.failed.len(), output.display());
@@ -872,7 +872,7 @@ fn exit_status(summary: &executor::RunSummary) -> ExitCode {
         eprintln!(
             "skipped record: stage `{}` {}: {}",
             flagged.stage,
-            crate::pipeline::units::describe(&flagged.unit),
+            crate::pipeline::work_units::describe(&flagged.unit),
             flagged.reason
         );
     }
@@ -881,7 +881,7 @@ fn exit_status(summary: &executor::RunSummary) -> ExitCode {
             eprintln!(
                 "error: stage `{}` {} failed: {}",
                 failed.stage,
-                crate::pipeline::units::describe(&failed.unit),
+                crate::pipeline::work_units::describe(&failed.unit),
                 failed.reason
             );
         }

@@ -19,4 +19,4 @@ pub mod sources;
 pub mod spec;
 pub mod stage;
 pub mod txn;
-pub mod units;
+pub mod work_units;

@@ -4,21 +4,24 @@
 //! `<case>/diagnosis.json` for each of several), the observed/baseline/model series and
 //! residuals (Parquet, + MCAP with `mcap: true`) and a figure with the located window shaded.
 
-use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
+use std::sync::LazyLock;
 
-use super::{InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use super::{Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::diagnose::contract::Contract;
 use crate::diagnose::rolling::RollingDiagnosis;
 use crate::diagnose::{diagnose, Diagnosis, Settings};
 use crate::io::case::read_case_unchanged;
-use crate::pipeline::params::{self, ParamError, ParamKind, ParamSpec, Params};
+use crate::pipeline::params::{self, ParamError, Params};
 use crate::pipeline::spec::RecordFormat;
 use crate::table::{Column, Table, TIME_COLUMN};
 
 pub struct Diagnose;
 
-static INFO: StageInfo = StageInfo {
+static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
+    StageInfo {
     name: "diagnose",
     version: 15,
     summary: "Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt; rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted jointly with the nominal parameters the equipment file's `uncertainty` block says are known only roughly (calibrated first), ranked by BIC; `ambiguous` when two explain the records about equally well, or `unexplained`.",
@@ -30,26 +33,25 @@ static INFO: StageInfo = StageInfo {
         OutputInfo { name: "reports", description: "<case>.png: records, models, residuals, window shaded", kind: OutputKind::Files },
         OutputInfo { name: "diagnosis.json", description: "the contract (verdict, window, rmse before/after, candidates, explanation, calibration): at the stage folder's root for one case, in `<case>/` for each of several", kind: OutputKind::Page },
     ],
-    params: &[
-        ParamSpec { name: "exceedance_sigma", kind: ParamKind::Float, default: Some("4.0"), unit: "", description: "a residual beyond this many noise standard deviations counts as a disagreement (5 within 0.1 s flag a mismatch)", range: Some((2.0, 20.0)) },
-        ParamSpec { name: "min_improvement", kind: ParamKind::Float, default: Some("3.0"), unit: "", description: "a physics is accepted only if it cuts the window's noise-normalised RMS misfit at least this many times", range: Some((1.0, 1e3)) },
-        ParamSpec { name: "max_remaining_flagged", kind: ParamKind::Float, default: Some("0.12"), unit: "", description: "... and leaves at most this fraction of the flagged samples flagged (rocking cases; a rolling cart may leave 0.7 of those in the window's first 5 s)", range: Some((0.0, 1.0)) },
-        super::MCAP_PARAM,
-    ],
-};
+    params: DiagnoseParams::specs(),
+}
+});
 
 /// The contract file held-out scorers read (`shakeflow diagnose CASE --out OUT` → `OUT/diagnosis.json`).
 pub const CONTRACT: &str = "diagnosis.json";
 
-/// The parameters `INFO` declares, typed (also `shakeflow diagnose --set`'s).
-#[derive(Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-pub struct DiagnoseParams {
-    pub exceedance_sigma: f64,
-    pub min_improvement: f64,
-    pub max_remaining_flagged: f64,
-    /// Read by the engine's sink.
-    pub mcap: bool,
+crate::stage_params! {
+    /// The parameters of `diagnose` (also `shakeflow diagnose --set`'s).
+    pub struct DiagnoseParams {
+        /// a residual beyond this many noise standard deviations counts as a disagreement (5 within 0.1 s flag a mismatch)
+        pub exceedance_sigma: f64 [default = 4.0, range = (2.0, 20.0)],
+        /// a physics is accepted only if it cuts the window's noise-normalised RMS misfit at least this many times
+        pub min_improvement: f64 [default = 3.0, range = (1.0, 1e3)],
+        /// ... and leaves at most this fraction of the flagged samples flagged (rocking cases; a rolling cart may leave 0.7 of those in the window's first 5 s)
+        pub max_remaining_flagged: f64 [default = 0.12, range = (0.0, 1.0)],
+        #[flatten]
+        pub mcap: super::Mcap,
+    }
 }
 
 /// The diagnosis settings the normalised parameters give.
@@ -60,6 +62,12 @@ pub fn settings(params: &Params) -> Result<Settings, ParamError> {
         min_improvement: p.min_improvement,
         max_remaining_flagged: p.max_remaining_flagged,
     })
+}
+
+impl super::StageType for Diagnose {
+    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
+        &[("diagnosis", super::Shown::Diagnosis)]
+    }
 }
 
 impl Stage for Diagnose {

@@ -213,14 +213,6 @@ pub fn stage_type(name: &str) -> Option<&'static dyn StageType> {
     stage_types().iter().copied().find(|s| s.info().name == name)
 }
 
-// `diagnose`'s file belongs to the diagnosis work this round; its report entry lives here until
-// it moves beside its `Stage`.
-impl StageType for diagnose::Diagnose {
-    fn shown(&self) -> &'static [(&'static str, Shown)] {
-        &[("diagnosis", Shown::Diagnosis)]
-    }
-}
-
 /// Per-record metadata keys shared by all stages, so readers find provenance in one place.
 pub fn record_provenance(part: &InputPart) -> BTreeMap<String, String> {
     BTreeMap::from([

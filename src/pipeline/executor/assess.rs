@@ -17,7 +17,7 @@ use crate::pipeline::layout::{DATA_FILE, FLAGGED, STATUS};
 use crate::pipeline::lock::{LockFile, StageLock, UnitLock};
 use crate::pipeline::plan::{Plan, PlannedStage};
 use crate::pipeline::stage::OutputKind;
-use crate::pipeline::units::{self, Unit, GATHER};
+use crate::pipeline::work_units::{self, Unit, GATHER};
 
 /// How assessing sees the files units wrote.
 pub(super) trait Disk: Sync {
@@ -189,7 +189,7 @@ impl StatusLine {
                     .stale
                     .iter()
                     .take(3)
-                    .map(|u| format!("{}: {}", units::describe(&u.id), u.reasons.join("; ")))
+                    .map(|u| format!("{}: {}", work_units::describe(&u.id), u.reasons.join("; ")))
                     .collect();
                 let more =
                     if self.stale.len() > 3 { format!("; and {} more", self.stale.len() - 3) } else { String::new() };
@@ -310,13 +310,13 @@ pub(super) fn assess_stage(
 ) -> anyhow::Result<AssessedStage> {
     let (lock, rerun) = (known.lock, known.rerun);
     let inputs = stage_inputs(plan, stage, known.sources, produced)?;
-    let split = units::split(stage, &inputs, known.files.get(&stage.name).unwrap_or(&BTreeMap::new()))?;
+    let split = work_units::split(stage, &inputs, known.files.get(&stage.name).unwrap_or(&BTreeMap::new()))?;
     let entry = lock.stages.get(&stage.name);
     let common = stage_reasons(stage, entry);
     let stage_dir = plan.stage_dir(&stage.name);
     let forced = rerun.stages.contains(&stage.name);
     let remake = rerun.remake.get(&stage.name);
-    let key_prefix = units::key_prefix(stage);
+    let key_prefix = work_units::key_prefix(stage);
     let units: Vec<(Unit, String, Vec<String>)> = split
         .into_par_iter()
         .map(|unit| {
@@ -371,7 +371,7 @@ mod tests {
             let info = stage.stage.info();
             let whole = serde_json::json!({"type": info.name, "version": info.version, "params": stage.params,
                 "select": stage.select, "inputs": unit.hashes});
-            assert_eq!(unit.key(&units::key_prefix(stage)), hash::hash_bytes(whole.to_string().as_bytes()));
+            assert_eq!(unit.key(&work_units::key_prefix(stage)), hash::hash_bytes(whole.to_string().as_bytes()));
         }
     }
 

@@ -18,7 +18,7 @@ use crate::pipeline::sink::OutputSink;
 use crate::pipeline::spec::OnError;
 use crate::pipeline::stage::{InputKind, StageInfo};
 use crate::pipeline::txn::Transaction;
-use crate::pipeline::units;
+use crate::pipeline::work_units;
 
 /// The lockfile unit that owns a stage's `flagged` table.
 pub(super) const FLAGGED_UNIT: &str = "(flagged)";
@@ -138,8 +138,8 @@ pub(super) fn fold(
                     if let Some(other) = owner.insert(file.clone(), record.id.clone()) {
                         anyhow::bail!(
                             "stage `{name}`: the {} and the {} both wrote `{file}`; give the sources distinct `partition:` values",
-                            units::describe(&other),
-                            units::describe(&record.id)
+                            work_units::describe(&other),
+                            work_units::describe(&record.id)
                         );
                     }
                     folded.produced.insert(file.clone(), ProducedFile { path: dir.join(file), hash: hash.clone() });

@@ -23,7 +23,7 @@ use crate::pipeline::sink::OutputSink;
 use crate::pipeline::spec::OnError;
 use crate::pipeline::stage::{StageContext, WorkUnits};
 use crate::pipeline::txn::Transaction;
-use crate::pipeline::units::{self, Unit};
+use crate::pipeline::work_units::{self, Unit};
 
 /// Runs units in this process.
 pub struct Local;
@@ -197,7 +197,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
     for record in &records {
         match &record.outcome {
             UnitOutcome::Failed { reason } => {
-                env.reporter.line(&format!("{name:<18} FAILED {}: {reason}", units::describe(&record.id)))
+                env.reporter.line(&format!("{name:<18} FAILED {}: {reason}", work_units::describe(&record.id)))
             }
             UnitOutcome::Flagged { file, reason } => {
                 env.reporter.line(&format!("{name:<18} skipped {file} (on_error: skip): {reason}"))
@@ -247,7 +247,7 @@ fn why_running(stale: &[&(Unit, String, Vec<String>)], units: usize) -> String {
     if stale.len() == units && stale.iter().all(|u| u.2 == stale[0].2) {
         return stale[0].2.join("; ");
     }
-    let first = format!("{}: {}", units::describe(&stale[0].0.id), stale[0].2.join("; "));
+    let first = format!("{}: {}", work_units::describe(&stale[0].0.id), stale[0].2.join("; "));
     let more = if stale.len() > 1 { ", …" } else { "" };
     format!("{} of {units} records; {first}{more}", stale.len())
 }

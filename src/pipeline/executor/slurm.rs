@@ -636,12 +636,12 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let state = Known { lock: &lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk };
     let assessed = assess_stage(&plan, stage, &state, &produced)?;
     // A unit nobody predicted (a partition no earlier output had) goes to the last shard.
-    let ours: Vec<&(crate::pipeline::units::Unit, String, Vec<String>)> = assessed
+    let ours: Vec<&(crate::pipeline::work_units::Unit, String, Vec<String>)> = assessed
         .units
         .iter()
         .filter(|(u, _, _)| mine.contains(u.id.as_str()) || (last && !known.contains(u.id.as_str())))
         .collect();
-    let stale: Vec<&(crate::pipeline::units::Unit, String, Vec<String>)> =
+    let stale: Vec<&(crate::pipeline::work_units::Unit, String, Vec<String>)> =
         ours.iter().copied().filter(|(_, _, r)| !r.is_empty()).collect();
     let results = run_dir.join("results").join(stage_name);
     std::fs::create_dir_all(&results)?;
@@ -675,7 +675,10 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let failed = records.iter().filter(|r| matches!(r.outcome, UnitOutcome::Failed { .. })).count();
     for record in &records {
         if let UnitOutcome::Failed { reason } = &record.outcome {
-            eprintln!("error: stage `{stage_name}` {} failed: {reason}", crate::pipeline::units::describe(&record.id));
+            eprintln!(
+                "error: stage `{stage_name}` {} failed: {reason}",
+                crate::pipeline::work_units::describe(&record.id)
+            );
         }
     }
     let manifest = Manifest { records, vanished: assessed.vanished.clone(), upstream_tainted };
@@ -862,7 +865,7 @@ fn commit_manifests(
     transaction.commit(&install, &remove, Some((&new_lock, &lock)))?;
     steps.done("committed");
     for (stage, unit, reason) in &summary.failed {
-        eprintln!("error: stage `{stage}` {} failed: {reason}", crate::pipeline::units::describe(unit));
+        eprintln!("error: stage `{stage}` {} failed: {reason}", crate::pipeline::work_units::describe(unit));
     }
     // The logs stay (`<run>/logs`); results and manifests were moved or are no longer needed.
     remove_run_outputs(run_dir);
