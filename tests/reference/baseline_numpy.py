@@ -2,15 +2,17 @@
 
 Reads ../shared/data/ground_motions/llolleo1002271.v1 with its own minimal fixed-width parser
 (independent of shakeflow's reader), converts g/10 to m/s^2, fits a cubic with numpy.polyfit
-against the file's time column and writes baseline_llolleo.json beside this script: the
-coefficients (numpy order) and samples of the corrected signal. tests/baseline_reference.rs
-compares shakeflow with these values; rerun this script to regenerate them:
+against the file's time column and prints the coefficients (numpy order) and samples of the
+corrected signal. tests/it/baseline_reference.rs compares shakeflow with the committed
+baseline_llolleo.json beside this script, and checks that this script still prints those values
+(without writing: a test never rewrites a committed reference). To regenerate the file:
 
-    python tests/reference/baseline_numpy.py
+    python tests/reference/baseline_numpy.py --write
 """
 import json
 import math
 import pathlib
+import sys
 
 import numpy as np
 
@@ -48,8 +50,10 @@ def main():
             "rms": float(np.sqrt(np.mean(corrected**2))),
             "max_abs": float(np.max(np.abs(corrected))),
         }
-    (HERE / "baseline_llolleo.json").write_text(json.dumps(out, indent=2) + "\n")
-    print(json.dumps(out, indent=2))
+    text = json.dumps(out, indent=2) + "\n"
+    if sys.argv[1:] == ["--write"]:
+        (HERE / "baseline_llolleo.json").write_text(text)
+    print(text, end="")
 
 
 if __name__ == "__main__":
