@@ -2,7 +2,7 @@
 //! every preset unit of Table 4 on floor 4 of the demo building, fixed-base and base-isolated,
 //! under every horizontal real ground motion in ../shared/data/ground_motions (their strong
 //! part, scaled to a peak floor acceleration), run with the adaptive integrator's tolerance and
-//! the two friction regularisations (ε, ε_sw) halved step by step. For each setting it writes
+//! the two friction regularisations (ε, ε_sw) halved step by step, and atol alone divided by 10. For each setting it writes
 //! the peak displacement and peak yaw, the work (right-hand-side evaluations) and the time, and
 //! says for each setting on how many runs halving it moves the peaks by less than 0.5 % and 0.5°.
 //!
@@ -18,7 +18,7 @@
 //! friction_eps,friction_eps_swivel` runs only the sweeps named.
 //!
 //! Usage: convergence [--out DIR] [--pfa-g G] [--units PS1,PB2,...] [--records ELC180,...]
-//!   [--law regularised|stick_slip] [--sweeps rtol,friction_eps,friction_eps_swivel] [--rocking]
+//!   [--law regularised|stick_slip] [--sweeps rtol,atol,friction_eps,friction_eps_swivel] [--rocking]
 //!   (`make convergence` writes docs/convergence/: results.csv, the figures and summary.md)
 
 use std::fmt::Write as _;
@@ -45,20 +45,25 @@ const PEAK_FLOOR_M: f64 = 0.002;
 /// ring-down after it.
 const MAX_WINDOW_S: f64 = 45.0;
 
-/// Settings swept, each with the others at their defaults (tolerance: atol = rtol / 100, as the
+/// Settings swept, each with the others at their defaults (the rtol sweep: atol = rtol / 100, as the
 /// defaults 1e-8 / 1e-10 tie them).
 const RTOLS: [f64; 8] = [1e-7, 1e-8, 5e-9, 1e-9, 5e-10, 1e-10, 5e-11, 1e-11];
 const EPS: [f64; 5] = [2e-4, 1e-4, 5e-5, 2.5e-5, 1.25e-5];
 const EPS_SW: [f64; 5] = [2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4];
-/// The tolerance at which the ε sweeps run (converged for every run of the tolerance sweep).
+/// atol alone, at rtol SWEEP_RTOL: what bounds the error while the cart creeps (states of
+/// 1e-4 m and m/s, where rtol × state is below atol). Each value is compared with the next, 10× finer.
+const ATOLS: [f64; 5] = [1e-11, 1e-12, 1e-13, 1e-14, 1e-15];
+/// The tolerance at which the ε and atol sweeps run (converged for every run of the tolerance
+/// sweep); the ε sweeps at the default atol.
 const SWEEP_RTOL: f64 = 1e-10;
 /// The sweeps, by the setting's name.
-const SWEEPS: [&str; 3] = ["rtol", "friction_eps", "friction_eps_swivel"];
+const SWEEPS: [&str; 4] = ["rtol", "atol", "friction_eps", "friction_eps_swivel"];
 
 /// The values of the sweep named `name`.
 fn sweep_values(name: &str) -> &'static [f64] {
     match name {
         "rtol" => &RTOLS,
+        "atol" => &ATOLS,
         "friction_eps" => &EPS,
         "friction_eps_swivel" => &EPS_SW,
         other => panic!("no sweep {other}: the sweeps are {SWEEPS:?}"),
@@ -165,6 +170,7 @@ fn floor(m: &Motion, base: Base, pfa_g: f64, paired: bool) -> FloorRecord {
 #[derive(Clone, Copy)]
 enum Setting {
     Rtol(f64),
+    Atol(f64),
     Eps(f64),
     EpsSwivel(f64),
 }
@@ -173,13 +179,14 @@ impl Setting {
     fn name(self) -> &'static str {
         match self {
             Setting::Rtol(_) => "rtol",
+            Setting::Atol(_) => "atol",
             Setting::Eps(_) => "friction_eps",
             Setting::EpsSwivel(_) => "friction_eps_swivel",
         }
     }
     fn value(self) -> f64 {
         match self {
-            Setting::Rtol(v) | Setting::Eps(v) | Setting::EpsSwivel(v) => v,
+            Setting::Rtol(v) | Setting::Atol(v) | Setting::Eps(v) | Setting::EpsSwivel(v) => v,
         }
     }
 }
@@ -200,14 +207,14 @@ fn run(unit: &'static str, f: &FloorRecord, setting: Setting, floor_index: usize
     let cart: Cart = table.cart(Cart::default_trail_m(table.wheel_diameter_m), rolling::DEFAULT_SWIVEL_ARM_M);
     let mut friction: Friction = table.friction(rolling::DEFAULT_FRICTION_EPS_MPS, law);
     let (yaw0_rad, steer0_rad) = table.initial_pose();
-    let mut rtol = SWEEP_RTOL;
+    let (mut rtol, mut atol) = (SWEEP_RTOL, rolling::DEFAULT_ATOL);
     match setting {
-        Setting::Rtol(v) => rtol = v,
+        Setting::Rtol(v) => (rtol, atol) = (v, 1e-2 * v),
+        Setting::Atol(v) => atol = v,
         Setting::Eps(v) => friction.eps_mps = v,
         Setting::EpsSwivel(v) => friction.eps_swivel_radps = v,
     }
-    let options =
-        Options { yaw0_rad, steer0_rad, method: Method::Adaptive { rtol, atol: 1e-2 * rtol }, ..Options::default() };
+    let options = Options { yaw0_rad, steer0_rad, method: Method::Adaptive { rtol, atol }, ..Options::default() };
     let excitation = Excitation { t0_s: 0.0, dt_s: f.dt, ax_mps2: &f.ax, ay_mps2: &f.ay };
     let started = Instant::now();
     let result = simulate(&cart, &friction, &excitation, &options);
@@ -282,6 +289,7 @@ fn main() {
     let settings: Vec<Setting> = RTOLS
         .iter()
         .map(|&v| Setting::Rtol(v))
+        .chain(ATOLS.iter().map(|&v| Setting::Atol(v)))
         .chain(EPS.iter().map(|&v| Setting::Eps(v)))
         .chain(EPS_SW.iter().map(|&v| Setting::EpsSwivel(v)))
         .filter(|s| sweeps.iter().any(|n| n == s.name()))
@@ -371,7 +379,7 @@ fn summarise(outcomes: &[Outcome], floors: &[FloorRecord], units: &[&str], sweep
     .unwrap();
     for name in sweeps {
         let (name, values) = (name.as_str(), sweep_values(name));
-        writeln!(s, "\n`{name}` (others at their defaults, rtol {SWEEP_RTOL:e} for the ε sweeps):\n").unwrap();
+        writeln!(s, "\n`{name}` (others at their defaults, rtol {SWEEP_RTOL:e} for the atol and ε sweeps):\n").unwrap();
         writeln!(
             s,
             "| {name} | runs passing | worst peak move | worst yaw move | worst run | mean evals | mean s/run |"
