@@ -2,17 +2,22 @@
 of cases in the contract format with truth/<case>.yaml beside them).
 
     python prove/rolling/score.py CASES_DIR --shakeflow BIN [--jobs 2] [--out runs/prove-rolling]
+                                  [--cpu-limit SECONDS]
 
 Runs the binary on each case as a user would, checks the diagnosis.json contract, and reports:
 accuracy (with a Wilson 95 % interval) and the confusion matrix, false alarms on `none`, the
 window start's error against the concealed onset, rmse_after/rmse_before where a physics is
 named, and the seconds per case. Exits non-zero if the binary fails or breaks the contract.
+With --cpu-limit, a diagnosis that spends more CPU seconds than that is stopped (RLIMIT_CPU) and
+scored as the verdict `over_cpu_limit` (wrong), so one runaway case cannot hold up a set.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import math
+import resource
+import signal
 import subprocess
 import sys
 import time
@@ -39,11 +44,23 @@ def wilson(k: int, n: int, z: float = 1.96):
     return (max(0.0, mid - half), min(1.0, mid + half))
 
 
-def run(binary: str, case: Path, out: Path):
+OVER_LIMIT = "over_cpu_limit"
+
+
+def run(binary: str, case: Path, out: Path, cpu_limit: float | None = None):
+    def limit():
+        # Inherited by the diagnosis the wrapper starts: SIGXCPU past `cpu_limit` CPU seconds.
+        resource.setrlimit(resource.RLIMIT_CPU, (int(cpu_limit), int(cpu_limit) + 10))
+
     started = time.perf_counter()
     proc = subprocess.run([sys.executable, "-c", CPU_WRAPPER, binary, "diagnose", str(case), "--out", str(out)],
-                          capture_output=True, text=True)
+                          capture_output=True, text=True, preexec_fn=limit if cpu_limit else None)
     seconds = time.perf_counter() - started
+    cpu = cpu_seconds(proc.stderr)
+    # The wrapper exits with the child's code: -SIGXCPU, or what a signal-killed child reports.
+    if cpu_limit and proc.returncode in (-signal.SIGXCPU, (-signal.SIGXCPU) % 256, -signal.SIGKILL % 256):
+        return {"verdict": OVER_LIMIT, "window": None, "rmse_before": math.nan, "rmse_after": math.nan,
+                "candidates": []}, seconds, cpu
     if proc.returncode != 0:
         raise SystemExit(f"{case.name}: shakeflow failed ({proc.returncode}):\n{proc.stderr}")
     d = json.loads((out / "diagnosis.json").read_text())
@@ -52,7 +69,7 @@ def run(binary: str, case: Path, out: Path):
         raise SystemExit(f"{case.name}: diagnosis.json breaks the contract (missing {missing}, verdict {d.get('verdict')})")
     if d["window"] is not None and not {"start_s", "end_s"} <= set(d["window"]):
         raise SystemExit(f"{case.name}: window lacks start_s/end_s")
-    return d, seconds, cpu_seconds(proc.stderr)
+    return d, seconds, cpu
 
 
 def main():
@@ -61,13 +78,14 @@ def main():
     ap.add_argument("--shakeflow", required=True)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default="runs/prove-rolling")
+    ap.add_argument("--cpu-limit", type=float, help="CPU seconds a diagnosis may spend (scored over_cpu_limit past it)")
     args = ap.parse_args()
     cases_dir = Path(args.cases)
     out_dir = Path(args.out)
     cases = sorted(p for p in cases_dir.iterdir() if (p / "equipment.yaml").is_file())
     truths = {c.name: yaml.safe_load((cases_dir / "truth" / f"{c.name}.yaml").read_text()) for c in cases}
     with ThreadPoolExecutor(args.jobs) as pool:
-        results = list(pool.map(lambda c: run(args.shakeflow, c, out_dir / "diagnosis" / c.name), cases))
+        results = list(pool.map(lambda c: run(args.shakeflow, c, out_dir / "diagnosis" / c.name, args.cpu_limit), cases))
     rows = []
     for c, (d, seconds, cpu) in zip(cases, results):
         t = truths[c.name]
@@ -84,7 +102,7 @@ def main():
         })
     n = len(rows)
     k = sum(r["correct"] for r in rows)
-    confusion = {e: {v: 0 for v in VERDICTS} for e in VERDICTS}
+    confusion = {e: {v: 0 for v in VERDICTS + [OVER_LIMIT]} for e in VERDICTS}
     for r in rows:
         confusion[r["expected"]][r["verdict"]] += 1
     none_rows = [r for r in rows if r["expected"] == "none"]

@@ -352,7 +352,7 @@ fn rolling_case(plan: &RollingPlan, ax: &[f64]) -> Result<(Vec<(String, Vec<u8>)
         camera_noise_rad: CAMERA_NOISE_RAD,
         uncertain: Vec::new(),
     };
-    let nominal = case.nominal()?;
+    let nominal = case.nominal().map_err(|e| e.to_string())?;
     let moved = (0..n)
         .find(|&k| nominal.x_m[k].hypot(nominal.y_m[k]) > 0.03)
         .ok_or_else(|| format!("{}: the cart never moves 3 cm in {}", plan.id, plan.test))?;

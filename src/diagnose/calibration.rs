@@ -18,6 +18,7 @@ use argmin::solver::neldermead::NelderMead;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use super::error::{ParameterError, SpreadError};
 use super::memo::Memo;
 
 /// Calibrated values are kept within this many sd of the stated value.
@@ -44,12 +45,12 @@ pub struct Spread {
 
 impl Spread {
     /// Why the spread is not usable, if it is not.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), SpreadError> {
         match (self.sd, self.rel_sd) {
             (Some(v), None) | (None, Some(v)) if v.is_finite() && v > 0.0 => Ok(()),
-            (Some(_), None) | (None, Some(_)) => Err("the standard deviation must be a positive number".into()),
-            (Some(_), Some(_)) => Err("give either `sd` or `rel_sd`, not both".into()),
-            (None, None) => Err("give `sd: X` (absolute) or `rel_sd: X` (relative to the stated value)".into()),
+            (Some(_), None) | (None, Some(_)) => Err(SpreadError::NotPositive),
+            (Some(_), Some(_)) => Err(SpreadError::Both),
+            (None, None) => Err(SpreadError::Neither),
         }
     }
 
@@ -71,7 +72,7 @@ pub trait UnitModel: Clone + Sync {
     /// The stated value of one element of a key.
     fn parameter(&self, key: &str, index: usize) -> Option<f64>;
     /// The same unit with one element of a key set to `value`, or why the model cannot take it.
-    fn set_parameter(&mut self, key: &str, index: usize, value: f64) -> Result<(), String>;
+    fn set_parameter(&mut self, key: &str, index: usize, value: f64) -> Result<(), ParameterError>;
     /// The values the model can take at all (a length is positive, a friction coefficient too).
     fn physical_range(&self, key: &str) -> (f64, f64);
     /// Whether the model's predictions depend on the key at all (a rocking block's mass does
@@ -110,21 +111,24 @@ impl Uncertain {
 
 /// The uncertain parameters of `model` that `block` names (key, spread), in the block's order;
 /// an error names a key that is not one of the model's nominal parameters.
-pub fn uncertain_parameters<M: UnitModel>(model: &M, block: &[(String, Spread)]) -> Result<Vec<Uncertain>, String> {
+pub fn uncertain_parameters<M: UnitModel>(
+    model: &M,
+    block: &[(String, Spread)],
+) -> Result<Vec<Uncertain>, ParameterError> {
     let keys = model.nominal_keys();
     let mut out = Vec::new();
     for (key, spread) in block {
         let Some(&(name, count)) = keys.iter().find(|(k, _)| *k == key.as_str()) else {
             let known: Vec<&str> = keys.iter().map(|k| k.0).collect();
-            return Err(format!("`{key}` is not a nominal parameter of this unit (those are {})", known.join(", ")));
+            return Err(ParameterError::NotNominal { key: key.clone(), known: known.join(", ") });
         };
-        spread.check().map_err(|e| format!("`uncertainty.{key}`: {e}"))?;
+        spread.check().map_err(|spread| ParameterError::Spread { key: key.clone(), spread })?;
         let (lo, hi) = model.physical_range(name);
         for i in 0..count {
-            let stated = model.parameter(name, i).ok_or_else(|| format!("`{key}` has no stated value"))?;
+            let stated = model.parameter(name, i).ok_or_else(|| ParameterError::NoStatedValue { key: key.clone() })?;
             let sd = spread.sd_of(stated);
             if !(sd.is_finite() && sd > 0.0) {
-                return Err(format!("`uncertainty.{key}`: a relative sd of a stated value of 0 is 0; give `sd`"));
+                return Err(ParameterError::RelativeOfZero { key: key.clone() });
             }
             let bounds = ((stated - BOUND_SD * sd).max(lo), (stated + BOUND_SD * sd).min(hi));
             out.push(Uncertain { key: name.to_string(), index: (count > 1).then_some(i), stated, sd, bounds });
@@ -134,7 +138,7 @@ pub fn uncertain_parameters<M: UnitModel>(model: &M, block: &[(String, Spread)])
 }
 
 /// `model` with the uncertain parameters set to `values`.
-pub fn with_values<M: UnitModel>(model: &M, parameters: &[Uncertain], values: &[f64]) -> Result<M, String> {
+pub fn with_values<M: UnitModel>(model: &M, parameters: &[Uncertain], values: &[f64]) -> Result<M, ParameterError> {
     let mut m = model.clone();
     for (p, &v) in parameters.iter().zip(values) {
         m.set_parameter(&p.key, p.index.unwrap_or(0), v)?;
@@ -180,7 +184,7 @@ impl Calibration {
     }
 
     /// `model` with the fitted values.
-    pub fn apply<M: UnitModel>(&self, model: &M) -> Result<M, String> {
+    pub fn apply<M: UnitModel>(&self, model: &M) -> Result<M, ParameterError> {
         with_values(model, &self.parameters, &self.fitted)
     }
 
@@ -441,7 +445,7 @@ mod tests {
                 _ => None,
             }
         }
-        fn set_parameter(&mut self, key: &str, index: usize, value: f64) -> Result<(), String> {
+        fn set_parameter(&mut self, key: &str, index: usize, value: f64) -> Result<(), ParameterError> {
             match key {
                 "slope" => self.slope = value,
                 _ => self.offsets[index] = value,
@@ -471,10 +475,13 @@ mod tests {
         assert!((p[0].sd - 0.2).abs() < 1e-15 && p[1].sd == 0.1);
         // The slope's bounds stop at its physical range, 5 sd = 1 away from 2: [1, 3].
         assert!((p[0].bounds.0 - 1.0).abs() < 1e-12 && (p[0].bounds.1 - 3.0).abs() < 1e-12);
-        let err = uncertain_parameters(&line, &block(&[("intercept", abs)])).unwrap_err();
+        let err = uncertain_parameters(&line, &block(&[("intercept", abs)])).unwrap_err().to_string();
         assert!(err.contains("`intercept` is not a nominal parameter") && err.contains("slope, offsets"), "{err}");
         let both = Spread { sd: Some(0.1), rel_sd: Some(0.1) };
-        assert!(uncertain_parameters(&line, &block(&[("slope", both)])).unwrap_err().contains("not both"));
+        assert_eq!(
+            uncertain_parameters(&line, &block(&[("slope", both)])),
+            Err(ParameterError::Spread { key: "slope".into(), spread: SpreadError::Both })
+        );
         let none = Spread::default();
         assert!(uncertain_parameters(&line, &block(&[("slope", none)])).is_err());
     }

@@ -20,6 +20,7 @@
 pub mod calibration;
 pub mod contract;
 pub mod effects;
+pub mod error;
 pub mod evidence;
 pub mod fit;
 pub mod memo;
@@ -30,9 +31,11 @@ use std::borrow::Cow;
 
 use rayon::prelude::*;
 
+use crate::physics::error::PhysicsError;
 use crate::physics::rocking::{self, Block, Excitation, Options, Shape};
 use calibration::{Calibration, Uncertain, UnitModel};
 use contract::{Contracted, ModelFields};
+use error::{DiagnoseError, ParameterError};
 use evidence::Evidence;
 use verdict::{Misfit, Model, Noise, Verdict};
 
@@ -79,7 +82,7 @@ impl UnitModel for Case {
         }
     }
 
-    fn set_parameter(&mut self, key: &str, _index: usize, value: f64) -> Result<(), String> {
+    fn set_parameter(&mut self, key: &str, _index: usize, value: f64) -> Result<(), ParameterError> {
         let mut shape = self.block.shape;
         let mut mass = self.block.mass_kg;
         match (&mut shape, key) {
@@ -89,7 +92,7 @@ impl UnitModel for Case {
             (Shape::Rectangular { f, .. }, "f") => *f = value,
             (Shape::Trapezoidal { b1_m, .. }, "B1_m") => *b1_m = value,
             (Shape::Trapezoidal { b2_m, .. }, "B2_m") => *b2_m = value,
-            _ => return Err(format!("`{key}` is not a parameter of this block")),
+            _ => return Err(ParameterError::Unknown { key: key.to_string(), unit: "block" }),
         }
         self.block = Block::new(shape, mass, self.block.g_mps2)?;
         Ok(())
@@ -177,7 +180,7 @@ impl Case {
     }
 
     /// Runs the rocking model with `options` and reads the top accelerometer the usual way.
-    pub fn simulate(&self, block: &Block, options: &Options) -> Result<(rocking::Response, Prediction), String> {
+    pub fn simulate(&self, block: &Block, options: &Options) -> Result<(rocking::Response, Prediction), PhysicsError> {
         let response = rocking::simulate(block, &self.excitation(), options)?;
         let theta = &response.theta_rad;
         let n = theta.len();
@@ -228,8 +231,8 @@ impl Case {
         &self,
         evidence: &Evidence,
         mut prediction: Prediction,
-        predict: impl Fn(&Case) -> Result<Prediction, String>,
-    ) -> Result<Prediction, String> {
+        predict: impl Fn(&Case) -> Result<Prediction, PhysicsError>,
+    ) -> Result<Prediction, PhysicsError> {
         let disagrees_from = |p: &Prediction| evidence.window(p).map_or(f64::INFINITY, |w| w.0);
         let own = disagrees_from(&prediction);
         let mut twin = predict(&self.probed(SENSITIVITY_PROBES[0]))?;
@@ -350,7 +353,7 @@ const JOINT_HORIZONS_S: [f64; 3] = [1.5, 4.0, f64::INFINITY];
 
 /// The evidence of the nominal model as `case` states it: the model under the usual and under
 /// other solver settings (samples where they differ are not evidence).
-fn nominal_evidence(case: &Case, settings: &Settings) -> Result<(Evidence, Prediction), String> {
+fn nominal_evidence(case: &Case, settings: &Settings) -> Result<(Evidence, Prediction), PhysicsError> {
     let options = case.nominal_options();
     let (_, nominal) = case.simulate(&case.block, &options)?;
     let (_, variant) = case.simulate(
@@ -368,7 +371,7 @@ fn nominal_evidence(case: &Case, settings: &Settings) -> Result<(Evidence, Predi
 /// first moment the records can tell anything: the first uplift of the stated model, or the
 /// first disagreement if the records show one earlier. A unit that neither uplifts nor
 /// disagrees keeps its stated values (nothing in the records constrains them).
-fn calibrate_nominal(stated: &Case, settings: &Settings) -> Result<Calibration, String> {
+fn calibrate_nominal(stated: &Case, settings: &Settings) -> Result<Calibration, PhysicsError> {
     if stated.uncertain.is_empty() {
         return Ok(Calibration::default());
     }
@@ -391,9 +394,9 @@ fn calibrate_nominal(stated: &Case, settings: &Settings) -> Result<Calibration, 
     Ok(calibration::calibrate_model(stated, &stated.uncertain, None, &horizons, true, &chi2))
 }
 
-pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, String> {
+pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, DiagnoseError> {
     if stated.accel.is_none() && stated.camera.is_none() {
-        return Err("the case has neither an accelerometer nor a camera record to compare with".into());
+        return Err(DiagnoseError::NoRecords);
     }
     let calibration = calibrate_nominal(stated, settings)?;
     let calibrated = calibration.apply(stated)?;

@@ -16,6 +16,7 @@ use crate::diagnose::{diagnose, Diagnosis, Settings};
 use crate::io::case::read_case_unchanged;
 use crate::pipeline::params::{self, ParamError, Params};
 use crate::pipeline::spec::RecordFormat;
+use crate::plot::PlotError;
 use crate::table::{Column, Table, TIME_COLUMN};
 
 pub struct Diagnose;
@@ -108,7 +109,7 @@ impl Stage for Diagnose {
                     1 => ctx.sink.write_page(CONTRACT, contract.bytes().as_bytes())?,
                     _ => ctx.sink.write_record_page(CONTRACT, &name, contract.bytes().as_bytes())?,
                 }
-                ctx.sink.write_file("reports", &format!("{name}.png"), &figure.map_err(anyhow::Error::msg)?)?;
+                ctx.sink.write_file("reports", &format!("{name}.png"), &figure?)?;
                 Ok((super::partition_values(&part.partition), contract))
             })
             .collect::<anyhow::Result<_>>()?;
@@ -223,7 +224,7 @@ fn summary_table(rows: &[(String, Contract)]) -> Table {
 }
 
 /// Records, nominal model and accepted model, the residuals, with the window shaded.
-pub fn figure(d: &Diagnosis) -> Result<Vec<u8>, String> {
+pub fn figure(d: &Diagnosis) -> Result<Vec<u8>, PlotError> {
     use crate::plot::{render_png, Panel, Series};
     let accel = d.evidence.accel_series(&d.baseline);
     let accel_model = d.evidence.accel_series(&d.model);
@@ -280,7 +281,7 @@ pub fn figure(d: &Diagnosis) -> Result<Vec<u8>, String> {
         Some((a, b)) => format!("case {}: {} (records and model disagree {a:.2}-{b:.2} s, shaded)", d.case, d.verdict),
         None => format!("case {}: the model agrees with the records", d.case),
     };
-    render_png(&title, &panels, 1400, 1100).map_err(|e| e.to_string())
+    render_png(&title, &panels, 1400, 1100)
 }
 
 /// What the stage writes of one case: the contract, the two tables and the figure.
@@ -288,7 +289,7 @@ pub struct Report {
     pub contract: Contract,
     pub accel: Table,
     pub camera: Table,
-    pub figure: Result<Vec<u8>, String>,
+    pub figure: Result<Vec<u8>, PlotError>,
 }
 
 impl From<Diagnosis> for Report {
@@ -364,7 +365,7 @@ fn rolling_camera_table(d: &RollingDiagnosis) -> Table {
 }
 
 /// Platform displacement, yaw and the accelerometer, observed and modelled, window shaded.
-fn rolling_figure(d: &RollingDiagnosis) -> Result<Vec<u8>, String> {
+fn rolling_figure(d: &RollingDiagnosis) -> Result<Vec<u8>, PlotError> {
     use crate::plot::{render_png, Panel, Series};
     let camera = d.evidence.camera_series(&d.baseline);
     let camera_model = d.evidence.camera_series(&d.model);
@@ -423,5 +424,5 @@ fn rolling_figure(d: &RollingDiagnosis) -> Result<Vec<u8>, String> {
         Some((a, b)) => format!("{}: {} (mismatch {a:.2}-{b:.2} s, shaded)", d.case, d.verdict),
         None => format!("{}: no mismatch", d.case),
     };
-    render_png(&title, &panels, 1400, 1300).map_err(|e| e.to_string())
+    render_png(&title, &panels, 1400, 1300)
 }

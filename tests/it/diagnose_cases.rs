@@ -157,6 +157,21 @@ fn a_broken_case_folder_fails_with_the_file_named_and_writes_nothing() {
     assert!(!root.join("out").exists(), "nothing is written when a case cannot be read");
 }
 
+/// `--set` with a key `diagnose` does not declare is refused before anything runs, naming the
+/// key and the close one it declares; nothing is written.
+#[test]
+fn an_undeclared_set_key_is_refused_by_name() {
+    let project = crate::tempdir::tempdir().unwrap();
+    let root = project.path();
+    let case = shared_dir().join("cases/demo/demo_02").display().to_string();
+    let run = shakeflow(&["diagnose", &case, "--set", "exceedance_sigmaa=1", "--out", "out"], root);
+    let message = stderr(&run);
+    assert_eq!(run.status.code(), Some(1), "{message}");
+    assert!(message.contains("unknown parameter `exceedance_sigmaa` for stage type `diagnose`"), "{message}");
+    assert!(message.contains("did you mean `exceedance_sigma`"), "{message}");
+    assert!(!root.join("out").exists(), "nothing is written");
+}
+
 /// An `uncertainty` key that is not a nominal parameter of the unit is an error at its line,
 /// for a rocking and a rolling unit alike; nothing is written.
 #[test]

@@ -4,6 +4,7 @@
 //! damping ζ carries the block.
 
 use super::{linspace, product, Case, Effect, Prediction};
+use crate::physics::error::PhysicsError;
 use crate::physics::rocking::{IsolatedBase, Options};
 
 pub struct Flexibility;
@@ -26,7 +27,7 @@ impl Effect for Flexibility {
         product(&[frequencies, vec![0.01, 0.025, 0.05, 0.1, 0.2]])
     }
 
-    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, String> {
+    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, PhysicsError> {
         let options = Options {
             isolated_base: Some(IsolatedBase { period_s: 1.0 / params[0], damping_ratio: params[1], mass_ratio: None }),
             ..case.nominal_options()

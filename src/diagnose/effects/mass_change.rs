@@ -3,12 +3,13 @@
 //! and Eq. 24 restitution. Parameters: t0 and the new centre-of-mass offset f (Table 5's f).
 
 use super::{linspace, product, Case, Effect, Prediction};
+use crate::physics::error::PhysicsError;
 use crate::physics::rocking::{Block, MassChange as Change, Options, Shape};
 
 pub struct MassChange;
 
 /// The unit after the change: same outline, centre of mass at H(0.5 + f).
-fn after(case: &Case, f: f64) -> Result<Block, String> {
+fn after(case: &Case, f: f64) -> Result<Block, PhysicsError> {
     let (b, h) = match case.block.shape {
         Shape::Rectangular { b_m, h_m, .. } => (b_m, h_m),
         // A trapezoid's rocking is set by its base and CM: its rectangle equivalent (Table 5).
@@ -41,7 +42,7 @@ impl Effect for MassChange {
         product(&[onsets, linspace(bounds[1].0, bounds[1].1, 13)])
     }
 
-    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, String> {
+    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, PhysicsError> {
         let options = Options {
             mass_change: Some(Change { time_s: params[0], after: after(case, params[1])? }),
             ..case.nominal_options()

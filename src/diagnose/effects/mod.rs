@@ -2,6 +2,7 @@
 //! leaves out. Adding one is a new file implementing [`Effect`] and a line in [`library`].
 
 use super::{Case, Prediction};
+use crate::physics::error::PhysicsError;
 
 mod flexibility;
 mod mass_change;
@@ -23,7 +24,7 @@ pub trait Effect: Sync {
     fn bounds(&self, case: &Case, window: (f64, f64)) -> Vec<(f64, f64)>;
     /// Starting points covering the ranges.
     fn grid(&self, case: &Case, window: (f64, f64)) -> Vec<Vec<f64>>;
-    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, String>;
+    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, PhysicsError>;
     /// One clause for the explanation, with the fitted values in engineering terms.
     fn explain(&self, case: &Case, params: &[f64]) -> String;
     /// When the effect first acts in this prediction; None when it acts all along.

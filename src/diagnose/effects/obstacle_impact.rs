@@ -3,6 +3,7 @@
 //! WSU1 on PS1).
 
 use super::{linspace, product, Case, Effect, Prediction};
+use crate::physics::error::PhysicsError;
 use crate::physics::rocking::EventKind;
 use crate::physics::rocking::{Obstacle, Options};
 
@@ -31,7 +32,7 @@ impl Effect for ObstacleImpact {
         product(&[vec![-1.0, 1.0], linspace(bounds[1].0, bounds[1].1, 15), linspace(0.1, 0.9, 5)])
     }
 
-    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, String> {
+    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, PhysicsError> {
         let side = if params[0] < 0.0 { -1 } else { 1 };
         let options = Options {
             obstacle: Some(Obstacle { side, angle_rad: params[1], restitution: params[2] }),

@@ -2,6 +2,7 @@
 //! (a soft or sticky contact, a base that is not a flat rigid line): one coefficient e.
 
 use super::{linspace, Case, Effect, Prediction};
+use crate::physics::error::PhysicsError;
 use crate::physics::rocking::EventKind;
 use crate::physics::rocking::Options;
 
@@ -24,7 +25,7 @@ impl Effect for Restitution {
         linspace(0.05, 1.0, 39).into_iter().map(|e| vec![e]).collect()
     }
 
-    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, String> {
+    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, PhysicsError> {
         let options = Options { restitution: Some(params[0]), ..case.nominal_options() };
         Ok(case.simulate(&case.block, &options)?.1)
     }

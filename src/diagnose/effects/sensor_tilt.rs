@@ -4,6 +4,7 @@
 //! −s(a_v + g). No parameter: the rotation the camera sees fixes it.
 
 use super::{Case, Effect, Prediction};
+use crate::physics::error::PhysicsError;
 use crate::physics::rocking::EventKind;
 
 pub struct SensorTilt;
@@ -25,7 +26,7 @@ impl Effect for SensorTilt {
         vec![Vec::new()]
     }
 
-    fn predict(&self, case: &Case, _: &[f64]) -> Result<Prediction, String> {
+    fn predict(&self, case: &Case, _: &[f64]) -> Result<Prediction, PhysicsError> {
         let (response, mut prediction) = case.simulate(&case.block, &case.nominal_options())?;
         let g = case.block.g_mps2;
         prediction.top_ax_mps2 = (0..response.theta_rad.len())

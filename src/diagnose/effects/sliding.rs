@@ -16,6 +16,7 @@
 //! well below the floor's at the same instant), besides an even grid over μ_s.
 
 use super::{linspace, product, Case, Effect, Prediction};
+use crate::physics::error::PhysicsError;
 use crate::physics::rocking::EventKind;
 use crate::physics::rocking::{Friction, Options};
 
@@ -93,7 +94,7 @@ impl Effect for Sliding {
         points
     }
 
-    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, String> {
+    fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, PhysicsError> {
         let friction = Friction { static_mu: params[0], kinetic_mu: params[0] * params[1], coupled: params[2] >= 0.5 };
         let options = Options { friction: Some(friction), ..case.nominal_options() };
         Ok(case.simulate(&case.block, &options)?.1)

@@ -41,6 +41,7 @@ use rayon::prelude::*;
 
 use super::calibration::{self, Calibration, Uncertain, UnitModel};
 use super::contract::{Contracted, ModelFields};
+use super::error::{DiagnoseError, ParameterError};
 use super::verdict::{self, Model, Noise, Predictability, Verdict};
 use super::{Observed, Settings};
 use crate::physics::rolling::{simulate_altered, Alteration, Cart, Excitation, Friction, Method, Options};
@@ -132,7 +133,7 @@ impl UnitModel for RollingCase {
         })
     }
 
-    fn set_parameter(&mut self, key: &str, index: usize, value: f64) -> Result<(), String> {
+    fn set_parameter(&mut self, key: &str, index: usize, value: f64) -> Result<(), ParameterError> {
         let (c, f) = (&mut self.cart, &mut self.friction);
         match key {
             "length_m" => c.length_m = value,
@@ -145,7 +146,9 @@ impl UnitModel for RollingCase {
             "swivel_arm_m" => c.swivel_arm_m = value,
             "yaw0_deg" => self.options.yaw0_rad = value.to_radians(),
             "steer0_deg" => {
-                *self.options.steer0_rad.get_mut(index).ok_or("steer0_deg has 4 elements")? = value.to_radians()
+                let count = self.options.steer0_rad.len();
+                *self.options.steer0_rad.get_mut(index).ok_or(ParameterError::Element { key: "steer0_deg", count })? =
+                    value.to_radians()
             }
             "mu_s_roll" => f.roll.mu_s = value,
             "mu_k_roll" => f.roll.mu_k = value,
@@ -154,7 +157,7 @@ impl UnitModel for RollingCase {
             "beta_spm" => (f.roll.beta_spm, f.swivel.beta_spm) = (value, value),
             "gamma_n" => (f.roll.gamma_n, f.swivel.gamma_n) = (value, value),
             "p" => (f.roll.p, f.swivel.p) = (value, value),
-            _ => return Err(format!("`{key}` is not a parameter of this cart")),
+            _ => return Err(ParameterError::Unknown { key: key.to_string(), unit: "cart" }),
         }
         self.cart.check(false)?;
         Ok(self.friction.check()?)
@@ -228,8 +231,8 @@ impl RollingCase {
     }
 
     /// The nominal cart over the whole record, with its states.
-    pub fn nominal(&self) -> Result<Track, String> {
-        self.nominal_until(self.end_s(), None).map_err(|(e, _)| e)
+    pub fn nominal(&self) -> Result<Track, DiagnoseError> {
+        self.nominal_until(self.end_s(), None).map_err(|(e, _)| DiagnoseError::Stopped(e))
     }
 
     /// The nominal cart from rest until `until_s`, with its states, within `allowance`
@@ -259,11 +262,11 @@ impl RollingCase {
     }
 
     /// The nominal cart's initial state only (where a run from the first sample starts).
-    fn nominal_start(&self) -> Result<Track, String> {
+    fn nominal_start(&self) -> Track {
         let mut y = vec![0.0; 10];
         y[2] = self.options.yaw0_rad;
         y[3..7].copy_from_slice(&self.options.steer0_rad);
-        Ok(Track { states: vec![y], ..Track::default() })
+        Track { states: vec![y], ..Track::default() }
     }
 
     /// The cart with `alteration` from `onset_s` on (the nominal cart's state there) until
@@ -456,7 +459,7 @@ fn calibrate_nominal(stated: &RollingCase, evidence: &Evidence, stated_track: &T
     let horizons = CALIBRATION_HORIZONS_S.map(|h| (window.0 + h).min(stated.end_s()));
     let per_sample = stated_track.evaluations as f64 / stated.samples() as f64;
     let chi2 = |m: &RollingCase, until: f64| {
-        let Ok(start) = m.nominal_start() else { return f64::INFINITY };
+        let start = m.nominal_start();
         let samples = (until - m.t0_s) / m.dt_s + 1.0;
         let allowance = (CALIBRATION_BUDGET_FACTOR * per_sample * samples).max(BUDGET_FLOOR * samples) as usize;
         m.altered(&start, &Alteration::default(), m.t0_s, until, Some(allowance))
@@ -515,12 +518,12 @@ fn recalibrate(
     verdict::recalibrate(stated, calibration, &horizons, &chi2, whole, 1, (fit.track.clone(), fit.misfit))
 }
 
-pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiagnosis, String> {
+pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiagnosis, DiagnoseError> {
     if stated.accel.is_none() && stated.camera.is_none() {
-        return Err("the case has neither an accelerometer nor a camera record to compare with".into());
+        return Err(DiagnoseError::NoRecords);
     }
     if stated.samples() < 3 {
-        return Err("the floor record needs at least 3 samples".into());
+        return Err(DiagnoseError::FloorTooShort);
     }
     let evidence = Evidence::new(stated, settings.exceedance_sigma);
     let stated_track = stated.nominal()?;
@@ -540,8 +543,8 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
         for &p in &PROBES {
             let twin_case = case.twin(p);
             let twin = twin_case
-                .altered(&twin_case.nominal_start()?, &Alteration::default(), case.t0_s, until, None)
-                .map_err(|(e, _)| e)?;
+                .altered(&twin_case.nominal_start(), &Alteration::default(), case.t0_s, until, None)
+                .map_err(|(e, _)| DiagnoseError::Stopped(e))?;
             probe = p;
             predictable_until_s = evidence.parting(nominal, &twin).filter(|t| *t <= until);
             // The largest probe whose twin the records do not reject before the nominal cart.

@@ -5,6 +5,7 @@
 //! m_w/2 of a disc, is a fraction of a per cent of the cart's mass and is not told apart.)
 
 use super::{caster, linspace, onset_bounds, onsets_at, product, Effect, RollingCase, Track};
+use crate::diagnose::error::Unphysical;
 use crate::physics::rolling::{Alteration, Brake};
 
 pub struct CasterBrake;
@@ -53,7 +54,7 @@ impl Effect for CasterBrake {
         locked.into_iter().chain(ramped).collect()
     }
 
-    fn alteration(&self, _: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {
+    fn alteration(&self, _: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), Unphysical> {
         let brake = Some(Brake { caster: caster(p[0]), mu: p[2] });
         Ok((Alteration { brake, ramp_s: p[3], ..Alteration::default() }, p[1]))
     }

@@ -9,6 +9,7 @@
 //! e, contact duration, neighbour (0: wall, 1: compliant neighbour).
 
 use super::{linspace, onset_bounds, onsets_at, product, Effect, RollingCase, Track};
+use crate::diagnose::error::Unphysical;
 use crate::physics::rolling::{Alteration, Wall};
 
 pub struct LateralImpact;
@@ -84,7 +85,7 @@ impl Effect for LateralImpact {
             .collect()
     }
 
-    fn alteration(&self, case: &RollingCase, nominal: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {
+    fn alteration(&self, case: &RollingCase, nominal: &Track, p: &[f64]) -> Result<(Alteration, f64), Unphysical> {
         let (axis, sign) = side(p[0]);
         let (position, onset) = wall_for(case, nominal, axis, sign, p[1]);
         let wall =

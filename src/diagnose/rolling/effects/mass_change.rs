@@ -16,6 +16,7 @@
 //! indistinguishable from none, and dm trades off against the offset.
 
 use super::{onset_bounds, onsets_at, product, Effect, RollingCase, Track};
+use crate::diagnose::error::Unphysical;
 use crate::physics::rolling::{Alteration, MassChange as Change};
 
 pub struct MassChange;
@@ -84,16 +85,13 @@ impl Effect for MassChange {
             .collect()
     }
 
-    fn alteration(&self, case: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {
+    fn alteration(&self, case: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), Unphysical> {
         let at_m = offset(p);
         if p[1] == 0.0 && (p[2] != 0.0 || p[3] != 0.0) {
-            return Err(format!("no mass cannot have moments of ({:.1}, {:.1}) kg m", p[2], p[3]));
+            return Err(Unphysical::MomentsWithoutMass { x: p[2], y: p[3] });
         }
         if at_m[0].abs() > REACH * 0.5 * case.cart.length_m || at_m[1].abs() > REACH * 0.5 * case.cart.width_m {
-            return Err(format!(
-                "{:.1} kg cannot have moments of ({:.1}, {:.1}) kg m on the platform",
-                p[1], p[2], p[3]
-            ));
+            return Err(Unphysical::OffPlatform { dm_kg: p[1], x: p[2], y: p[3] });
         }
         let mass = Some(Change { dm_kg: p[1], at_m });
         Ok((Alteration { mass, ramp_s: p[4], ..Alteration::default() }, p[0]))

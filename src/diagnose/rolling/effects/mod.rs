@@ -2,6 +2,7 @@
 //! [`Alteration`] of `physics::rolling`'s no-slip model from the moment it begins.
 
 use super::{RollingCase, Track};
+use crate::diagnose::error::Unphysical;
 use crate::physics::rolling::Alteration;
 
 mod caster_brake;
@@ -38,7 +39,7 @@ pub trait Effect: Sync {
     /// Starting points covering the ranges.
     fn grid(&self, case: &RollingCase, nominal: &Track, window: (f64, f64)) -> Vec<Vec<f64>>;
     /// The physics, and the time it begins.
-    fn alteration(&self, case: &RollingCase, nominal: &Track, params: &[f64]) -> Result<(Alteration, f64), String>;
+    fn alteration(&self, case: &RollingCase, nominal: &Track, params: &[f64]) -> Result<(Alteration, f64), Unphysical>;
     /// Floor samples of `track` (this effect's run) whose accelerometer reading the effect
     /// cannot predict (see [`Track::accel_unseen`]); empty: every one.
     fn accel_unseen(&self, _case: &RollingCase, _nominal: &Track, _params: &[f64], _track: &Track) -> Vec<bool> {

@@ -9,6 +9,7 @@
 //! below a few times the cart's own swivel friction) leaves no trace.
 
 use super::{caster, linspace, onset_bounds, product, sharp_onsets, Effect, RollingCase, Track};
+use crate::diagnose::error::Unphysical;
 use crate::physics::rolling::{Alteration, Jam};
 
 pub struct SwivelJam;
@@ -44,7 +45,7 @@ impl Effect for SwivelJam {
         rigid.into_iter().chain(lock).collect()
     }
 
-    fn alteration(&self, _: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), String> {
+    fn alteration(&self, _: &RollingCase, _: &Track, p: &[f64]) -> Result<(Alteration, f64), Unphysical> {
         let mu = (p[2] >= 0.5).then_some(p[3]);
         Ok((Alteration { jam: Some(Jam { caster: caster(p[0]), mu }), ..Alteration::default() }, p[1]))
     }
