@@ -15,6 +15,7 @@ use super::commit::{commit, fold, leave_out_not_kept, relative, Changes, UnitOut
 use super::inputs::{cached_files, Produced};
 use super::{upstream_stages, Backend, Opened, Outcome, RunSummary, StageReport, UnitProblem};
 use crate::io::hash;
+use crate::pipeline::layout::{fan_out_above, fans_out};
 use crate::pipeline::lock::StageLock;
 use crate::pipeline::memo::{TableMemo, DEFAULT_BUDGET_BYTES};
 use crate::pipeline::plan::{Plan, PlannedStage};
@@ -169,6 +170,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
     let assessed = assess_stage(env.plan, stage, &env.known, &snapshot)?;
     let new_dir = env.transaction.new_path(env.plan.stage_path(name));
     let stale: Vec<&(Unit, String, Vec<String>)> = assessed.units.iter().filter(|(_, _, r)| !r.is_empty()).collect();
+    let fanned = fans_out(assessed.units.iter().map(|(u, _, _)| u.id.as_str()), fan_out_above());
     let started = Instant::now();
     let records_in: usize = stale.iter().map(|(u, _, _)| u.inputs.iter().map(|i| i.parts().len()).sum::<usize>()).sum();
     let mut ran: BTreeMap<String, UnitRecord> = if stale.is_empty() {
@@ -178,7 +180,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
         env.reporter.line(&format!("{name:<18} running ({})", why_running(&stale, assessed.units.len())));
         let bar = env.reporter.stage_bar(name, stale.len() as u64);
         let readers = env.plan.stages.values().filter(|s| upstream_stages(s).contains(name)).count();
-        let records = execute(env.plan, stage, &stale, &new_dir, &env.memo, readers, &bar);
+        let records = execute(env.plan, stage, &stale, &new_dir, &env.memo, readers, &bar, fanned);
         bar.finish_and_clear();
         records.into_iter().map(|r| (r.id.clone(), r)).collect()
     };
@@ -205,8 +207,12 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
             _ => {}
         }
     }
-    let folded = fold(env.plan, stage, entry, records, &assessed.vanished, upstream_tainted, &new_dir)?;
+    let folded = fold(env.plan, stage, entry, records, &assessed.vanished, upstream_tainted, &new_dir, fanned)?;
     let failed = folded.failed.len();
+    if folded.moved > 0 {
+        let layout = if fanned { "two-level folders (over 1 folder's worth of records)" } else { "one folder" };
+        env.reporter.line(&format!("{name:<18} {} cached file(s) moved to {layout}", folded.moved));
+    }
     if !stale.is_empty() {
         let written = folded.install.len();
         env.reporter.line(&format!(
@@ -252,7 +258,8 @@ fn why_running(stale: &[&(Unit, String, Vec<String>)], units: usize) -> String {
     format!("{} of {units} records; {first}{more}", stale.len())
 }
 
-/// Runs `stale` units of `stage` in parallel, each writing under `dir` (`dir/<output>/…`).
+/// Runs `stale` units of `stage` in parallel, each writing under `dir` (`dir/<output>/…`, one
+/// folder down when `fanned`).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn execute(
     plan: &Plan,
@@ -262,6 +269,7 @@ pub(super) fn execute(
     memo: &Arc<TableMemo>,
     readers: usize,
     bar: &indicatif::ProgressBar,
+    fanned: bool,
 ) -> Vec<UnitRecord> {
     let info = stage.stage.info();
     let base_dir = plan.file.base_dir();
@@ -269,7 +277,8 @@ pub(super) fn execute(
         .par_iter()
         .map(|(unit, key, _)| {
             let mut sink =
-                OutputSink::new(dir, &stage.name, info, &stage.params, &unit.hashes, indicatif::ProgressBar::hidden());
+                OutputSink::new(dir, &stage.name, info, &stage.params, &unit.hashes, indicatif::ProgressBar::hidden())
+                    .fanned_out(fanned);
             if readers > 0 {
                 sink = sink.keeping_tables_in(memo.clone(), readers);
             }
