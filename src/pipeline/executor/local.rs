@@ -10,7 +10,7 @@ use std::time::Instant;
 use anyhow::anyhow;
 use rayon::prelude::*;
 
-use super::assess::{assess_stage, predict, Known};
+use super::assess::{assess_stage, predict, AssessedStage, Known};
 use super::commit::{commit, fold, leave_out_not_kept, relative, Changes, UnitOutcome, UnitRecord};
 use super::inputs::{cached_files, Produced};
 use super::{upstream_stages, Backend, Opened, Outcome, RunSummary, StageReport, UnitProblem};
@@ -41,6 +41,8 @@ struct RunEnv<'a> {
     state: Mutex<RunState>,
     /// Tables written this run, kept for the stages that read them next.
     memo: Arc<TableMemo>,
+    /// Stages assessed already, by the prediction of a run with `keep: false` stages.
+    settled: Mutex<BTreeMap<String, AssessedStage>>,
 }
 
 /// What the stages of one run fill in.
@@ -166,8 +168,14 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
             .insert(name.to_string(), StageReport { name: name.into(), outcome: Outcome::Skipped, units, ran: 0 });
         return Ok(());
     }
-    let snapshot = env.state.lock().expect("no poisoned lock").produced.clone();
-    let assessed = assess_stage(env.plan, stage, &env.known, &snapshot)?;
+    let settled = env.settled.lock().expect("no poisoned lock").remove(name);
+    let assessed = match settled {
+        Some(assessed) => assessed,
+        None => {
+            let snapshot = env.state.lock().expect("no poisoned lock").produced.clone();
+            assess_stage(env.plan, stage, &env.known, &snapshot)?
+        }
+    };
     let new_dir = env.transaction.new_path(env.plan.stage_path(name));
     let stale: Vec<&(Unit, String, Vec<String>)> = assessed.units.iter().filter(|(_, _, r)| !r.is_empty()).collect();
     let fanned = fans_out(assessed.units.iter().map(|(u, _, _)| u.id.as_str()), fan_out_above());
@@ -316,9 +324,13 @@ impl Backend for Local {
     fn run(&self, opened: Opened<'_>, reporter: &Reporter) -> anyhow::Result<RunSummary> {
         let mut opened = opened;
         let plan = opened.plan;
+        // What `keep: false` stages make again needs the whole plan assessed first; the stages
+        // that assessment settled are not assessed a second time.
+        let mut settled = BTreeMap::new();
         if plan.stages.values().any(|s| !s.keep) {
-            let remake = predict(plan, &opened.known())?.remake;
-            opened.rerun.remake = remake;
+            let prediction = predict(plan, &opened.known())?;
+            opened.rerun.remake = prediction.remake;
+            settled = prediction.settled;
         }
         let transaction = Transaction::begin(&opened.lease)?;
         let env = RunEnv {
@@ -330,6 +342,7 @@ impl Backend for Local {
             reporter,
             state: Mutex::new(RunState::default()),
             memo: Arc::new(TableMemo::new(DEFAULT_BUDGET_BYTES)),
+            settled: Mutex::new(settled),
         };
         let outcome = run_stages(&env);
         let state = env.state.into_inner().map_err(|_| anyhow!("a stage panicked"));
