@@ -218,7 +218,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
     let folded = fold(env.plan, stage, entry, records, &assessed.vanished, upstream_tainted, &new_dir, fanned)?;
     let failed = folded.failed.len();
     if folded.moved > 0 {
-        let layout = if fanned { "two-level folders (over 1 folder's worth of records)" } else { "one folder" };
+        let layout = if fanned { "two-level folders" } else { "one folder" };
         env.reporter.line(&format!("{name:<18} {} cached file(s) moved to {layout}", folded.moved));
     }
     if !stale.is_empty() {
