@@ -225,11 +225,12 @@ pub fn hash_dir_known(dir: &Path, known: &KnownHashes) -> anyhow::Result<(String
 }
 
 /// Hash of a source path: a file's content, or a folder's file names and contents.
+/// One `stat` for a file, which the memo then uses (a no-op rerun asks this of every record file).
 pub fn hash_path(path: &Path) -> anyhow::Result<String> {
-    if path.is_dir() {
-        Ok(hash_dir(path)?.0)
-    } else {
-        hash_file(path)
+    match (std::fs::metadata(path), MEMO.get()) {
+        (Ok(meta), _) if meta.is_dir() => Ok(hash_dir(path)?.0),
+        (Ok(meta), Some(memo)) => memo.hash_with(path, &meta),
+        _ => hash_file(path),
     }
 }
 

@@ -12,6 +12,7 @@
 //!   <stage>/                           a stage's folder (a command's: the output folder itself)
 //!     .shakeflow-stage                 STAGE_MARKER: whose folder it is
 //!     <output>/<key>=<value>/…/data.parquet   DATA_FILE, one record's table (`partition_path`)
+//!     <output>/<xx>/<key>=<value>/…/data.parquet   the same past FAN_OUT_ABOVE records (`placed`)
 //!     mcap/<output>/…/data.mcap        MCAP_DIR, MCAP_FILE: opt-in MCAP twins
 //!     flagged/data.parquet             FLAGGED: records skipped by `on_error: skip`
 //!     status/data.parquet              STATUS: every record's status (loaded, flagged, skipped)
@@ -49,6 +50,67 @@ pub const FLAGGED: &str = "flagged";
 /// skipped or failed.
 pub const STATUS: &str = "status";
 
+/// A dataset folder holds at most this many record folders side by side. A stage with more
+/// records (more distinct first `key=value` segments) puts each record one level down, in a
+/// folder named by two hex digits of its first segment's blake3 (`records/3f/motion=FB-4/…`), as
+/// git fans out its objects: 256 folders of ~40 records each at 10⁴ records. A folder name
+/// without `=` is no partition to pyarrow, polars or DuckDB (their Hive readers skip it), and
+/// unit ids, `shakeflow.partition` and input labels leave it out: the layout changes paths only.
+pub const FAN_OUT_ABOVE: usize = 1000;
+
+/// [`FAN_OUT_ABOVE`], or `SHAKEFLOW_FAN_OUT_ABOVE` (tests and benchmarks fan out small archives).
+pub fn fan_out_above() -> usize {
+    std::env::var("SHAKEFLOW_FAN_OUT_ABOVE").ok().and_then(|v| v.parse().ok()).unwrap_or(FAN_OUT_ABOVE)
+}
+
+/// Whether a stage whose units are `ids` (partition paths) writes two-level folders: more than
+/// `limit` distinct first segments. Decided once per stage and run by the planner (a Slurm run
+/// carries it to its tasks and commit job in `run.json`).
+pub fn fans_out<'a>(ids: impl IntoIterator<Item = &'a str>, limit: usize) -> bool {
+    let mut firsts = std::collections::BTreeSet::new();
+    for id in ids {
+        let first = id.split('/').next().unwrap_or_default();
+        if first.contains('=') && firsts.insert(first) && firsts.len() > limit {
+            return true;
+        }
+    }
+    false
+}
+
+/// The folder a record goes in under a fanned-out dataset: two hex digits of the blake3 of its
+/// partition path's first segment (all of a motion's floors share one).
+pub fn fan_folder(partition_path: &str) -> String {
+    let first = partition_path.split('/').next().unwrap_or_default();
+    format!("{:02x}", blake3::hash(first.as_bytes()).as_bytes()[0])
+}
+
+fn is_fan_folder(segment: &str) -> bool {
+    segment.len() == 2 && segment.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
+}
+
+/// `relative`, a file of a stage folder, where it goes in the flat layout (`fanned` false) or
+/// the two-level one: a record's table or MCAP twin (`records/motion=FB-4/data.parquet`,
+/// `mcap/records/…/data.mcap`) gains or loses the folder before its first `key=value`
+/// segment; every other file (figures, pages, a gathering stage's table) stays where it is.
+pub fn placed(relative: &str, fanned: bool) -> std::borrow::Cow<'_, str> {
+    use std::borrow::Cow;
+    let name = relative.rsplit('/').next().unwrap_or_default();
+    if name != DATA_FILE && name != MCAP_FILE {
+        return Cow::Borrowed(relative);
+    }
+    let segments: Vec<&str> = relative.split('/').collect();
+    let Some(first) = segments.iter().position(|s| s.contains('=')) else { return Cow::Borrowed(relative) };
+    // The output's name comes first (`records`, or `mcap/records`): a fan folder follows it.
+    let has_fan = first >= 2 && is_fan_folder(segments[first - 1]);
+    if has_fan == fanned {
+        return Cow::Borrowed(relative);
+    }
+    let head = &segments[..if has_fan { first - 1 } else { first }];
+    let tail = &segments[first..];
+    let fan = fanned.then(|| fan_folder(&tail.join("/")));
+    Cow::Owned(head.iter().copied().chain(fan.as_deref()).chain(tail.iter().copied()).collect::<Vec<_>>().join("/"))
+}
+
 /// Partition keys of a record (`motion=FB-4/floor=5`), in order.
 pub type Partition = Vec<(String, String)>;
 
@@ -83,5 +145,50 @@ mod tests {
         let path = partition_path(&partition);
         assert_eq!(path, "motion=090%20%28CUE%29/floor=5");
         assert_eq!(partition_of(&format!("{path}/{DATA_FILE}")), partition);
+        let fanned = placed(&format!("records/{path}/{DATA_FILE}"), true).into_owned();
+        assert_eq!(partition_of(fanned.strip_prefix("records/").unwrap()), partition, "the fan folder is no key");
+    }
+
+    #[test]
+    fn a_stage_fans_out_past_its_limit_of_first_segments() {
+        let ids: Vec<String> =
+            (0..5).flat_map(|m| [format!("motion=M{m}/floor=4"), format!("motion=M{m}/floor=5")]).collect();
+        let ids = || ids.iter().map(String::as_str);
+        assert!(!fans_out(ids(), 5), "5 motions (10 records) fit 5 folders");
+        assert!(fans_out(ids(), 4));
+        assert!(!fans_out(["*"], 0), "a gathering stage's one unit has no partition");
+        assert!(!fans_out([""], 0));
+        assert_eq!(fan_out_above(), FAN_OUT_ABOVE, "tests run without SHAKEFLOW_FAN_OUT_ABOVE");
+    }
+
+    #[test]
+    fn record_files_move_between_layouts_and_nothing_else_does() {
+        let fan = fan_folder("motion=FB-4");
+        assert_eq!(fan, fan_folder("motion=FB-4/floor=5"), "a motion's floors share a folder");
+        assert!(is_fan_folder(&fan) && !fan.contains('='));
+        let flat = "records/motion=FB-4/floor=5/data.parquet";
+        let two = format!("records/{fan}/motion=FB-4/floor=5/data.parquet");
+        assert_eq!(placed(flat, true), two);
+        assert_eq!(placed(&two, false), flat);
+        assert_eq!(placed(flat, false), flat);
+        assert_eq!(placed(&two, true), two);
+        let mcap = "mcap/records/motion=FB-4/data.mcap";
+        assert_eq!(placed(mcap, true), format!("mcap/records/{fan}/motion=FB-4/data.mcap"));
+        assert_eq!(placed(&placed(mcap, true), false), mcap);
+        for other in [
+            "figures/motion=FB-4.png",
+            "summary/data.parquet",
+            "index.html",
+            "status/data.parquet",
+            "case_1/diagnosis.json",
+        ] {
+            assert_eq!(placed(other, true), other);
+            assert_eq!(placed(other, false), other);
+        }
+        // An output folder is never taken for a fan folder, whatever its name.
+        assert_eq!(placed("ab/motion=X/data.parquet", false), "ab/motion=X/data.parquet");
+        // Values read from file names are encoded, so every fan folder name is plain.
+        let odd = format!("records/{}/data.parquet", partition_path(&vec![("motion".into(), "090 (CUE)".into())]));
+        assert_eq!(placed(&placed(&odd, true), false), odd);
     }
 }

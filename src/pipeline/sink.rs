@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex};
 use anyhow::{anyhow, bail};
 
 use super::info::{OutputInfo, OutputKind, StageInfo};
-use super::layout::{partition_path, Partition, DATA_FILE, LOCK_FILE, MCAP_DIR, MCAP_FILE, STAGE_MARKER};
+use super::layout::{fan_folder, partition_path, Partition, DATA_FILE, LOCK_FILE, MCAP_DIR, MCAP_FILE, STAGE_MARKER};
 use crate::io::hash::{self, KnownHashes};
 use crate::io::{mcap, parquet};
 use crate::pipeline::memo::TableMemo;
@@ -54,6 +54,9 @@ pub struct OutputSink {
     memo: Option<(Arc<TableMemo>, usize)>,
     /// What the tables written so far flag ([`FLAGS_KEY`]), as `reason (file:line)`.
     flags: Mutex<Vec<String>>,
+    /// Whether records go in two-level folders (`layout::placed`): the stage has more records
+    /// than a folder should hold.
+    fanned: bool,
 }
 
 impl OutputSink {
@@ -85,7 +88,14 @@ impl OutputSink {
             hashes: Mutex::new(KnownHashes::new()),
             memo: None,
             flags: Mutex::new(Vec::new()),
+            fanned: false,
         }
+    }
+
+    /// Puts each record's files one folder down (`records/3f/motion=FB-4/…`, `layout::placed`).
+    pub fn fanned_out(mut self, fanned: bool) -> Self {
+        self.fanned = fanned;
+        self
     }
 
     /// Keeps every table written in `memo` too, for the `readers` stages that read them next.
@@ -128,7 +138,12 @@ impl OutputSink {
         if !self.written.lock().expect("no panics while holding the lock").insert(format!("{output}/{relative}")) {
             bail!("stage `{}` wrote the record `{relative}` of `{output}` twice: two inputs share these partition keys; give the sources distinct `partition:` values", self.stage_name);
         }
-        let dir = self.root.join(output).join(&relative);
+        // The folder of the record's files: one level down in a fanned-out stage.
+        let folder = match self.fanned && !relative.is_empty() {
+            true => format!("{}/{relative}", fan_folder(&relative)),
+            false => relative.clone(),
+        };
+        let dir = self.root.join(output).join(&folder);
         std::fs::create_dir_all(&dir).map_err(|e| anyhow!("cannot create `{}`: {e}", dir.display()))?;
         table.metadata.extend(self.provenance.clone());
         table.metadata.insert("shakeflow.output".into(), output.into());
@@ -146,7 +161,7 @@ impl OutputSink {
                 format!("/{}/{output}/{relative}", self.stage_name)
             };
             // A separate tree: pyarrow.dataset and friends refuse folders that mix in non-Parquet files.
-            let mcap_dir = self.root.join(MCAP_DIR).join(output).join(&relative);
+            let mcap_dir = self.root.join(MCAP_DIR).join(output).join(&folder);
             std::fs::create_dir_all(&mcap_dir).map_err(|e| anyhow!("cannot create `{}`: {e}", mcap_dir.display()))?;
             let split: Vec<(String, Cow<'_, Table>)> = match key {
                 None => vec![(topic, Cow::Borrowed(&table))],

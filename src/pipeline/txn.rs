@@ -78,7 +78,10 @@ impl Transaction {
         let root = lease.root().to_path_buf();
         let token = format!("{TXN_PREFIX}{}-{}", std::process::id(), unique());
         let dir = root.join(STATE_DIR).join(token);
-        fs::create_dir_all(dir.join("new")).with_context(|| format!("cannot create `{}`", dir.display()))?;
+        // The lease made `.shakeflow/`: two `mkdir`s, not `create_dir_all`'s failed first try.
+        fs::create_dir(&dir)
+            .and_then(|()| fs::create_dir(dir.join("new")))
+            .with_context(|| format!("cannot create `{}`", dir.display()))?;
         Ok(Transaction { root, dir })
     }
 
@@ -196,8 +199,8 @@ fn roll_forward(root: &Path, dir: &Path) -> anyhow::Result<()> {
             "a committed run's results are not all in place yet: they are, at the next run once the link is gone";
         return Err(link_refused(&link, state).into());
     }
+    // Made by the first entry moved aside (most commits of new records move none).
     let old = dir.join("old");
-    fs::create_dir_all(&old)?;
     let move_aside = |entry: &str| -> anyhow::Result<()> {
         let target = root.join(entry);
         if exists(&target) {

@@ -208,6 +208,10 @@ impl StatusLine {
 pub struct Prediction {
     pub lines: Vec<StatusLine>,
     pub remake: BTreeMap<String, BTreeMap<String, String>>,
+    /// The assessments a run of this prediction may use as they are: of the stages none of
+    /// whose units is made again and whose upstream stages are settled (every unit cached, none
+    /// gone, none made again), so they read at run time exactly what they were assessed with.
+    pub(super) settled: BTreeMap<String, AssessedStage>,
 }
 
 /// Each stage's units and which would run, and why: upstream units that would run stand for
@@ -225,6 +229,7 @@ pub(super) fn predict(plan: &Plan, known: &Known<'_>) -> Result<Prediction, User
         Ok(user) => user,
         Err(e) => UserError::new(format!("{e:#}")),
     };
+    let mut assessments: BTreeMap<String, AssessedStage> = BTreeMap::new();
     for stage in plan.stages.values() {
         let assessed = assess_stage(plan, stage, known, &produced).map_err(error)?;
         let stage_dir = plan.stage_dir(&stage.name);
@@ -267,6 +272,7 @@ pub(super) fn predict(plan: &Plan, known: &Known<'_>) -> Result<Prediction, User
         }
         produced.insert(stage.name.clone(), mine);
         lines.push(line);
+        assessments.insert(stage.name.clone(), assessed);
     }
     // Readers come after what they read: walking back, a unit made again marks what it reads.
     let mut remake: BTreeMap<String, BTreeMap<String, String>> = BTreeMap::new();
@@ -288,7 +294,19 @@ pub(super) fn predict(plan: &Plan, known: &Known<'_>) -> Result<Prediction, User
         let order: BTreeMap<&str, usize> = line.ids.iter().enumerate().map(|(i, id)| (id.as_str(), i)).collect();
         line.stale.sort_by_key(|u| order.get(u.id.as_str()).copied().unwrap_or(usize::MAX));
     }
-    Ok(Prediction { lines, remake })
+    let unchanged: BTreeSet<&str> = lines
+        .iter()
+        .filter(|l| l.stale.is_empty() && l.vanished.is_empty() && !remake.contains_key(&l.name))
+        .map(|l| l.name.as_str())
+        .collect();
+    let settled = assessments
+        .into_iter()
+        .filter(|(name, _)| {
+            let stage = &plan.stages[name];
+            !remake.contains_key(name) && super::upstream_stages(stage).iter().all(|u| unchanged.contains(u))
+        })
+        .collect();
+    Ok(Prediction { lines, remake, settled })
 }
 
 /// A stage split into units, each with its cache key and why it is stale (empty: cached).

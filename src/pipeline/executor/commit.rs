@@ -10,7 +10,7 @@ use anyhow::anyhow;
 
 use super::inputs::{cached_files, Produced, ProducedFile};
 use super::{upstream_stages, UnitProblem};
-use crate::pipeline::layout::{FLAGGED, STAGE_MARKER, STATUS};
+use crate::pipeline::layout::{placed, FLAGGED, STAGE_MARKER, STATUS};
 use crate::pipeline::lock::{LockFile, StageLock, UnitLock};
 use crate::pipeline::ownership;
 use crate::pipeline::plan::{InputRef, Plan, PlannedStage};
@@ -71,11 +71,14 @@ pub(super) struct Folded {
     pub(super) flagged: Vec<UnitProblem>,
     /// Whether every unit succeeded (records gone from the inputs then leave too).
     pub(super) complete: bool,
+    /// Files of cached units moved to the stage's layout (flat or two-level folders).
+    pub(super) moved: usize,
 }
 
 /// Folds a stage's unit records into its new lockfile entry, the files to install and remove,
 /// and what downstream stages read. `staging` is where new stage-level files (the marker, the
-/// `flagged` table) are written.
+/// `flagged` table) are written. `fanned`: the stage's records go in two-level folders
+/// (`layout::placed`); cached units whose files are in the other layout move there.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn fold(
     plan: &Plan,
@@ -85,6 +88,7 @@ pub(super) fn fold(
     vanished: &[String],
     upstream_tainted: bool,
     staging: &Path,
+    fanned: bool,
 ) -> anyhow::Result<Folded> {
     let name = stage.name.as_str();
     let info = stage.stage.info();
@@ -131,7 +135,9 @@ pub(super) fn fold(
                     (None, true) => ("loaded", String::new()),
                 };
                 status(&record.id, what, record_files(&old.inputs), reason);
-                new_entry.units.insert(record.id, old.clone());
+                let mut unit = old.clone();
+                relayout(&mut unit, fanned, &stage_dir, staging, &at, &mut folded)?;
+                new_entry.units.insert(record.id, unit);
             }
             UnitOutcome::Ran { dir, files, notes } => {
                 for (file, hash) in &files {
@@ -238,6 +244,43 @@ pub(super) fn fold(
     }
     folded.entry = Some(new_entry);
     Ok(folded)
+}
+
+/// Moves a cached unit's record files to the layout `fanned` (`layout::placed`): each one on
+/// disk is linked (copied where the file system has no hard links) into `staging` at its new
+/// place, which the commit installs, and its old place is removed by the same commit; the
+/// entry names the new places, hashes unchanged. A `keep: false` file already gone is only renamed
+/// in the entry. Before the commit point nothing has moved (the links go with the transaction).
+fn relayout(
+    unit: &mut UnitLock,
+    fanned: bool,
+    stage_dir: &Path,
+    staging: &Path,
+    at: &dyn Fn(&str) -> String,
+    folded: &mut Folded,
+) -> anyhow::Result<()> {
+    if unit.files.keys().all(|f| placed(f, fanned) == f.as_str()) {
+        return Ok(());
+    }
+    let mut files = BTreeMap::new();
+    for (file, hash) in std::mem::take(&mut unit.files) {
+        let new = placed(&file, fanned).into_owned();
+        if new != file {
+            let (from, to) = (stage_dir.join(&file), staging.join(&new));
+            if std::fs::symlink_metadata(&from).is_ok_and(|m| m.is_file()) {
+                std::fs::create_dir_all(to.parent().expect("a file of the stage"))?;
+                if std::fs::hard_link(&from, &to).is_err() {
+                    std::fs::copy(&from, &to).map_err(|e| anyhow!("cannot copy `{}`: {e}", from.display()))?;
+                }
+                folded.install.insert(at(&new), to);
+                folded.remove.insert(at(&file));
+                folded.moved += 1;
+            }
+        }
+        files.insert(new, hash);
+    }
+    unit.files = files;
+    Ok(())
 }
 
 /// The columns of the `flagged` table: one row per record skipped under `on_error: skip`.
@@ -406,7 +449,7 @@ mod tests {
             record("motion=FB-2", ran(&staging, &[("figures/FB-2.png", "png")])),
             record("motion=FB-3", UnitOutcome::Failed { reason: "bad row".into() }),
         ];
-        let folded = fold(&plan, &plan.stages["load"], Some(&entry), records, &[], false, &staging).unwrap();
+        let folded = fold(&plan, &plan.stages["load"], Some(&entry), records, &[], false, &staging, false).unwrap();
         // The status table is new: every record's, the failed one's too.
         assert_eq!(folded.install.keys().collect::<Vec<_>>(), ["load/figures/FB-2.png", "load/status/data.parquet"]);
         let status = crate::io::parquet::read_table(&staging.join("status/data.parquet")).unwrap();
@@ -432,11 +475,11 @@ mod tests {
         let stage = &plan.stages["load"];
         let cached = || vec![record("motion=FB-1", UnitOutcome::Cached), record("motion=FB-2", UnitOutcome::Cached)];
         let gone = ["motion=FB-3".to_string()];
-        let complete = fold(&plan, stage, Some(&entry), cached(), &gone, false, &staging).unwrap();
+        let complete = fold(&plan, stage, Some(&entry), cached(), &gone, false, &staging, false).unwrap();
         assert_eq!(complete.remove.iter().collect::<Vec<_>>(), ["load/records/motion=FB-3/data.parquet"]);
         assert!(!complete.entry.unwrap().units.contains_key("motion=FB-3"));
         // An upstream unit failed: the record may only look gone; its files and entry stay.
-        let tainted = fold(&plan, stage, Some(&entry), cached(), &gone, true, &staging).unwrap();
+        let tainted = fold(&plan, stage, Some(&entry), cached(), &gone, true, &staging, false).unwrap();
         assert!(tainted.remove.is_empty());
         assert_eq!(tainted.install.keys().collect::<Vec<_>>(), ["load/status/data.parquet"]);
         assert_eq!(tainted.entry.unwrap().units["motion=FB-3"], entry.units["motion=FB-3"]);
@@ -452,13 +495,13 @@ mod tests {
             record("motion=FB-1", ran(&staging, &[("records/x/data.parquet", "1")])),
             record("motion=FB-2", ran(&staging, &[("records/x/data.parquet", "2")])),
         ];
-        let error = fold(&plan, stage, None, both, &[], false, &staging).err().unwrap().to_string();
+        let error = fold(&plan, stage, None, both, &[], false, &staging, false).err().unwrap().to_string();
         assert!(
             error.contains("record motion=FB-1 and the record motion=FB-2 both wrote `records/x/data.parquet`"),
             "{error}"
         );
         let one = vec![record("motion=FB-1", ran(&staging, &[("records/motion=FB-1/data.parquet", "1")]))];
-        let folded = fold(&plan, stage, None, one, &[], false, &staging).unwrap();
+        let folded = fold(&plan, stage, None, one, &[], false, &staging, false).unwrap();
         assert!(folded.complete);
         assert_eq!(
             folded.install.keys().collect::<Vec<_>>(),

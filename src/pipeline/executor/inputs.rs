@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use crate::error::UserError;
 use crate::io::hash;
-use crate::pipeline::layout::{partition_of, DATA_FILE, HASH_MEMO, STATE_DIR};
+use crate::pipeline::layout::{partition_of, placed, DATA_FILE, HASH_MEMO, STATE_DIR};
 use crate::pipeline::lock::UnitLock;
 use crate::pipeline::plan::{InputRef, Plan, PlannedStage};
 use crate::pipeline::sources;
@@ -62,6 +62,8 @@ pub(super) fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSo
             .into_iter()
             .map(|f| {
                 let relative = f.path.strip_prefix(&base).unwrap_or(&f.path).to_string_lossy().replace('\\', "/");
+                // A dataset's records are labelled alike in either layout (`layout::placed`).
+                let relative = placed(&relative, false).into_owned();
                 let hash = hashed[&f.path].clone();
                 InputPart { partition: f.partition, path: f.path, label: relative, hash }
             })
@@ -198,6 +200,9 @@ fn dataset_of(produced: &Produced, output: &str, label: &str) -> Vec<InputPart> 
             if inner != DATA_FILE && !inner.ends_with(&format!("/{DATA_FILE}")) {
                 return None;
             }
+            // Labels (and so the readers' cache keys) are the same in either layout.
+            let flat = placed(relative, false);
+            let inner = flat.strip_prefix(&prefix).unwrap_or(inner);
             Some(InputPart {
                 partition: partition_of(inner),
                 path: file.path.clone(),

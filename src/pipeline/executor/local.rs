@@ -10,11 +10,12 @@ use std::time::Instant;
 use anyhow::anyhow;
 use rayon::prelude::*;
 
-use super::assess::{assess_stage, predict, Known};
+use super::assess::{assess_stage, predict, AssessedStage, Known};
 use super::commit::{commit, fold, leave_out_not_kept, relative, Changes, UnitOutcome, UnitRecord};
 use super::inputs::{cached_files, Produced};
 use super::{upstream_stages, Backend, Opened, Outcome, RunSummary, StageReport, UnitProblem};
 use crate::io::hash;
+use crate::pipeline::layout::{fan_out_above, fans_out};
 use crate::pipeline::lock::StageLock;
 use crate::pipeline::memo::{TableMemo, DEFAULT_BUDGET_BYTES};
 use crate::pipeline::plan::{Plan, PlannedStage};
@@ -40,6 +41,8 @@ struct RunEnv<'a> {
     state: Mutex<RunState>,
     /// Tables written this run, kept for the stages that read them next.
     memo: Arc<TableMemo>,
+    /// Stages assessed already, by the prediction of a run with `keep: false` stages.
+    settled: Mutex<BTreeMap<String, AssessedStage>>,
 }
 
 /// What the stages of one run fill in.
@@ -165,10 +168,17 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
             .insert(name.to_string(), StageReport { name: name.into(), outcome: Outcome::Skipped, units, ran: 0 });
         return Ok(());
     }
-    let snapshot = env.state.lock().expect("no poisoned lock").produced.clone();
-    let assessed = assess_stage(env.plan, stage, &env.known, &snapshot)?;
+    let settled = env.settled.lock().expect("no poisoned lock").remove(name);
+    let assessed = match settled {
+        Some(assessed) => assessed,
+        None => {
+            let snapshot = env.state.lock().expect("no poisoned lock").produced.clone();
+            assess_stage(env.plan, stage, &env.known, &snapshot)?
+        }
+    };
     let new_dir = env.transaction.new_path(env.plan.stage_path(name));
     let stale: Vec<&(Unit, String, Vec<String>)> = assessed.units.iter().filter(|(_, _, r)| !r.is_empty()).collect();
+    let fanned = fans_out(assessed.units.iter().map(|(u, _, _)| u.id.as_str()), fan_out_above());
     let started = Instant::now();
     let records_in: usize = stale.iter().map(|(u, _, _)| u.inputs.iter().map(|i| i.parts().len()).sum::<usize>()).sum();
     let mut ran: BTreeMap<String, UnitRecord> = if stale.is_empty() {
@@ -178,7 +188,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
         env.reporter.line(&format!("{name:<18} running ({})", why_running(&stale, assessed.units.len())));
         let bar = env.reporter.stage_bar(name, stale.len() as u64);
         let readers = env.plan.stages.values().filter(|s| upstream_stages(s).contains(name)).count();
-        let records = execute(env.plan, stage, &stale, &new_dir, &env.memo, readers, &bar);
+        let records = execute(env.plan, stage, &stale, &new_dir, &env.memo, readers, &bar, fanned);
         bar.finish_and_clear();
         records.into_iter().map(|r| (r.id.clone(), r)).collect()
     };
@@ -205,8 +215,12 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
             _ => {}
         }
     }
-    let folded = fold(env.plan, stage, entry, records, &assessed.vanished, upstream_tainted, &new_dir)?;
+    let folded = fold(env.plan, stage, entry, records, &assessed.vanished, upstream_tainted, &new_dir, fanned)?;
     let failed = folded.failed.len();
+    if folded.moved > 0 {
+        let layout = if fanned { "two-level folders" } else { "one folder" };
+        env.reporter.line(&format!("{name:<18} {} cached file(s) moved to {layout}", folded.moved));
+    }
     if !stale.is_empty() {
         let written = folded.install.len();
         env.reporter.line(&format!(
@@ -252,7 +266,8 @@ fn why_running(stale: &[&(Unit, String, Vec<String>)], units: usize) -> String {
     format!("{} of {units} records; {first}{more}", stale.len())
 }
 
-/// Runs `stale` units of `stage` in parallel, each writing under `dir` (`dir/<output>/…`).
+/// Runs `stale` units of `stage` in parallel, each writing under `dir` (`dir/<output>/…`, one
+/// folder down when `fanned`).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn execute(
     plan: &Plan,
@@ -262,6 +277,7 @@ pub(super) fn execute(
     memo: &Arc<TableMemo>,
     readers: usize,
     bar: &indicatif::ProgressBar,
+    fanned: bool,
 ) -> Vec<UnitRecord> {
     let info = stage.stage.info();
     let base_dir = plan.file.base_dir();
@@ -269,7 +285,8 @@ pub(super) fn execute(
         .par_iter()
         .map(|(unit, key, _)| {
             let mut sink =
-                OutputSink::new(dir, &stage.name, info, &stage.params, &unit.hashes, indicatif::ProgressBar::hidden());
+                OutputSink::new(dir, &stage.name, info, &stage.params, &unit.hashes, indicatif::ProgressBar::hidden())
+                    .fanned_out(fanned);
             if readers > 0 {
                 sink = sink.keeping_tables_in(memo.clone(), readers);
             }
@@ -307,9 +324,13 @@ impl Backend for Local {
     fn run(&self, opened: Opened<'_>, reporter: &Reporter) -> anyhow::Result<RunSummary> {
         let mut opened = opened;
         let plan = opened.plan;
+        // What `keep: false` stages make again needs the whole plan assessed first; the stages
+        // that assessment settled are not assessed a second time.
+        let mut settled = BTreeMap::new();
         if plan.stages.values().any(|s| !s.keep) {
-            let remake = predict(plan, &opened.known())?.remake;
-            opened.rerun.remake = remake;
+            let prediction = predict(plan, &opened.known())?;
+            opened.rerun.remake = prediction.remake;
+            settled = prediction.settled;
         }
         let transaction = Transaction::begin(&opened.lease)?;
         let env = RunEnv {
@@ -321,6 +342,7 @@ impl Backend for Local {
             reporter,
             state: Mutex::new(RunState::default()),
             memo: Arc::new(TableMemo::new(DEFAULT_BUDGET_BYTES)),
+            settled: Mutex::new(settled),
         };
         let outcome = run_stages(&env);
         let state = env.state.into_inner().map_err(|_| anyhow!("a stage panicked"));

@@ -40,7 +40,7 @@ use super::{
     forced_stages, selected_stages, upstream_stages, Backend, Opened, Rerun, RunOptions, RunSummary, UnitProblem,
 };
 use crate::error::UserError;
-use crate::pipeline::layout::{LOCK_FILE, RUNS_DIR, STATE_DIR};
+use crate::pipeline::layout::{fan_out_above, fans_out, LOCK_FILE, RUNS_DIR, STATE_DIR};
 use crate::pipeline::lease::Lease;
 use crate::pipeline::lock::LockFile;
 use crate::pipeline::memo::TableMemo;
@@ -88,6 +88,10 @@ struct RunFile {
     /// Units of `keep: false` stages made again for the units that read them (see [`Rerun`]).
     #[serde(default)]
     remake: BTreeMap<String, BTreeMap<String, String>>,
+    /// The stages whose records go in two-level folders (`layout::placed`), decided by the
+    /// planner from all of a stage's units, so every task and the commit job agree.
+    #[serde(default)]
+    fanned: BTreeSet<String>,
 }
 
 impl RunFile {
@@ -113,6 +117,7 @@ impl RunFile {
             commit: None,
             allocation,
             remake: BTreeMap::new(),
+            fanned: BTreeSet::new(),
         })
     }
 
@@ -307,6 +312,12 @@ fn cut_shards(
         .collect()
 }
 
+/// The stages with more records than one folder should hold (`layout::fans_out`).
+fn fanned_stages(lines: &[StatusLine]) -> BTreeSet<String> {
+    let limit = fan_out_above();
+    lines.iter().filter(|l| fans_out(l.ids.iter().map(String::as_str), limit)).map(|l| l.name.clone()).collect()
+}
+
 /// Whether shard i of `stage` reads only shard i of `upstream`: both per-record, cut alike.
 fn aligned(plan: &Plan, run: &RunFile, stage: &str, upstream: &str) -> bool {
     plan.stages[stage].stage.work_units() == WorkUnits::EachRecord
@@ -334,6 +345,7 @@ fn run_in_allocation(opened: Opened<'_>, slurm: &SlurmOptions, reporter: &Report
     let run_dir = runs_dir(&output_dir).join(&id);
     let mut run = RunFile::new(&id, plan, options, slurm, Some(allocation.job_id.clone()))?;
     run.remake = prediction.remake;
+    run.fanned = fanned_stages(&prediction.lines);
     let order: Vec<String> = cut.iter().map(|(name, _, _)| name.clone()).collect();
     for (name, shards, only) in cut {
         run.shards.insert(name.clone(), shards);
@@ -446,6 +458,7 @@ fn submit_arrays(
     let lines = &prediction.lines;
     let mut run = RunFile::new(id, plan, options, slurm, None)?;
     run.remake = prediction.remake.clone();
+    run.fanned = fanned_stages(lines);
     let quote = |p: &Path| format!("'{}'", p.display().to_string().replace('\'', r"'\''"));
     let stale_units: BTreeMap<&str, (usize, usize)> =
         lines.iter().map(|l| (l.name.as_str(), (l.stale.len(), l.units))).collect();
@@ -649,7 +662,16 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let done = results.join(shard.to_string());
     let _ = std::fs::remove_dir_all(&tmp);
     let memo = Arc::new(TableMemo::new(0));
-    let ran = execute(&plan, stage, &stale, &tmp, &memo, 0, &indicatif::ProgressBar::hidden());
+    let ran = execute(
+        &plan,
+        stage,
+        &stale,
+        &tmp,
+        &memo,
+        0,
+        &indicatif::ProgressBar::hidden(),
+        run.fanned.contains(stage_name),
+    );
     if done.exists() {
         std::fs::remove_dir_all(&done)?; // an earlier attempt of this shard
     }
@@ -832,7 +854,8 @@ fn commit_manifests(
         records.retain(|r| {
             !matches!(r.outcome, UnitOutcome::Cached) || entry.is_some_and(|e| e.units.contains_key(&r.id))
         });
-        let folded = fold(plan, stage, entry, records, &vanished, upstream_tainted, &staging)?;
+        let fanned = run.fanned.contains(name);
+        let folded = fold(plan, stage, entry, records, &vanished, upstream_tainted, &staging, fanned)?;
         steps.done(&format!("{name}: folded"));
         install.extend(folded.install.keys().cloned());
         produced.extend(folded.install);
