@@ -43,6 +43,7 @@ impl super::StageType for Baseline {
     fn examples(&self) -> &'static [super::Example] {
         &[super::Example {
             title: "the study's cubic baseline removed from every channel of the loaded records",
+            data: &super::RINALDI,
             stages: "\
 baseline:
   type: baseline

@@ -166,6 +166,7 @@ impl super::StageType for SimulateRolling {
     fn examples(&self) -> &'static [super::Example] {
         &[super::Example {
             title: "the study's patient bed PB2 on four swivel casters under both horizontal components",
+            data: &super::RINALDI,
             stages: "\
 simulate_rolling:
   type: simulate_rolling
