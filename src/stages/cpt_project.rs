@@ -80,20 +80,11 @@ impl super::StageType for CptProject {
             title: "the stretcher panel's rocking angle θ(t) from two tracked markers on the plane Y = 0",
             data: &super::DEMO_CAMERA,
             stages: "\
-cpt_calibrate:
-  type: cpt_calibrate
-  inputs: [control_points]
-  params:
-    distortion: k1
-cpt_track:
-  type: cpt_track
-  inputs: [video]
-  params:
-    fps: 30
-    points: \"M1=376.3,328.0; M2=380.2,248.8\"
+calibrate: {type: cpt_calibrate, inputs: [control_points], params: {distortion: k1}}
+track: {type: cpt_track, inputs: [video], params: {fps: 30, points: \"M1=376.3,328.0; M2=380.2,248.8\"}}
 cpt_project:
   type: cpt_project
-  inputs: [cpt_track, cpt_calibrate.calibration]
+  inputs: [track, calibrate.calibration]
   params:
     plane: \"0,1,0,0\"
     points: [M1, M2]
