@@ -110,9 +110,22 @@ pub fn file_names() -> Vec<String> {
     out
 }
 
+/// Why a case cannot be made: its plan does not fit (an unknown unit, one that never moves), or
+/// a model refused to run it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CaseError {
+    #[error("{0}")]
+    Plan(String),
+    #[error(transparent)]
+    Physics(#[from] crate::physics::error::PhysicsError),
+    /// The rolling diagnosis model's refusal, as its text.
+    #[error("{0}")]
+    Model(String),
+}
+
 /// Every case's files (path in the archive, bytes), in `file_names()` order. `floor` gives the
 /// physical floor motion (m/s², 200 Hz from t = 0: horizontal E-W, vertical) of a test and floor.
-pub fn case_files(floor: impl Fn(&str, u8) -> (Vec<f64>, Vec<f64>)) -> Result<Vec<(String, Vec<u8>)>, String> {
+pub fn case_files(floor: impl Fn(&str, u8) -> (Vec<f64>, Vec<f64>)) -> Result<Vec<(String, Vec<u8>)>, CaseError> {
     let mut cases = Vec::new();
     let mut truths = Vec::new();
     for plan in &PLANS {
@@ -131,8 +144,8 @@ pub fn case_files(floor: impl Fn(&str, u8) -> (Vec<f64>, Vec<f64>)) -> Result<Ve
     Ok(cases)
 }
 
-fn make_case(plan: &Plan, ax: &[f64], az: &[f64]) -> Result<(Vec<(String, Vec<u8>)>, String), String> {
-    let (shape, mass) = rocking::preset(plan.unit).ok_or("unknown unit")?;
+fn make_case(plan: &Plan, ax: &[f64], az: &[f64]) -> Result<(Vec<(String, Vec<u8>)>, String), CaseError> {
+    let (shape, mass) = rocking::preset(plan.unit).ok_or(CaseError::Plan("unknown unit".into()))?;
     let block = Block::new(shape, mass, 9.81)?;
     let excitation = Excitation { t0_s: 0.0, dt_s: 1.0 / FS_HZ, horizontal_mps2: ax, vertical_mps2: Some(az) };
     let baseline = rocking::simulate(&block, &excitation, &Options::default())?;
@@ -141,12 +154,12 @@ fn make_case(plan: &Plan, ax: &[f64], az: &[f64]) -> Result<(Vec<(String, Vec<u8
     let (options, parameters) = match plan.effect {
         Effect::None | Effect::SensorTilt => (Options::default(), String::new()),
         Effect::MassChange => {
-            let (t0, _) = first_uplift.ok_or("the unit never rocks")?;
+            let (t0, _) = first_uplift.ok_or(CaseError::Plan("the unit never rocks".into()))?;
             let t0 = t0 + 0.4;
             // 20 % of the mass at 0.8 H leaves: the centre of mass drops.
             let (hc, h) = (block.cm_height_m, block.height_m);
             let hc_after = (hc - 0.2 * 0.8 * h) / 0.8;
-            let Shape::Rectangular { b_m, h_m, .. } = shape else { return Err("a rectangle".into()) };
+            let Shape::Rectangular { b_m, h_m, .. } = shape else { return Err(CaseError::Plan("a rectangle".into())) };
             let after = Block::new(Shape::Rectangular { b_m, h_m, f: hc_after / h - 0.5 }, 0.8 * mass, 9.81)?;
             (
                 Options { mass_change: Some(MassChange { time_s: t0, after }), ..Options::default() },
@@ -158,7 +171,7 @@ fn make_case(plan: &Plan, ax: &[f64], az: &[f64]) -> Result<(Vec<(String, Vec<u8
             )
         }
         Effect::Obstacle => {
-            let (_, side) = first_uplift.ok_or("the unit never rocks")?;
+            let (_, side) = first_uplift.ok_or(CaseError::Plan("the unit never rocks".into()))?;
             let angle = 0.6 * block.alpha_rad;
             (
                 Options { obstacle: Some(Obstacle { side, angle_rad: angle, restitution: 0.5 }), ..Options::default() },
@@ -204,7 +217,9 @@ fn make_case(plan: &Plan, ax: &[f64], az: &[f64]) -> Result<(Vec<(String, Vec<u8
             format!("{t:.4},{theta:.6}\n")
         }
     });
-    let Shape::Rectangular { b_m, h_m, f } = shape else { return Err("the demo cases are rectangles".into()) };
+    let Shape::Rectangular { b_m, h_m, f } = shape else {
+        return Err(CaseError::Plan("the demo cases are rectangles".into()));
+    };
     let equipment = format!(
         "name: {unit}\ndescription: {what} ({test}, floor {floor}); synthetic demo case\nshape: rectangular\nB_m: {b_m}\nH_m: {h_m}\nf: {f}\nmass_kg: {mass}\ng_mps2: 9.81\nsensors:\n  accelerometer:\n    file: observed_accel.csv\n    position: top centre (x=0, height H)\n    rate_hz: {FS_HZ}\n    noise_sd_mps2: {ACCEL_NOISE_MPS2}\n  camera:\n    file: observed_cpt.csv\n    quantity: rotation theta, rad\n    rate_hz: {CAMERA_HZ}\n    noise_sd_rad: {CAMERA_NOISE_RAD}\nconventions: theta > 0 = rotation about the +x corner, top moving toward +x\n",
         unit = plan.unit,
@@ -317,10 +332,10 @@ const ROLLING_ONSET_AFTER_S: f64 = 1.0;
 const ROLLING_RECORD_S: f64 = 30.0;
 const CAMERA_NOISE_M: f64 = 0.0015;
 
-fn rolling_case(plan: &RollingPlan, ax: &[f64]) -> Result<(Vec<(String, Vec<u8>)>, String), String> {
+fn rolling_case(plan: &RollingPlan, ax: &[f64]) -> Result<(Vec<(String, Vec<u8>)>, String), CaseError> {
     use crate::diagnose::rolling::RollingCase;
     use crate::physics::rolling::{self as rolling, Alteration, FrictionLaw, MassChange as Change};
-    let table = rolling::preset(plan.unit).ok_or("unknown rolling unit")?;
+    let table = rolling::preset(plan.unit).ok_or(CaseError::Plan("unknown rolling unit".into()))?;
     let cart = table.cart(rolling::Cart::default_trail_m(table.wheel_diameter_m), rolling::DEFAULT_SWIVEL_ARM_M);
     let friction = table.friction(rolling::DEFAULT_FRICTION_EPS_MPS, FrictionLaw::Regularised);
     let (yaw0_rad, steer0_rad) = table.initial_pose();
@@ -352,14 +367,14 @@ fn rolling_case(plan: &RollingPlan, ax: &[f64]) -> Result<(Vec<(String, Vec<u8>)
         camera_noise_rad: CAMERA_NOISE_RAD,
         uncertain: Vec::new(),
     };
-    let nominal = case.nominal().map_err(|e| e.to_string())?;
+    let nominal = case.nominal().map_err(|e| CaseError::Model(e.to_string()))?;
     let moved = (0..n)
         .find(|&k| nominal.x_m[k].hypot(nominal.y_m[k]) > 0.03)
-        .ok_or_else(|| format!("{}: the cart never moves 3 cm in {}", plan.id, plan.test))?;
+        .ok_or_else(|| CaseError::Plan(format!("{}: the cart never moves 3 cm in {}", plan.id, plan.test)))?;
     let t0 = moved as f64 / FS_HZ + ROLLING_ONSET_AFTER_S;
     let mass = Some(Change { dm_kg: plan.dm_kg, at_m: plan.at_m });
     let change = Alteration { mass, ramp_s: plan.ramp_s, ..Alteration::default() };
-    let truth = case.altered(&nominal, &change, t0, case.end_s(), None).map_err(|(e, _)| e)?;
+    let truth = case.altered(&nominal, &change, t0, case.end_s(), None).map_err(|(e, _)| CaseError::Model(e))?;
     let mut rng = SplitMix64::new(seed_from_label(&format!("case:{}", plan.id)));
     let mut floor_csv = String::from("time_s,ax_mps2,ay_mps2\n");
     let mut accel_csv = String::from("time_s,top_ax_mps2\n");

@@ -43,6 +43,7 @@ impl super::StageType for Baseline {
     fn examples(&self) -> &'static [super::Example] {
         &[super::Example {
             title: "the study's cubic baseline removed from every channel of the loaded records",
+            data: &super::RINALDI,
             stages: "\
 baseline:
   type: baseline
@@ -85,29 +86,53 @@ impl Stage for Baseline {
         ctx.sink.set_total(parts.len());
         parts.par_iter().try_for_each(|part| {
             let table = ctx.read_table(part)?;
-            let mut corrected =
-                correct(&table, order, &wanted).map_err(|e| anyhow::anyhow!("{}: {}", part.label, printable(&e)))?;
+            let mut corrected = correct(&table, order, &wanted)
+                .map_err(|e| anyhow::anyhow!("{}: {}", part.label, printable(&e.to_string())))?;
             corrected.metadata.extend(super::record_provenance(part));
             ctx.sink.write("records", &part.partition, corrected)
         })
     }
 }
 
+/// Why [`correct`] refuses a record (the stage prefixes the record's label).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BaselineError {
+    #[error("the table has no `time_s` column")]
+    NoTime,
+    /// Too few samples for the order (`column`: a channel shorter than its record).
+    #[error("{}{samples} samples are too few for an order-{order} baseline", column.as_ref().map_or(String::new(), |c| format!("column `{c}`: ")))]
+    TooFew { column: Option<String>, samples: usize, order: usize },
+    #[error("column `{0}` is not a float column")]
+    NotFloat(String),
+    #[error("no column `{name}`; columns: {columns}")]
+    NoColumn { name: String, columns: String },
+    #[error("`time_s` has a non-finite value at sample {sample}")]
+    NonFiniteTime { sample: usize },
+    #[error("column `{column}` has a non-finite value at sample {sample}; load it with `gaps: interpolate`")]
+    NonFinite { column: String, sample: usize },
+    #[error("column `{column}`: the order-{order} baseline fit is not finite: its values reach {peak:e} {unit}, beyond what a least-squares fit can square and sum")]
+    FitNotFinite { column: String, order: usize, peak: f64, unit: String },
+    #[error("column `{column}` has a missing value at sample {missing} followed by values (sample {next}): a baseline needs the channel's samples without gaps")]
+    Gap { column: String, missing: usize, next: usize },
+}
+
 /// The pure part of the stage: a corrected copy of `table` with its fits in the metadata.
-pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, String> {
-    let time = table.f64_column(TIME_COLUMN).ok_or_else(|| format!("the table has no `{TIME_COLUMN}` column"))?;
+pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, BaselineError> {
+    let time = table.f64_column(TIME_COLUMN).ok_or(BaselineError::NoTime)?;
     if time.len() <= order {
-        return Err(format!("{} samples are too few for an order-{order} baseline", time.len()));
+        return Err(BaselineError::TooFew { column: None, samples: time.len(), order });
     }
     for name in wanted {
         match table.column(name) {
             Some(c) if matches!(c.data, ColumnData::F64(_) | ColumnData::OptF64(_)) => {}
-            Some(_) => return Err(format!("column `{name}` is not a float column")),
-            None => return Err(format!("no column `{name}`; columns: {}", table.column_names().join(", "))),
+            Some(_) => return Err(BaselineError::NotFloat(name.clone())),
+            None => {
+                return Err(BaselineError::NoColumn { name: name.clone(), columns: table.column_names().join(", ") })
+            }
         }
     }
     if let Some(i) = time.iter().position(|t| !t.is_finite()) {
-        return Err(format!("`{TIME_COLUMN}` has a non-finite value at sample {}", i + 1));
+        return Err(BaselineError::NonFiniteTime { sample: i + 1 });
     }
     let basis = PolynomialBasis::new(time, order);
     let mut out = Table { columns: Vec::new(), metadata: table.metadata.clone() };
@@ -129,11 +154,7 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
             _ => unreachable!("selected columns are float"),
         };
         if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-            return Err(format!(
-                "column `{}` has a non-finite value at sample {}; load it with `gaps: interpolate`",
-                column.name,
-                i + 1
-            ));
+            return Err(BaselineError::NonFinite { column: column.name.clone(), sample: i + 1 });
         }
         let shorter;
         let basis = match values.len() {
@@ -142,17 +163,17 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
                 shorter = PolynomialBasis::new(&time[..n], order);
                 &shorter
             }
-            n => {
-                return Err(format!("column `{}`: {n} samples are too few for an order-{order} baseline", column.name))
-            }
+            n => return Err(BaselineError::TooFew { column: Some(column.name.clone()), samples: n, order }),
         };
         let (corrected, fit) = basis.remove(&values);
         if corrected.iter().chain(&fit.coefficients).any(|v| !v.is_finite()) {
             let peak = values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            return Err(format!(
-                "column `{}`: the order-{order} baseline fit is not finite: its values reach {peak:e} {}, beyond what a least-squares fit can square and sum",
-                column.name, column.unit
-            ));
+            return Err(BaselineError::FitNotFinite {
+                column: column.name.clone(),
+                order,
+                peak,
+                unit: column.unit.clone(),
+            });
         }
         let rms_removed =
             (values.iter().zip(&corrected).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / values.len() as f64).sqrt();
@@ -193,14 +214,10 @@ pub fn correct(table: &Table, order: usize, wanted: &[String]) -> Result<Table, 
 
 /// A nullable channel's own samples: the values before its first null, which must be the
 /// padding past its end (no value after it).
-fn own_samples(name: &str, values: &[Option<f64>]) -> Result<Vec<f64>, String> {
+fn own_samples(name: &str, values: &[Option<f64>]) -> Result<Vec<f64>, BaselineError> {
     let n = values.iter().position(Option::is_none).unwrap_or(values.len());
     if let Some(k) = values[n..].iter().position(Option::is_some) {
-        return Err(format!(
-            "column `{name}` has a missing value at sample {} followed by values (sample {}): a baseline needs the channel's samples without gaps",
-            n + 1,
-            n + k + 1
-        ));
+        return Err(BaselineError::Gap { column: name.to_string(), missing: n + 1, next: n + k + 1 });
     }
     Ok(values[..n].iter().map(|v| v.expect("before the first null")).collect())
 }
@@ -221,7 +238,7 @@ mod tests {
     fn values_too_large_to_fit_are_an_error_not_nan() {
         let mut values: Vec<f64> = (0..200).map(|k| (k as f64 * 0.3).sin()).collect();
         values[17] = 1e308;
-        let e = correct(&table(values), 3, &[]).unwrap_err();
+        let e = correct(&table(values), 3, &[]).unwrap_err().to_string();
         assert!(e.contains("column `ax_mps2`: the order-3 baseline fit is not finite"), "{e}");
         assert!(e.contains("1e308 m/s^2"), "{e}");
         let fine = correct(&table((0..200).map(|k| (k as f64 * 0.3).sin() * 1e150).collect()), 3, &[]).unwrap();
@@ -253,10 +270,40 @@ mod tests {
         let mut gap = padded;
         gap[160] = Some(1.0);
         t.columns[2].data = ColumnData::OptF64(gap);
-        let e = correct(&t, 3, &[]).unwrap_err();
+        let e = correct(&t, 3, &[]).unwrap_err().to_string();
         assert!(
             e.contains("column `az_mps2` has a missing value at sample 151 followed by values (sample 161)"),
             "{e}"
+        );
+    }
+
+    /// The refusals' messages, as users read them after the record's label.
+    #[test]
+    fn refusals_say_what_is_wrong_and_where() {
+        let t = table(vec![0.0, 1.0, f64::NAN, 3.0, 4.0]);
+        assert_eq!(
+            correct(&t, 3, &[]).unwrap_err().to_string(),
+            "column `ax_mps2` has a non-finite value at sample 3; load it with `gaps: interpolate`"
+        );
+        assert_eq!(
+            correct(&table(vec![0.0; 3]), 3, &[]).unwrap_err().to_string(),
+            "3 samples are too few for an order-3 baseline"
+        );
+        assert_eq!(
+            correct(&table(vec![0.0; 9]), 1, &["az_mps2".into()]).unwrap_err().to_string(),
+            "no column `az_mps2`; columns: time_s, ax_mps2"
+        );
+        assert_eq!(correct(&Table::new(), 1, &[]).unwrap_err().to_string(), "the table has no `time_s` column");
+        let mut short = table(vec![0.0; 9]);
+        short.push(Column {
+            name: "az_mps2".into(),
+            unit: String::new(),
+            description: String::new(),
+            data: ColumnData::OptF64(vec![Some(1.0), None, None, None, None, None, None, None, None]),
+        });
+        assert_eq!(
+            correct(&short, 1, &[]).unwrap_err().to_string(),
+            "column `az_mps2`: 1 samples are too few for an order-1 baseline"
         );
     }
 
@@ -266,6 +313,6 @@ mod tests {
         if let ColumnData::F64(time) = &mut t.columns[0].data {
             time[4] = f64::INFINITY;
         }
-        assert!(correct(&t, 1, &[]).unwrap_err().contains("`time_s` has a non-finite value at sample 5"));
+        assert!(correct(&t, 1, &[]).unwrap_err().to_string().contains("`time_s` has a non-finite value at sample 5"));
     }
 }

@@ -41,6 +41,7 @@ impl super::StageType for Compare {
     fn examples(&self) -> &'static [super::Example] {
         &[super::Example {
             title: "what the cubic baseline changed: corrected against loaded accelerations",
+            data: &super::RINALDI,
             stages: "\
 baseline:
   type: baseline

@@ -56,7 +56,21 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
-impl super::StageType for CptCalibrate {}
+impl super::StageType for CptCalibrate {
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title: "the demo camera from its 14 control points, with radial distortion k1",
+            data: &super::DEMO_CAMERA,
+            stages: "\
+cpt_calibrate:
+  type: cpt_calibrate
+  inputs: [control_points]
+  params:
+    distortion: k1
+",
+        }]
+    }
+}
 
 impl Stage for CptCalibrate {
     fn info(&self) -> &'static StageInfo {

@@ -74,7 +74,26 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 }
 });
 
-impl super::StageType for CptProject {}
+impl super::StageType for CptProject {
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title: "the stretcher panel's rocking angle θ(t) from two tracked markers on the plane Y = 0",
+            data: &super::DEMO_CAMERA,
+            stages: "\
+calibrate: {type: cpt_calibrate, inputs: [control_points], params: {distortion: k1}}
+track: {type: cpt_track, inputs: [video], params: {fps: 30, points: \"M1=376.3,328.0; M2=380.2,248.8\"}}
+cpt_project:
+  type: cpt_project
+  inputs: [track, calibrate.calibration]
+  params:
+    plane: \"0,1,0,0\"
+    points: [M1, M2]
+    unit_motion: rocking
+    theta_zero: upright
+",
+        }]
+    }
+}
 
 impl Stage for CptProject {
     fn info(&self) -> &'static StageInfo {
@@ -182,17 +201,25 @@ pub fn parse_plane(text: &str) -> Result<Plane, UserError> {
     Ok(Plane { a: values[0], b: values[1], c: values[2], d: values[3] })
 }
 
-fn camera_of(table: &Table) -> Result<Camera, String> {
+/// Why a calibration table gives no camera.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+enum CameraError {
+    /// An element `p<row><column>` of the projection matrix is missing.
+    #[error("the calibration has no p{0}{1}")]
+    Missing(usize, usize),
+    #[error("the calibration's P has a singular 3×3 block")]
+    Singular,
+}
+
+fn camera_of(table: &Table) -> Result<Camera, CameraError> {
     let value = |name: &str| table.f64_column(name).and_then(|v| v.first().copied());
     let mut p = [[0.0; 4]; 3];
     for (r, row) in p.iter_mut().enumerate() {
         for (c, cell) in row.iter_mut().enumerate() {
-            *cell =
-                value(&format!("p{}{}", r + 1, c + 1)).ok_or(format!("the calibration has no p{}{}", r + 1, c + 1))?;
+            *cell = value(&format!("p{}{}", r + 1, c + 1)).ok_or(CameraError::Missing(r + 1, c + 1))?;
         }
     }
-    Camera::from_projection(&p, value("k1").unwrap_or(0.0), value("k2").unwrap_or(0.0))
-        .ok_or_else(|| "the calibration's P has a singular 3×3 block".to_string())
+    Camera::from_projection(&p, value("k1").unwrap_or(0.0), value("k2").unwrap_or(0.0)).ok_or(CameraError::Singular)
 }
 
 type Projected = (Table, Option<Table>, serde_json::Value);
@@ -368,4 +395,25 @@ fn figure(motion: &Table, unit_motion: UnitMotion, label: &str) -> anyhow::Resul
         });
     }
     render_png(&format!("unit motion ({unit_motion}): {label}"), &panels, 1100, 1000).map_err(anyhow::Error::msg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::table::Column;
+
+    /// A calibration table lacking an element, or with a singular left 3×3 block, is refused
+    /// with the message the run prints after the calibration's label.
+    #[test]
+    fn a_calibration_without_a_camera_says_why() {
+        let mut table = Table::new();
+        for r in 1..=3 {
+            for c in 1..=4 {
+                table.push(Column::f64(&format!("p{r}{c}"), "", "", vec![0.0]));
+            }
+        }
+        assert_eq!(camera_of(&table).unwrap_err().to_string(), "the calibration's P has a singular 3×3 block");
+        table.columns.retain(|c| c.name != "p23");
+        assert_eq!(camera_of(&table).unwrap_err().to_string(), "the calibration has no p23");
+    }
 }

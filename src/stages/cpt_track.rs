@@ -85,7 +85,22 @@ static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
 /// Frames decoded per batch: enough to keep every core decoding.
 const BATCH: usize = 16;
 
-impl super::StageType for CptTrack {}
+impl super::StageType for CptTrack {
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title: "the four markers through the video, started where a person clicks them in the first frame",
+            data: &super::DEMO_CAMERA,
+            stages: "\
+cpt_track:
+  type: cpt_track
+  inputs: [video]
+  params:
+    fps: 30
+    points: \"M1=376.3,328.0; M2=380.2,248.8; M3=549.7,212.6; M4=613.4,205.8\"
+",
+        }]
+    }
+}
 
 impl Stage for CptTrack {
     fn info(&self) -> &'static StageInfo {

@@ -43,7 +43,41 @@ impl super::StageType for DetectToppling {
     fn shown(&self) -> &'static [(&'static str, super::Shown)] {
         &[("events", super::Shown::Toppling)]
     }
+
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title: "the top accelerometers of the shared cases: the four rocking units that overturn, at the times \
+                    their truth files give, and none of the four carts on casters",
+            data: &TOP_ACCELEROMETERS,
+            stages: "\
+detect_toppling:
+  type: detect_toppling
+  inputs: [load]
+  params:
+    channels: [top_ax_mps2]
+",
+        }]
+    }
 }
+
+/// The top accelerometers of the shared rocking (`demo`) and rolling (`rolling_demo`) cases.
+const TOP_ACCELEROMETERS: super::ExampleData = super::ExampleData {
+    what: "the shared cases' top accelerometers",
+    head: "\
+inputs:
+  tops:
+    description: a unit's top accelerometer (in-plane, 200 Hz) in each shared case, rocking units and carts
+    format: csv
+    path: ../shared/cases/{set}/{case}/observed_accel.csv
+    time_column: time_s
+    columns:
+      top_ax_mps2: {column: top_ax_mps2, unit: m/s^2}
+stages:
+  load:
+    type: load
+    inputs: [tops]
+",
+};
 
 impl Stage for DetectToppling {
     fn info(&self) -> &'static StageInfo {

@@ -18,6 +18,9 @@ pub enum StageError {
     /// The model the stage runs refuses the record or its parameters, or stopped.
     #[error(transparent)]
     Physics(#[from] PhysicsError),
+    /// The record's figure could not be drawn.
+    #[error("drawing the figure: {0}")]
+    Figure(#[from] crate::plot::PlotError),
 }
 
 /// The float column `name` of `table`, or the error naming the columns it has.

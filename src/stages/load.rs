@@ -55,7 +55,58 @@ impl super::StageType for Load {
     fn shown(&self) -> &'static [(&'static str, super::Shown)] {
         &[("status", super::Shown::RecordStatus)]
     }
+
+    fn examples(&self) -> &'static [super::Example] {
+        &[
+            super::Example {
+                title: "two NIED stations, one file per component, each read as one record in m/s² with its axes from \
+                    the files' `Dir.` lines",
+                data: &KNET,
+                stages: "",
+            },
+            super::Example {
+                title: "every shared record file, each read by the format its content tells (one record per file); \
+                    `on_error: skip` lists a file that cannot be read in `flagged` and goes on",
+                data: &ARCHIVE,
+                stages: "",
+            },
+        ]
+    }
 }
+
+/// Every file of the shared records, told by content.
+const ARCHIVE: super::ExampleData = super::ExampleData {
+    what: "the shared records, 18 files of 8 agencies",
+    head: "\
+inputs:
+  archive:
+    description: the shared strong-motion files as their agencies ship them, one folder per agency
+    format: auto
+    path: ../shared/data/records/{agency}/{file}
+    on_error: skip
+stages:
+  load:
+    type: load
+    inputs: [archive]
+",
+};
+
+/// The shared K-NET (`.EW`, `.NS`, `.UD`) and KiK-net surface (`.EW2`, `.NS2`, `.UD2`) records.
+const KNET: super::ExampleData = super::ExampleData {
+    what: "the shared K-NET and KiK-net records",
+    head: "\
+inputs:
+  knet:
+    description: K-NET AOM005 (Jan 2018) and KiK-net AICH04 (surface sensor, Oct 2000), counts with scale factors
+    format: knet
+    path: ../shared/data/records/knet/{station}.{component}
+    components: {key: component}
+stages:
+  load:
+    type: load
+    inputs: [knet]
+",
+};
 
 impl Stage for Load {
     fn info(&self) -> &'static StageInfo {

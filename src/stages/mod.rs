@@ -114,21 +114,32 @@ pub trait StageType: Stage {
     }
 }
 
-/// One documented use of a stage type: the `stages:` entries of a pipeline that reads
-/// [`EXAMPLE_INPUTS`], among them one named as the stage type (the stage shown).
+/// One documented use of a stage type: a pipeline on data anyone here has ([`ExampleData`]),
+/// one of its stages named as the stage type (the stage shown).
 pub struct Example {
     /// What it shows, in one line.
     pub title: &'static str,
-    /// YAML: the entries under `stages:` after [`EXAMPLE_INPUTS`]'s `load` (not indented).
+    /// The sources it reads and the stages loading them.
+    pub data: &'static ExampleData,
+    /// YAML: the entries under `stages:` after the data's (not indented).
     pub stages: &'static str,
 }
 
-/// The head of every example pipeline: the shared Rinaldi record of Northridge 1994 (three
-/// components in PEER AT2 files, `ax_mps2`, `ay_mps2`, `az_mps2`) loaded by a stage `load`;
-/// paths are relative to a pipeline in the project's root folder.
-pub const EXAMPLE_INPUTS: &str = "\
-version: 1
-output_dir: out
+/// The head of example pipelines: their sources and the stages loading them. Paths are relative
+/// to a pipeline in the project's root folder: the shared data (`../shared`), or the demo archive
+/// as `shakeflow demo-archive runs/demo-archive` writes it.
+pub struct ExampleData {
+    /// What the sources are, as docs/stages.md names them.
+    pub what: &'static str,
+    /// YAML: `inputs:`, then `stages:` and the stages loading the sources (indented as in the file).
+    pub head: &'static str,
+}
+
+/// The shared Rinaldi record of Northridge 1994 (three components in PEER AT2 files, `ax_mps2`,
+/// `ay_mps2`, `az_mps2`) loaded by a stage `load`.
+pub const RINALDI: ExampleData = ExampleData {
+    what: "the shared Rinaldi record",
+    head: "\
 inputs:
   rinaldi:
     description: Rinaldi Receiving Station, Northridge 1994 (PEER NGA-West2), three components
@@ -140,13 +151,32 @@ stages:
   load:
     type: load
     inputs: [rinaldi]
-";
+",
+};
+
+/// The demo archive's camera: its surveyed control points and its video's frames (no stage loads
+/// them; the `cpt_*` stages read them).
+pub const DEMO_CAMERA: ExampleData = ExampleData {
+    what: "the demo archive's camera (`shakeflow demo-archive runs/demo-archive` writes it)",
+    head: "\
+inputs:
+  control_points:
+    description: the demo camera's 14 surveyed control points (world mm and pixels measured by hand, 0.5 px noise)
+    format: control_points
+    path: runs/demo-archive/cpt/control_points.csv
+  video:
+    description: 960x540, 30 fps frames of a rocking stretcher panel (markers M1 low, M2 high) and a rolling cart top (M3, M4)
+    format: frames
+    path: runs/demo-archive/cpt/frames
+stages:
+",
+};
 
 impl Example {
     /// The whole pipeline.
     pub fn pipeline(&self) -> String {
         let entries: String = self.stages.lines().map(|line| format!("  {line}\n")).collect();
-        format!("{EXAMPLE_INPUTS}{entries}")
+        format!("version: 1\noutput_dir: out\n{}{entries}", self.data.head)
     }
 }
 

@@ -63,7 +63,8 @@ fn write_markdown(out: &mut String) -> std::fmt::Result {
         for example in stage.examples() {
             writeln!(
                 out,
-                "\nExample, run as a test on the shared records: {}.\n\n```yaml\n{}```",
+                "\nExample, run as a test on {}: {}.\n\n```yaml\n{}```",
+                example.data.what,
                 example.title,
                 example.pipeline()
             )?;

@@ -126,6 +126,7 @@ impl super::StageType for Report {
         &[super::Example {
             title:
                 "the study report of a rocking simulation: the unit's runs, what the report lacked, the records loaded",
+            data: &super::RINALDI,
             stages: "\
 baseline:
   type: baseline

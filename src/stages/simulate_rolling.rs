@@ -8,6 +8,7 @@ use std::sync::LazyLock;
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
 
+use super::error::StageError;
 use super::{Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::physics::rolling::{
     self, simulate, Cart, EventKind, Excitation, Friction, FrictionLaw, LateralSlip, Method, Options, Response,
@@ -167,6 +168,7 @@ impl super::StageType for SimulateRolling {
     fn examples(&self) -> &'static [super::Example] {
         &[super::Example {
             title: "the study's patient bed PB2 on four swivel casters under both horizontal components",
+            data: &super::RINALDI,
             stages: "\
 simulate_rolling:
   type: simulate_rolling
@@ -371,40 +373,36 @@ impl Setup {
         table: &Table,
         params: &SimulateRollingParams,
         record: &str,
-    ) -> Result<(Table, Table, Option<Vec<u8>>), String> {
-        let time = table.f64_column(TIME_COLUMN).ok_or("no time_s column")?;
+    ) -> Result<(Table, Table, Option<Vec<u8>>), StageError> {
+        let time = table.f64_column(TIME_COLUMN).ok_or_else(|| StageError::Record("no time_s column".into()))?;
         let column = |name: &str| {
             table.f64_column(name).ok_or_else(|| {
-                format!(
+                StageError::Record(format!(
                     "no float column `{name}` (set x_channel / y_channel); columns: {}",
                     table.column_names().join(", ")
-                )
+                ))
             })
         };
         let (x_name, y_name) = (params.x_channel.as_str(), params.y_channel.as_str());
         let (ax, ay) = (column(x_name)?, column(y_name)?);
         let n = time.len();
         if n < 2 {
-            return Err(format!("{n} sample(s): the simulation needs at least 2"));
+            return Err(StageError::Record(format!("{n} sample(s): the simulation needs at least 2")));
         }
         let step = time[1] - time[0];
         if let Some(k) = (1..n).find(|&k| ((time[k] - time[k - 1]) - step).abs() > 1e-6 * step.abs()) {
-            return Err(format!(
+            return Err(StageError::Record(format!(
                 "time is not uniformly sampled: the step at t = {} s is {} s, the record's first step {step} s; resample the record (a source's `non_uniform: resample`)",
                 time[k - 1],
                 time[k] - time[k - 1]
-            ));
+            )));
         }
         let dt = (time[n - 1] - time[0]) / (n - 1) as f64;
         let excitation = Excitation { t0_s: time[0], dt_s: dt, ax_mps2: ax, ay_mps2: ay };
         let response = simulate(&self.cart, &self.friction, &excitation, &self.options)?;
         let trajectory = self.trajectory(time, ax, ay, &response, x_name, y_name);
         let events = self.events(time, &response);
-        let png = if params.figure {
-            Some(self.figure(record, time, ax, ay, &response).map_err(|e| format!("drawing the figure: {e}"))?)
-        } else {
-            None
-        };
+        let png = if params.figure { Some(self.figure(record, time, ax, ay, &response)?) } else { None };
         Ok((trajectory, events, png))
     }
 

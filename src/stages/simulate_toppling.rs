@@ -102,6 +102,7 @@ impl super::StageType for SimulateToppling {
     fn examples(&self) -> &'static [super::Example] {
         &[super::Example {
             title: "the study's PS2 unit on the baseline-corrected record, both horizontal and vertical shaking",
+            data: &super::RINALDI,
             stages: "\
 baseline:
   type: baseline

@@ -69,6 +69,7 @@ impl super::StageType for Synchronize {
         &[super::Example {
             title:
                 "a second DAQ (here the same record loaded again, so the lag found is 0) put on the reference's clock",
+            data: &super::RINALDI,
             stages: "\
 daq2:
   type: load

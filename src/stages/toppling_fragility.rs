@@ -61,6 +61,7 @@ impl super::StageType for TopplingFragility {
     fn examples(&self) -> &'static [super::Example] {
         &[super::Example {
             title: "PS2's overturning fragility from the record scaled to three intensities",
+            data: &super::RINALDI,
             stages: "\
 toppling_fragility:
   type: toppling_fragility

@@ -64,7 +64,60 @@ impl super::StageType for TransferFunction {
     fn shown(&self) -> &'static [(&'static str, super::Shown)] {
         &[("identified", super::Shown::Frequencies), ("spectra", super::Shown::Spectra)]
     }
+
+    fn examples(&self) -> &'static [super::Example] {
+        &[super::Example {
+            title: "a fixed-base frame's fundamental frequency (1.0 Hz) from its ground record and its 4th floor's \
+                    response; the floor record starts 1.31 s into the ground record",
+            data: &GROUND_AND_FLOOR,
+            stages: "\
+synchronize:
+  type: synchronize
+  inputs: [load_floor, load_ground]
+  params:
+    target_channel: ax_mps2
+    join: case
+    known_lag_s: -1.31
+transfer_function:
+  type: transfer_function
+  inputs: [synchronize]
+  params:
+    pairs: [ax_mps2 -> floor4_ax_mps2]
+    band_min_hz: 0.5
+    band_max_hz: 3.0
+    segment_s: 8.0
+",
+        }]
+    }
 }
+
+/// The shared case demo_03: a 4th floor's record and the ground record it was made from.
+const GROUND_AND_FLOOR: super::ExampleData = super::ExampleData {
+    what: "the shared case demo_03 and its ground record",
+    head: "\
+inputs:
+  ground:
+    description: Northridge 1994, Sylmar Converter Station (PEER NGA-West2 RSN1084), the motion under case demo_03
+    format: at2
+    path: ../shared/data/ground_motions/RSN1084_NORTHR_SCS052.AT2
+    partition: {case: demo_03}
+  floor:
+    description: the 4th floor of a fixed-base frame (period 1.0 s, 5 % damping) under it, 200 Hz
+    format: csv
+    path: ../shared/cases/demo/demo_03/floor.csv
+    partition: {case: demo_03, floor: \"4\"}
+    time_column: time_s
+    columns:
+      ax_mps2: {column: ax_mps2, unit: m/s^2}
+stages:
+  load_ground:
+    type: load
+    inputs: [ground]
+  load_floor:
+    type: load
+    inputs: [floor]
+",
+};
 
 impl Stage for TransferFunction {
     fn info(&self) -> &'static StageInfo {
