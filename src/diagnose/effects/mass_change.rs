@@ -15,7 +15,7 @@ fn after(case: &Case, f: f64) -> Result<Block, PhysicsError> {
         // A trapezoid's rocking is set by its base and CM: its rectangle equivalent (Table 5).
         Shape::Trapezoidal { b1_m, h_m, .. } => (b1_m, h_m),
     };
-    Ok(Block::new(Shape::Rectangular { b_m: b, h_m: h, f }, case.block.mass_kg, case.block.g_mps2)?)
+    Block::new(Shape::Rectangular { b_m: b, h_m: h, f }, case.block.mass_kg, case.block.g_mps2)
 }
 
 fn nominal_f(case: &Case) -> f64 {
