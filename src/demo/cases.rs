@@ -118,7 +118,10 @@ pub enum CaseError {
     Plan(String),
     #[error(transparent)]
     Physics(#[from] crate::physics::error::PhysicsError),
-    /// The rolling diagnosis model's refusal, as its text.
+    /// The rolling diagnosis model's refusal of the nominal run.
+    #[error(transparent)]
+    Diagnose(#[from] crate::diagnose::error::DiagnoseError),
+    /// The rolling diagnosis model's refusal of an altered run, as its text.
     #[error("{0}")]
     Model(String),
 }
@@ -367,7 +370,7 @@ fn rolling_case(plan: &RollingPlan, ax: &[f64]) -> Result<(Vec<(String, Vec<u8>)
         camera_noise_rad: CAMERA_NOISE_RAD,
         uncertain: Vec::new(),
     };
-    let nominal = case.nominal().map_err(|e| CaseError::Model(e.to_string()))?;
+    let nominal = case.nominal()?;
     let moved = (0..n)
         .find(|&k| nominal.x_m[k].hypot(nominal.y_m[k]) > 0.03)
         .ok_or_else(|| CaseError::Plan(format!("{}: the cart never moves 3 cm in {}", plan.id, plan.test)))?;
