@@ -103,10 +103,16 @@ impl StatMemo {
     }
 }
 
-/// How the memo names a file: its absolute path (not resolved: no system call), so a run from
-/// another folder or node finds it.
+/// How the memo names a file: its absolute path (not resolved), so a run from another folder or
+/// node finds it. The working folder is asked once per process (shakeflow never changes it), not
+/// once per file.
 fn memo_key(path: &Path) -> PathBuf {
-    std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf())
+    static CWD: OnceLock<Option<PathBuf>> = OnceLock::new();
+    let absolute = match CWD.get_or_init(|| std::env::current_dir().ok()) {
+        Some(cwd) if path.is_relative() => std::path::absolute(cwd.join(path)),
+        _ => std::path::absolute(path),
+    };
+    absolute.unwrap_or_else(|_| path.to_path_buf())
 }
 
 /// From now on [`hash_file`] goes through the memo saved in `file`. The first call in a
@@ -271,6 +277,13 @@ impl<W: std::io::Write> std::io::Write for HashingWriter<W> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn memo_keys_are_the_absolute_paths_the_working_folder_gives() {
+        for path in ["a/b.csv", "./a/../b.csv", "/x/./y.csv", "/x/../y.csv"] {
+            assert_eq!(memo_key(Path::new(path)), std::path::absolute(path).unwrap(), "{path}");
+        }
+    }
 
     #[test]
     fn dir_hash_depends_on_names_and_contents_only() {

@@ -75,23 +75,48 @@ pub fn normalize<'v>(
     Ok(out)
 }
 
-fn check(spec: &ParamSpec, value: Value) -> Result<Value, String> {
+/// Why a value does not fit its parameter's declaration; [`normalize`] names the parameter.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+enum ValueError {
+    /// Of the wrong kind: what was expected (`a number`, `text`, …).
+    #[error("expected {0}")]
+    Expected(&'static str),
+    #[error("expected one of {options}, found {found}")]
+    NotAChoice { options: String, found: Value },
+    #[error("expected a list of {len} numbers, like [{like}], found {found}")]
+    NotNNumbers { len: usize, like: String, found: Value },
+    #[error("expected a list of numbers, like [1, 2.5], found {found}")]
+    NotNumbers { found: Value },
+    #[error("{value} is outside the allowed range {lo} to {hi}")]
+    OutOfRange { value: f64, lo: f64, hi: f64 },
+}
+
+/// Why a `--set` assignment does not parse.
+#[derive(Debug, thiserror::Error)]
+pub enum SetError {
+    #[error("`--set {0}` must look like key=value")]
+    NotKeyValue(String),
+    #[error("`--set {assignment}`: {source}")]
+    Yaml { assignment: String, source: serde_yaml::Error },
+}
+
+fn check(spec: &ParamSpec, value: Value) -> Result<Value, ValueError> {
     if value.is_null() && spec.default == Some("null") {
         return Ok(value);
     }
     let checked = match spec.kind {
-        ParamKind::Float => value.as_f64().map(Value::from).ok_or("expected a number")?,
-        ParamKind::Int => value.as_i64().map(Value::from).ok_or("expected a whole number")?,
-        ParamKind::Bool => value.as_bool().map(Value::from).ok_or("expected true or false")?,
-        ParamKind::Str => value.as_str().map(Value::from).ok_or("expected text")?,
+        ParamKind::Float => value.as_f64().map(Value::from).ok_or(ValueError::Expected("a number"))?,
+        ParamKind::Int => value.as_i64().map(Value::from).ok_or(ValueError::Expected("a whole number"))?,
+        ParamKind::Bool => value.as_bool().map(Value::from).ok_or(ValueError::Expected("true or false"))?,
+        ParamKind::Str => value.as_str().map(Value::from).ok_or(ValueError::Expected("text"))?,
         ParamKind::Choice(options) => match value.as_str() {
             Some(s) if options.contains(&s) => Value::from(s),
-            _ => return Err(format!("expected one of {}, found {value}", options.join(", "))),
+            _ => return Err(ValueError::NotAChoice { options: options.join(", "), found: value }),
         },
         ParamKind::StrList => match &value {
             Value::String(s) => Value::from(vec![s.clone()]),
             Value::Array(items) if items.iter().all(Value::is_string) => value,
-            _ => return Err("expected a list of names".into()),
+            _ => return Err(ValueError::Expected("a list of names")),
         },
         ParamKind::FloatList(len) => match &value {
             // A single number is a list of one where any length will do.
@@ -101,14 +126,12 @@ fn check(spec: &ParamSpec, value: Value) -> Result<Value, String> {
             }
             _ => {
                 return Err(match len {
-                    Some(n) => {
-                        format!("expected a list of {n} numbers, like [{}], found {value}", vec!["0"; n].join(", "))
-                    }
-                    None => format!("expected a list of numbers, like [1, 2.5], found {value}"),
+                    Some(n) => ValueError::NotNNumbers { len: n, like: vec!["0"; n].join(", "), found: value },
+                    None => ValueError::NotNumbers { found: value },
                 })
             }
         },
-        ParamKind::Path => value.as_str().map(Value::from).ok_or("expected a file path")?,
+        ParamKind::Path => value.as_str().map(Value::from).ok_or(ValueError::Expected("a file path"))?,
     };
     if let Some((lo, hi)) = spec.range {
         let numbers = match &checked {
@@ -116,7 +139,7 @@ fn check(spec: &ParamSpec, value: Value) -> Result<Value, String> {
             other => other.as_f64().into_iter().collect::<Vec<_>>(),
         };
         if let Some(x) = numbers.into_iter().find(|x| !(lo..=hi).contains(x)) {
-            return Err(format!("{x} is outside the allowed range {lo} to {hi}"));
+            return Err(ValueError::OutOfRange { value: x, lo, hi });
         }
     }
     Ok(checked)
@@ -128,10 +151,10 @@ pub fn yaml_to_json(value: &serde_yaml::Value) -> Value {
 }
 
 /// Parses a `--set key=value` string the way YAML would (`3` is a number, `[a, b]` a list).
-pub fn parse_set(assignment: &str) -> Result<(String, Value), String> {
-    let (key, raw) =
-        assignment.split_once('=').ok_or_else(|| format!("`--set {assignment}` must look like key=value"))?;
-    let yaml: serde_yaml::Value = serde_yaml::from_str(raw).map_err(|e| format!("`--set {assignment}`: {e}"))?;
+pub fn parse_set(assignment: &str) -> Result<(String, Value), SetError> {
+    let (key, raw) = assignment.split_once('=').ok_or_else(|| SetError::NotKeyValue(assignment.into()))?;
+    let yaml: serde_yaml::Value =
+        serde_yaml::from_str(raw).map_err(|source| SetError::Yaml { assignment: assignment.into(), source })?;
     Ok((key.trim().to_string(), yaml_to_json(&yaml)))
 }
 
@@ -331,6 +354,31 @@ mod tests {
     fn set_values_parse_as_yaml() {
         assert_eq!(parse_set("order=2").unwrap(), ("order".into(), json!(2)));
         assert_eq!(parse_set("columns=[a, b]").unwrap().1, json!(["a", "b"]));
-        assert!(parse_set("order").is_err());
+        assert_eq!(parse_set("order").unwrap_err().to_string(), "`--set order` must look like key=value");
+        let yaml = parse_set("order=[1").unwrap_err().to_string();
+        assert!(yaml.starts_with("`--set order=[1`: "), "{yaml}");
+    }
+
+    /// The wording of every refusal of a value, as users read it after `parameter `k` of `s`: `.
+    #[test]
+    fn value_refusals_keep_their_wording() {
+        let spec = |kind, range| ParamSpec { name: "k", kind, default: None, unit: "", description: "", range };
+        let refuse = |kind, range, value| check(&spec(kind, range), value).unwrap_err().to_string();
+        assert_eq!(refuse(ParamKind::Float, None, json!("x")), "expected a number");
+        assert_eq!(refuse(ParamKind::Int, None, json!(1.5)), "expected a whole number");
+        assert_eq!(refuse(ParamKind::Bool, None, json!(1)), "expected true or false");
+        assert_eq!(refuse(ParamKind::Str, None, json!(1)), "expected text");
+        assert_eq!(refuse(ParamKind::Path, None, json!(1)), "expected a file path");
+        assert_eq!(refuse(ParamKind::StrList, None, json!([1])), "expected a list of names");
+        assert_eq!(refuse(ParamKind::Choice(&["a", "b"]), None, json!("c")), "expected one of a, b, found \"c\"");
+        assert_eq!(
+            refuse(ParamKind::FloatList(Some(2)), None, json!([1])),
+            "expected a list of 2 numbers, like [0, 0], found [1]"
+        );
+        assert_eq!(
+            refuse(ParamKind::FloatList(None), None, json!("x")),
+            "expected a list of numbers, like [1, 2.5], found \"x\""
+        );
+        assert_eq!(refuse(ParamKind::Float, Some((0.0, 1.5)), json!(2.5)), "2.5 is outside the allowed range 0 to 1.5");
     }
 }

@@ -32,15 +32,24 @@ fn push_literal(pieces: &mut Vec<Piece>, text: &str) {
     }
 }
 
-fn parse_template(template: &str) -> Result<Vec<Piece>, String> {
+/// Why a path template does not parse.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+enum TemplateError {
+    #[error("unclosed `{{` in `{template}`")]
+    Unclosed { template: String },
+    #[error("`{{{key}}}` in `{template}` is not a valid partition key (letters, digits, _)")]
+    BadKey { key: String, template: String },
+}
+
+fn parse_template(template: &str) -> Result<Vec<Piece>, TemplateError> {
     let mut pieces = Vec::new();
     let mut rest = template;
     while let Some(open) = rest.find('{') {
         push_literal(&mut pieces, &rest[..open]);
-        let close = rest[open..].find('}').ok_or_else(|| format!("unclosed `{{` in `{template}`"))? + open;
+        let close = rest[open..].find('}').ok_or_else(|| TemplateError::Unclosed { template: template.into() })? + open;
         let key = &rest[open + 1..close];
         if key.is_empty() || !key.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
-            return Err(format!("`{{{key}}}` in `{template}` is not a valid partition key (letters, digits, _)"));
+            return Err(TemplateError::BadKey { key: key.into(), template: template.into() });
         }
         pieces.push(Piece::Key(key.to_string()));
         rest = &rest[close + 1..];
@@ -78,7 +87,7 @@ pub fn resolve(
     constant: &std::collections::BTreeMap<String, String>,
     folders: bool,
 ) -> Result<Vec<MatchedFile>, UserError> {
-    let pieces = parse_template(pattern).map_err(UserError::new)?;
+    let pieces = parse_template(pattern).map_err(|e| UserError::new(e.to_string()))?;
     let has_keys = pieces.iter().any(|p| matches!(p, Piece::Key(_)));
     let glob_pattern = glob_of(&pieces);
     let is_glob = glob_pattern.contains(['*', '?', '[']);
@@ -138,7 +147,7 @@ fn match_path(base_dir: &Path, glob_pattern: &str, pieces: &[Piece], path: &Path
 /// A `components:` source's files with the component `key` taken out of their partitions: the
 /// files whose other keys agree are one record. Refuses a `key` that `pattern` does not name.
 pub fn group_components(pattern: &str, mut files: Vec<MatchedFile>, key: &str) -> Result<Vec<MatchedFile>, UserError> {
-    let pieces = parse_template(pattern).map_err(UserError::new)?;
+    let pieces = parse_template(pattern).map_err(|e| UserError::new(e.to_string()))?;
     if !pieces.contains(&Piece::Key(key.to_string())) {
         return Err(UserError::new(format!(
             "`components: {{key: {key}}}` names no `{{{key}}}` of the path `{pattern}`"
@@ -216,6 +225,12 @@ mod tests {
         assert_eq!(partitions, ["motion=BI-2", "motion=WN-6", "motion=FB-4"]);
         // A `*` takes no `/`, and may take nothing.
         let pieces = parse_template("a*/{k}.txt").unwrap();
+        // The refusals' wording, pinned (users see it as the error of `run`).
+        assert_eq!(parse_template("x/{a.csv").unwrap_err().to_string(), "unclosed `{` in `x/{a.csv`");
+        assert_eq!(
+            parse_template("{a-b}.csv").unwrap_err().to_string(),
+            "`{a-b}` in `{a-b}.csv` is not a valid partition key (letters, digits, _)"
+        );
         assert_eq!(match_pieces("a/x.txt", &pieces).unwrap(), vec![("k".into(), "x".into())]);
         assert!(match_pieces("ab/c/x.txt", &pieces).is_none());
     }

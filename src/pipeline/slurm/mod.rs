@@ -90,6 +90,12 @@ impl Default for Backoff {
 /// restarting) before it gives up.
 const QUERY_FAILURES_TOLERATED: u32 = 5;
 
+/// A Slurm command that ran and failed: its standard error (its exit status when that is empty),
+/// which the caller words into a [`UserError`].
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+struct Failed(String);
+
 impl Slurm {
     pub fn new() -> Slurm {
         Slurm { conf: None }
@@ -101,7 +107,7 @@ impl Slurm {
 
     /// Runs `program args…` (with `stdin` on its standard input); its standard output, or its
     /// standard error as the error when it failed.
-    fn run(&self, program: &str, args: &[String], stdin: Option<&str>) -> Result<Result<String, String>, UserError> {
+    fn run(&self, program: &str, args: &[String], stdin: Option<&str>) -> Result<Result<String, Failed>, UserError> {
         let mut command = Command::new(program);
         command.args(args).stdin(if stdin.is_some() { Stdio::piped() } else { Stdio::null() });
         command.stdout(Stdio::piped()).stderr(Stdio::piped());
@@ -126,7 +132,7 @@ impl Slurm {
         Ok(if out.status.success() {
             Ok(stdout)
         } else {
-            Err(if stderr.is_empty() { out.status.to_string() } else { stderr })
+            Err(Failed(if stderr.is_empty() { out.status.to_string() } else { stderr }))
         })
     }
 
@@ -221,7 +227,7 @@ impl Slurm {
             let args = sacct_args(&names, now.saturating_sub(since));
             match self.run("sacct", &args, None)? {
                 Ok(text) => return Ok(status.apply(&status::parse_status_lines(&text))),
-                Err(e) if e.contains("accounting storage is disabled") => {}
+                Err(e) if e.0.contains("accounting storage is disabled") => {}
                 Err(e) => return Err(UserError::new(format!("`sacct` failed: {e}"))),
             }
         }
@@ -298,7 +304,7 @@ impl Slurm {
         }
         match self.run("scancel", &ids, None)? {
             Ok(_) => Ok(()),
-            Err(e) if e.contains("already completing or completed") || e.contains("Invalid job id") => Ok(()),
+            Err(e) if e.0.contains("already completing or completed") || e.0.contains("Invalid job id") => Ok(()),
             Err(e) => Err(UserError::new(format!("`scancel {}` failed: {e}", ids.join(" ")))),
         }
     }
@@ -369,6 +375,8 @@ mod tests {
         let slurm = Slurm::with_conf("/x/slurm.conf");
         let echo = |script: &str, stdin| slurm.run("sh", &["-c".to_string(), script.to_string()], stdin).unwrap();
         assert_eq!(echo("cat; echo \" $SLURM_CONF\"", Some("script")), Ok("script /x/slurm.conf\n".to_string()));
-        assert_eq!(echo("echo oops >&2; exit 3", None), Err("oops".to_string()));
+        assert_eq!(echo("echo oops >&2; exit 3", None), Err(Failed("oops".to_string())));
+        assert_eq!(echo("echo oops >&2; exit 3", None).unwrap_err().to_string(), "oops");
+        assert_eq!(echo("exit 3", None).unwrap_err().to_string(), "exit status: 3");
     }
 }
