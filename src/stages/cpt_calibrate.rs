@@ -300,3 +300,51 @@ fn figure(
     ];
     render_png(&format!("camera calibration: {label}"), &panels, 1100, 1000).map_err(anyhow::Error::msg)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vision::calibrate::ControlPoint;
+
+    /// Points of a 3 × 3 × 2 grid (mm) seen by a pinhole camera at (200, −100, −5000) mm looking
+    /// along +Z: u = fx X'/Z' + cx, v = fy Y'/Z' + cy in its own frame, with no distortion.
+    fn seen(fx: f64, fy: f64, cx: f64, cy: f64, centre: [f64; 3]) -> Vec<ControlPoint> {
+        let mut points = vec![];
+        for x in [-1000.0, 0.0, 1000.0] {
+            for y in [-600.0, 0.0, 600.0] {
+                for z in [0.0, 1200.0] {
+                    let (dx, dy, dz) = (x - centre[0], y - centre[1], z - centre[2]);
+                    points.push(ControlPoint { world: [x, y, z], pixel: [fx * dx / dz + cx, fy * dy / dz + cy] });
+                }
+            }
+        }
+        points
+    }
+
+    #[test]
+    fn a_pinhole_camera_is_recovered_from_its_exact_projections() {
+        let (fx, fy, cx, cy, centre) = (1100.0, 1050.0, 480.0, 270.0, [200.0, -100.0, -5000.0]);
+        let points = seen(fx, fy, cx, cy, centre);
+        let model = Model { distortion: Distortion::None, zero_skew: true };
+        let table = calibration_table(&calibrate(&points, model, 3.5).unwrap());
+        let value = |name: &str| table.f64_column(name).unwrap()[0];
+        for (name, exact) in [
+            ("fx_px", fx),
+            ("fy_px", fy),
+            ("cx_px", cx),
+            ("cy_px", cy),
+            ("camera_X_mm", centre[0]),
+            ("camera_Y_mm", centre[1]),
+            ("camera_Z_mm", centre[2]),
+        ] {
+            assert!(
+                (value(name) - exact).abs() < 1e-6 * exact.abs().max(1.0),
+                "{name}: {} against {exact}",
+                value(name)
+            );
+        }
+        assert!(value("skew_px").abs() < 1e-9);
+        assert!(value("rms_px") < 1e-6, "rms {} px", value("rms_px"));
+        assert!(matches!(&table.column("points").unwrap().data, ColumnData::I64(n) if n == &[18]));
+    }
+}

@@ -225,3 +225,55 @@ fn summary_line(dir: &Path) -> anyhow::Result<String> {
     }
     Ok(line)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A shared case's column (`../shared/cases/<set>/<case>/<file>`), read here with a plain split.
+    fn shared_csv(set: &str, case: &str, file: &str) -> Vec<(String, Vec<f64>)> {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../shared/cases/{set}/{case}/{file}"));
+        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let mut lines = text.lines();
+        let mut columns: Vec<(String, Vec<f64>)> =
+            lines.next().unwrap().split(',').map(|name| (name.to_string(), vec![])).collect();
+        for line in lines.filter(|l| !l.is_empty()) {
+            for (column, field) in columns.iter_mut().zip(line.split(',')) {
+                column.1.push(field.trim().parse().unwrap());
+            }
+        }
+        columns
+    }
+
+    fn events(set: &str, case: &str) -> Table {
+        let mut table = Table::new();
+        for (name, values) in shared_csv(set, case, "observed_accel.csv") {
+            table.push(Column::f64(&name, "", "", values));
+        }
+        let opts = DetectOptions { sta_lta_on: 8.0, drop_ratio: 0.35, ..DetectOptions::default() };
+        detect(&table, &[("top_ax_mps2".to_string(), None)], &opts).unwrap()
+    }
+
+    /// The `overturn_time_s:` its truth file gives the case.
+    fn truth_overturn_time(case: &str) -> f64 {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../shared/cases/demo/truth/{case}.yaml"));
+        let truth: serde_yaml::Value = serde_yaml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        truth["overturn_time_s"].as_f64().unwrap()
+    }
+
+    #[test]
+    fn a_shared_overturn_is_found_at_its_true_time_and_a_cart_is_not_toppled() {
+        let found = events("demo", "demo_03");
+        let column = |table: &Table, name: &str| table.column(name).unwrap().data.clone();
+        assert!(matches!(column(&found, "toppled"), ColumnData::Bool(v) if v == [true]));
+        let ColumnData::OptF64(time) = column(&found, "impact_time_s") else { panic!("impact_time_s") };
+        let truth = truth_overturn_time("demo_03");
+        assert!((time[0].unwrap() - truth).abs() < 0.05, "found {:?}, truth {truth} s", time[0]);
+
+        let cart = events("rolling_demo", "demo_01");
+        assert!(matches!(column(&cart, "toppled"), ColumnData::Bool(v) if v == [false]));
+        assert!(matches!(column(&cart, "impact_time_s"), ColumnData::OptF64(v) if v == [None]));
+    }
+}

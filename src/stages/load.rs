@@ -1070,3 +1070,40 @@ fn guess_delimited_layout(path: &std::path::Path, skip: usize) -> Vec<(&'static 
     }
     guesses
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const RECORD: &str = "RSN1084_NORTHR_SCS052.AT2";
+
+    /// The record's header (`NPTS=   8773, DT=   .0050 SEC`) and values in g, read here with a
+    /// plain split of the file's text.
+    fn by_hand(path: &std::path::Path) -> (usize, f64, Vec<f64>) {
+        let text = std::fs::read_to_string(path).unwrap();
+        let header = text.lines().nth(3).unwrap();
+        let field = |key: &str| header.split(key).nth(1).unwrap().split([',', 'S']).next().unwrap().trim().to_string();
+        let values = text.lines().skip(4).flat_map(str::split_whitespace).map(|v| v.parse().unwrap()).collect();
+        (field("NPTS=").parse().unwrap(), field("DT=").parse().unwrap(), values)
+    }
+
+    #[test]
+    fn a_peer_record_loads_with_its_header_step_and_its_values_in_si() {
+        let path = crate::signal::test_support::ground_motion_path(RECORD);
+        let (npts, dt, values) = by_hand(&path);
+        assert_eq!((npts, dt, values.len()), (8773, 0.005, 8773));
+        let spec = ad_hoc_source(&path, &serde_json::Map::new()).unwrap();
+        let part = InputPart { partition: vec![], path: path.clone(), label: RECORD.into(), hash: String::new() };
+        let table = load_record(&spec, &part).unwrap();
+        let time = table.f64_column(TIME_COLUMN).unwrap();
+        assert_eq!(time.len(), npts);
+        assert!((time[npts - 1] - time[0] - (npts - 1) as f64 * dt).abs() < 1e-9);
+        let column = table.columns.iter().find(|c| c.name != TIME_COLUMN).unwrap();
+        assert_eq!(column.unit, "m/s^2");
+        let ColumnData::F64(loaded) = &column.data else { panic!("{} is not f64", column.name) };
+        // Standard gravity, 9.806 65 m/s² per g (CGPM 1901).
+        for (k, (&si, &g)) in loaded.iter().zip(&values).enumerate() {
+            assert!((si - g * 9.80665).abs() <= 1e-12 * si.abs().max(1e-3), "sample {k}: {si} against {g} g");
+        }
+    }
+}

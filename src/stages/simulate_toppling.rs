@@ -464,3 +464,32 @@ fn summary_line(dir: &Path) -> anyhow::Result<String> {
     }
     Ok(line)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_block_on_a_ramped_floor_uplifts_when_the_floor_reaches_g_b_over_h() {
+        // B/H = 1/3 with the centre of mass at mid-height (f = 0): Housner's threshold g tan α = g B/H.
+        let (b, h, g) = (0.5, 1.5, 9.80665);
+        let block = Block::new(Shape::Rectangular { b_m: b, h_m: h, f: 0.0 }, 100.0, g).unwrap();
+        let rate = 0.5; // m/s² per s
+        let n = 2001; // 10 s at 200 Hz
+        let time: Vec<f64> = (0..n).map(|k| k as f64 / 200.0).collect();
+        let mut table = Table::new();
+        table.push(Column::f64(TIME_COLUMN, "s", "", time.clone()));
+        table.push(Column::f64("ax_mps2", "m/s^2", "", time.iter().map(|t| rate * t).collect()));
+        let (_, response) = simulate_record(&table, &block, &Options::default(), "ax_mps2", None).unwrap();
+        let events = events_table(&response);
+        let ColumnData::Str(kind) = &events.column("event").unwrap().data else { panic!("event") };
+        let ColumnData::OptF64(at) = &events.column(TIME_COLUMN).unwrap().data else { panic!("time_s") };
+        assert_eq!(kind[0], "uplift");
+        let exact = g * b / h / rate;
+        assert!((at[0].unwrap() - exact).abs() < 1e-6, "uplift at {:?} s, closed form {exact} s", at[0]);
+        // A floor accelerating toward +x throws the block onto its −x corner.
+        let ColumnData::I64(side) = &events.column("side").unwrap().data else { panic!("side") };
+        assert_eq!(side[0], -1);
+        assert_eq!(kind.last().unwrap(), "summary");
+    }
+}

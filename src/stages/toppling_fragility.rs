@@ -401,3 +401,50 @@ fn summary_line(dir: &Path) -> anyhow::Result<String> {
     }
     Ok(line)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    /// Five whole cycles of a = A sin(2π f t) at 2 kHz, and a vertical channel.
+    fn sine(amplitude: f64, f_hz: f64) -> Table {
+        let n = (5.0 / f_hz * 2000.0) as usize + 1;
+        let time: Vec<f64> = (0..n).map(|k| k as f64 / 2000.0).collect();
+        let mut table = Table::new();
+        table.push(Column::f64(
+            "ax_mps2",
+            "m/s^2",
+            "",
+            time.iter().map(|t| amplitude * (2.0 * PI * f_hz * t).sin()).collect(),
+        ));
+        table.push(Column::f64("az_mps2", "m/s^2", "", vec![1.0; n]));
+        table.push(Column::f64("other", "", "", vec![7.0; n]));
+        table.push(Column::f64(TIME_COLUMN, "s", "", time));
+        table
+    }
+
+    #[test]
+    fn pfa_and_pfv_of_a_sine_are_its_closed_forms() {
+        let (amplitude, f_hz) = (2.5, 1.6);
+        let table = sine(amplitude, f_hz);
+        let pfa = intensity(&table, "ax_mps2", false).unwrap();
+        assert!((pfa / amplitude - 1.0).abs() < 1e-4, "PFA {pfa}");
+        // v(t) = A/(2πf) (1 − cos 2πft) from rest: its peak is A/(πf).
+        let pfv = intensity(&table, "ax_mps2", true).unwrap();
+        let exact = amplitude / (PI * f_hz);
+        assert!((pfv / exact - 1.0).abs() < 1e-5, "PFV {pfv} against {exact}");
+        assert!(intensity(&sine(0.0, f_hz), "ax_mps2", false).is_err());
+    }
+
+    #[test]
+    fn scaling_multiplies_the_floor_channels_only_and_keeps_the_clock() {
+        let table = sine(2.5, 1.6);
+        let scaled = scaled(&table, 3.0, "ax_mps2", Some("az_mps2"));
+        assert_eq!(scaled.column_names(), ["ax_mps2", "az_mps2", TIME_COLUMN]);
+        assert_eq!(scaled.f64_column(TIME_COLUMN), table.f64_column(TIME_COLUMN));
+        assert_eq!(scaled.f64_column("az_mps2").unwrap()[0], 3.0);
+        let pfa = intensity(&scaled, "ax_mps2", false).unwrap();
+        assert!((pfa / 7.5 - 1.0).abs() < 1e-4, "PFA {pfa}");
+    }
+}

@@ -283,3 +283,67 @@ fn analyse(
     spectra.metadata.insert("shakeflow.welch".into(), welch.to_string());
     Ok((identified, spectra))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::signal::test_support::Rng;
+    use std::f64::consts::PI;
+
+    const FS: f64 = 100.0;
+    /// The resonator y[k] = x[k] + 2r cos(ω0) y[k-1] − r² y[k-2]: poles r·e^(±iω0).
+    const R: f64 = 0.98;
+    const F0: f64 = 5.0;
+
+    /// |H(e^(iω))| of the resonator, its closed form.
+    fn gain(omega: f64) -> f64 {
+        let w0 = 2.0 * PI * F0 / FS;
+        let re = 1.0 - 2.0 * R * w0.cos() * omega.cos() + R * R * (2.0 * omega).cos();
+        let im = 2.0 * R * w0.cos() * omega.sin() - R * R * (2.0 * omega).sin();
+        1.0 / re.hypot(im)
+    }
+
+    #[test]
+    fn a_resonators_peak_frequency_gain_and_damping_are_its_closed_forms() {
+        let w0 = 2.0 * PI * F0 / FS;
+        let n = (800.0 * FS) as usize;
+        let mut rng = Rng::new(37);
+        let x: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
+        let mut y = vec![0.0; n];
+        for k in 0..n {
+            let back = |j: usize| if k >= j { y[k - j] } else { 0.0 };
+            let next = x[k] + 2.0 * R * w0.cos() * back(1) - R * R * back(2);
+            y[k] = next;
+        }
+        let mut table = Table::new();
+        table.push(Column::f64(TIME_COLUMN, "s", "", (0..n).map(|k| k as f64 / FS).collect()));
+        table.push(Column::f64("x", "", "", x));
+        table.push(Column::f64("y", "", "", y));
+        let p = TransferFunctionParams {
+            pairs: vec!["x -> y".into()],
+            band_min_hz: 2.0,
+            band_max_hz: 10.0,
+            window: WindowChoice::Hamming,
+            segment_s: Some(40.0),
+            overlap: 0.5,
+            detrend: DetrendChoice::None,
+            coherence_threshold: 0.5,
+        };
+        let (identified, _) = analyse(&table, &[("x".into(), "y".into())], &p).unwrap();
+        let value = |name: &str| match &identified.column(name).unwrap().data {
+            ColumnData::OptF64(v) => v[0].unwrap(),
+            other => panic!("{name}: {other:?}"),
+        };
+        // The peak of |H|: cos ω = (1 + r²)/(2r) cos ω0.
+        let peak = ((1.0 + R * R) / (2.0 * R) * w0.cos()).acos();
+        let peak_hz = peak * FS / (2.0 * PI);
+        assert!((value("frequency_hz") - peak_hz).abs() < 0.01, "{} Hz against {peak_hz} Hz", value("frequency_hz"));
+        let gain_error = value("peak_gain") / gain(peak) - 1.0;
+        assert!(gain_error.abs() < 0.05, "peak gain {} against {}", value("peak_gain"), gain(peak));
+        // The continuous system with the same poles: σ = −fs ln r, ζ = σ / |s|.
+        let sigma = -FS * R.ln();
+        let zeta = sigma / sigma.hypot(w0 * FS);
+        assert!((value("damping_ratio") / zeta - 1.0).abs() < 0.1, "ζ {} against {zeta}", value("damping_ratio"));
+        assert!(value("coherence") > 0.95, "coherence {}", value("coherence"));
+    }
+}
