@@ -5,12 +5,11 @@
 
 use rayon::prelude::*;
 use serde_json::json;
-use std::sync::LazyLock;
 
 use super::{partition_path, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::control_points::read_control_points;
-use crate::pipeline::params::{self, ParamError, Params};
+use crate::pipeline::params;
 use crate::pipeline::spec::RecordFormat;
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
@@ -41,45 +40,35 @@ crate::choice! {
     pub enum Skew { Free = "free", Zero = "zero" }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "cpt_calibrate",
-    version: 2,
-    summary: "Camera calibration from control points (X_mm, Y_mm, Z_mm, u_px, v_px; ≥ 8, not coplanar): normalised DLT, Levenberg–Marquardt on the reprojection error, optional radial distortion k1 (k2).",
-    inputs: InputKind::Files(&[RecordFormat::ControlPoints]),
-    outputs: &[
-        OutputInfo { name: "calibration", description: "one row: p11…p34 (P scaled so ‖p31..p33‖ = 1), k1/k2 when fitted, intrinsics, camera centre, objective_px (Eq. 2), rms_px", kind: OutputKind::Table },
-        OutputInfo { name: "residuals", description: "per control point: u_res_px, v_res_px, dist_px, loo_dist_px (its distance when fitted without it), outlier", kind: OutputKind::Table },
-        OutputInfo { name: "figures", description: "calibration.png: control points with magnified residuals, and residual per point", kind: OutputKind::Files },
-    ],
-    params: CptCalibrateParams::specs(),
-}
-});
-
-impl super::StageType for CptCalibrate {
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "the demo camera from its 14 control points, with radial distortion k1",
-            data: &super::DEMO_CAMERA,
-            stages: "\
+super::declare_stage! {
+    CptCalibrate,
+    info: StageInfo {
+        name: "cpt_calibrate",
+        version: 2,
+        summary: "Camera calibration from control points (X_mm, Y_mm, Z_mm, u_px, v_px; ≥ 8, not coplanar): normalised DLT, Levenberg–Marquardt on the reprojection error, optional radial distortion k1 (k2).",
+        inputs: InputKind::Files(&[RecordFormat::ControlPoints]),
+        outputs: &[
+            OutputInfo { name: "calibration", description: "one row: p11…p34 (P scaled so ‖p31..p33‖ = 1), k1/k2 when fitted, intrinsics, camera centre, objective_px (Eq. 2), rms_px", kind: OutputKind::Table },
+            OutputInfo { name: "residuals", description: "per control point: u_res_px, v_res_px, dist_px, loo_dist_px (its distance when fitted without it), outlier", kind: OutputKind::Table },
+            OutputInfo { name: "figures", description: "calibration.png: control points with magnified residuals, and residual per point", kind: OutputKind::Files },
+        ],
+        params: CptCalibrateParams::specs(),
+    },
+    examples: [super::Example {
+        title: "the demo camera from its 14 control points, with radial distortion k1",
+        data: &super::DEMO_CAMERA,
+        stages: "\
 cpt_calibrate:
   type: cpt_calibrate
   inputs: [control_points]
   params:
     distortion: k1
 ",
-        }]
-    }
+    }],
 }
 
 impl Stage for CptCalibrate {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<CptCalibrateParams>(params)
-    }
+    super::info_and_check_params!(CptCalibrateParams);
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let p: CptCalibrateParams = params::typed(ctx.params)?;

@@ -5,10 +5,9 @@
 use super::error::{float_column, StageError};
 use rayon::prelude::*;
 use std::path::Path;
-use std::sync::LazyLock;
 
 use super::{split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{self, ParamError, Params};
+use crate::pipeline::params::{self, Params};
 use crate::signal::toppling::{detect_toppling, detect_toppling_on, DetectOptions, TimeBase};
 use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -28,36 +27,29 @@ crate::stage_params! {
     }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "detect_toppling",
-    version: 2,
-    summary: "Toppling impacts from top accelerometers: STA/LTA spike confirmed by a lasting amplitude drop; optional floor-vertical cross-check.",
-    inputs: InputKind::Datasets,
-    outputs: &[OutputInfo { name: "events", description: "per channel: toppled, impact_time_s, peak_mps2, confidence, and why", kind: OutputKind::Table }],
-    params: DetectTopplingParams::specs(),
-}
-});
-
-impl super::StageType for DetectToppling {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("events", super::Shown::Toppling)]
-    }
-
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "the top accelerometers of the shared cases: the four rocking units that overturn, at the times \
-                    their truth files give, and none of the four carts on casters",
-            data: &TOP_ACCELEROMETERS,
-            stages: "\
+super::declare_stage! {
+    DetectToppling,
+    info: StageInfo {
+        name: "detect_toppling",
+        version: 2,
+        summary: "Toppling impacts from top accelerometers: STA/LTA spike confirmed by a lasting amplitude drop; optional floor-vertical cross-check.",
+        inputs: InputKind::Datasets,
+        outputs: &[OutputInfo { name: "events", description: "per channel: toppled, impact_time_s, peak_mps2, confidence, and why", kind: OutputKind::Table }],
+        params: DetectTopplingParams::specs(),
+    },
+    shown: [("events", super::Shown::Toppling)],
+    examples: [super::Example {
+        title: "the top accelerometers of the shared cases: the four rocking units that overturn, at the times \
+                their truth files give, and none of the four carts on casters",
+        data: &TOP_ACCELEROMETERS,
+        stages: "\
 detect_toppling:
   type: detect_toppling
   inputs: [load]
   params:
     channels: [top_ax_mps2]
 ",
-        }]
-    }
+    }],
 }
 
 /// The top accelerometers of the shared rocking (`demo`) and rolling (`rolling_demo`) cases.
@@ -80,13 +72,7 @@ stages:
 };
 
 impl Stage for DetectToppling {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<DetectTopplingParams>(params)
-    }
+    super::info_and_check_params!(DetectTopplingParams);
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord

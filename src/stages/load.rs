@@ -3,7 +3,6 @@
 //! time-series tables, one per file, partitioned as the source's path template says.
 
 use std::collections::{BTreeMap, HashMap};
-use std::sync::LazyLock;
 
 use rayon::prelude::*;
 use serde_json::json;
@@ -11,7 +10,6 @@ use serde_json::json;
 use super::{Declared, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
 use crate::error::{did_you_mean_hint, UserError};
 use crate::io::records::{self, DelimitedOptions, RawRecord};
-use crate::pipeline::params::{self, ParamError, Params};
 use crate::pipeline::spec::{Axis, ColumnSpec, ComponentAs, GapPolicy, NonUniformPolicy, RecordFormat, SourceSpec};
 use crate::signal::resample;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -24,54 +22,47 @@ crate::stage_params! {
     pub struct LoadParams {}
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "load",
-    version: 3,
-    summary: "Read record files into SI time-series tables: checks sampling, gaps and point counts, converts units.",
-    inputs: InputKind::Sources,
-    outputs: &[
-        OutputInfo {
-            name: "records",
-            description: "one table per record file: time_s plus each channel in SI",
-            kind: OutputKind::Table,
+super::declare_stage! {
+    Load,
+    info: StageInfo {
+        name: "load",
+        version: 3,
+        summary: "Read record files into SI time-series tables: checks sampling, gaps and point counts, converts units.",
+        inputs: InputKind::Sources,
+        outputs: &[
+            OutputInfo {
+                name: "records",
+                description: "one table per record file: time_s plus each channel in SI",
+                kind: OutputKind::Table,
+            },
+            OutputInfo {
+                name: "flagged",
+                description: "written by the engine when a source has `on_error: skip`: one row per record that could not be read (record, file, reason with file:line:column)",
+                kind: OutputKind::Table,
+            },
+            OutputInfo {
+                name: "status",
+                description: "written by the engine: one row per record (record, status, file, reason): loaded, flagged (loaded whole, e.g. channels of unequal lengths null-padded; reason with file:line), skipped (`on_error: skip`) or failed",
+                kind: OutputKind::Table,
+            },
+        ],
+        params: LoadParams::specs(),
+    },
+    shown: [("status", super::Shown::RecordStatus)],
+    examples: [
+        super::Example {
+            title: "two NIED stations, one file per component, each read as one record in m/s² with its axes from \
+                the files' `Dir.` lines",
+            data: &KNET,
+            stages: "",
         },
-        OutputInfo {
-            name: "flagged",
-            description: "written by the engine when a source has `on_error: skip`: one row per record that could not be read (record, file, reason with file:line:column)",
-            kind: OutputKind::Table,
-        },
-        OutputInfo {
-            name: "status",
-            description: "written by the engine: one row per record (record, status, file, reason): loaded, flagged (loaded whole, e.g. channels of unequal lengths null-padded; reason with file:line), skipped (`on_error: skip`) or failed",
-            kind: OutputKind::Table,
+        super::Example {
+            title: "every shared record file, each read by the format its content tells (one record per file); \
+                `on_error: skip` lists a file that cannot be read in `flagged` and goes on",
+            data: &ARCHIVE,
+            stages: "",
         },
     ],
-    params: LoadParams::specs(),
-}
-});
-
-impl super::StageType for Load {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("status", super::Shown::RecordStatus)]
-    }
-
-    fn examples(&self) -> &'static [super::Example] {
-        &[
-            super::Example {
-                title: "two NIED stations, one file per component, each read as one record in m/s² with its axes from \
-                    the files' `Dir.` lines",
-                data: &KNET,
-                stages: "",
-            },
-            super::Example {
-                title: "every shared record file, each read by the format its content tells (one record per file); \
-                    `on_error: skip` lists a file that cannot be read in `flagged` and goes on",
-                data: &ARCHIVE,
-                stages: "",
-            },
-        ]
-    }
 }
 
 /// Every file of the shared records, told by content.
@@ -109,13 +100,7 @@ stages:
 };
 
 impl Stage for Load {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<LoadParams>(params)
-    }
+    super::info_and_check_params!(LoadParams);
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord

@@ -4,7 +4,6 @@
 
 use super::error::{float_column, StageError};
 use std::path::{Path, PathBuf};
-use std::sync::LazyLock;
 
 use rayon::prelude::*;
 
@@ -79,31 +78,25 @@ crate::stage_params! {
     }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "simulate_toppling",
-    version: 3,
-    summary: "The study's 2D rigid-block toppling model on floor records: rest, uplift (Eq. 20/21), rocking (Eq. 22), impacts (Eq. 24), overturning; adaptive integration with located events.",
-    inputs: InputKind::Datasets,
-    outputs: &[
-        OutputInfo { name: "response", description: "per record: time_s, theta_rad, theta_dot_radps, top_ax_mps2 (what a top accelerometer records), on the input time base", kind: OutputKind::TimeSeries },
-        OutputInfo { name: "events", description: "per record: uplifts, impacts, returns to rest, anchor yield/fracture, overturn; the last row (event = summary) and every row carry overturned, overturn_time_s, overturn_side", kind: OutputKind::Table },
-        OutputInfo { name: "figures", description: "<record>.png: floor and top acceleration, theta with the events marked", kind: OutputKind::Files },
-    ],
-    params: SimulateTopplingParams::specs(),
-}
-});
-
-impl super::StageType for SimulateToppling {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("events", super::Shown::Rocking)]
-    }
-
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "the study's PS2 unit on the baseline-corrected record, both horizontal and vertical shaking",
-            data: &super::RINALDI,
-            stages: "\
+super::declare_stage! {
+    SimulateToppling,
+    info: StageInfo {
+        name: "simulate_toppling",
+        version: 3,
+        summary: "The study's 2D rigid-block toppling model on floor records: rest, uplift (Eq. 20/21), rocking (Eq. 22), impacts (Eq. 24), overturning; adaptive integration with located events.",
+        inputs: InputKind::Datasets,
+        outputs: &[
+            OutputInfo { name: "response", description: "per record: time_s, theta_rad, theta_dot_radps, top_ax_mps2 (what a top accelerometer records), on the input time base", kind: OutputKind::TimeSeries },
+            OutputInfo { name: "events", description: "per record: uplifts, impacts, returns to rest, anchor yield/fracture, overturn; the last row (event = summary) and every row carry overturned, overturn_time_s, overturn_side", kind: OutputKind::Table },
+            OutputInfo { name: "figures", description: "<record>.png: floor and top acceleration, theta with the events marked", kind: OutputKind::Files },
+        ],
+        params: SimulateTopplingParams::specs(),
+    },
+    shown: [("events", super::Shown::Rocking)],
+    examples: [super::Example {
+        title: "the study's PS2 unit on the baseline-corrected record, both horizontal and vertical shaking",
+        data: &super::RINALDI,
+        stages: "\
 baseline:
   type: baseline
   inputs: [load]
@@ -115,18 +108,11 @@ simulate_toppling:
     horizontal: ax_mps2
     vertical: az_mps2
 ",
-        }]
-    }
+    }],
 }
 
 impl Stage for SimulateToppling {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<SimulateTopplingParams>(params)
-    }
+    super::info_and_check_params!(SimulateTopplingParams);
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord

@@ -5,13 +5,12 @@
 use super::error::{float_column, StageError};
 use std::path::Path;
 use std::sync::Arc;
-use std::sync::LazyLock;
 
 use rayon::prelude::*;
 
 use super::simulate_toppling::{model_from_params, simulate_record, RockingParams};
 use super::{partition_values, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{self, ParamError, Params};
+use crate::pipeline::params::{self, Params};
 use crate::stats::fragility::{fit_lognormal, FitOutcome, LognormalFit};
 use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -38,31 +37,25 @@ crate::choice! {
     pub enum Intensity { Pfa = "pfa", Pfv = "pfv" }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "toppling_fragility",
-    version: 3,
-    summary: "Overturning fragility of one unit: floor records scaled over intensities, all runs simulated in parallel, lognormal curve (median, beta) by maximum likelihood.",
-    inputs: InputKind::Datasets,
-    outputs: &[
-        OutputInfo { name: "runs", description: "every run: record, level, scale, im, overturned, overturn_time_s, overturn_side, max_abs_theta_rad, n_impacts", kind: OutputKind::Table },
-        OutputInfo { name: "fragility", description: "one row: im_measure, median, beta, log_likelihood, n_runs, n_overturned, note", kind: OutputKind::Table },
-        OutputInfo { name: "figures", description: "fragility.png: the fitted curve, every run at 0 (stood) or 1 (overturned) and the overturned fraction per level; pfa in g", kind: OutputKind::Files },
-    ],
-    params: TopplingFragilityParams::specs(),
-}
-});
-
-impl super::StageType for TopplingFragility {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("fragility", super::Shown::Fragility)]
-    }
-
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "PS2's overturning fragility from the record scaled to three intensities",
-            data: &super::RINALDI,
-            stages: "\
+super::declare_stage! {
+    TopplingFragility,
+    info: StageInfo {
+        name: "toppling_fragility",
+        version: 3,
+        summary: "Overturning fragility of one unit: floor records scaled over intensities, all runs simulated in parallel, lognormal curve (median, beta) by maximum likelihood.",
+        inputs: InputKind::Datasets,
+        outputs: &[
+            OutputInfo { name: "runs", description: "every run: record, level, scale, im, overturned, overturn_time_s, overturn_side, max_abs_theta_rad, n_impacts", kind: OutputKind::Table },
+            OutputInfo { name: "fragility", description: "one row: im_measure, median, beta, log_likelihood, n_runs, n_overturned, note", kind: OutputKind::Table },
+            OutputInfo { name: "figures", description: "fragility.png: the fitted curve, every run at 0 (stood) or 1 (overturned) and the overturned fraction per level; pfa in g", kind: OutputKind::Files },
+        ],
+        params: TopplingFragilityParams::specs(),
+    },
+    shown: [("fragility", super::Shown::Fragility)],
+    examples: [super::Example {
+        title: "PS2's overturning fragility from the record scaled to three intensities",
+        data: &super::RINALDI,
+        stages: "\
 toppling_fragility:
   type: toppling_fragility
   inputs: [load]
@@ -70,18 +63,11 @@ toppling_fragility:
     preset: PS2
     scales: [0.5, 1.0, 2.0]
 ",
-        }]
-    }
+    }],
 }
 
 impl Stage for TopplingFragility {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<TopplingFragilityParams>(params)
-    }
+    super::info_and_check_params!(TopplingFragilityParams);
 
     /// `horizontal` and `vertical` must be columns of the floor records.
     fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {

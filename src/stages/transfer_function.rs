@@ -4,10 +4,9 @@
 
 use super::error::{float_column, StageError};
 use rayon::prelude::*;
-use std::sync::LazyLock;
 
 use super::{split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{self, ParamError, Params};
+use crate::pipeline::params;
 use crate::signal::welch::{identify_peak, transfer_function, Detrend, WelchOptions, Window};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
@@ -46,31 +45,25 @@ crate::choice! {
     pub enum DetrendChoice { None = "none", Constant = "constant", Linear = "linear" }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "transfer_function",
-    version: 2,
-    summary: "Welch transfer functions H1, H2 and coherence (MATLAB tfestimate defaults) and the identified fundamental frequency with half-power damping.",
-    inputs: InputKind::Datasets,
-    outputs: &[
-        OutputInfo { name: "identified", description: "per pair: frequency_hz, damping_ratio, peak_gain, coherence, low_coherence, note", kind: OutputKind::Table },
-        OutputInfo { name: "spectra", description: "per pair and frequency: |H1|, phase, |H2|, coherence", kind: OutputKind::Table },
-    ],
-    params: TransferFunctionParams::specs(),
-}
-});
-
-impl super::StageType for TransferFunction {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("identified", super::Shown::Frequencies), ("spectra", super::Shown::Spectra)]
-    }
-
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "a fixed-base frame's fundamental frequency (1.0 Hz) from its ground record and its 4th floor's \
-                    response; the floor record starts 1.31 s into the ground record",
-            data: &GROUND_AND_FLOOR,
-            stages: "\
+super::declare_stage! {
+    TransferFunction,
+    info: StageInfo {
+        name: "transfer_function",
+        version: 2,
+        summary: "Welch transfer functions H1, H2 and coherence (MATLAB tfestimate defaults) and the identified fundamental frequency with half-power damping.",
+        inputs: InputKind::Datasets,
+        outputs: &[
+            OutputInfo { name: "identified", description: "per pair: frequency_hz, damping_ratio, peak_gain, coherence, low_coherence, note", kind: OutputKind::Table },
+            OutputInfo { name: "spectra", description: "per pair and frequency: |H1|, phase, |H2|, coherence", kind: OutputKind::Table },
+        ],
+        params: TransferFunctionParams::specs(),
+    },
+    shown: [("identified", super::Shown::Frequencies), ("spectra", super::Shown::Spectra)],
+    examples: [super::Example {
+        title: "a fixed-base frame's fundamental frequency (1.0 Hz) from its ground record and its 4th floor's \
+                response; the floor record starts 1.31 s into the ground record",
+        data: &GROUND_AND_FLOOR,
+        stages: "\
 synchronize:
   type: synchronize
   inputs: [load_floor, load_ground]
@@ -87,8 +80,7 @@ transfer_function:
     band_max_hz: 3.0
     segment_s: 8.0
 ",
-        }]
-    }
+    }],
 }
 
 /// The shared case demo_03: a 4th floor's record and the ground record it was made from.
@@ -120,13 +112,7 @@ stages:
 };
 
 impl Stage for TransferFunction {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<TransferFunctionParams>(params)
-    }
+    super::info_and_check_params!(TransferFunctionParams);
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
