@@ -4,11 +4,9 @@
 use rayon::prelude::*;
 use serde_json::json;
 
-use std::sync::LazyLock;
-
 use super::{Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::io::records::printable;
-use crate::pipeline::params::{self, ParamError, Params};
+use crate::pipeline::params::{self, Params};
 use crate::signal::baseline::PolynomialBasis;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
@@ -26,43 +24,35 @@ crate::stage_params! {
     }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| StageInfo {
-    name: "baseline",
-    version: 5,
-    summary: "Remove a least-squares polynomial trend (default cubic) from each channel; no filtering, peaks kept.",
-    inputs: InputKind::Datasets,
-    outputs: &[OutputInfo {
-        name: "records",
-        description: "the input tables with each selected channel baseline-corrected",
-        kind: OutputKind::TimeSeries,
-    }],
-    params: BaselineParams::specs(),
-});
-
-impl super::StageType for Baseline {
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "the study's cubic baseline removed from every channel of the loaded records",
-            data: &super::RINALDI,
-            stages: "\
+super::declare_stage! {
+    Baseline,
+    info: StageInfo {
+        name: "baseline",
+        version: 5,
+        summary: "Remove a least-squares polynomial trend (default cubic) from each channel; no filtering, peaks kept.",
+        inputs: InputKind::Datasets,
+        outputs: &[OutputInfo {
+            name: "records",
+            description: "the input tables with each selected channel baseline-corrected",
+            kind: OutputKind::TimeSeries,
+        }],
+        params: BaselineParams::specs(),
+    },
+    examples: [super::Example {
+        title: "the study's cubic baseline removed from every channel of the loaded records",
+        data: &super::RINALDI,
+        stages: "\
 baseline:
   type: baseline
   inputs: [load]
   params:
     order: 3
 ",
-        }]
-    }
+    }],
 }
 
 impl Stage for Baseline {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<BaselineParams>(params)
-    }
+    super::info_and_check_params!(BaselineParams);
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord

@@ -3,11 +3,9 @@
 //! units are reconciled through the columns' `unit` metadata, and the RMS and largest errors are
 //! reported per column pair, with a PNG overlay.
 
-use std::sync::LazyLock;
-
 use super::{partition_path, split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
-use crate::pipeline::params::{self, ParamError, Params};
+use crate::pipeline::params;
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
@@ -23,26 +21,23 @@ crate::stage_params! {
     }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "compare",
-    version: 2,
-    summary: "Errors of measured time series against a reference (interpolated onto the measured times, units reconciled): RMS and largest error per column pair, and a PNG overlay.",
-    inputs: InputKind::Datasets,
-    outputs: &[
-        OutputInfo { name: "errors", description: "per pair: measured, reference, unit, samples, missing, rms_error, max_abs_error, reference_rms", kind: OutputKind::Table },
-        OutputInfo { name: "figures", description: "<partition or compare>.png: measured over reference, and their difference", kind: OutputKind::Files },
-    ],
-    params: CompareParams::specs(),
-}
-});
-
-impl super::StageType for Compare {
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "what the cubic baseline changed: corrected against loaded accelerations",
-            data: &super::RINALDI,
-            stages: "\
+super::declare_stage! {
+    Compare,
+    info: StageInfo {
+        name: "compare",
+        version: 2,
+        summary: "Errors of measured time series against a reference (interpolated onto the measured times, units reconciled): RMS and largest error per column pair, and a PNG overlay.",
+        inputs: InputKind::Datasets,
+        outputs: &[
+            OutputInfo { name: "errors", description: "per pair: measured, reference, unit, samples, missing, rms_error, max_abs_error, reference_rms", kind: OutputKind::Table },
+            OutputInfo { name: "figures", description: "<partition or compare>.png: measured over reference, and their difference", kind: OutputKind::Files },
+        ],
+        params: CompareParams::specs(),
+    },
+    examples: [super::Example {
+        title: "what the cubic baseline changed: corrected against loaded accelerations",
+        data: &super::RINALDI,
+        stages: "\
 baseline:
   type: baseline
   inputs: [load]
@@ -52,18 +47,11 @@ compare:
   params:
     pairs: [ax_mps2 -> ax_mps2, az_mps2 -> az_mps2]
 ",
-        }]
-    }
+    }],
 }
 
 impl Stage for Compare {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<CompareParams>(params)
-    }
+    super::info_and_check_params!(CompareParams);
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::PerRecordOf { primary: 0 }

@@ -5,12 +5,11 @@
 
 use rayon::prelude::*;
 use serde_json::json;
-use std::sync::LazyLock;
 
 use super::{partition_path, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::control_points::read_control_points;
-use crate::pipeline::params::{self, ParamError, Params};
+use crate::pipeline::params;
 use crate::pipeline::spec::RecordFormat;
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
@@ -41,45 +40,35 @@ crate::choice! {
     pub enum Skew { Free = "free", Zero = "zero" }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "cpt_calibrate",
-    version: 2,
-    summary: "Camera calibration from control points (X_mm, Y_mm, Z_mm, u_px, v_px; ≥ 8, not coplanar): normalised DLT, Levenberg–Marquardt on the reprojection error, optional radial distortion k1 (k2).",
-    inputs: InputKind::Files(&[RecordFormat::ControlPoints]),
-    outputs: &[
-        OutputInfo { name: "calibration", description: "one row: p11…p34 (P scaled so ‖p31..p33‖ = 1), k1/k2 when fitted, intrinsics, camera centre, objective_px (Eq. 2), rms_px", kind: OutputKind::Table },
-        OutputInfo { name: "residuals", description: "per control point: u_res_px, v_res_px, dist_px, loo_dist_px (its distance when fitted without it), outlier", kind: OutputKind::Table },
-        OutputInfo { name: "figures", description: "calibration.png: control points with magnified residuals, and residual per point", kind: OutputKind::Files },
-    ],
-    params: CptCalibrateParams::specs(),
-}
-});
-
-impl super::StageType for CptCalibrate {
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "the demo camera from its 14 control points, with radial distortion k1",
-            data: &super::DEMO_CAMERA,
-            stages: "\
+super::declare_stage! {
+    CptCalibrate,
+    info: StageInfo {
+        name: "cpt_calibrate",
+        version: 2,
+        summary: "Camera calibration from control points (X_mm, Y_mm, Z_mm, u_px, v_px; ≥ 8, not coplanar): normalised DLT, Levenberg–Marquardt on the reprojection error, optional radial distortion k1 (k2).",
+        inputs: InputKind::Files(&[RecordFormat::ControlPoints]),
+        outputs: &[
+            OutputInfo { name: "calibration", description: "one row: p11…p34 (P scaled so ‖p31..p33‖ = 1), k1/k2 when fitted, intrinsics, camera centre, objective_px (Eq. 2), rms_px", kind: OutputKind::Table },
+            OutputInfo { name: "residuals", description: "per control point: u_res_px, v_res_px, dist_px, loo_dist_px (its distance when fitted without it), outlier", kind: OutputKind::Table },
+            OutputInfo { name: "figures", description: "calibration.png: control points with magnified residuals, and residual per point", kind: OutputKind::Files },
+        ],
+        params: CptCalibrateParams::specs(),
+    },
+    examples: [super::Example {
+        title: "the demo camera from its 14 control points, with radial distortion k1",
+        data: &super::DEMO_CAMERA,
+        stages: "\
 cpt_calibrate:
   type: cpt_calibrate
   inputs: [control_points]
   params:
     distortion: k1
 ",
-        }]
-    }
+    }],
 }
 
 impl Stage for CptCalibrate {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<CptCalibrateParams>(params)
-    }
+    super::info_and_check_params!(CptCalibrateParams);
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let p: CptCalibrateParams = params::typed(ctx.params)?;
@@ -299,4 +288,52 @@ fn figure(
         },
     ];
     render_png(&format!("camera calibration: {label}"), &panels, 1100, 1000).map_err(anyhow::Error::msg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vision::calibrate::ControlPoint;
+
+    /// Points of a 3 × 3 × 2 grid (mm) seen by a pinhole camera at (200, −100, −5000) mm looking
+    /// along +Z: u = fx X'/Z' + cx, v = fy Y'/Z' + cy in its own frame, with no distortion.
+    fn seen(fx: f64, fy: f64, cx: f64, cy: f64, centre: [f64; 3]) -> Vec<ControlPoint> {
+        let mut points = vec![];
+        for x in [-1000.0, 0.0, 1000.0] {
+            for y in [-600.0, 0.0, 600.0] {
+                for z in [0.0, 1200.0] {
+                    let (dx, dy, dz) = (x - centre[0], y - centre[1], z - centre[2]);
+                    points.push(ControlPoint { world: [x, y, z], pixel: [fx * dx / dz + cx, fy * dy / dz + cy] });
+                }
+            }
+        }
+        points
+    }
+
+    #[test]
+    fn a_pinhole_camera_is_recovered_from_its_exact_projections() {
+        let (fx, fy, cx, cy, centre) = (1100.0, 1050.0, 480.0, 270.0, [200.0, -100.0, -5000.0]);
+        let points = seen(fx, fy, cx, cy, centre);
+        let model = Model { distortion: Distortion::None, zero_skew: true };
+        let table = calibration_table(&calibrate(&points, model, 3.5).unwrap());
+        let value = |name: &str| table.f64_column(name).unwrap()[0];
+        for (name, exact) in [
+            ("fx_px", fx),
+            ("fy_px", fy),
+            ("cx_px", cx),
+            ("cy_px", cy),
+            ("camera_X_mm", centre[0]),
+            ("camera_Y_mm", centre[1]),
+            ("camera_Z_mm", centre[2]),
+        ] {
+            assert!(
+                (value(name) - exact).abs() < 1e-6 * exact.abs().max(1.0),
+                "{name}: {} against {exact}",
+                value(name)
+            );
+        }
+        assert!(value("skew_px").abs() < 1e-9);
+        assert!(value("rms_px") < 1e-6, "rms {} px", value("rms_px"));
+        assert!(matches!(&table.column("points").unwrap().data, ColumnData::I64(n) if n == &[18]));
+    }
 }

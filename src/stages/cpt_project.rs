@@ -3,7 +3,6 @@
 //! rocking angle θ (rocking units), ready for the diagnosis (`time_s`, `theta_rad`).
 
 use std::sync::Arc;
-use std::sync::LazyLock;
 
 use std::collections::BTreeMap;
 
@@ -11,7 +10,7 @@ use serde_json::json;
 
 use super::{partition_path, Declared, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
-use crate::pipeline::params::{self, ParamError, Params};
+use crate::pipeline::params;
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
 use crate::vision::camera::Camera;
@@ -59,27 +58,24 @@ crate::choice! {
     pub enum ThetaZero { FirstFrame = "first_frame", Upright = "upright" }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "cpt_project",
-    version: 2,
-    summary: "Back-project tracked pixels onto a plane aX + bY + cZ + d = 0 (Eq. 4) with a cpt_calibrate camera; for two points on one unit, its translation and in-plane rotation (rolling) or rocking angle θ (rocking).",
-    inputs: InputKind::Datasets,
-    outputs: &[
-        OutputInfo { name: "points", description: "per frame and point: time_s, point, X_mm, Y_mm, Z_mm (NaN when the track is lost)", kind: OutputKind::TimeSeries },
-        OutputInfo { name: "motion", description: "rolling: time_s, dx_mm, dy_mm, dz_mm, yaw_rad; rocking: time_s, theta_rad, dx_mm, dy_mm, dz_mm (empty when unit_motion is none)", kind: OutputKind::TimeSeries },
-        OutputInfo { name: "figures", description: "motion.png: the unit's recovered motion", kind: OutputKind::Files },
-    ],
-    params: CptProjectParams::specs(),
-}
-});
-
-impl super::StageType for CptProject {
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "the stretcher panel's rocking angle θ(t) from two tracked markers on the plane Y = 0",
-            data: &super::DEMO_CAMERA,
-            stages: "\
+super::declare_stage! {
+    CptProject,
+    info: StageInfo {
+        name: "cpt_project",
+        version: 2,
+        summary: "Back-project tracked pixels onto a plane aX + bY + cZ + d = 0 (Eq. 4) with a cpt_calibrate camera; for two points on one unit, its translation and in-plane rotation (rolling) or rocking angle θ (rocking).",
+        inputs: InputKind::Datasets,
+        outputs: &[
+            OutputInfo { name: "points", description: "per frame and point: time_s, point, X_mm, Y_mm, Z_mm (NaN when the track is lost)", kind: OutputKind::TimeSeries },
+            OutputInfo { name: "motion", description: "rolling: time_s, dx_mm, dy_mm, dz_mm, yaw_rad; rocking: time_s, theta_rad, dx_mm, dy_mm, dz_mm (empty when unit_motion is none)", kind: OutputKind::TimeSeries },
+            OutputInfo { name: "figures", description: "motion.png: the unit's recovered motion", kind: OutputKind::Files },
+        ],
+        params: CptProjectParams::specs(),
+    },
+    examples: [super::Example {
+        title: "the stretcher panel's rocking angle θ(t) from two tracked markers on the plane Y = 0",
+        data: &super::DEMO_CAMERA,
+        stages: "\
 calibrate: {type: cpt_calibrate, inputs: [control_points], params: {distortion: k1}}
 track: {type: cpt_track, inputs: [video], params: {fps: 30, points: \"M1=376.3,328.0; M2=380.2,248.8\"}}
 cpt_project:
@@ -91,18 +87,11 @@ cpt_project:
     unit_motion: rocking
     theta_zero: upright
 ",
-        }]
-    }
+    }],
 }
 
 impl Stage for CptProject {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<CptProjectParams>(params)
-    }
+    super::info_and_check_params!(CptProjectParams);
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let p: CptProjectParams = params::typed(ctx.params)?;

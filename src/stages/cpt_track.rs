@@ -4,12 +4,11 @@
 //! reported as NaN with a status, optional camera-shake correction from stationary points.
 
 use serde_json::json;
-use std::sync::LazyLock;
 
 use super::{partition_path, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
 use crate::error::UserError;
 use crate::io::frames::FrameReader;
-use crate::pipeline::params::{self, ParamError, Params};
+use crate::pipeline::params;
 use crate::pipeline::spec::RecordFormat;
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
@@ -68,29 +67,23 @@ crate::choice! {
     pub enum TemplateChoice { Reference = "reference", EveryFrame = "every_frame" }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "cpt_track",
-    version: 3,
-    summary: "Track points through an image sequence (PNG/JPEG folder, or a video through ffmpeg): ZNCC or SSD template matching against a reference template, sub-pixel, lost points flagged, optional camera-shake correction.",
-    inputs: InputKind::Files(&[RecordFormat::Frames]),
-    outputs: &[
-        OutputInfo { name: "tracks", description: "per frame and point: frame, time_s, point, u_px, v_px, score, status (NaN positions when lost)", kind: OutputKind::TimeSeries },
-        OutputInfo { name: "figures", description: "tracks.png: u, v and score of every point over time", kind: OutputKind::Files },
-    ],
-    params: CptTrackParams::specs(),
-}
-});
-
-/// Frames decoded per batch: enough to keep every core decoding.
-const BATCH: usize = 16;
-
-impl super::StageType for CptTrack {
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "the four markers through the video, started where a person clicks them in the first frame",
-            data: &super::DEMO_CAMERA,
-            stages: "\
+super::declare_stage! {
+    CptTrack,
+    info: StageInfo {
+        name: "cpt_track",
+        version: 3,
+        summary: "Track points through an image sequence (PNG/JPEG folder, or a video through ffmpeg): ZNCC or SSD template matching against a reference template, sub-pixel, lost points flagged, optional camera-shake correction.",
+        inputs: InputKind::Files(&[RecordFormat::Frames]),
+        outputs: &[
+            OutputInfo { name: "tracks", description: "per frame and point: frame, time_s, point, u_px, v_px, score, status (NaN positions when lost)", kind: OutputKind::TimeSeries },
+            OutputInfo { name: "figures", description: "tracks.png: u, v and score of every point over time", kind: OutputKind::Files },
+        ],
+        params: CptTrackParams::specs(),
+    },
+    examples: [super::Example {
+        title: "the four markers through the video, started where a person clicks them in the first frame",
+        data: &super::DEMO_CAMERA,
+        stages: "\
 cpt_track:
   type: cpt_track
   inputs: [video]
@@ -98,18 +91,14 @@ cpt_track:
     fps: 30
     points: \"M1=376.3,328.0; M2=380.2,248.8; M3=549.7,212.6; M4=613.4,205.8\"
 ",
-        }]
-    }
+    }],
 }
 
-impl Stage for CptTrack {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
+/// Frames decoded per batch: enough to keep every core decoding.
+const BATCH: usize = 16;
 
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<CptTrackParams>(params)
-    }
+impl Stage for CptTrack {
+    super::info_and_check_params!(CptTrackParams);
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let p: CptTrackParams = params::typed(ctx.params)?;

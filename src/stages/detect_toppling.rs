@@ -5,10 +5,9 @@
 use super::error::{float_column, StageError};
 use rayon::prelude::*;
 use std::path::Path;
-use std::sync::LazyLock;
 
 use super::{split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{self, ParamError, Params};
+use crate::pipeline::params::{self, Params};
 use crate::signal::toppling::{detect_toppling, detect_toppling_on, DetectOptions, TimeBase};
 use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -28,36 +27,29 @@ crate::stage_params! {
     }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "detect_toppling",
-    version: 2,
-    summary: "Toppling impacts from top accelerometers: STA/LTA spike confirmed by a lasting amplitude drop; optional floor-vertical cross-check.",
-    inputs: InputKind::Datasets,
-    outputs: &[OutputInfo { name: "events", description: "per channel: toppled, impact_time_s, peak_mps2, confidence, and why", kind: OutputKind::Table }],
-    params: DetectTopplingParams::specs(),
-}
-});
-
-impl super::StageType for DetectToppling {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("events", super::Shown::Toppling)]
-    }
-
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "the top accelerometers of the shared cases: the four rocking units that overturn, at the times \
-                    their truth files give, and none of the four carts on casters",
-            data: &TOP_ACCELEROMETERS,
-            stages: "\
+super::declare_stage! {
+    DetectToppling,
+    info: StageInfo {
+        name: "detect_toppling",
+        version: 2,
+        summary: "Toppling impacts from top accelerometers: STA/LTA spike confirmed by a lasting amplitude drop; optional floor-vertical cross-check.",
+        inputs: InputKind::Datasets,
+        outputs: &[OutputInfo { name: "events", description: "per channel: toppled, impact_time_s, peak_mps2, confidence, and why", kind: OutputKind::Table }],
+        params: DetectTopplingParams::specs(),
+    },
+    shown: [("events", super::Shown::Toppling)],
+    examples: [super::Example {
+        title: "the top accelerometers of the shared cases: the four rocking units that overturn, at the times \
+                their truth files give, and none of the four carts on casters",
+        data: &TOP_ACCELEROMETERS,
+        stages: "\
 detect_toppling:
   type: detect_toppling
   inputs: [load]
   params:
     channels: [top_ax_mps2]
 ",
-        }]
-    }
+    }],
 }
 
 /// The top accelerometers of the shared rocking (`demo`) and rolling (`rolling_demo`) cases.
@@ -80,13 +72,7 @@ stages:
 };
 
 impl Stage for DetectToppling {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<DetectTopplingParams>(params)
-    }
+    super::info_and_check_params!(DetectTopplingParams);
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
@@ -224,4 +210,56 @@ fn summary_line(dir: &Path) -> anyhow::Result<String> {
         line += &format!(" ({})", summary::some_of(&which, 6));
     }
     Ok(line)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A shared case's column (`../shared/cases/<set>/<case>/<file>`), read here with a plain split.
+    fn shared_csv(set: &str, case: &str, file: &str) -> Vec<(String, Vec<f64>)> {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../shared/cases/{set}/{case}/{file}"));
+        let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let mut lines = text.lines();
+        let mut columns: Vec<(String, Vec<f64>)> =
+            lines.next().unwrap().split(',').map(|name| (name.to_string(), vec![])).collect();
+        for line in lines.filter(|l| !l.is_empty()) {
+            for (column, field) in columns.iter_mut().zip(line.split(',')) {
+                column.1.push(field.trim().parse().unwrap());
+            }
+        }
+        columns
+    }
+
+    fn events(set: &str, case: &str) -> Table {
+        let mut table = Table::new();
+        for (name, values) in shared_csv(set, case, "observed_accel.csv") {
+            table.push(Column::f64(&name, "", "", values));
+        }
+        let opts = DetectOptions { sta_lta_on: 8.0, drop_ratio: 0.35, ..DetectOptions::default() };
+        detect(&table, &[("top_ax_mps2".to_string(), None)], &opts).unwrap()
+    }
+
+    /// The `overturn_time_s:` its truth file gives the case.
+    fn truth_overturn_time(case: &str) -> f64 {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../shared/cases/demo/truth/{case}.yaml"));
+        let truth: serde_yaml::Value = serde_yaml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        truth["overturn_time_s"].as_f64().unwrap()
+    }
+
+    #[test]
+    fn a_shared_overturn_is_found_at_its_true_time_and_a_cart_is_not_toppled() {
+        let found = events("demo", "demo_03");
+        let column = |table: &Table, name: &str| table.column(name).unwrap().data.clone();
+        assert!(matches!(column(&found, "toppled"), ColumnData::Bool(v) if v == [true]));
+        let ColumnData::OptF64(time) = column(&found, "impact_time_s") else { panic!("impact_time_s") };
+        let truth = truth_overturn_time("demo_03");
+        assert!((time[0].unwrap() - truth).abs() < 0.05, "found {:?}, truth {truth} s", time[0]);
+
+        let cart = events("rolling_demo", "demo_01");
+        assert!(matches!(column(&cart, "toppled"), ColumnData::Bool(v) if v == [false]));
+        assert!(matches!(column(&cart, "impact_time_s"), ColumnData::OptF64(v) if v == [None]));
+    }
 }

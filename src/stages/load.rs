@@ -3,7 +3,6 @@
 //! time-series tables, one per file, partitioned as the source's path template says.
 
 use std::collections::{BTreeMap, HashMap};
-use std::sync::LazyLock;
 
 use rayon::prelude::*;
 use serde_json::json;
@@ -11,7 +10,6 @@ use serde_json::json;
 use super::{Declared, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
 use crate::error::{did_you_mean_hint, UserError};
 use crate::io::records::{self, DelimitedOptions, RawRecord};
-use crate::pipeline::params::{self, ParamError, Params};
 use crate::pipeline::spec::{Axis, ColumnSpec, ComponentAs, GapPolicy, NonUniformPolicy, RecordFormat, SourceSpec};
 use crate::signal::resample;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -24,54 +22,47 @@ crate::stage_params! {
     pub struct LoadParams {}
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "load",
-    version: 3,
-    summary: "Read record files into SI time-series tables: checks sampling, gaps and point counts, converts units.",
-    inputs: InputKind::Sources,
-    outputs: &[
-        OutputInfo {
-            name: "records",
-            description: "one table per record file: time_s plus each channel in SI",
-            kind: OutputKind::Table,
+super::declare_stage! {
+    Load,
+    info: StageInfo {
+        name: "load",
+        version: 3,
+        summary: "Read record files into SI time-series tables: checks sampling, gaps and point counts, converts units.",
+        inputs: InputKind::Sources,
+        outputs: &[
+            OutputInfo {
+                name: "records",
+                description: "one table per record file: time_s plus each channel in SI",
+                kind: OutputKind::Table,
+            },
+            OutputInfo {
+                name: "flagged",
+                description: "written by the engine when a source has `on_error: skip`: one row per record that could not be read (record, file, reason with file:line:column)",
+                kind: OutputKind::Table,
+            },
+            OutputInfo {
+                name: "status",
+                description: "written by the engine: one row per record (record, status, file, reason): loaded, flagged (loaded whole, e.g. channels of unequal lengths null-padded; reason with file:line), skipped (`on_error: skip`) or failed",
+                kind: OutputKind::Table,
+            },
+        ],
+        params: LoadParams::specs(),
+    },
+    shown: [("status", super::Shown::RecordStatus)],
+    examples: [
+        super::Example {
+            title: "two NIED stations, one file per component, each read as one record in m/s² with its axes from \
+                the files' `Dir.` lines",
+            data: &KNET,
+            stages: "",
         },
-        OutputInfo {
-            name: "flagged",
-            description: "written by the engine when a source has `on_error: skip`: one row per record that could not be read (record, file, reason with file:line:column)",
-            kind: OutputKind::Table,
-        },
-        OutputInfo {
-            name: "status",
-            description: "written by the engine: one row per record (record, status, file, reason): loaded, flagged (loaded whole, e.g. channels of unequal lengths null-padded; reason with file:line), skipped (`on_error: skip`) or failed",
-            kind: OutputKind::Table,
+        super::Example {
+            title: "every shared record file, each read by the format its content tells (one record per file); \
+                `on_error: skip` lists a file that cannot be read in `flagged` and goes on",
+            data: &ARCHIVE,
+            stages: "",
         },
     ],
-    params: LoadParams::specs(),
-}
-});
-
-impl super::StageType for Load {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("status", super::Shown::RecordStatus)]
-    }
-
-    fn examples(&self) -> &'static [super::Example] {
-        &[
-            super::Example {
-                title: "two NIED stations, one file per component, each read as one record in m/s² with its axes from \
-                    the files' `Dir.` lines",
-                data: &KNET,
-                stages: "",
-            },
-            super::Example {
-                title: "every shared record file, each read by the format its content tells (one record per file); \
-                    `on_error: skip` lists a file that cannot be read in `flagged` and goes on",
-                data: &ARCHIVE,
-                stages: "",
-            },
-        ]
-    }
 }
 
 /// Every file of the shared records, told by content.
@@ -109,13 +100,7 @@ stages:
 };
 
 impl Stage for Load {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<LoadParams>(params)
-    }
+    super::info_and_check_params!(LoadParams);
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
@@ -1069,4 +1054,41 @@ fn guess_delimited_layout(path: &std::path::Path, skip: usize) -> Vec<(&'static 
         }
     }
     guesses
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const RECORD: &str = "RSN1084_NORTHR_SCS052.AT2";
+
+    /// The record's header (`NPTS=   8773, DT=   .0050 SEC`) and values in g, read here with a
+    /// plain split of the file's text.
+    fn by_hand(path: &std::path::Path) -> (usize, f64, Vec<f64>) {
+        let text = std::fs::read_to_string(path).unwrap();
+        let header = text.lines().nth(3).unwrap();
+        let field = |key: &str| header.split(key).nth(1).unwrap().split([',', 'S']).next().unwrap().trim().to_string();
+        let values = text.lines().skip(4).flat_map(str::split_whitespace).map(|v| v.parse().unwrap()).collect();
+        (field("NPTS=").parse().unwrap(), field("DT=").parse().unwrap(), values)
+    }
+
+    #[test]
+    fn a_peer_record_loads_with_its_header_step_and_its_values_in_si() {
+        let path = crate::signal::test_support::ground_motion_path(RECORD);
+        let (npts, dt, values) = by_hand(&path);
+        assert_eq!((npts, dt, values.len()), (8773, 0.005, 8773));
+        let spec = ad_hoc_source(&path, &serde_json::Map::new()).unwrap();
+        let part = InputPart { partition: vec![], path: path.clone(), label: RECORD.into(), hash: String::new() };
+        let table = load_record(&spec, &part).unwrap();
+        let time = table.f64_column(TIME_COLUMN).unwrap();
+        assert_eq!(time.len(), npts);
+        assert!((time[npts - 1] - time[0] - (npts - 1) as f64 * dt).abs() < 1e-9);
+        let column = table.columns.iter().find(|c| c.name != TIME_COLUMN).unwrap();
+        assert_eq!(column.unit, "m/s^2");
+        let ColumnData::F64(loaded) = &column.data else { panic!("{} is not f64", column.name) };
+        // Standard gravity, 9.806 65 m/s² per g (CGPM 1901).
+        for (k, (&si, &g)) in loaded.iter().zip(&values).enumerate() {
+            assert!((si - g * 9.80665).abs() <= 1e-12 * si.abs().max(1e-3), "sample {k}: {si} against {g} g");
+        }
+    }
 }

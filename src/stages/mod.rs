@@ -205,6 +205,53 @@ pub enum Shown {
     RecordStatus,
 }
 
+/// A stage type's declaration in one block: its [`StageInfo`] as the file's `static INFO`
+/// (which [`info_and_check_params`] returns), and its [`StageType`]: what the report shows of its
+/// outputs (`shown`) and the example pipelines its documentation shows (`examples`), each
+/// optional.
+macro_rules! declare_stage {
+    (
+        $stage:ty,
+        info: $info:expr,
+        $(shown: [$($shown:expr),* $(,)?],)?
+        $(examples: [$($example:expr),* $(,)?],)?
+    ) => {
+        static INFO: std::sync::LazyLock<$crate::stages::StageInfo> = std::sync::LazyLock::new(|| $info);
+
+        impl $crate::stages::StageType for $stage {
+            $(
+                fn shown(&self) -> &'static [(&'static str, $crate::stages::Shown)] {
+                    &[$($shown),*]
+                }
+            )?
+            $(
+                fn examples(&self) -> &'static [$crate::stages::Example] {
+                    &[$($example),*]
+                }
+            )?
+        }
+    };
+}
+pub(crate) use declare_stage;
+
+/// In a stage's `impl Stage`: `info` returns the file's `INFO` ([`declare_stage`]) and
+/// `check_params` checks the parameters against the struct `$params` ([`crate::pipeline::params::check_typed`]).
+macro_rules! info_and_check_params {
+    ($params:ty) => {
+        fn info(&self) -> &'static $crate::stages::StageInfo {
+            &INFO
+        }
+
+        fn check_params(
+            &self,
+            params: &$crate::pipeline::params::Params,
+        ) -> Result<(), $crate::pipeline::params::ParamError> {
+            $crate::pipeline::params::check_typed::<$params>(params)
+        }
+    };
+}
+pub(crate) use info_and_check_params;
+
 /// The stage types, each named once: [`registry`] for the engine and [`stage_types`] for what
 /// the engine does not ask.
 macro_rules! stage_types {

@@ -11,7 +11,6 @@ mod html;
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::sync::LazyLock;
 
 use rayon::prelude::*;
 use serde::de::DeserializeOwned;
@@ -23,7 +22,7 @@ use super::{
     figure_stem, partition_values, Declared, InputKind, InputPart, OutputInfo, OutputKind, Shown, Stage, StageContext,
     StageInfo, StageInput,
 };
-use crate::pipeline::params::{self, ParamError, Params};
+use crate::pipeline::params;
 use crate::table::{Column, ColumnData, Table};
 
 pub struct Report;
@@ -41,21 +40,42 @@ crate::stage_params! {
     }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "report",
-    version: 3,
-    summary: "Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time, confidence); rolling units' peak displacement, yaw and caster flips per motion; the study report index.html.",
-    inputs: InputKind::Datasets,
-    outputs: &[
-        OutputInfo { name: "summary", description: "one row per unit and toppling event (or one row when none)", kind: OutputKind::Table },
-        OutputInfo { name: "rolling", description: "one row per rolling unit and motion: peak_displacement_m, peak_yaw_rad, caster_flips, breakaway_time_s (from simulate_rolling.events inputs)", kind: OutputKind::Table },
-        OutputInfo { name: "figures", description: "<unit>.png: floor vs top acceleration in `figure_motion`, transfer functions in their band with the picked peaks, coherence", kind: OutputKind::Files },
-        OutputInfo { name: "index.html", description: "the study report for a browser: summary, per unit its frequencies, toppling events, simulations, fragility, rolling results and figures, the diagnosis, provenance (figures linked relatively: open it where `run` wrote it)", kind: OutputKind::Page },
-    ],
-    params: ReportParams::specs(),
+super::declare_stage! {
+    Report,
+    info: StageInfo {
+        name: "report",
+        version: 3,
+        summary: "Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time, confidence); rolling units' peak displacement, yaw and caster flips per motion; the study report index.html.",
+        inputs: InputKind::Datasets,
+        outputs: &[
+            OutputInfo { name: "summary", description: "one row per unit and toppling event (or one row when none)", kind: OutputKind::Table },
+            OutputInfo { name: "rolling", description: "one row per rolling unit and motion: peak_displacement_m, peak_yaw_rad, caster_flips, breakaway_time_s (from simulate_rolling.events inputs)", kind: OutputKind::Table },
+            OutputInfo { name: "figures", description: "<unit>.png: floor vs top acceleration in `figure_motion`, transfer functions in their band with the picked peaks, coherence", kind: OutputKind::Files },
+            OutputInfo { name: "index.html", description: "the study report for a browser: summary, per unit its frequencies, toppling events, simulations, fragility, rolling results and figures, the diagnosis, provenance (figures linked relatively: open it where `run` wrote it)", kind: OutputKind::Page },
+        ],
+        params: ReportParams::specs(),
+    },
+    examples: [super::Example {
+        title:
+            "the study report of a rocking simulation: the unit's runs, what the report lacked, the records loaded",
+        data: &super::RINALDI,
+        stages: "\
+baseline:
+  type: baseline
+  inputs: [load]
+PS2:
+  type: simulate_toppling
+  inputs: [baseline]
+  params:
+    preset: PS2
+report:
+  type: report
+  inputs: [PS2.events, load.status]
+  params:
+    title: Rinaldi on PS2
+",
+    }],
 }
-});
 
 /// What the report does with each kind of output.
 impl Shown {
@@ -121,39 +141,8 @@ fn reads() -> String {
     outputs.join(", ")
 }
 
-impl super::StageType for Report {
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title:
-                "the study report of a rocking simulation: the unit's runs, what the report lacked, the records loaded",
-            data: &super::RINALDI,
-            stages: "\
-baseline:
-  type: baseline
-  inputs: [load]
-PS2:
-  type: simulate_toppling
-  inputs: [baseline]
-  params:
-    preset: PS2
-report:
-  type: report
-  inputs: [PS2.events, load.status]
-  params:
-    title: Rinaldi on PS2
-",
-        }]
-    }
-}
-
 impl Stage for Report {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<ReportParams>(params)
-    }
+    super::info_and_check_params!(ReportParams);
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
         let p: ReportParams = params::typed(ctx.params)?;

@@ -3,7 +3,6 @@
 //! Table 4 `preset`, then an `equipment` file of the same keys, then the stage's own values.
 
 use std::path::{Path, PathBuf};
-use std::sync::LazyLock;
 
 use rayon::prelude::*;
 use serde_json::{json, Map, Value};
@@ -145,31 +144,25 @@ crate::choice! {
     pub enum FrictionLawChoice { Regularised = "regularised", StickSlip = "stick_slip" }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "simulate_rolling",
-    version: 3,
-    summary: "Rolling, turning and pivot steering of equipment on four swivel casters under the two horizontal floor components (the study's 4WMC, made well posed).",
-    inputs: InputKind::Datasets,
-    outputs: &[
-        OutputInfo { name: "trajectory", description: "on the input time base: time_s, x_m, y_m, yaw_rad, delta1_rad…delta4_rad, velocities, roll1_mps…roll4_mps, swivel rates, the platform's absolute acceleration ax_abs_mps2/ay_abs_mps2, the floor input", kind: OutputKind::TimeSeries },
-        OutputInfo { name: "events", description: "breakaway, rest and caster flip times, the peak displacement and the peak yaw: time_s, event, caster, displacement_m, yaw_rad, delta_rad", kind: OutputKind::Table },
-        OutputInfo { name: "figures", description: "<partition>.png: floor inputs, x/y displacement, yaw with the four caster angles, and the x–y orbit (the study's Figure 11)", kind: OutputKind::Files },
-    ],
-    params: SimulateRollingParams::specs(),
-}
-});
-
-impl super::StageType for SimulateRolling {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("events", super::Shown::Rolling)]
-    }
-
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "the study's patient bed PB2 on four swivel casters under both horizontal components",
-            data: &super::RINALDI,
-            stages: "\
+super::declare_stage! {
+    SimulateRolling,
+    info: StageInfo {
+        name: "simulate_rolling",
+        version: 3,
+        summary: "Rolling, turning and pivot steering of equipment on four swivel casters under the two horizontal floor components (the study's 4WMC, made well posed).",
+        inputs: InputKind::Datasets,
+        outputs: &[
+            OutputInfo { name: "trajectory", description: "on the input time base: time_s, x_m, y_m, yaw_rad, delta1_rad…delta4_rad, velocities, roll1_mps…roll4_mps, swivel rates, the platform's absolute acceleration ax_abs_mps2/ay_abs_mps2, the floor input", kind: OutputKind::TimeSeries },
+            OutputInfo { name: "events", description: "breakaway, rest and caster flip times, the peak displacement and the peak yaw: time_s, event, caster, displacement_m, yaw_rad, delta_rad", kind: OutputKind::Table },
+            OutputInfo { name: "figures", description: "<partition>.png: floor inputs, x/y displacement, yaw with the four caster angles, and the x–y orbit (the study's Figure 11)", kind: OutputKind::Files },
+        ],
+        params: SimulateRollingParams::specs(),
+    },
+    shown: [("events", super::Shown::Rolling)],
+    examples: [super::Example {
+        title: "the study's patient bed PB2 on four swivel casters under both horizontal components",
+        data: &super::RINALDI,
+        stages: "\
 simulate_rolling:
   type: simulate_rolling
   inputs: [load]
@@ -178,18 +171,11 @@ simulate_rolling:
     x_channel: ax_mps2
     y_channel: ay_mps2
 ",
-        }]
-    }
+    }],
 }
 
 impl Stage for SimulateRolling {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<SimulateRollingParams>(params)
-    }
+    super::info_and_check_params!(SimulateRollingParams);
 
     fn check(&self, params: &Params, base_dir: &Path) -> Result<(), ParamError> {
         Setup::resolve(&params::typed(params)?, base_dir).map(|_| ())

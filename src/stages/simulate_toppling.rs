@@ -4,7 +4,6 @@
 
 use super::error::{float_column, StageError};
 use std::path::{Path, PathBuf};
-use std::sync::LazyLock;
 
 use rayon::prelude::*;
 
@@ -79,31 +78,25 @@ crate::stage_params! {
     }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "simulate_toppling",
-    version: 3,
-    summary: "The study's 2D rigid-block toppling model on floor records: rest, uplift (Eq. 20/21), rocking (Eq. 22), impacts (Eq. 24), overturning; adaptive integration with located events.",
-    inputs: InputKind::Datasets,
-    outputs: &[
-        OutputInfo { name: "response", description: "per record: time_s, theta_rad, theta_dot_radps, top_ax_mps2 (what a top accelerometer records), on the input time base", kind: OutputKind::TimeSeries },
-        OutputInfo { name: "events", description: "per record: uplifts, impacts, returns to rest, anchor yield/fracture, overturn; the last row (event = summary) and every row carry overturned, overturn_time_s, overturn_side", kind: OutputKind::Table },
-        OutputInfo { name: "figures", description: "<record>.png: floor and top acceleration, theta with the events marked", kind: OutputKind::Files },
-    ],
-    params: SimulateTopplingParams::specs(),
-}
-});
-
-impl super::StageType for SimulateToppling {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("events", super::Shown::Rocking)]
-    }
-
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "the study's PS2 unit on the baseline-corrected record, both horizontal and vertical shaking",
-            data: &super::RINALDI,
-            stages: "\
+super::declare_stage! {
+    SimulateToppling,
+    info: StageInfo {
+        name: "simulate_toppling",
+        version: 3,
+        summary: "The study's 2D rigid-block toppling model on floor records: rest, uplift (Eq. 20/21), rocking (Eq. 22), impacts (Eq. 24), overturning; adaptive integration with located events.",
+        inputs: InputKind::Datasets,
+        outputs: &[
+            OutputInfo { name: "response", description: "per record: time_s, theta_rad, theta_dot_radps, top_ax_mps2 (what a top accelerometer records), on the input time base", kind: OutputKind::TimeSeries },
+            OutputInfo { name: "events", description: "per record: uplifts, impacts, returns to rest, anchor yield/fracture, overturn; the last row (event = summary) and every row carry overturned, overturn_time_s, overturn_side", kind: OutputKind::Table },
+            OutputInfo { name: "figures", description: "<record>.png: floor and top acceleration, theta with the events marked", kind: OutputKind::Files },
+        ],
+        params: SimulateTopplingParams::specs(),
+    },
+    shown: [("events", super::Shown::Rocking)],
+    examples: [super::Example {
+        title: "the study's PS2 unit on the baseline-corrected record, both horizontal and vertical shaking",
+        data: &super::RINALDI,
+        stages: "\
 baseline:
   type: baseline
   inputs: [load]
@@ -115,18 +108,11 @@ simulate_toppling:
     horizontal: ax_mps2
     vertical: az_mps2
 ",
-        }]
-    }
+    }],
 }
 
 impl Stage for SimulateToppling {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<SimulateTopplingParams>(params)
-    }
+    super::info_and_check_params!(SimulateTopplingParams);
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
@@ -463,4 +449,33 @@ fn summary_line(dir: &Path) -> anyhow::Result<String> {
         line += &format!(" ({})", summary::some_of(&which, 6));
     }
     Ok(line)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_block_on_a_ramped_floor_uplifts_when_the_floor_reaches_g_b_over_h() {
+        // B/H = 1/3 with the centre of mass at mid-height (f = 0): Housner's threshold g tan α = g B/H.
+        let (b, h, g) = (0.5, 1.5, 9.80665);
+        let block = Block::new(Shape::Rectangular { b_m: b, h_m: h, f: 0.0 }, 100.0, g).unwrap();
+        let rate = 0.5; // m/s² per s
+        let n = 2001; // 10 s at 200 Hz
+        let time: Vec<f64> = (0..n).map(|k| k as f64 / 200.0).collect();
+        let mut table = Table::new();
+        table.push(Column::f64(TIME_COLUMN, "s", "", time.clone()));
+        table.push(Column::f64("ax_mps2", "m/s^2", "", time.iter().map(|t| rate * t).collect()));
+        let (_, response) = simulate_record(&table, &block, &Options::default(), "ax_mps2", None).unwrap();
+        let events = events_table(&response);
+        let ColumnData::Str(kind) = &events.column("event").unwrap().data else { panic!("event") };
+        let ColumnData::OptF64(at) = &events.column(TIME_COLUMN).unwrap().data else { panic!("time_s") };
+        assert_eq!(kind[0], "uplift");
+        let exact = g * b / h / rate;
+        assert!((at[0].unwrap() - exact).abs() < 1e-6, "uplift at {:?} s, closed form {exact} s", at[0]);
+        // A floor accelerating toward +x throws the block onto its −x corner.
+        let ColumnData::I64(side) = &events.column("side").unwrap().data else { panic!("side") };
+        assert_eq!(side[0], -1);
+        assert_eq!(kind.last().unwrap(), "summary");
+    }
 }

@@ -12,7 +12,6 @@
 use super::error::StageError;
 use std::path::Path;
 use std::sync::Arc;
-use std::sync::LazyLock;
 
 use rayon::prelude::*;
 
@@ -46,31 +45,25 @@ crate::stage_params! {
     }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "synchronize",
-    version: 4,
-    summary: "Align a second DAQ with the reference DAQ: band-limited resampling, FFT cross-correlation lag (sub-sample), shift onto the reference clock.",
-    inputs: InputKind::Datasets,
-    outputs: &[
-        OutputInfo { name: "records", description: "reference channels and aligned target channels on the reference time base", kind: OutputKind::TimeSeries },
-        OutputInfo { name: "lags", description: "estimated (or given) lag per target record: channel, lag_s, lag_uncertainty_s, correlation", kind: OutputKind::Table },
-    ],
-    params: SynchronizeParams::specs(),
-}
-});
-
-impl super::StageType for Synchronize {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("records", super::Shown::Records)]
-    }
-
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title:
-                "a second DAQ (here the same record loaded again, so the lag found is 0) put on the reference's clock",
-            data: &super::RINALDI,
-            stages: "\
+super::declare_stage! {
+    Synchronize,
+    info: StageInfo {
+        name: "synchronize",
+        version: 4,
+        summary: "Align a second DAQ with the reference DAQ: band-limited resampling, FFT cross-correlation lag (sub-sample), shift onto the reference clock.",
+        inputs: InputKind::Datasets,
+        outputs: &[
+            OutputInfo { name: "records", description: "reference channels and aligned target channels on the reference time base", kind: OutputKind::TimeSeries },
+            OutputInfo { name: "lags", description: "estimated (or given) lag per target record: channel, lag_s, lag_uncertainty_s, correlation", kind: OutputKind::Table },
+        ],
+        params: SynchronizeParams::specs(),
+    },
+    shown: [("records", super::Shown::Records)],
+    examples: [super::Example {
+        title:
+            "a second DAQ (here the same record loaded again, so the lag found is 0) put on the reference's clock",
+        data: &super::RINALDI,
+        stages: "\
 daq2:
   type: load
   inputs: [rinaldi]
@@ -81,18 +74,11 @@ synchronize:
     target_channel: ax_mps2
     join: station
 ",
-        }]
-    }
+    }],
 }
 
 impl Stage for Synchronize {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<SynchronizeParams>(params)
-    }
+    super::info_and_check_params!(SynchronizeParams);
 
     /// `reference_select` is checked with the pipeline, so `validate` points at its line.
     fn check(&self, params: &Params, _base_dir: &Path) -> Result<(), ParamError> {

@@ -5,13 +5,12 @@
 use super::error::{float_column, StageError};
 use std::path::Path;
 use std::sync::Arc;
-use std::sync::LazyLock;
 
 use rayon::prelude::*;
 
 use super::simulate_toppling::{model_from_params, simulate_record, RockingParams};
 use super::{partition_values, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{self, ParamError, Params};
+use crate::pipeline::params::{self, Params};
 use crate::stats::fragility::{fit_lognormal, FitOutcome, LognormalFit};
 use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
@@ -38,31 +37,25 @@ crate::choice! {
     pub enum Intensity { Pfa = "pfa", Pfv = "pfv" }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "toppling_fragility",
-    version: 3,
-    summary: "Overturning fragility of one unit: floor records scaled over intensities, all runs simulated in parallel, lognormal curve (median, beta) by maximum likelihood.",
-    inputs: InputKind::Datasets,
-    outputs: &[
-        OutputInfo { name: "runs", description: "every run: record, level, scale, im, overturned, overturn_time_s, overturn_side, max_abs_theta_rad, n_impacts", kind: OutputKind::Table },
-        OutputInfo { name: "fragility", description: "one row: im_measure, median, beta, log_likelihood, n_runs, n_overturned, note", kind: OutputKind::Table },
-        OutputInfo { name: "figures", description: "fragility.png: the fitted curve, every run at 0 (stood) or 1 (overturned) and the overturned fraction per level; pfa in g", kind: OutputKind::Files },
-    ],
-    params: TopplingFragilityParams::specs(),
-}
-});
-
-impl super::StageType for TopplingFragility {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("fragility", super::Shown::Fragility)]
-    }
-
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "PS2's overturning fragility from the record scaled to three intensities",
-            data: &super::RINALDI,
-            stages: "\
+super::declare_stage! {
+    TopplingFragility,
+    info: StageInfo {
+        name: "toppling_fragility",
+        version: 3,
+        summary: "Overturning fragility of one unit: floor records scaled over intensities, all runs simulated in parallel, lognormal curve (median, beta) by maximum likelihood.",
+        inputs: InputKind::Datasets,
+        outputs: &[
+            OutputInfo { name: "runs", description: "every run: record, level, scale, im, overturned, overturn_time_s, overturn_side, max_abs_theta_rad, n_impacts", kind: OutputKind::Table },
+            OutputInfo { name: "fragility", description: "one row: im_measure, median, beta, log_likelihood, n_runs, n_overturned, note", kind: OutputKind::Table },
+            OutputInfo { name: "figures", description: "fragility.png: the fitted curve, every run at 0 (stood) or 1 (overturned) and the overturned fraction per level; pfa in g", kind: OutputKind::Files },
+        ],
+        params: TopplingFragilityParams::specs(),
+    },
+    shown: [("fragility", super::Shown::Fragility)],
+    examples: [super::Example {
+        title: "PS2's overturning fragility from the record scaled to three intensities",
+        data: &super::RINALDI,
+        stages: "\
 toppling_fragility:
   type: toppling_fragility
   inputs: [load]
@@ -70,18 +63,11 @@ toppling_fragility:
     preset: PS2
     scales: [0.5, 1.0, 2.0]
 ",
-        }]
-    }
+    }],
 }
 
 impl Stage for TopplingFragility {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<TopplingFragilityParams>(params)
-    }
+    super::info_and_check_params!(TopplingFragilityParams);
 
     /// `horizontal` and `vertical` must be columns of the floor records.
     fn output_columns(&self, params: &Params, input: Option<&[String]>) -> super::ColumnCheck {
@@ -400,4 +386,51 @@ fn summary_line(dir: &Path) -> anyhow::Result<String> {
         _ => line += &format!("; no curve: {}", summary::texts(&fit, "note")?.pop().unwrap_or_default()),
     }
     Ok(line)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    /// Five whole cycles of a = A sin(2π f t) at 2 kHz, and a vertical channel.
+    fn sine(amplitude: f64, f_hz: f64) -> Table {
+        let n = (5.0 / f_hz * 2000.0) as usize + 1;
+        let time: Vec<f64> = (0..n).map(|k| k as f64 / 2000.0).collect();
+        let mut table = Table::new();
+        table.push(Column::f64(
+            "ax_mps2",
+            "m/s^2",
+            "",
+            time.iter().map(|t| amplitude * (2.0 * PI * f_hz * t).sin()).collect(),
+        ));
+        table.push(Column::f64("az_mps2", "m/s^2", "", vec![1.0; n]));
+        table.push(Column::f64("other", "", "", vec![7.0; n]));
+        table.push(Column::f64(TIME_COLUMN, "s", "", time));
+        table
+    }
+
+    #[test]
+    fn pfa_and_pfv_of_a_sine_are_its_closed_forms() {
+        let (amplitude, f_hz) = (2.5, 1.6);
+        let table = sine(amplitude, f_hz);
+        let pfa = intensity(&table, "ax_mps2", false).unwrap();
+        assert!((pfa / amplitude - 1.0).abs() < 1e-4, "PFA {pfa}");
+        // v(t) = A/(2πf) (1 − cos 2πft) from rest: its peak is A/(πf).
+        let pfv = intensity(&table, "ax_mps2", true).unwrap();
+        let exact = amplitude / (PI * f_hz);
+        assert!((pfv / exact - 1.0).abs() < 1e-5, "PFV {pfv} against {exact}");
+        assert!(intensity(&sine(0.0, f_hz), "ax_mps2", false).is_err());
+    }
+
+    #[test]
+    fn scaling_multiplies_the_floor_channels_only_and_keeps_the_clock() {
+        let table = sine(2.5, 1.6);
+        let scaled = scaled(&table, 3.0, "ax_mps2", Some("az_mps2"));
+        assert_eq!(scaled.column_names(), ["ax_mps2", "az_mps2", TIME_COLUMN]);
+        assert_eq!(scaled.f64_column(TIME_COLUMN), table.f64_column(TIME_COLUMN));
+        assert_eq!(scaled.f64_column("az_mps2").unwrap()[0], 3.0);
+        let pfa = intensity(&scaled, "ax_mps2", false).unwrap();
+        assert!((pfa / 7.5 - 1.0).abs() < 1e-4, "PFA {pfa}");
+    }
 }

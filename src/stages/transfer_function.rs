@@ -4,10 +4,9 @@
 
 use super::error::{float_column, StageError};
 use rayon::prelude::*;
-use std::sync::LazyLock;
 
 use super::{split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
-use crate::pipeline::params::{self, ParamError, Params};
+use crate::pipeline::params;
 use crate::signal::welch::{identify_peak, transfer_function, Detrend, WelchOptions, Window};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 
@@ -46,31 +45,25 @@ crate::choice! {
     pub enum DetrendChoice { None = "none", Constant = "constant", Linear = "linear" }
 }
 
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "transfer_function",
-    version: 2,
-    summary: "Welch transfer functions H1, H2 and coherence (MATLAB tfestimate defaults) and the identified fundamental frequency with half-power damping.",
-    inputs: InputKind::Datasets,
-    outputs: &[
-        OutputInfo { name: "identified", description: "per pair: frequency_hz, damping_ratio, peak_gain, coherence, low_coherence, note", kind: OutputKind::Table },
-        OutputInfo { name: "spectra", description: "per pair and frequency: |H1|, phase, |H2|, coherence", kind: OutputKind::Table },
-    ],
-    params: TransferFunctionParams::specs(),
-}
-});
-
-impl super::StageType for TransferFunction {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("identified", super::Shown::Frequencies), ("spectra", super::Shown::Spectra)]
-    }
-
-    fn examples(&self) -> &'static [super::Example] {
-        &[super::Example {
-            title: "a fixed-base frame's fundamental frequency (1.0 Hz) from its ground record and its 4th floor's \
-                    response; the floor record starts 1.31 s into the ground record",
-            data: &GROUND_AND_FLOOR,
-            stages: "\
+super::declare_stage! {
+    TransferFunction,
+    info: StageInfo {
+        name: "transfer_function",
+        version: 2,
+        summary: "Welch transfer functions H1, H2 and coherence (MATLAB tfestimate defaults) and the identified fundamental frequency with half-power damping.",
+        inputs: InputKind::Datasets,
+        outputs: &[
+            OutputInfo { name: "identified", description: "per pair: frequency_hz, damping_ratio, peak_gain, coherence, low_coherence, note", kind: OutputKind::Table },
+            OutputInfo { name: "spectra", description: "per pair and frequency: |H1|, phase, |H2|, coherence", kind: OutputKind::Table },
+        ],
+        params: TransferFunctionParams::specs(),
+    },
+    shown: [("identified", super::Shown::Frequencies), ("spectra", super::Shown::Spectra)],
+    examples: [super::Example {
+        title: "a fixed-base frame's fundamental frequency (1.0 Hz) from its ground record and its 4th floor's \
+                response; the floor record starts 1.31 s into the ground record",
+        data: &GROUND_AND_FLOOR,
+        stages: "\
 synchronize:
   type: synchronize
   inputs: [load_floor, load_ground]
@@ -87,8 +80,7 @@ transfer_function:
     band_max_hz: 3.0
     segment_s: 8.0
 ",
-        }]
-    }
+    }],
 }
 
 /// The shared case demo_03: a 4th floor's record and the ground record it was made from.
@@ -120,13 +112,7 @@ stages:
 };
 
 impl Stage for TransferFunction {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
-
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<TransferFunctionParams>(params)
-    }
+    super::info_and_check_params!(TransferFunctionParams);
 
     fn work_units(&self) -> super::WorkUnits {
         super::WorkUnits::EachRecord
@@ -282,4 +268,68 @@ fn analyse(
     identified.metadata.insert("shakeflow.welch".into(), welch.to_string());
     spectra.metadata.insert("shakeflow.welch".into(), welch.to_string());
     Ok((identified, spectra))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::signal::test_support::Rng;
+    use std::f64::consts::PI;
+
+    const FS: f64 = 100.0;
+    /// The resonator y[k] = x[k] + 2r cos(ω0) y[k-1] − r² y[k-2]: poles r·e^(±iω0).
+    const R: f64 = 0.98;
+    const F0: f64 = 5.0;
+
+    /// |H(e^(iω))| of the resonator, its closed form.
+    fn gain(omega: f64) -> f64 {
+        let w0 = 2.0 * PI * F0 / FS;
+        let re = 1.0 - 2.0 * R * w0.cos() * omega.cos() + R * R * (2.0 * omega).cos();
+        let im = 2.0 * R * w0.cos() * omega.sin() - R * R * (2.0 * omega).sin();
+        1.0 / re.hypot(im)
+    }
+
+    #[test]
+    fn a_resonators_peak_frequency_gain_and_damping_are_its_closed_forms() {
+        let w0 = 2.0 * PI * F0 / FS;
+        let n = (800.0 * FS) as usize;
+        let mut rng = Rng::new(37);
+        let x: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
+        let mut y = vec![0.0; n];
+        for k in 0..n {
+            let back = |j: usize| if k >= j { y[k - j] } else { 0.0 };
+            let next = x[k] + 2.0 * R * w0.cos() * back(1) - R * R * back(2);
+            y[k] = next;
+        }
+        let mut table = Table::new();
+        table.push(Column::f64(TIME_COLUMN, "s", "", (0..n).map(|k| k as f64 / FS).collect()));
+        table.push(Column::f64("x", "", "", x));
+        table.push(Column::f64("y", "", "", y));
+        let p = TransferFunctionParams {
+            pairs: vec!["x -> y".into()],
+            band_min_hz: 2.0,
+            band_max_hz: 10.0,
+            window: WindowChoice::Hamming,
+            segment_s: Some(40.0),
+            overlap: 0.5,
+            detrend: DetrendChoice::None,
+            coherence_threshold: 0.5,
+        };
+        let (identified, _) = analyse(&table, &[("x".into(), "y".into())], &p).unwrap();
+        let value = |name: &str| match &identified.column(name).unwrap().data {
+            ColumnData::OptF64(v) => v[0].unwrap(),
+            other => panic!("{name}: {other:?}"),
+        };
+        // The peak of |H|: cos ω = (1 + r²)/(2r) cos ω0.
+        let peak = ((1.0 + R * R) / (2.0 * R) * w0.cos()).acos();
+        let peak_hz = peak * FS / (2.0 * PI);
+        assert!((value("frequency_hz") - peak_hz).abs() < 0.01, "{} Hz against {peak_hz} Hz", value("frequency_hz"));
+        let gain_error = value("peak_gain") / gain(peak) - 1.0;
+        assert!(gain_error.abs() < 0.05, "peak gain {} against {}", value("peak_gain"), gain(peak));
+        // The continuous system with the same poles: σ = −fs ln r, ζ = σ / |s|.
+        let sigma = -FS * R.ln();
+        let zeta = sigma / sigma.hypot(w0 * FS);
+        assert!((value("damping_ratio") / zeta - 1.0).abs() < 0.1, "ζ {} against {zeta}", value("damping_ratio"));
+        assert!(value("coherence") > 0.95, "coherence {}", value("coherence"));
+    }
 }

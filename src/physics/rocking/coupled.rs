@@ -16,10 +16,10 @@
 
 use super::{
     chatter, initial_side, sensor_acceleration, Block, EventKind, Excitation, IsolatedBase, Options, Phase, Response,
-    MAX_TRANSITIONS_PER_SAMPLE,
+    Run,
 };
 use crate::physics::error::PhysicsError;
-use crate::physics::hybrid::{self, rebounds, Course, Equations, Hybrid, Now, Segment};
+use crate::physics::hybrid::{rebounds, Course, Equations, Hybrid, Now, Segment};
 use crate::physics::ode::{Stats, Stepper};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -136,32 +136,12 @@ pub(super) fn simulate<S: Stepper<4>>(
         .restitution
         .unwrap_or(1.0 - 2.0 * block.half_base_m.powi(2) / (block.i0_per_kg - system.mu * block.cm_height_m.powi(2)));
     let y = [options.initial_theta_rad, options.initial_theta_dot_radps, 0.0, 0.0];
-    let mut coupled = Coupled {
-        system,
-        excitation,
-        options,
-        restitution,
-        rest_speed_squared: block.rest_speed_squared(options.rest_amplitude_rad),
-        sensor_height: options.sensor_height_m.unwrap_or(block.height_m),
-        regime: initial_side(y[0], y[1]).map_or(Regime::Rest, |side| Regime::Rocking { side }),
-        response: Response::with_capacity(excitation.horizontal_mps2.len(), false),
-    };
-    let stats = hybrid::drive(&mut coupled, excitation.clock(), MAX_TRANSITIONS_PER_SAMPLE, y, stepper)?;
-    coupled.response.stats = stats;
-    Ok(coupled.response)
+    let regime = initial_side(y[0], y[1]).map_or(Regime::Rest, |side| Regime::Rocking { side });
+    Run::new(block, system, regime, restitution, (excitation, options), false).drive(y, stepper)
 }
 
-/// The coupled system's state between transitions, and what it records.
-struct Coupled<'a> {
-    system: System<'a>,
-    excitation: &'a Excitation<'a>,
-    options: &'a Options,
-    restitution: f64,
-    rest_speed_squared: f64,
-    sensor_height: f64,
-    regime: Regime,
-    response: Response,
-}
+/// The coupled system's run between transitions, and what it records.
+type Coupled<'a> = Run<'a, System<'a>, Regime>;
 
 impl<'a> Hybrid<4, 2> for Coupled<'a> {
     type Transition = Transition;
@@ -172,7 +152,7 @@ impl<'a> Hybrid<4, 2> for Coupled<'a> {
         let (k, t) = (now.k, now.t);
         let seg = self.excitation.segment(k);
         if self.regime == Regime::Rest {
-            let now = self.system.uplift_margins(&seg, t, y);
+            let now = self.model.uplift_margins(&seg, t, y);
             // A base accelerating toward −x (margin 0 spent) throws the block onto its +x
             // corner, and the other way round.
             let side_now = if now[0] <= 0.0 && now[0] <= now[1] {
@@ -186,11 +166,11 @@ impl<'a> Hybrid<4, 2> for Coupled<'a> {
                 return Ok(Course::Switch { at: t, transition: Transition::UpliftNow(side) });
             }
         }
-        Ok(Course::Integrate(Phase { model: self.system, regime: self.regime, seg }))
+        Ok(Course::Integrate(Phase { model: self.model, regime: self.regime, seg }))
     }
 
     fn apply(&mut self, _: usize, transition: Transition, t: f64, y: [f64; 4], immediate: bool) -> [f64; 4] {
-        let block = self.system.block;
+        let block = self.model.block;
         match (transition, self.regime) {
             (Transition::UpliftNow(side), _) => {
                 self.regime = Regime::Rocking { side };
@@ -214,7 +194,7 @@ impl<'a> Hybrid<4, 2> for Coupled<'a> {
                     self.response.log(t, EventKind::Rest, 0, before, 0.0);
                 }
                 // The system's horizontal momentum is conserved through the impact.
-                [0.0, after, y[2], y[3] - self.system.mu * block.cm_height_m * (after - before)]
+                [0.0, after, y[2], y[3] - self.model.mu * block.cm_height_m * (after - before)]
             }
             (Transition::Overturn, Regime::Rocking { side }) => {
                 // The block lies on the base, which carries it on as a rigid mass.
@@ -232,7 +212,7 @@ impl<'a> Hybrid<4, 2> for Coupled<'a> {
     }
 
     fn record(&mut self, k: usize, y: &[f64; 4]) {
-        let (system, block) = (&self.system, self.system.block);
+        let (system, block) = (&self.model, self.model.block);
         let av = self.excitation.vertical(k);
         let (theta_ddot, base, sensor) = match self.regime {
             Regime::Rocking { side } => {

@@ -26,8 +26,8 @@
 //! The model is mass-independent (only I₀/m enters); the mass is kept for reports.
 
 use crate::physics::error::PhysicsError;
-use crate::physics::hybrid::{Clock, Segment};
-use crate::physics::ode::{Dopri5, Either, Rk4, Stats};
+use crate::physics::hybrid::{self, Clock, Hybrid, Segment};
+use crate::physics::ode::{Dopri5, Either, Rk4, Stats, Stepper};
 use crate::physics::sdof::Sdof;
 
 mod coupled;
@@ -435,6 +435,53 @@ struct Phase<Mo, R> {
     model: Mo,
     regime: R,
     seg: Segment<2>,
+}
+
+/// A run of the sliding or the coupled model: its equations `model` (the part of a [`Phase`]
+/// that stays), its `regime`, what it reads and the response it records. Each model's
+/// `Hybrid` impl on it decides the transitions; [`Run::drive`] runs it.
+struct Run<'a, Mo, R> {
+    model: Mo,
+    excitation: &'a Excitation<'a>,
+    options: &'a Options,
+    restitution: f64,
+    rest_speed_squared: f64,
+    sensor_height: f64,
+    regime: R,
+    response: Response,
+}
+
+impl<'a, Mo, R> Run<'a, Mo, R> {
+    /// A run from `regime` (`slip`: the response records the base's slip).
+    fn new(
+        block: &Block,
+        model: Mo,
+        regime: R,
+        restitution: f64,
+        (excitation, options): (&'a Excitation<'a>, &'a Options),
+        slip: bool,
+    ) -> Self {
+        Run {
+            model,
+            excitation,
+            options,
+            restitution,
+            rest_speed_squared: block.rest_speed_squared(options.rest_amplitude_rad),
+            sensor_height: options.sensor_height_m.unwrap_or(block.height_m),
+            regime,
+            response: Response::with_capacity(excitation.horizontal_mps2.len(), slip),
+        }
+    }
+
+    /// The response from the state `y` at the record's start, its solver's figures included.
+    fn drive<const E: usize>(mut self, y: [f64; 4], stepper: impl Stepper<4>) -> Result<Response, PhysicsError>
+    where
+        Self: Hybrid<4, E, Error = PhysicsError>,
+    {
+        let clock = self.excitation.clock();
+        self.response.stats = hybrid::drive(&mut self, clock, MAX_TRANSITIONS_PER_SAMPLE, y, stepper)?;
+        Ok(self.response)
+    }
 }
 
 /// The error of a run whose `what` (impacts, stick-slip) kept switching near `t`.

@@ -26,10 +26,10 @@
 
 use super::{
     chatter, initial_side, most_negative, sensor_acceleration, Block, EventKind, Excitation, Friction, Options, Phase,
-    Response, MAX_TRANSITIONS_PER_SAMPLE,
+    Response, Run,
 };
 use crate::physics::error::PhysicsError;
-use crate::physics::hybrid::{self, rebounds, Course, Equations, Hybrid, Now, Segment};
+use crate::physics::hybrid::{rebounds, Course, Equations, Hybrid, Now, Segment};
 use crate::physics::ode::{Stats, Stepper};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -56,6 +56,8 @@ enum Regime {
 struct Model<'a> {
     block: &'a Block,
     friction: Friction,
+    /// Coupled friction above tan α: a block sliding flat tips at once.
+    tips_while_sliding: bool,
 }
 
 impl Model<'_> {
@@ -250,34 +252,15 @@ pub(super) fn simulate<S: Stepper<4>>(
     stepper: S,
 ) -> Result<Response, PhysicsError> {
     let y = [options.initial_theta_rad, options.initial_theta_dot_radps, 0.0, 0.0];
-    let mut sliding = Sliding {
-        model: Model { block, friction },
-        excitation,
-        options,
-        restitution: options.restitution.unwrap_or(block.restitution_eq24),
-        rest_speed_squared: block.rest_speed_squared(options.rest_amplitude_rad),
-        tips_while_sliding: friction.coupled && friction.kinetic_mu > block.alpha_rad.tan(),
-        sensor_height: options.sensor_height_m.unwrap_or(block.height_m),
-        regime: initial_side(y[0], y[1]).map_or(Regime::Stick, |side| Regime::Rock { side }),
-        response: Response::with_capacity(excitation.horizontal_mps2.len(), true),
-    };
-    let stats = hybrid::drive(&mut sliding, excitation.clock(), MAX_TRANSITIONS_PER_SAMPLE, y, stepper)?;
-    sliding.response.stats = stats;
-    Ok(sliding.response)
+    let tips_while_sliding = friction.coupled && friction.kinetic_mu > block.alpha_rad.tan();
+    let model = Model { block, friction, tips_while_sliding };
+    let regime = initial_side(y[0], y[1]).map_or(Regime::Stick, |side| Regime::Rock { side });
+    let restitution = options.restitution.unwrap_or(block.restitution_eq24);
+    Run::new(block, model, regime, restitution, (excitation, options), true).drive(y, stepper)
 }
 
-/// The sliding block's state between transitions, and what it records.
-struct Sliding<'a> {
-    model: Model<'a>,
-    excitation: &'a Excitation<'a>,
-    options: &'a Options,
-    restitution: f64,
-    rest_speed_squared: f64,
-    tips_while_sliding: bool,
-    sensor_height: f64,
-    regime: Regime,
-    response: Response,
-}
+/// The sliding block's run between transitions, and what it records.
+type Sliding<'a> = Run<'a, Model<'a>, Regime>;
 
 impl Sliding<'_> {
     /// A decision at the current instant, before integrating: a regime whose own condition is
@@ -289,7 +272,7 @@ impl Sliding<'_> {
             Regime::Slide { .. } if !model.friction.coupled => {
                 most_negative(&model.uplift_margins(seg, t)).map(|i| Transition::Uplift(STICK_EXITS[i]))
             }
-            Regime::Slide { .. } if self.tips_while_sliding => Some(Transition::Tip),
+            Regime::Slide { .. } if model.tips_while_sliding => Some(Transition::Tip),
             Regime::Rock { side } => {
                 let m = model.grip_margins(side, seg, t, y);
                 (m[0] < 0.0 || m[1] < 0.0).then(|| {
