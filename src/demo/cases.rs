@@ -121,9 +121,6 @@ pub enum CaseError {
     /// The rolling diagnosis model's refusal of the nominal run.
     #[error(transparent)]
     Diagnose(#[from] crate::diagnose::error::DiagnoseError),
-    /// The rolling diagnosis model's refusal of an altered run, as its text.
-    #[error("{0}")]
-    Model(String),
 }
 
 /// Every case's files (path in the archive, bytes), in `file_names()` order. `floor` gives the
@@ -377,7 +374,7 @@ fn rolling_case(plan: &RollingPlan, ax: &[f64]) -> Result<(Vec<(String, Vec<u8>)
     let t0 = moved as f64 / FS_HZ + ROLLING_ONSET_AFTER_S;
     let mass = Some(Change { dm_kg: plan.dm_kg, at_m: plan.at_m });
     let change = Alteration { mass, ramp_s: plan.ramp_s, ..Alteration::default() };
-    let truth = case.altered(&nominal, &change, t0, case.end_s(), None).map_err(|(e, _)| CaseError::Model(e))?;
+    let truth = case.altered(&nominal, &change, t0, case.end_s(), None).map_err(|s| CaseError::Physics(s.error))?;
     let mut rng = SplitMix64::new(seed_from_label(&format!("case:{}", plan.id)));
     let mut floor_csv = String::from("time_s,ax_mps2,ay_mps2\n");
     let mut accel_csv = String::from("time_s,top_ax_mps2\n");

@@ -16,9 +16,6 @@ pub enum DiagnoseError {
     /// The model refuses the case's parameters or floor record, or its run stopped.
     #[error(transparent)]
     Physics(#[from] PhysicsError),
-    /// A rolling cart's run that stopped (the integrator's message: where, and why).
-    #[error("{0}")]
-    Stopped(String),
     /// A nominal parameter the calibration cannot read or set.
     #[error(transparent)]
     Parameter(#[from] ParameterError),

@@ -36,6 +36,15 @@ pub enum PhysicsError {
     Stopped(String),
 }
 
+/// A run that stopped part way, with the right-hand-side evaluations it had spent by then (a fit
+/// charges them against its allowance). It reads as its [`PhysicsError`].
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{error}")]
+pub struct RunStopped {
+    pub error: PhysicsError,
+    pub spent: usize,
+}
+
 impl PhysicsError {
     /// The parameter the refusal is about, where it names one.
     pub fn parameter(&self) -> Option<&'static str> {

@@ -104,7 +104,7 @@ impl Objective<'_> {
         }
         let (alteration, onset) = self.effect.alteration(self.case, self.nominal, params).ok()?;
         let run = self.case.altered(self.nominal, &alteration, onset, until, Some(left));
-        allowance.spend(run.as_ref().map_or_else(|(_, spent)| *spent, |t| t.evaluations));
+        allowance.spend(run.as_ref().map_or_else(|s| s.spent, |t| t.evaluations));
         let mut track = run.ok()?;
         track.accel_unseen = self.effect.accel_unseen(self.case, self.nominal, params, &track);
         Some(track)

@@ -44,7 +44,7 @@ use super::contract::{Contracted, ModelFields};
 use super::error::{DiagnoseError, ParameterError};
 use super::verdict::{self, Model, Noise, Predictability, Verdict};
 use super::{Observed, Settings};
-use crate::physics::rolling::{simulate_altered, Alteration, Cart, Excitation, Friction, Method, Options};
+use crate::physics::rolling::{simulate_altered, Alteration, Cart, Excitation, Friction, Method, Options, RunStopped};
 use evidence::Evidence;
 
 /// The integrator the diagnosis runs the cart with: its counted evaluation allowances were tuned
@@ -232,12 +232,12 @@ impl RollingCase {
 
     /// The nominal cart over the whole record, with its states.
     pub fn nominal(&self) -> Result<Track, DiagnoseError> {
-        self.nominal_until(self.end_s(), None).map_err(|(e, _)| DiagnoseError::Stopped(e))
+        self.nominal_until(self.end_s(), None).map_err(|s| DiagnoseError::Physics(s.error))
     }
 
     /// The nominal cart from rest until `until_s`, with its states, within `allowance`
-    /// right-hand-side evaluations (`Err((message, evaluations spent))` past it).
-    fn nominal_until(&self, until_s: f64, allowance: Option<usize>) -> Result<Track, (String, usize)> {
+    /// right-hand-side evaluations (a [`RunStopped`] past it, with what it spent).
+    fn nominal_until(&self, until_s: f64, allowance: Option<usize>) -> Result<Track, RunStopped> {
         let end = (((until_s - self.t0_s) / self.dt_s).ceil().max(0.0) as usize).min(self.samples() - 1);
         let r = simulate_altered(
             &self.cart,
@@ -280,7 +280,7 @@ impl RollingCase {
         onset_s: f64,
         until_s: f64,
         allowance: Option<usize>,
-    ) -> Result<Track, (String, usize)> {
+    ) -> Result<Track, RunStopped> {
         let n = self.samples();
         let k0 = self.index(onset_s).min(n - 2);
         let end = (((until_s - self.t0_s) / self.dt_s).ceil().max(0.0) as usize).min(n - 1);
@@ -544,7 +544,7 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
             let twin_case = case.twin(p);
             let twin = twin_case
                 .altered(&twin_case.nominal_start(), &Alteration::default(), case.t0_s, until, None)
-                .map_err(|(e, _)| DiagnoseError::Stopped(e))?;
+                .map_err(|s| DiagnoseError::Physics(s.error))?;
             probe = p;
             predictable_until_s = evidence.parting(nominal, &twin).filter(|t| *t <= until);
             // The largest probe whose twin the records do not reject before the nominal cart.

@@ -31,7 +31,7 @@ mod simulate;
 #[cfg(test)]
 mod tests;
 
-pub use crate::physics::error::PhysicsError;
+pub use crate::physics::error::{PhysicsError, RunStopped};
 pub use dynamics::{Alteration, Brake, Dynamics, Jam, MassChange, NoSlip, Power, Slip, Wall, JAM_EPS_RADPS};
 pub use simulate::{simulate, simulate_altered, Event, EventKind, Excitation, Response};
 

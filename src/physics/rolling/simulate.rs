@@ -3,7 +3,7 @@
 //! moment the cart slows enough to stick or the floor breaks it away) and what it records at each
 //! sample; the floor is linear between samples, so every output lands on the input time base.
 
-use crate::physics::error::PhysicsError;
+use crate::physics::error::{PhysicsError, RunStopped};
 use std::f64::consts::PI;
 
 use super::dynamics::{Alteration, Dynamics, NoSlip, Slip};
@@ -222,9 +222,9 @@ pub fn simulate_altered(
     start: Option<(usize, &[f64])>,
     end: usize,
     budget: Option<usize>,
-) -> Result<Response, (String, usize)> {
+) -> Result<Response, RunStopped> {
     let n = excitation.ax_mps2.len();
-    let refused = |e: PhysicsError| (e.to_string(), 0);
+    let refused = |error: PhysicsError| RunStopped { error, spent: 0 };
     if friction.law != FrictionLaw::Regularised || options.lateral_slip.is_some() {
         return Err(refused(PhysicsError::Parameter(
             "an altered cart runs the no-slip model with regularised friction only".into(),
@@ -248,14 +248,15 @@ pub fn simulate_altered(
             y[3..7].copy_from_slice(&options.steer0_rad);
             y
         }
-        Some((_, state)) => {
-            state.try_into().map_err(|_| (format!("a cart state has 10 values, got {}", state.len()), 0))?
-        }
+        Some((_, state)) => state.try_into().map_err(|_| {
+            refused(PhysicsError::Parameter(format!("a cart state has 10 values, got {}", state.len())))
+        })?,
     };
     let mut response: Option<Response> = None;
     let mut used = 0;
     for (first, last, piece) in pieces(alteration, k0, end, excitation.dt_s) {
-        let model = NoSlip::altered(cart, friction, options.g_mps2, &piece).map_err(|e| (e.to_string(), used))?;
+        let model = NoSlip::altered(cart, friction, options.g_mps2, &piece)
+            .map_err(|error| RunStopped { error, spent: used })?;
         if start.is_some() || first > k0 {
             y = model.enter(&before, &y);
         }
@@ -270,9 +271,10 @@ pub fn simulate_altered(
         run.budget = budget.map(|b| b.saturating_sub(used));
         let next = run
             .run(stepper(options.method, excitation.dt_s, run.budget), y)
-            .map_err(|(e, spent)| (e.to_string(), used + spent))?;
-        let state = next.states.last().ok_or(("an altered run kept no state".to_string(), used))?;
-        y = state.as_slice().try_into().map_err(|_| ("an altered run kept a malformed state".to_string(), used))?;
+            .map_err(|(error, spent)| RunStopped { error, spent: used + spent })?;
+        let stopped = |what: &str| RunStopped { error: PhysicsError::Stopped(what.into()), spent: used };
+        let state = next.states.last().ok_or_else(|| stopped("an altered run kept no state"))?;
+        y = state.as_slice().try_into().map_err(|_| stopped("an altered run kept a malformed state"))?;
         used += next.stats.rhs_evals;
         match response.as_mut() {
             None => response = Some(next),
@@ -280,7 +282,7 @@ pub fn simulate_altered(
         }
         before = model;
     }
-    response.ok_or_else(|| ("an altered run covered no samples".to_string(), used))
+    response.ok_or(RunStopped { error: PhysicsError::Stopped("an altered run covered no samples".into()), spent: used })
 }
 
 /// The constant pieces (first sample, last sample, alteration) of an altered run over k0..=end.

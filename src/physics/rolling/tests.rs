@@ -769,4 +769,24 @@ mod alterations {
         assert!(lost > 1.0, "the brake must do real work: {lost} J");
         assert!((lost - work).abs() < 5e-3 * work, "lost {lost} J vs {work} J");
     }
+
+    #[test]
+    fn an_altered_run_that_stops_says_why_and_what_it_spent() {
+        // A fit charges a stopped run's evaluations against its allowance: a refusal before the
+        // run spends nothing, a run cut by its budget reports at least the budget.
+        let n = 401;
+        let floor: Vec<f64> = (0..n).map(|k| 2.0 * (k as f64 * 0.005 * 6.0).sin()).collect();
+        let excitation = Excitation { t0_s: 0.0, dt_s: 0.005, ax_mps2: &floor, ay_mps2: &floor };
+        let (cart, options) = (prototype(), Options::default());
+        let run = |end, budget| {
+            simulate_altered(&cart, &frictionless(), &excitation, &options, &Alteration::default(), None, end, budget)
+        };
+        let refused = run(n, None).unwrap_err();
+        assert_eq!(refused.spent, 0);
+        assert_eq!(refused.to_string(), "cannot simulate samples 0..=401 of a 401-sample floor record");
+        let whole = run(n - 1, None).unwrap().stats.rhs_evals;
+        let cut = run(n - 1, Some(whole / 4)).unwrap_err();
+        assert!(cut.spent >= whole / 4 && cut.spent < whole, "{} of {whole} evaluations spent", cut.spent);
+        assert_eq!(cut.to_string(), cut.error.to_string());
+    }
 }
