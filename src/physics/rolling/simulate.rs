@@ -271,7 +271,7 @@ pub fn simulate_altered(
         run.budget = budget.map(|b| b.saturating_sub(used));
         let next = run
             .run(stepper(options.method, excitation.dt_s, run.budget), y)
-            .map_err(|(error, spent)| RunStopped { error, spent: used + spent })?;
+            .map_err(|s| RunStopped { spent: used + s.spent, ..s })?;
         let stopped = |what: &str| RunStopped { error: PhysicsError::Stopped(what.into()), spent: used };
         let state = next.states.last().ok_or_else(|| stopped("an altered run kept no state"))?;
         y = state.as_slice().try_into().map_err(|_| stopped("an altered run kept a malformed state"))?;
@@ -307,7 +307,7 @@ fn dispatch<const N: usize, D: Dynamics<N>>(
     method: Method,
 ) -> Result<Response, PhysicsError> {
     let run = Run::new(model, excitation, friction.law, friction.eps_mps);
-    run.run(stepper(method, excitation.dt_s, None), y0).map_err(|(e, _)| e)
+    run.run(stepper(method, excitation.dt_s, None), y0).map_err(|s| s.error)
 }
 
 /// The stepper `method` asks for, giving up past `budget` evaluations (adaptive only).
@@ -458,9 +458,9 @@ impl<const N: usize, D: Dynamics<N>> Rolling<'_, '_, N, D> {
 impl<'r, 'a, const N: usize, D: Dynamics<N>> Hybrid<N, EVENTS> for Rolling<'r, 'a, N, D> {
     type Transition = Transition;
     type Equations = Moving<'r, 'a, N, D>;
-    type Error = (PhysicsError, usize);
+    type Error = RunStopped;
 
-    fn course(&mut self, now: Now, y: &[f64; N]) -> Result<Course<Transition, Self::Equations>, (PhysicsError, usize)> {
+    fn course(&mut self, now: Now, y: &[f64; N]) -> Result<Course<Transition, Self::Equations>, RunStopped> {
         let Now { k, t, limit } = now;
         let run = self.run;
         let seg = run.segment(k);
@@ -517,33 +517,33 @@ impl<'r, 'a, const N: usize, D: Dynamics<N>> Hybrid<N, EVENTS> for Rolling<'r, '
         (slow && run.holding_set(y).holds(&run.load(y, run.segment(k).at(t_end)))).then_some(Transition::Settle)
     }
 
-    fn check(&self, t_end: f64, y: &[f64; N], stats: &Stats) -> Result<(), (PhysicsError, usize)> {
+    fn check(&self, t_end: f64, y: &[f64; N], stats: &Stats) -> Result<(), RunStopped> {
         if let Some(budget) = self.run.budget.filter(|b| stats.rhs_evals > *b) {
-            return Err((
-                PhysicsError::Stopped(format!(
+            return Err(RunStopped {
+                error: PhysicsError::Stopped(format!(
                     "the run needs more than {budget} evaluations by t = {t_end:.3} s (too stiff)"
                 )),
-                stats.rhs_evals,
-            ));
+                spent: stats.rhs_evals,
+            });
         }
         if !y.iter().all(|v| v.is_finite()) {
-            return Err((
-                PhysicsError::Stopped(format!(
+            return Err(RunStopped {
+                error: PhysicsError::Stopped(format!(
                     "the cart's state is no longer a number at t = {t_end:.3} s: the run diverged (too stiff a friction law or too large a change)"
                 )),
-                stats.rhs_evals,
-            ));
+                spent: stats.rhs_evals,
+            });
         }
         Ok(())
     }
 
-    fn chatter(&self, t: f64, stats: &Stats) -> (PhysicsError, usize) {
-        (
-            PhysicsError::Stopped(format!(
+    fn chatter(&self, t: f64, stats: &Stats) -> RunStopped {
+        RunStopped {
+            error: PhysicsError::Stopped(format!(
                 "more than {MAX_TRANSITIONS_PER_SAMPLE} events within the sample at t = {t:.4} s: the run does not settle (raise friction_eps)"
             )),
-            stats.rhs_evals,
-        )
+            spent: stats.rhs_evals,
+        }
     }
 
     fn record(&mut self, k: usize, y: &[f64; N]) {
@@ -577,7 +577,7 @@ impl<'a, const N: usize, D: Dynamics<N>> Run<'a, N, D> {
     }
 
     /// The run, or why it failed with the evaluations it had spent.
-    fn run<S: Stepper<N>>(&self, stepper: S, y: [f64; N]) -> Result<Response, (PhysicsError, usize)> {
+    fn run<S: Stepper<N>>(&self, stepper: S, y: [f64; N]) -> Result<Response, RunStopped> {
         let t0 = self.excitation.t0_s;
         let mut rolling = Rolling {
             run: self,
