@@ -698,3 +698,17 @@ fn bytes_other_than_the_planned_ones_are_refused() {
     assert!(e.message.contains("`rec.csv` changed while this run was reading it"), "{e}");
     assert!(e.hint.contains("rerun when it is no longer being written"), "{e}");
 }
+
+#[test]
+fn text_is_borrowed_when_valid_replaced_where_not_and_refused_with_a_nul() {
+    let path = Path::new("r.txt");
+    let text = decode(path, "\u{feff}time,ax\n0,1.5\n".as_bytes()).expect("valid UTF-8");
+    assert!(matches!(text, Cow::Borrowed("time,ax\n0,1.5\n")), "{text:?}");
+    // A Latin-1 station name (é = 0xE9) is replaced, the rest kept byte for byte.
+    let text = decode(path, b"station Qu\xe9bec\n0,1.5\n").expect("lossy");
+    assert_eq!(text, "station Qu\u{fffd}bec\n0,1.5\n");
+    let refused = not_text(b"a\nb\nc\0d").expect("a NUL byte is not text");
+    assert_eq!(refused.line, Some(3));
+    assert!(refused.message.contains("byte 6, line 3"), "{}", refused.message);
+    assert_eq!(not_text(b"a\nb\n"), None);
+}
