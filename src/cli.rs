@@ -264,9 +264,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
             force,
             quiet,
         } => {
-            if let Some(jobs) = jobs {
-                rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build_global().context("setting --jobs")?;
-            }
+            start_workers(jobs)?;
             let plan = Plan::new(PipelineFile::read(&pipeline)?, stages::registry())?;
             let options = RunOptions { force, only: stages, keep_going, ..RunOptions::default() };
             if dry_run {
@@ -469,7 +467,10 @@ pub fn main() -> anyhow::Result<ExitCode> {
             );
             Ok(ExitCode::SUCCESS)
         }
-        Command::Stage { name, inputs, output, set } => run_single_stage(&name, &inputs, &output, &set),
+        Command::Stage { name, inputs, output, set } => {
+            start_workers(None)?;
+            run_single_stage(&name, &inputs, &output, &set)
+        }
         Command::Stages { markdown: true, .. } => {
             print!("{}", stages::reference::markdown());
             Ok(ExitCode::SUCCESS)
@@ -524,9 +525,7 @@ pub fn main() -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Diagnose { cases, out, jobs, set } => {
-            if let Some(jobs) = jobs {
-                rayon::ThreadPoolBuilder::new().num_threads(jobs.max(1)).build_global().context("setting --jobs")?;
-            }
+            start_workers(jobs)?;
             diagnose_cases(&cases, &out, &set)
         }
         Command::Schema => {
@@ -567,6 +566,18 @@ fn describe_stages(only: Option<&str>) -> anyhow::Result<String> {
 
 /// `shakeflow stage`: one stage on files, run by the executor every pipeline runs on, as a
 /// pipeline made in memory: a source per input, the stage, `output` as its output folder.
+/// The worker pool of a command that runs work: `jobs` threads (default: `RAYON_NUM_THREADS`, else
+/// one per core), this thread one of them. It runs work while it waits for the pool instead of
+/// sleeping beside it, and a one-unit call starts one thread fewer (with its stack and malloc
+/// arena: ≈ 0.3 ms of a 5 ms `stage` call, docs/benchmarks.md "Per call").
+fn start_workers(jobs: Option<usize>) -> anyhow::Result<()> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs.map_or(0, |jobs| jobs.max(1)))
+        .use_current_thread()
+        .build_global()
+        .context("starting the worker threads (--jobs)")
+}
+
 fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String]) -> anyhow::Result<ExitCode> {
     let stage = stages::registry().find(name).ok_or_else(|| {
         crate::error::UserError::new(format!("unknown stage type `{name}`"))
