@@ -127,20 +127,28 @@ pub fn check_output_dir(file: &PipelineFile, files: &[PathBuf]) -> Result<(), Us
     Ok(())
 }
 
-/// [`resolved`] for many files, most of them side by side: each folder is resolved once, and a
-/// file on its own only when it is a symbolic link (or has no folder or plain name). The same
-/// answer as [`resolved`], in one `lstat` per file instead of a `readlink` per path component.
+/// [`resolved`] for many files, most of them side by side: a file or folder is its folder's
+/// resolution and its name, each folder resolved once (and its own folder the same way), unless
+/// it is a symbolic link (or has no folder or plain name), which [`resolved`] resolves on its
+/// own. The same answer as [`resolved`], in one `lstat` per file and per folder instead of a
+/// `readlink` per path component of every folder.
 #[derive(Default)]
 struct ResolvedFolders(std::collections::HashMap<PathBuf, PathBuf>);
 
 impl ResolvedFolders {
-    fn resolve(&mut self, file: &Path) -> PathBuf {
-        let folder = file.parent().filter(|f| !f.as_os_str().is_empty());
-        let (Some(folder), Some(name)) = (folder, file.file_name()) else { return resolved(file) };
-        if std::fs::symlink_metadata(file).is_ok_and(|m| m.file_type().is_symlink()) {
-            return resolved(file);
+    fn resolve(&mut self, path: &Path) -> PathBuf {
+        let folder = path.parent().filter(|f| !f.as_os_str().is_empty());
+        let (Some(folder), Some(name)) = (folder, path.file_name()) else { return resolved(path) };
+        if std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink()) {
+            return resolved(path);
         }
-        self.0.entry(folder.to_path_buf()).or_insert_with(|| resolved(folder)).join(name)
+        if let Some(known) = self.0.get(folder) {
+            return known.join(name);
+        }
+        let real = self.resolve(folder);
+        let joined = real.join(name);
+        self.0.insert(folder.to_path_buf(), real);
+        joined
     }
 }
 
@@ -287,6 +295,8 @@ mod tests {
             "data/b/../a/r.csv",
             "data/a/missing.csv",
             "data/c/d.csv",
+            "data/b/new/deeper/d.csv",
+            "data/a/../b/o.csv",
         ] {
             assert_eq!(folders.resolve(&d.join(file)), resolved(&d.join(file)), "{file}");
         }

@@ -93,12 +93,24 @@ pub fn resolve(
     let is_glob = glob_pattern.contains(['*', '?', '[']);
     let full = base_dir.join(&glob_pattern);
     let full_text = full.to_string_lossy().replace('\\', "/");
-    let entries =
-        glob::glob(&full_text).map_err(|e| UserError::new(format!("invalid path pattern `{pattern}`: {e}")))?;
+    let matched = match walk_stars(&full_text) {
+        Some(walked) => walked?,
+        None => {
+            let entries =
+                glob::glob(&full_text).map_err(|e| UserError::new(format!("invalid path pattern `{pattern}`: {e}")))?;
+            let mut matched = Vec::new();
+            for entry in entries {
+                let path = entry
+                    .map_err(|e| UserError::new(format!("cannot read `{}`: {}", e.path().display(), e.error())))?;
+                let kind = Kind::of(&path);
+                matched.push((path, kind));
+            }
+            matched
+        }
+    };
     let mut files = Vec::new();
-    for entry in entries {
-        let path = entry.map_err(|e| UserError::new(format!("cannot read `{}`: {}", e.path().display(), e.error())))?;
-        if !(path.is_file() || folders && path.is_dir()) {
+    for (path, kind) in matched {
+        if !(kind == Kind::File || folders && kind == Kind::Folder) {
             continue;
         }
         let mut partition = if has_keys {
@@ -122,6 +134,117 @@ pub fn resolve(
         ));
     }
     Ok(files)
+}
+
+/// What a matched path is, links followed (`Path::is_file`, `Path::is_dir`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Kind {
+    File,
+    Folder,
+    Other,
+}
+
+impl Kind {
+    fn of(path: &Path) -> Kind {
+        match std::fs::metadata(path) {
+            Ok(m) if m.is_file() => Kind::File,
+            Ok(m) if m.is_dir() => Kind::Folder,
+            _ => Kind::Other,
+        }
+    }
+}
+
+/// The paths the glob `full` matches, as `glob::glob` finds them (the same paths, `.` not
+/// prefixed to a relative one), when its only wildcard is `*` within a segment — what every
+/// template makes of its keys and `*`s: each folder is listed once and what its entries are is
+/// taken from the listing (a `stat` only for a symbolic link), where `glob` asks `stat` of every
+/// folder it passes and the caller of every file. None: `full` has other wildcards (`?`, `[…]`,
+/// `**`), an empty segment or a trailing `/`; `glob` then resolves it.
+fn walk_stars(full: &str) -> Option<Result<Vec<(PathBuf, Kind)>, UserError>> {
+    let (root, rest) = match full.strip_prefix('/') {
+        Some(rest) => ("/", rest),
+        None => (".", full),
+    };
+    let segments: Vec<&str> = rest.split('/').collect();
+    if segments.iter().any(|s| s.is_empty() || s.contains(['?', '[', ']']) || s.contains("**")) {
+        return None;
+    }
+    let mut found = Vec::new();
+    let result = walk_segments(PathBuf::from(root), Kind::Folder, &segments, &mut found);
+    Some(result.map(|()| found))
+}
+
+/// `dir` joined with `name` as `glob` joins them: below `.`, the name alone.
+fn joined(dir: &Path, name: &str) -> PathBuf {
+    if dir == Path::new(".") {
+        PathBuf::from(name)
+    } else {
+        dir.join(name)
+    }
+}
+
+fn walk_segments(
+    dir: PathBuf,
+    kind: Kind,
+    segments: &[&str],
+    found: &mut Vec<(PathBuf, Kind)>,
+) -> Result<(), UserError> {
+    let Some((segment, rest)) = segments.split_first() else {
+        found.push((dir, kind));
+        return Ok(());
+    };
+    if !segment.contains('*') {
+        // A literal segment: no listing; a missing one is found missing below it.
+        let path = joined(&dir, segment);
+        let kind = if rest.is_empty() { Kind::of(&path) } else { Kind::Other };
+        return walk_segments(path, kind, rest, found);
+    }
+    let entries = match std::fs::read_dir(&dir) {
+        Ok(entries) => entries,
+        // Not there, or not a folder: nothing below it (as `glob`, which does not list it).
+        Err(e) if matches!(e.kind(), std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory) => return Ok(()),
+        Err(e) => return Err(UserError::new(format!("cannot read `{}`: {e}", dir.display()))),
+    };
+    let mut matches = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| UserError::new(format!("cannot read `{}`: {e}", dir.display())))?;
+        // `glob` leaves names that are not UTF-8 out.
+        let Some(name) = entry.file_name().to_str().map(str::to_string) else { continue };
+        if !star_matches(segment, &name) {
+            continue;
+        }
+        let path = joined(&dir, &name);
+        let kind = match entry.file_type() {
+            Ok(t) if t.is_file() => Kind::File,
+            Ok(t) if t.is_dir() => Kind::Folder,
+            Ok(t) if !t.is_symlink() => Kind::Other,
+            _ => Kind::of(&path),
+        };
+        matches.push((path, kind));
+    }
+    matches.sort_by(|a, b| a.0.cmp(&b.0));
+    for (path, kind) in matches {
+        if rest.is_empty() || kind == Kind::Folder {
+            walk_segments(path, kind, rest, found)?;
+        }
+    }
+    Ok(())
+}
+
+/// Whether `name` matches `pattern`, whose only wildcard is `*` (any characters, none too).
+fn star_matches(pattern: &str, name: &str) -> bool {
+    let mut pieces = pattern.split('*');
+    let first = pieces.next().unwrap_or_default();
+    let Some(mut rest) = name.strip_prefix(first) else { return false };
+    let mut pieces: Vec<&str> = pieces.collect();
+    let Some(last) = pieces.pop() else { return rest.is_empty() };
+    for piece in pieces {
+        match rest.find(piece) {
+            Some(at) => rest = &rest[at + piece.len()..],
+            None => return false,
+        }
+    }
+    rest.len() >= last.len() && rest.ends_with(last)
 }
 
 /// The glob a template's pieces match: each key and wildcard a `*`.
@@ -233,6 +356,63 @@ mod tests {
         );
         assert_eq!(match_pieces("a/x.txt", &pieces).unwrap(), vec![("k".into(), "x".into())]);
         assert!(match_pieces("ab/c/x.txt", &pieces).is_none());
+    }
+
+    /// The walk of `*`-only globs finds what `glob` finds, the same paths: relative and absolute,
+    /// `.`/`..` segments, a missing folder, a file where a folder is expected, dot files, links.
+    #[test]
+    fn the_walk_of_star_globs_finds_what_glob_finds() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let d = dir.path();
+        for folder in ["E-1/T-1/Rep-1/C", "E-1/T-2/Rep-1/C", "E-2/T-1/Rep-2/C", "E-3/.hidden/Rep-1/C"] {
+            std::fs::create_dir_all(d.join(folder)).unwrap();
+        }
+        for file in [
+            "E-1/T-1/Rep-1/C/a_D1.txt",
+            "E-1/T-2/Rep-1/C/b_D1.txt",
+            "E-1/T-2/Rep-1/C/b_D2.txt",
+            "E-2/T-1/Rep-2/C/c_D1.txt",
+        ] {
+            std::fs::write(d.join(file), "x").unwrap();
+        }
+        std::fs::write(d.join("E-3/.hidden/Rep-1/C/.d_D1.txt"), "x").unwrap();
+        std::fs::write(d.join("E-4"), "a file, not a folder").unwrap();
+        std::os::unix::fs::symlink(d.join("E-1/T-1"), d.join("E-2/T-link")).unwrap();
+        std::os::unix::fs::symlink(d.join("gone"), d.join("E-2/T-dangling")).unwrap();
+        let root = d.display().to_string();
+        for pattern in [
+            format!("{root}/E-*/T-*/Rep-1/C/*_D1.txt"),
+            format!("{root}/E-*/*/Rep-*/C/*"),
+            format!("{root}/E-*/T-*/Rep-1/C"),
+            format!("{root}/E-1/../E-*/T-*/./Rep-1/C/*D*.txt"),
+            format!("{root}/missing/*/x.txt"),
+            format!("{root}/E-1/T-1/Rep-1/C/a_D1.txt"),
+            format!("{root}/E-*/*"),
+            format!("{root}/*-*-*"),
+        ] {
+            let globbed: Vec<PathBuf> = glob::glob(&pattern).unwrap().map(|p| p.unwrap()).collect();
+            let mut walked: Vec<PathBuf> = walk_stars(&pattern).unwrap().unwrap().into_iter().map(|(p, _)| p).collect();
+            walked.retain(|p| std::fs::symlink_metadata(p).is_ok());
+            let mut sorted = globbed.clone();
+            sorted.sort();
+            assert_eq!(walked, sorted, "{pattern}");
+            for (path, kind) in walk_stars(&pattern).unwrap().unwrap() {
+                assert_eq!(kind, Kind::of(&path), "{}", path.display());
+            }
+        }
+        // Relative to the working folder, as glob names them (no `./`).
+        let relative = "src/pipeline/executor/*.rs";
+        let mut globbed: Vec<PathBuf> = glob::glob(relative).unwrap().map(|p| p.unwrap()).collect();
+        globbed.sort();
+        let walked: Vec<PathBuf> = walk_stars(relative).unwrap().unwrap().into_iter().map(|(p, _)| p).collect();
+        assert_eq!(walked, globbed);
+        assert!(!walked.is_empty());
+        // Other wildcards are glob's.
+        assert!(
+            walk_stars("a/?.txt").is_none() && walk_stars("a/[ab].txt").is_none() && walk_stars("a/**/b").is_none()
+        );
+        assert!(star_matches("*_D1.txt", "a_D1.txt") && star_matches("*", "") && star_matches("a*b*a", "aba"));
+        assert!(!star_matches("a*a", "a") && !star_matches("T-*", "E-1") && !star_matches("*.txt", "x.txt2"));
     }
 
     #[test]

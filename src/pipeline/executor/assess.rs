@@ -3,7 +3,7 @@
 //! the files units wrote look now, through [`Disk`]). `status`, `--dry-run`, a local run's
 //! stages, Slurm's shards and each Slurm task's units all come from here.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
@@ -27,15 +27,56 @@ pub(super) trait Disk: Sync {
 }
 
 /// The file system, through the stat/hash memo (a file whose stat is unchanged is not read).
-pub(super) struct RealDisk;
+/// A folder found missing is remembered, and files below it are missing without a `stat`: the
+/// files of a `keep: false` stage are gone with their folders, and a run asks after each of
+/// them. What a run asks about is the committed output, which nothing changes before the
+/// commit: one `RealDisk` serves one run (or one `status`).
+#[derive(Default)]
+pub(super) struct RealDisk {
+    missing: std::sync::RwLock<HashSet<PathBuf>>,
+}
+
+impl RealDisk {
+    /// Whether a folder of `path` is known to be missing.
+    fn below_missing(&self, path: &Path) -> bool {
+        let missing = self.missing.read().expect("never poisoned");
+        !missing.is_empty() && path.ancestors().skip(1).any(|a| missing.contains(a))
+    }
+
+    /// `path` is missing: remembers which of its folders are missing too.
+    fn note_missing(&self, path: &Path) {
+        let gone: Vec<&Path> = path
+            .ancestors()
+            .skip(1)
+            .take_while(|a| !a.as_os_str().is_empty() && std::fs::symlink_metadata(a).is_err())
+            .collect();
+        if !gone.is_empty() {
+            self.missing.write().expect("never poisoned").extend(gone.into_iter().map(Path::to_path_buf));
+        }
+    }
+}
 
 impl Disk for RealDisk {
     fn hash(&self, path: &Path) -> Option<String> {
-        hash::hash_if_present(path)
+        if self.below_missing(path) {
+            return None;
+        }
+        let hash = hash::hash_if_present(path);
+        if hash.is_none() {
+            self.note_missing(path);
+        }
+        hash
     }
 
     fn exists(&self, path: &Path) -> bool {
-        path.exists()
+        if self.below_missing(path) {
+            return false;
+        }
+        let exists = path.exists();
+        if !exists {
+            self.note_missing(path);
+        }
+        exists
     }
 }
 
@@ -223,7 +264,7 @@ pub(super) fn predict(plan: &Plan, known: &Known<'_>) -> Result<Prediction, User
     let mut lines = Vec::new();
     // Removed files of up-to-date `keep: false` units → (stage, unit); and, in run order, the
     // units reading some of them: (stage, unit, stale, the units whose files it reads).
-    let mut removed: BTreeMap<PathBuf, (String, String)> = BTreeMap::new();
+    let mut removed: HashMap<PathBuf, (String, String)> = HashMap::new();
     let mut readers: Vec<(String, String, bool, BTreeSet<(String, String)>)> = Vec::new();
     let error = |e: anyhow::Error| match e.downcast::<UserError>() {
         Ok(user) => user,

@@ -1,6 +1,6 @@
 //! The commit side of a run: what became of each unit ([`UnitRecord`]) folded into its stage's
-//! new lockfile entry and the files to install and remove ([`fold`]), `keep: false` files left
-//! out ([`leave_out_not_kept`]), and the transaction committed ([`commit`]). The local run folds
+//! new lockfile entry and the files to install and remove ([`entry_from_outcomes`]), `keep:
+//! false` files left out ([`leave_out_not_kept`]), and the transaction committed ([`commit`]). The local run folds
 //! each stage as it finishes; Slurm's commit job folds the manifests its tasks left.
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::anyhow;
 
+use super::assess::Disk;
 use super::inputs::{cached_files, Produced, ProducedFile};
 use super::{upstream_stages, UnitProblem};
 use crate::pipeline::layout::{placed, FLAGGED, STAGE_MARKER, STATUS};
@@ -80,7 +81,7 @@ pub(super) struct Folded {
 /// `flagged` table) are written. `fanned`: the stage's records go in two-level folders
 /// (`layout::placed`); cached units whose files are in the other layout move there.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn fold(
+pub(super) fn entry_from_outcomes(
     plan: &Plan,
     stage: &PlannedStage,
     entry: Option<&StageLock>,
@@ -352,6 +353,7 @@ pub(super) fn leave_out_not_kept(
     entries: &BTreeMap<String, StageLock>,
     install: &mut BTreeSet<String>,
     remove: &mut BTreeSet<String>,
+    disk: &dyn Disk,
 ) {
     let done = |name: &str| selected.contains(name) && !tainted.contains(name);
     let not_kept = plan
@@ -372,7 +374,7 @@ pub(super) fn leave_out_not_kept(
     let output_dir = plan.file.output_dir();
     for path in not_kept {
         install.remove(&path);
-        if output_dir.join(&path).exists() {
+        if disk.exists(&output_dir.join(&path)) {
             remove.insert(path);
         }
     }
@@ -396,16 +398,16 @@ pub(super) fn commit(
     plan: &Plan,
     lock: &LockFile,
 ) -> anyhow::Result<()> {
+    if changes.install.is_empty() && changes.remove.is_empty() && !lock.is_older_format() {
+        transaction.abort();
+        return Ok(());
+    }
     let mut stages = lock.stages.clone();
     // Stages the pipeline no longer has keep their entries until `gc` removes their folders.
     stages.extend(changes.entries.iter().map(|(name, entry)| (name.clone(), entry.clone())));
     let mut new_lock = LockFile::empty();
     new_lock.pipeline = Some(ownership::pipeline_label(&plan.file));
     new_lock.stages = stages;
-    if changes.install.is_empty() && changes.remove.is_empty() && !lock.is_older_format() {
-        transaction.abort();
-        return Ok(());
-    }
     let install: Vec<String> = changes.install.iter().cloned().collect();
     let remove: Vec<String> = changes.remove.difference(changes.install).cloned().collect();
     transaction.commit(&install, &remove, Some((&new_lock, lock)))
@@ -439,7 +441,7 @@ mod tests {
     }
 
     #[test]
-    fn a_fold_installs_what_ran_keeps_what_is_cached_and_what_failed() {
+    fn an_entry_from_outcomes_installs_what_ran_keeps_what_is_cached_and_what_failed() {
         let dir = crate::tempdir::tempdir().unwrap();
         let (plan, entry) = committed(dir.path());
         let staging = dir.path().join("staging");
@@ -449,7 +451,9 @@ mod tests {
             record("motion=FB-2", ran(&staging, &[("figures/FB-2.png", "png")])),
             record("motion=FB-3", UnitOutcome::Failed { reason: "bad row".into() }),
         ];
-        let folded = fold(&plan, &plan.stages["load"], Some(&entry), records, &[], false, &staging, false).unwrap();
+        let folded =
+            entry_from_outcomes(&plan, &plan.stages["load"], Some(&entry), records, &[], false, &staging, false)
+                .unwrap();
         // The status table is new: every record's, the failed one's too.
         assert_eq!(folded.install.keys().collect::<Vec<_>>(), ["load/figures/FB-2.png", "load/status/data.parquet"]);
         let status = crate::io::parquet::read_table(&staging.join("status/data.parquet")).unwrap();
@@ -475,11 +479,12 @@ mod tests {
         let stage = &plan.stages["load"];
         let cached = || vec![record("motion=FB-1", UnitOutcome::Cached), record("motion=FB-2", UnitOutcome::Cached)];
         let gone = ["motion=FB-3".to_string()];
-        let complete = fold(&plan, stage, Some(&entry), cached(), &gone, false, &staging, false).unwrap();
+        let complete =
+            entry_from_outcomes(&plan, stage, Some(&entry), cached(), &gone, false, &staging, false).unwrap();
         assert_eq!(complete.remove.iter().collect::<Vec<_>>(), ["load/records/motion=FB-3/data.parquet"]);
         assert!(!complete.entry.unwrap().units.contains_key("motion=FB-3"));
         // An upstream unit failed: the record may only look gone; its files and entry stay.
-        let tainted = fold(&plan, stage, Some(&entry), cached(), &gone, true, &staging, false).unwrap();
+        let tainted = entry_from_outcomes(&plan, stage, Some(&entry), cached(), &gone, true, &staging, false).unwrap();
         assert!(tainted.remove.is_empty());
         assert_eq!(tainted.install.keys().collect::<Vec<_>>(), ["load/status/data.parquet"]);
         assert_eq!(tainted.entry.unwrap().units["motion=FB-3"], entry.units["motion=FB-3"]);
@@ -495,13 +500,14 @@ mod tests {
             record("motion=FB-1", ran(&staging, &[("records/x/data.parquet", "1")])),
             record("motion=FB-2", ran(&staging, &[("records/x/data.parquet", "2")])),
         ];
-        let error = fold(&plan, stage, None, both, &[], false, &staging, false).err().unwrap().to_string();
+        let error =
+            entry_from_outcomes(&plan, stage, None, both, &[], false, &staging, false).err().unwrap().to_string();
         assert!(
             error.contains("record motion=FB-1 and the record motion=FB-2 both wrote `records/x/data.parquet`"),
             "{error}"
         );
         let one = vec![record("motion=FB-1", ran(&staging, &[("records/motion=FB-1/data.parquet", "1")]))];
-        let folded = fold(&plan, stage, None, one, &[], false, &staging, false).unwrap();
+        let folded = entry_from_outcomes(&plan, stage, None, one, &[], false, &staging, false).unwrap();
         assert!(folded.complete);
         assert_eq!(
             folded.install.keys().collect::<Vec<_>>(),

@@ -11,7 +11,7 @@ use anyhow::anyhow;
 use rayon::prelude::*;
 
 use super::assess::{assess_stage, predict, AssessedStage, Known};
-use super::commit::{commit, fold, leave_out_not_kept, relative, Changes, UnitOutcome, UnitRecord};
+use super::commit::{commit, entry_from_outcomes, leave_out_not_kept, relative, Changes, UnitOutcome, UnitRecord};
 use super::inputs::{cached_files, Produced};
 use super::{upstream_stages, Backend, Opened, Outcome, RunSummary, StageReport, UnitProblem};
 use crate::io::hash;
@@ -89,7 +89,7 @@ fn run_stages(env: &RunEnv<'_>) -> anyhow::Result<()> {
     // A stage starts as soon as its own upstream stages are done, not when a whole "wave" is.
     rayon::scope(|scope| {
         for stage in roots {
-            start(env, &dependents, scope, stage);
+            spawn_stage(env, &dependents, scope, stage);
         }
     });
     let mut state = env.state.lock().expect("no poisoned lock");
@@ -100,7 +100,7 @@ fn run_stages(env: &RunEnv<'_>) -> anyhow::Result<()> {
 }
 
 /// Runs `stage` on the pool, then starts each dependent whose upstream stages are all done.
-fn start<'s, 'a: 's>(
+fn spawn_stage<'s, 'a: 's>(
     env: &'s RunEnv<'a>,
     dependents: &'s BTreeMap<&'a str, Vec<&'a PlannedStage>>,
     scope: &rayon::Scope<'s>,
@@ -124,7 +124,7 @@ fn start<'s, 'a: 's>(
             let left = state.waiting_on.get_mut(&dependent.name).expect("every stage is counted");
             *left -= 1;
             if *left == 0 {
-                start(env, dependents, scope, dependent);
+                spawn_stage(env, dependents, scope, dependent);
             }
         }
     });
@@ -215,7 +215,8 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
             _ => {}
         }
     }
-    let folded = fold(env.plan, stage, entry, records, &assessed.vanished, upstream_tainted, &new_dir, fanned)?;
+    let folded =
+        entry_from_outcomes(env.plan, stage, entry, records, &assessed.vanished, upstream_tainted, &new_dir, fanned)?;
     let failed = folded.failed.len();
     if folded.moved > 0 {
         let layout = if fanned { "two-level folders" } else { "one folder" };
@@ -355,7 +356,8 @@ impl Backend for Local {
             }
         };
         let (selected, lock, all_or_nothing) = (&opened.selected, &opened.lock, opened.options.all_or_nothing);
-        leave_out_not_kept(plan, selected, &state.tainted, &state.entries, &mut state.install, &mut state.remove);
+        let (install, remove) = (&mut state.install, &mut state.remove);
+        leave_out_not_kept(plan, selected, &state.tainted, &state.entries, install, remove, &opened.disk);
         let changes = Changes { entries: &state.entries, install: &state.install, remove: &state.remove };
         if let Some(error) = fatal {
             // A stage could not be planned (a bad select, two records with one partition): what

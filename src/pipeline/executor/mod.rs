@@ -78,12 +78,13 @@ pub struct Opened<'a> {
     files: BTreeMap<String, BTreeMap<String, String>>,
     lease: Lease,
     lock: LockFile,
+    disk: RealDisk,
 }
 
 impl Opened<'_> {
     /// What assessing a stage of this run reads.
     fn known(&self) -> Known<'_> {
-        Known { lock: &self.lock, sources: &self.sources, files: &self.files, rerun: &self.rerun, disk: &RealDisk }
+        Known { lock: &self.lock, sources: &self.sources, files: &self.files, rerun: &self.rerun, disk: &self.disk }
     }
 }
 
@@ -108,7 +109,7 @@ fn open<'a>(plan: &'a Plan, options: &'a RunOptions, reporter: &Reporter) -> any
     let files = param_file_hashes(plan)?;
     let (lease, lock) = take_output_folder(plan, &sources, reporter)?;
     let rerun = Rerun { stages: forced_stages(plan, &options.force), remake: BTreeMap::new() };
-    Ok(Opened { plan, options, selected, rerun, sources, files, lease, lock })
+    Ok(Opened { plan, options, selected, rerun, sources, files, lease, lock, disk: RealDisk::default() })
 }
 
 #[derive(Debug, Clone, Default)]
@@ -208,7 +209,7 @@ pub fn status(plan: &Plan, notes: &mut Vec<String>) -> Result<Vec<StatusLine>, U
     }
     let (sources, files) = (resolve_sources(plan)?, param_file_hashes(plan)?);
     let rerun = Rerun::default();
-    let known = Known { lock: &lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk };
+    let known = Known { lock: &lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk::default() };
     Ok(predict(plan, &known)?.lines)
 }
 
@@ -218,7 +219,7 @@ pub fn dry_run(plan: &Plan, options: &RunOptions) -> Result<Vec<StatusLine>, Use
     let rerun = Rerun { stages: forced_stages(plan, &options.force), remake: BTreeMap::new() };
     let lock = LockFile::read(&lock_path(plan))?;
     let (sources, files) = (resolve_sources(plan)?, param_file_hashes(plan)?);
-    let known = Known { lock: &lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk };
+    let known = Known { lock: &lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk::default() };
     let lines = predict(plan, &known)?.lines;
     Ok(lines.into_iter().filter(|l| selected.contains(&l.name)).collect())
 }

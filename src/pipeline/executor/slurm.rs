@@ -33,7 +33,7 @@ use anyhow::{anyhow, bail, Context};
 use serde::{Deserialize, Serialize};
 
 use super::assess::{assess_stage, predict, Known, Prediction, RealDisk, StatusLine};
-use super::commit::{fold, leave_out_not_kept, UnitOutcome, UnitRecord};
+use super::commit::{entry_from_outcomes, leave_out_not_kept, UnitOutcome, UnitRecord};
 use super::inputs::{cached_files, param_file_hashes, resolve_sources, Produced, ProducedFile};
 use super::local::execute;
 use super::{
@@ -646,7 +646,7 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let files = param_file_hashes(&plan)?;
     let (produced, upstream_tainted) = upstream_produced(run_dir, &run, &plan, &lock, stage_name, shard)?;
     let rerun = Rerun { stages: forced_stages(&plan, &run.force), remake: run.remake.clone() };
-    let state = Known { lock: &lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk };
+    let state = Known { lock: &lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk::default() };
     let assessed = assess_stage(&plan, stage, &state, &produced)?;
     // A unit nobody predicted (a partition no earlier output had) goes to the last shard.
     let ours: Vec<&(crate::pipeline::work_units::Unit, String, Vec<String>)> = assessed
@@ -855,7 +855,7 @@ fn commit_manifests(
             !matches!(r.outcome, UnitOutcome::Cached) || entry.is_some_and(|e| e.units.contains_key(&r.id))
         });
         let fanned = run.fanned.contains(name);
-        let folded = fold(plan, stage, entry, records, &vanished, upstream_tainted, &staging, fanned)?;
+        let folded = entry_from_outcomes(plan, stage, entry, records, &vanished, upstream_tainted, &staging, fanned)?;
         steps.done(&format!("{name}: folded"));
         install.extend(folded.install.keys().cloned());
         produced.extend(folded.install);
@@ -872,7 +872,7 @@ fn commit_manifests(
     }
     let options = RunOptions { force: run.force.clone(), only: run.only.clone(), ..RunOptions::default() };
     let selected = selected_stages(plan, &options)?;
-    leave_out_not_kept(plan, &selected, &tainted, &new_lock.stages, &mut install, &mut remove);
+    leave_out_not_kept(plan, &selected, &tainted, &new_lock.stages, &mut install, &mut remove, &RealDisk::default());
     for relative in &install {
         let from = &produced[relative];
         let to = transaction.new_path(relative);
@@ -929,7 +929,8 @@ fn resubmit(run: &RunFile, plan: &Plan, lock: &LockFile, retries_left: u32) -> a
     let options = RunOptions { only: run.only.clone(), keep_going: run.keep_going, ..RunOptions::default() };
     let selected = selected_stages(plan, &options)?;
     let (sources, files, rerun) = (resolve_sources(plan)?, param_file_hashes(plan)?, Rerun::default());
-    let prediction = predict(plan, &Known { lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk })?;
+    let prediction =
+        predict(plan, &Known { lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk::default() })?;
     let mut slurm = run.options.clone();
     slurm.executor.retries = Some(retries_left);
     let client = Slurm::new();
