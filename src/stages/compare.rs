@@ -3,13 +3,11 @@
 //! units are reconciled through the columns' `unit` metadata, and the RMS and largest errors are
 //! reported per column pair, with a PNG overlay.
 
-use super::{partition_path, split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{partition_path, split_pair, Stage, StageContext};
 use crate::error::UserError;
 use crate::pipeline::params;
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
-
-pub struct Compare;
 
 crate::stage_params! {
     /// The parameters of `compare`.
@@ -22,22 +20,18 @@ crate::stage_params! {
 }
 
 super::declare_stage! {
-    Compare,
-    info: StageInfo {
-        name: "compare",
-        version: 2,
-        summary: "Errors of measured time series against a reference (interpolated onto the measured times, units reconciled): RMS and largest error per column pair, and a PNG overlay.",
-        inputs: InputKind::Datasets,
-        outputs: &[
-            OutputInfo { name: "errors", description: "per pair: measured, reference, unit, samples, missing, rms_error, max_abs_error, reference_rms", kind: OutputKind::Table },
-            OutputInfo { name: "figures", description: "<partition or compare>.png: measured over reference, and their difference", kind: OutputKind::Files },
-        ],
-        params: CompareParams::specs(),
-    },
-    examples: [super::Example {
-        title: "what the cubic baseline changed: corrected against loaded accelerations",
-        data: &super::RINALDI,
-        stages: "\
+    /// Errors of measured time series against a reference (interpolated onto the measured times, units reconciled): RMS
+    /// and largest error per column pair, and a PNG overlay.
+    pub struct Compare: "compare", version 2, reads Datasets, params CompareParams;
+    outputs {
+        /// per pair: measured, reference, unit, samples, missing, rms_error, max_abs_error, reference_rms
+        "errors": Table,
+        /// <partition or compare>.png: measured over reference, and their difference
+        "figures": Files,
+    }
+    examples {
+        /// what the cubic baseline changed: corrected against loaded accelerations
+        super::RINALDI => "\
 baseline:
   type: baseline
   inputs: [load]
@@ -47,7 +41,7 @@ compare:
   params:
     pairs: [ax_mps2 -> ax_mps2, az_mps2 -> az_mps2]
 ",
-    }],
+    }
 }
 
 impl Stage for Compare {

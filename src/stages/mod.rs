@@ -205,28 +205,81 @@ pub enum Shown {
     RecordStatus,
 }
 
-/// A stage type's declaration in one block: its [`StageInfo`] as the file's `static INFO`
-/// (which [`info_and_check_params`] returns), and its [`StageType`]: what the report shows of its
-/// outputs (`shown`) and the example pipelines its documentation shows (`examples`), each
-/// optional.
+/// A doc comment's text as a macro sees it (`/// text` is `#[doc = " text"]`, lines joined by
+/// `concat!`) without the space after `///`: how [`declare_stage`] reads the summary, the
+/// outputs' descriptions and the examples' titles from doc comments.
+pub const fn doc_text(doc: &'static str) -> &'static str {
+    doc.trim_ascii_start()
+}
+
+/// A stage type declared in one block, read as it is written: the summary is the doc comment
+/// of the stage's struct (which the block defines), then its YAML name, version, what it reads
+/// ([`InputKind`]) and its parameter struct; each output, under its doc comment (what it holds),
+/// by name and [`OutputKind`], with `=> ` the [`Shown`] kind the study report shows it as; each
+/// example pipeline, under its doc comment (its title), by the [`ExampleData`] it reads and the
+/// YAML of its stages. The block writes the file's `static INFO` (which [`info_and_check_params`]
+/// returns) and the stage's [`StageType`] (`shown`, `examples`). A doc comment of several lines
+/// is joined with spaces.
+///
+/// ```ignore
+/// declare_stage! {
+///     /// Remove a least-squares polynomial trend from each channel.
+///     pub struct Baseline: "baseline", version 5, reads Datasets, params BaselineParams;
+///     outputs {
+///         /// the input tables with each selected channel baseline-corrected
+///         "records": TimeSeries,
+///     }
+///     examples {
+///         /// the study's cubic baseline removed from every channel
+///         super::RINALDI => "baseline:\n  type: baseline\n  inputs: [load]\n",
+///     }
+/// }
+/// ```
 macro_rules! declare_stage {
     (
-        $stage:ty,
-        info: $info:expr,
-        $(shown: [$($shown:expr),* $(,)?],)?
-        $(examples: [$($example:expr),* $(,)?],)?
+        $(#[doc = $summary:literal])+
+        pub struct $stage:ident: $name:literal, version $version:literal,
+            reads $reads:ident $(($formats:expr))?, params $params:ident;
+        outputs {
+            $($(#[doc = $description:literal])+ $output:literal: $kind:ident $(=> $shown:ident)?,)+
+        }
+        $(examples {
+            $($(#[doc = $title:literal])+ $data:path => $yaml:literal,)+
+        })?
     ) => {
-        static INFO: std::sync::LazyLock<$crate::stages::StageInfo> = std::sync::LazyLock::new(|| $info);
+        $(#[doc = $summary])+
+        pub struct $stage;
+
+        static INFO: std::sync::LazyLock<$crate::stages::StageInfo> =
+            std::sync::LazyLock::new(|| $crate::stages::StageInfo {
+                name: $name,
+                version: $version,
+                summary: $crate::stages::doc_text(concat!($($summary),+)),
+                inputs: $crate::stages::InputKind::$reads $(($formats))?,
+                outputs: {
+                    const OUTPUTS: &[$crate::stages::OutputInfo] = &[$($crate::stages::OutputInfo {
+                        name: $output,
+                        description: $crate::stages::doc_text(concat!($($description),+)),
+                        kind: $crate::stages::OutputKind::$kind,
+                    }),+];
+                    OUTPUTS
+                },
+                params: <$params as $crate::stages::Declared>::specs(),
+            });
 
         impl $crate::stages::StageType for $stage {
-            $(
-                fn shown(&self) -> &'static [(&'static str, $crate::stages::Shown)] {
-                    &[$($shown),*]
-                }
-            )?
+            fn shown(&self) -> &'static [(&'static str, $crate::stages::Shown)] {
+                &[$($(($output, $crate::stages::Shown::$shown),)?)+]
+            }
+
             $(
                 fn examples(&self) -> &'static [$crate::stages::Example] {
-                    &[$($example),*]
+                    const EXAMPLES: &[$crate::stages::Example] = &[$($crate::stages::Example {
+                        title: $crate::stages::doc_text(concat!($($title),+)),
+                        data: &$data,
+                        stages: $yaml,
+                    }),+];
+                    EXAMPLES
                 }
             )?
         }

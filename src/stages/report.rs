@@ -18,14 +18,9 @@ use serde::de::DeserializeOwned;
 use super::simulate_rolling::SimulateRollingParams;
 use super::simulate_toppling::{RockingParams, SimulateTopplingParams};
 use super::transfer_function::TransferFunctionParams;
-use super::{
-    figure_stem, partition_values, Declared, InputKind, InputPart, OutputInfo, OutputKind, Shown, Stage, StageContext,
-    StageInfo, StageInput,
-};
+use super::{figure_stem, partition_values, InputPart, Shown, Stage, StageContext, StageInput};
 use crate::pipeline::params;
 use crate::table::{Column, ColumnData, Table};
-
-pub struct Report;
 
 crate::stage_params! {
     /// The parameters of `report`.
@@ -41,25 +36,26 @@ crate::stage_params! {
 }
 
 super::declare_stage! {
-    Report,
-    info: StageInfo {
-        name: "report",
-        version: 3,
-        summary: "Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time, confidence); rolling units' peak displacement, yaw and caster flips per motion; the study report index.html.",
-        inputs: InputKind::Datasets,
-        outputs: &[
-            OutputInfo { name: "summary", description: "one row per unit and toppling event (or one row when none)", kind: OutputKind::Table },
-            OutputInfo { name: "rolling", description: "one row per rolling unit and motion: peak_displacement_m, peak_yaw_rad, caster_flips, breakaway_time_s (from simulate_rolling.events inputs)", kind: OutputKind::Table },
-            OutputInfo { name: "figures", description: "<unit>.png: floor vs top acceleration in `figure_motion`, transfer functions in their band with the picked peaks, coherence", kind: OutputKind::Files },
-            OutputInfo { name: "index.html", description: "the study report for a browser: summary, per unit its frequencies, toppling events, simulations, fragility, rolling results and figures, the diagnosis, provenance (figures linked relatively: open it where `run` wrote it)", kind: OutputKind::Page },
-        ],
-        params: ReportParams::specs(),
-    },
-    examples: [super::Example {
-        title:
-            "the study report of a rocking simulation: the unit's runs, what the report lacked, the records loaded",
-        data: &super::RINALDI,
-        stages: "\
+    /// Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time,
+    /// confidence); rolling units' peak displacement, yaw and caster flips per motion; the study report index.html.
+    pub struct Report: "report", version 3, reads Datasets, params ReportParams;
+    outputs {
+        /// one row per unit and toppling event (or one row when none)
+        "summary": Table,
+        /// one row per rolling unit and motion: peak_displacement_m, peak_yaw_rad, caster_flips, breakaway_time_s (from
+        /// simulate_rolling.events inputs)
+        "rolling": Table,
+        /// <unit>.png: floor vs top acceleration in `figure_motion`, transfer functions in their band with the picked
+        /// peaks, coherence
+        "figures": Files,
+        /// the study report for a browser: summary, per unit its frequencies, toppling events, simulations, fragility,
+        /// rolling results and figures, the diagnosis, provenance (figures linked relatively: open it where `run` wrote
+        /// it)
+        "index.html": Page,
+    }
+    examples {
+        /// the study report of a rocking simulation: the unit's runs, what the report lacked, the records loaded
+        super::RINALDI => "\
 baseline:
   type: baseline
   inputs: [load]
@@ -74,7 +70,7 @@ report:
   params:
     title: Rinaldi on PS2
 ",
-    }],
+    }
 }
 
 /// What the report does with each kind of output.
