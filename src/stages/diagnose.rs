@@ -4,12 +4,10 @@
 //! `<case>/diagnosis.json` for each of several), the observed/baseline/model series and
 //! residuals (Parquet, + MCAP with `mcap: true`) and a figure with the located window shaded.
 
-use std::sync::LazyLock;
-
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::{Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{Stage, StageContext};
 use crate::diagnose::contract::Contract;
 use crate::diagnose::rolling::RollingDiagnosis;
 use crate::diagnose::{diagnose, Diagnosis, Settings};
@@ -18,25 +16,6 @@ use crate::pipeline::params::{self, ParamError, Params};
 use crate::pipeline::spec::RecordFormat;
 use crate::plot::PlotError;
 use crate::table::{Column, Table, TIME_COLUMN};
-
-pub struct Diagnose;
-
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "diagnose",
-    version: 15,
-    summary: "Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt; rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted jointly with the nominal parameters the equipment file's `uncertainty` block says are known only roughly (calibrated first), ranked by BIC; `ambiguous` when two explain the records about equally well, or `unexplained`.",
-    inputs: InputKind::Files(&[RecordFormat::Case]),
-    outputs: &[
-        OutputInfo { name: "diagnosis", description: "per case: mismatch, verdict, window_start_s, window_end_s, rmse_before, rmse_after, explanation, candidates (JSON), calibration (JSON)", kind: OutputKind::Table },
-        OutputInfo { name: "accel", description: "per case: observed, baseline and model top acceleration and the residuals before/after", kind: OutputKind::TimeSeries },
-        OutputInfo { name: "camera", description: "per case: observed, baseline and model rotation and the residuals before/after", kind: OutputKind::TimeSeries },
-        OutputInfo { name: "reports", description: "<case>.png: records, models, residuals, window shaded", kind: OutputKind::Files },
-        OutputInfo { name: "diagnosis.json", description: "the contract (verdict, window, rmse before/after, candidates, explanation, calibration): at the stage folder's root for one case, in `<case>/` for each of several", kind: OutputKind::Page },
-    ],
-    params: DiagnoseParams::specs(),
-}
-});
 
 /// The contract file held-out scorers read (`shakeflow diagnose CASE --out OUT` → `OUT/diagnosis.json`).
 pub const CONTRACT: &str = "diagnosis.json";
@@ -65,20 +44,56 @@ pub fn settings(params: &Params) -> Result<Settings, ParamError> {
     })
 }
 
-impl super::StageType for Diagnose {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("diagnosis", super::Shown::Diagnosis)]
+super::declare_stage! {
+    /// Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which
+    /// physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt;
+    /// rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted jointly with the nominal parameters the
+    /// equipment file's `uncertainty` block says are known only roughly (calibrated first), ranked by BIC; `ambiguous`
+    /// when two explain the records about equally well, or `unexplained`.
+    pub struct Diagnose: "diagnose", version 15,
+        reads Files(&[RecordFormat::Case]), params DiagnoseParams;
+    outputs {
+        /// per case: mismatch, verdict, window_start_s, window_end_s, rmse_before, rmse_after, explanation, candidates
+        /// (JSON), calibration (JSON)
+        "diagnosis": Table => Diagnosis,
+        /// per case: observed, baseline and model top acceleration and the residuals before/after
+        "accel": TimeSeries,
+        /// per case: observed, baseline and model rotation and the residuals before/after
+        "camera": TimeSeries,
+        /// <case>.png: records, models, residuals, window shaded
+        "reports": Files,
+        /// the contract (verdict, window, rmse before/after, candidates, explanation, calibration): at the stage
+        /// folder's root for one case, in `<case>/` for each of several
+        "diagnosis.json": Page,
+    }
+    examples {
+        /// a shared case whose WSU1 unit loses 15 % of its mass 4.6 s into the record (its truth file:
+        /// `effect: mass_change`), diagnosed as `mass_change`
+        CASE => "\
+diagnose:
+  type: diagnose
+  inputs: [case]
+",
     }
 }
 
-impl Stage for Diagnose {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
+/// One shared diagnosis case (`../shared/cases/demo/demo_02`: a WSU1 unit on the isolated
+/// building's 4th floor; `truth/` says what is hidden, which the stage never reads).
+const CASE: super::ExampleData = super::ExampleData {
+    what: "a shared diagnosis case",
+    head: "\
+inputs:
+  case:
+    description: a WSU1 unit on the base-isolated building's 4th floor, its records and equipment file
+    format: case
+    path: ../shared/cases/demo/demo_02/equipment.yaml
+    partition: {case: demo_02}
+stages:
+",
+};
 
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<DiagnoseParams>(params)
-    }
+impl Stage for Diagnose {
+    super::info_and_check_params!(DiagnoseParams);
 
     fn summary(&self, stage_dir: &std::path::Path) -> Option<String> {
         crate::summary::verdicts(stage_dir).ok()
@@ -426,3 +441,4 @@ fn rolling_figure(d: &RollingDiagnosis) -> Result<Vec<u8>, PlotError> {
     };
     render_png(&title, &panels, 1400, 1300)
 }
+
