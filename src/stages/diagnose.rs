@@ -442,3 +442,47 @@ fn rolling_figure(d: &RollingDiagnosis) -> Result<Vec<u8>, PlotError> {
     render_png(&title, &panels, 1400, 1300)
 }
 
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::params::normalize;
+
+    /// The default settings, as a pipeline without `params:` gets them.
+    fn defaults() -> Settings {
+        settings(&normalize(INFO.params, INFO.name, Vec::new()).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn the_settings_are_the_declared_defaults() {
+        let s = defaults();
+        assert_eq!((s.exceedance_sigma, s.min_improvement, s.max_remaining_flagged), (4.0, 3.0, 0.12));
+    }
+
+    /// The shared rolling case `rolling_demo/demo_01` (its truth: `effect: none`): the verdict is
+    /// `none` without a window, the summary row says so, and the camera table carries the case's
+    /// records as its `observed_cpt.csv` gives them (`nan`: a dropout), read here by a plain split of
+    /// the text.
+    #[test]
+    fn a_rolling_case_without_a_mismatch_is_none_and_keeps_its_records() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/cases/rolling_demo/demo_01");
+        let report = diagnose_folder(&dir, "", &defaults()).unwrap();
+        assert_eq!(report.contract.verdict.to_string(), "none");
+        assert!(!report.contract.mismatch && report.contract.window.is_none());
+        let summary = summary_table(&[("demo_01".into(), report.contract)]);
+        assert_eq!(summary.column("verdict").unwrap().data, crate::table::ColumnData::Str(vec!["none".into()]));
+
+        let text = std::fs::read_to_string(dir.join("observed_cpt.csv")).unwrap();
+        let rows: Vec<Vec<f64>> =
+            text.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+        let by_time: std::collections::HashMap<u64, &Vec<f64>> = rows.iter().map(|r| (r[0].to_bits(), r)).collect();
+        let time = report.camera.f64_column(TIME_COLUMN).unwrap();
+        assert!(time.len() + 1 >= rows.len(), "{} of {} camera rows kept", time.len(), rows.len());
+        for (k, name) in ["x_m", "y_m", "yaw_rad"].into_iter().enumerate() {
+            let observed = report.camera.f64_column(&format!("observed_{name}")).unwrap();
+            for (t, v) in time.iter().zip(observed) {
+                let expected = by_time[&t.to_bits()][k + 1];
+                assert!(*v == expected || v.is_nan() && expected.is_nan(), "{name} at {t} s: {v} against {expected}");
+            }
+        }
+    }
+}
