@@ -315,17 +315,11 @@ fn study_page(
         }
     }
     for (motion, table) in events {
-        let toppled = match table.column("toppled").map(|c| &c.data) {
-            Some(ColumnData::Bool(v)) => v,
-            _ => anyhow::bail!("the events table has no `toppled` column"),
-        };
-        let confidence = table.f64_column("confidence").ok_or_else(|| anyhow::anyhow!("no `confidence` column"))?;
-        let times = optionals(table, "impact_time_s")?;
-        for (i, channel) in strings(table, "channel")?.iter().enumerate() {
+        for (channel, toppled, time, confidence) in toppling_rows(table)? {
             let unit = unit_entry(&mut page.units, &unit_name(channel), page.tests.len());
             unit.detected = true;
-            if toppled[i] {
-                unit.topplings.push((motion.clone(), times[i].unwrap_or(f64::NAN), confidence[i]));
+            if toppled {
+                unit.topplings.push((motion.clone(), time, confidence));
             }
         }
     }
@@ -680,6 +674,21 @@ fn optionals<'a>(table: &'a Table, name: &str) -> anyhow::Result<&'a [Option<f64
     }
 }
 
+/// The rows of a toppling `events` table (`Shown::Toppling`): channel, toppled, impact time
+/// (NaN without one) and confidence.
+fn toppling_rows(table: &Table) -> anyhow::Result<Vec<(&String, bool, f64, f64)>> {
+    let toppled = match table.column("toppled").map(|c| &c.data) {
+        Some(ColumnData::Bool(v)) => v,
+        _ => anyhow::bail!("the events table has no `toppled` column"),
+    };
+    let confidence = table.f64_column("confidence").ok_or_else(|| anyhow::anyhow!("no `confidence` column"))?;
+    let times = optionals(table, "impact_time_s")?;
+    let rows = strings(table, "channel")?.iter().zip(toppled).zip(times).zip(confidence);
+    Ok(rows
+        .map(|(((channel, &toppled), time), &confidence)| (channel, toppled, time.unwrap_or(f64::NAN), confidence))
+        .collect())
+}
+
 fn summarize(
     identified: Vec<(String, Arc<Table>)>,
     events: Vec<(String, Arc<Table>)>,
@@ -700,19 +709,12 @@ fn summarize(
     }
     let mut topplings: BTreeMap<String, Vec<(String, f64, f64)>> = BTreeMap::new();
     for (motion, table) in &events {
-        let toppled = match table.column("toppled").map(|c| &c.data) {
-            Some(ColumnData::Bool(v)) => v,
-            _ => anyhow::bail!("the events table has no `toppled` column"),
-        };
-        let confidence = table.f64_column("confidence").ok_or_else(|| anyhow::anyhow!("no `confidence` column"))?;
-        let times = optionals(table, "impact_time_s")?;
-        for (i, channel) in strings(table, "channel")?.iter().enumerate() {
+        for (channel, toppled, time, confidence) in toppling_rows(table)? {
             if !order.contains(channel) {
                 order.push(channel.clone());
             }
-            if toppled[i] {
-                let time = times[i].unwrap_or(f64::NAN);
-                topplings.entry(channel.clone()).or_default().push((motion.clone(), time, confidence[i]));
+            if toppled {
+                topplings.entry(channel.clone()).or_default().push((motion.clone(), time, confidence));
             }
         }
     }
