@@ -192,12 +192,6 @@ fn compare(
         labels.push(format!("{m_name} [{m_unit}]"));
         plotted.push([m, on_time, diff]);
     }
-    let text = |name: &str, description: &str, v: Vec<String>| Column {
-        name: name.into(),
-        unit: String::new(),
-        description: description.into(),
-        data: ColumnData::Str(v),
-    };
     let count = |name: &str, description: &str, v: Vec<i64>| Column {
         name: name.into(),
         unit: String::new(),
@@ -205,9 +199,9 @@ fn compare(
         data: ColumnData::I64(v),
     };
     let mut table = Table::new();
-    table.push(text("measured", "measured column", names_m));
-    table.push(text("reference", "reference column", names_r.clone()));
-    table.push(text("unit", "unit of the errors (the measured column's)", units));
+    table.push(super::text_column("measured", "measured column", names_m));
+    table.push(super::text_column("reference", "reference column", names_r.clone()));
+    table.push(super::text_column("unit", "unit of the errors (the measured column's)", units));
     table.push(count("samples", "measured samples with a reference value", samples));
     table.push(count("missing", "measured samples without one (lost, or outside the reference's time span)", missing));
     // Errors mix units across rows (mm, rad): the `unit` column says which; the field metadata cannot.

@@ -256,4 +256,17 @@ mod tests {
         assert!(matches!(column(&cart, "toppled"), ColumnData::Bool(v) if v == [false]));
         assert!(matches!(column(&cart, "impact_time_s"), ColumnData::OptF64(v) if v == [None]));
     }
+
+    /// The one line after `run`: the records and channels that toppled, of all.
+    #[test]
+    fn the_summary_line_names_the_records_and_channels_that_toppled() {
+        use crate::stages::test_tables::{flag, part, text};
+        let dir = crate::tempdir::tempdir().unwrap();
+        part(dir.path(), "events", "motion=FB-4", vec![text("channel", &["a", "b"]), flag("toppled", &[true, false])]);
+        part(dir.path(), "events", "motion=FB-5", vec![text("channel", &["a", "b"]), flag("toppled", &[false, true])]);
+        assert_eq!(
+            DetectToppling.summary(dir.path()).unwrap(),
+            "toppling detected in 2 of 4 channel records (FB-4 a, FB-5 b)"
+        );
+    }
 }

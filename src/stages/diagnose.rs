@@ -177,12 +177,6 @@ pub fn camera_table(d: &Diagnosis) -> Table {
 }
 
 fn summary_table(rows: &[(String, Contract)]) -> Table {
-    let text = |name: &str, description: &str, v: Vec<String>| Column {
-        name: name.into(),
-        unit: String::new(),
-        description: description.into(),
-        data: crate::table::ColumnData::Str(v),
-    };
     let optional = |name: &str, description: &str, v: Vec<Option<f64>>| Column {
         name: name.into(),
         unit: "s".into(),
@@ -190,7 +184,7 @@ fn summary_table(rows: &[(String, Contract)]) -> Table {
         data: crate::table::ColumnData::OptF64(v),
     };
     let mut t = Table::new();
-    t.push(text(
+    t.push(super::text_column(
         "case",
         "the case: its partition values (`demo_01` for case=demo_01)",
         rows.iter().map(|r| r.0.clone()).collect(),
@@ -201,7 +195,7 @@ fn summary_table(rows: &[(String, Contract)]) -> Table {
         description: "the nominal model disagrees with the records beyond their noise".into(),
         data: crate::table::ColumnData::Bool(rows.iter().map(|r| r.1.mismatch).collect()),
     });
-    t.push(text(
+    t.push(super::text_column(
         "verdict",
         "none | unexplained | ambiguous; rocking: sliding | mass_change | restitution | flexibility | obstacle_impact | sensor_tilt; rolling: lateral_impact | mass_change | caster_brake | swivel_jam",
         rows.iter().map(|r| r.1.verdict.to_string()).collect(),
@@ -224,13 +218,17 @@ fn summary_table(rows: &[(String, Contract)]) -> Table {
         "the same for the accepted model",
         rows.iter().map(|r| r.1.rmse_after).collect(),
     ));
-    t.push(text("explanation", "for a test engineer", rows.iter().map(|r| r.1.explanation.clone()).collect()));
-    t.push(text(
+    t.push(super::text_column(
+        "explanation",
+        "for a test engineer",
+        rows.iter().map(|r| r.1.explanation.clone()).collect(),
+    ));
+    t.push(super::text_column(
         "candidates",
         "every fitted hypothesis (JSON)",
         rows.iter().map(|r| compact(&r.1.candidates)).collect(),
     ));
-    t.push(text(
+    t.push(super::text_column(
         "calibration",
         "per uncertain nominal parameter: stated, fitted, sd, within 3 sd (JSON; {} when the equipment file has no uncertainty block)",
         rows.iter().map(|r| compact(&r.1.calibration)).collect(),
@@ -484,5 +482,14 @@ mod tests {
                 assert!(*v == expected || v.is_nan() && expected.is_nan(), "{name} at {t} s: {v} against {expected}");
             }
         }
+    }
+
+    /// The one line after `run` counts the verdicts.
+    #[test]
+    fn the_summary_line_counts_the_verdicts() {
+        use crate::stages::test_tables::{part, text};
+        let dir = crate::tempdir::tempdir().unwrap();
+        part(dir.path(), "diagnosis", "", vec![text("verdict", &["sliding", "none", "sliding"])]);
+        assert_eq!(Diagnose.summary(dir.path()).unwrap(), "3 cases: none 1, sliding 2");
     }
 }

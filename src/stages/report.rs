@@ -615,15 +615,9 @@ fn summarize_rolling(rolling: &[RollingRun]) -> anyhow::Result<Table> {
         flips.push(kinds.iter().filter(|k| *k == "flip").count() as i64);
         breakaways.push(kinds.iter().position(|k| k == "breakaway").map(|i| time[i]));
     }
-    let text = |name: &str, description: &str, v: Vec<String>| Column {
-        name: name.into(),
-        unit: String::new(),
-        description: description.into(),
-        data: ColumnData::Str(v),
-    };
     let mut table = Table::new();
-    table.push(text("unit", "rolling unit (simulate_rolling)", units));
-    table.push(text("motion", "test motion", motions));
+    table.push(super::text_column("unit", "rolling unit (simulate_rolling)", units));
+    table.push(super::text_column("motion", "test motion", motions));
     table.push(Column::f64(
         "peak_displacement_m",
         "m",
@@ -725,14 +719,8 @@ fn summarize(
             None => rows.push((channel.clone(), None)),
         }
     }
-    let text = |name: &str, description: &str, v: Vec<String>| Column {
-        name: name.into(),
-        unit: String::new(),
-        description: description.into(),
-        data: ColumnData::Str(v),
-    };
     let mut table = Table::new();
-    table.push(text(
+    table.push(super::text_column(
         "unit",
         "equipment unit",
         rows.iter().map(|(c, _)| c.strip_suffix(suffix).unwrap_or(c).to_string()).collect(),

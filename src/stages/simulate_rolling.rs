@@ -773,4 +773,24 @@ mod tests {
             Setup::resolve(&params(json!({"preset": "UI3", "trail_m": 0.0, "lateral_slip": true})), dir.path()).is_ok()
         );
     }
+
+    /// The one line after `run`: the peak displacement and its record, breakaways and flips.
+    #[test]
+    fn the_summary_line_names_the_peak_and_counts_breakaways_and_flips() {
+        use crate::stages::test_tables::{part, text};
+        let dir = crate::tempdir::tempdir().unwrap();
+        let events =
+            |kinds: &[&str], d: &[f64]| vec![text("event", kinds), Column::f64("displacement_m", "m", "d", d.to_vec())];
+        part(
+            dir.path(),
+            "events",
+            "motion=FB-1",
+            events(&["breakaway", "flip", "peak_displacement"], &[0.0, 0.1, 0.25]),
+        );
+        part(dir.path(), "events", "motion=FB-2", events(&["peak_displacement"], &[0.0]));
+        assert_eq!(
+            SimulateRolling.summary(dir.path()).unwrap(),
+            "2 records: peak displacement 0.250 m (FB-1), started rolling in 1, 1 caster flips"
+        );
+    }
 }

@@ -474,4 +474,15 @@ mod tests {
         assert_eq!(side[0], -1);
         assert_eq!(kind.last().unwrap(), "summary");
     }
+
+    /// The one line after `run` counts the `summary` rows only.
+    #[test]
+    fn the_summary_line_counts_the_summary_rows_only() {
+        use crate::stages::test_tables::{flag, part, text};
+        let dir = crate::tempdir::tempdir().unwrap();
+        let kinds = ["uplift", "impact", "overturn", "summary"];
+        part(dir.path(), "events", "record=A", vec![text("event", &kinds), flag("overturned", &[true; 4])]);
+        part(dir.path(), "events", "record=B", vec![text("event", &["summary"]), flag("overturned", &[false])]);
+        assert_eq!(SimulateToppling.summary(dir.path()).unwrap(), "overturned in 1 of 2 records (A)");
+    }
 }

@@ -219,12 +219,6 @@ fn analyse(
             }
         }
     }
-    let text = |name: &str, description: &str, v: Vec<String>| Column {
-        name: name.into(),
-        unit: String::new(),
-        description: description.into(),
-        data: ColumnData::Str(v),
-    };
     let opt = |name: &str, unit: &str, description: &str, v: Vec<Option<f64>>| Column {
         name: name.into(),
         unit: unit.into(),
@@ -232,8 +226,8 @@ fn analyse(
         data: ColumnData::OptF64(v),
     };
     let mut identified = Table::new();
-    identified.push(text("output", "output (response) channel", outputs));
-    identified.push(text("input", "input (excitation) channel", inputs));
+    identified.push(super::text_column("output", "output (response) channel", outputs));
+    identified.push(super::text_column("input", "input (excitation) channel", inputs));
     identified.push(opt(
         "frequency_hz",
         "Hz",
@@ -249,9 +243,9 @@ fn analyse(
         description: "coherence at the peak below the threshold".into(),
         data: ColumnData::Bool(low),
     });
-    identified.push(text("note", "confidence note for a test engineer", notes));
+    identified.push(super::text_column("note", "confidence note for a test engineer", notes));
     let mut spectra = Table::new();
-    spectra.push(text("output", "output (response) channel", s_out));
+    spectra.push(super::text_column("output", "output (response) channel", s_out));
     spectra.push(Column::f64("frequency_hz", "Hz", "frequency", s_freq));
     spectra.push(Column::f64("h1_gain", "", "|H1| = |Pxy/Pxx|", s_h1));
     spectra.push(Column::f64("h1_phase_rad", "rad", "phase of H1", s_phase));
