@@ -4,13 +4,11 @@
 use rayon::prelude::*;
 use serde_json::json;
 
-use super::{Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{Stage, StageContext};
 use crate::io::records::printable;
 use crate::pipeline::params::{self, Params};
 use crate::signal::baseline::PolynomialBasis;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
-
-pub struct Baseline;
 
 crate::stage_params! {
     /// The parameters of `baseline`.
@@ -25,30 +23,22 @@ crate::stage_params! {
 }
 
 super::declare_stage! {
-    Baseline,
-    info: StageInfo {
-        name: "baseline",
-        version: 5,
-        summary: "Remove a least-squares polynomial trend (default cubic) from each channel; no filtering, peaks kept.",
-        inputs: InputKind::Datasets,
-        outputs: &[OutputInfo {
-            name: "records",
-            description: "the input tables with each selected channel baseline-corrected",
-            kind: OutputKind::TimeSeries,
-        }],
-        params: BaselineParams::specs(),
-    },
-    examples: [super::Example {
-        title: "the study's cubic baseline removed from every channel of the loaded records",
-        data: &super::RINALDI,
-        stages: "\
+    /// Remove a least-squares polynomial trend (default cubic) from each channel; no filtering, peaks kept.
+    pub struct Baseline: "baseline", version 5, reads Datasets, params BaselineParams;
+    outputs {
+        /// the input tables with each selected channel baseline-corrected
+        "records": TimeSeries,
+    }
+    examples {
+        /// the study's cubic baseline removed from every channel of the loaded records
+        super::RINALDI => "\
 baseline:
   type: baseline
   inputs: [load]
   params:
     order: 3
 ",
-    }],
+    }
 }
 
 impl Stage for Baseline {

@@ -3,13 +3,11 @@
 //! units are reconciled through the columns' `unit` metadata, and the RMS and largest errors are
 //! reported per column pair, with a PNG overlay.
 
-use super::{partition_path, split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{partition_path, split_pair, Stage, StageContext};
 use crate::error::UserError;
 use crate::pipeline::params;
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
-
-pub struct Compare;
 
 crate::stage_params! {
     /// The parameters of `compare`.
@@ -22,22 +20,18 @@ crate::stage_params! {
 }
 
 super::declare_stage! {
-    Compare,
-    info: StageInfo {
-        name: "compare",
-        version: 2,
-        summary: "Errors of measured time series against a reference (interpolated onto the measured times, units reconciled): RMS and largest error per column pair, and a PNG overlay.",
-        inputs: InputKind::Datasets,
-        outputs: &[
-            OutputInfo { name: "errors", description: "per pair: measured, reference, unit, samples, missing, rms_error, max_abs_error, reference_rms", kind: OutputKind::Table },
-            OutputInfo { name: "figures", description: "<partition or compare>.png: measured over reference, and their difference", kind: OutputKind::Files },
-        ],
-        params: CompareParams::specs(),
-    },
-    examples: [super::Example {
-        title: "what the cubic baseline changed: corrected against loaded accelerations",
-        data: &super::RINALDI,
-        stages: "\
+    /// Errors of measured time series against a reference (interpolated onto the measured times, units reconciled): RMS
+    /// and largest error per column pair, and a PNG overlay.
+    pub struct Compare: "compare", version 2, reads Datasets, params CompareParams;
+    outputs {
+        /// per pair: measured, reference, unit, samples, missing, rms_error, max_abs_error, reference_rms
+        "errors": Table,
+        /// <partition or compare>.png: measured over reference, and their difference
+        "figures": Files,
+    }
+    examples {
+        /// what the cubic baseline changed: corrected against loaded accelerations
+        super::RINALDI => "\
 baseline:
   type: baseline
   inputs: [load]
@@ -47,7 +41,7 @@ compare:
   params:
     pairs: [ax_mps2 -> ax_mps2, az_mps2 -> az_mps2]
 ",
-    }],
+    }
 }
 
 impl Stage for Compare {
@@ -198,12 +192,6 @@ fn compare(
         labels.push(format!("{m_name} [{m_unit}]"));
         plotted.push([m, on_time, diff]);
     }
-    let text = |name: &str, description: &str, v: Vec<String>| Column {
-        name: name.into(),
-        unit: String::new(),
-        description: description.into(),
-        data: ColumnData::Str(v),
-    };
     let count = |name: &str, description: &str, v: Vec<i64>| Column {
         name: name.into(),
         unit: String::new(),
@@ -211,9 +199,9 @@ fn compare(
         data: ColumnData::I64(v),
     };
     let mut table = Table::new();
-    table.push(text("measured", "measured column", names_m));
-    table.push(text("reference", "reference column", names_r.clone()));
-    table.push(text("unit", "unit of the errors (the measured column's)", units));
+    table.push(super::text_column("measured", "measured column", names_m));
+    table.push(super::text_column("reference", "reference column", names_r.clone()));
+    table.push(super::text_column("unit", "unit of the errors (the measured column's)", units));
     table.push(count("samples", "measured samples with a reference value", samples));
     table.push(count("missing", "measured samples without one (lost, or outside the reference's time span)", missing));
     // Errors mix units across rows (mm, rad): the `unit` column says which; the field metadata cannot.

@@ -6,7 +6,7 @@
 use rayon::prelude::*;
 use serde_json::json;
 
-use super::{partition_path, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{partition_path, Stage, StageContext};
 use crate::error::UserError;
 use crate::io::control_points::read_control_points;
 use crate::pipeline::params;
@@ -14,8 +14,6 @@ use crate::pipeline::spec::RecordFormat;
 use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
 use crate::vision::calibrate::{calibrate, expected_rms_px, Calibration, CalibrationError, Distortion, Model};
-
-pub struct CptCalibrate;
 
 crate::stage_params! {
     /// The parameters of `cpt_calibrate`.
@@ -41,30 +39,29 @@ crate::choice! {
 }
 
 super::declare_stage! {
-    CptCalibrate,
-    info: StageInfo {
-        name: "cpt_calibrate",
-        version: 2,
-        summary: "Camera calibration from control points (X_mm, Y_mm, Z_mm, u_px, v_px; ≥ 8, not coplanar): normalised DLT, Levenberg–Marquardt on the reprojection error, optional radial distortion k1 (k2).",
-        inputs: InputKind::Files(&[RecordFormat::ControlPoints]),
-        outputs: &[
-            OutputInfo { name: "calibration", description: "one row: p11…p34 (P scaled so ‖p31..p33‖ = 1), k1/k2 when fitted, intrinsics, camera centre, objective_px (Eq. 2), rms_px", kind: OutputKind::Table },
-            OutputInfo { name: "residuals", description: "per control point: u_res_px, v_res_px, dist_px, loo_dist_px (its distance when fitted without it), outlier", kind: OutputKind::Table },
-            OutputInfo { name: "figures", description: "calibration.png: control points with magnified residuals, and residual per point", kind: OutputKind::Files },
-        ],
-        params: CptCalibrateParams::specs(),
-    },
-    examples: [super::Example {
-        title: "the demo camera from its 14 control points, with radial distortion k1",
-        data: &super::DEMO_CAMERA,
-        stages: "\
+    /// Camera calibration from control points (X_mm, Y_mm, Z_mm, u_px, v_px; ≥ 8, not coplanar): normalised DLT,
+    /// Levenberg–Marquardt on the reprojection error, optional radial distortion k1 (k2).
+    pub struct CptCalibrate: "cpt_calibrate", version 2,
+        reads Files(&[RecordFormat::ControlPoints]), params CptCalibrateParams;
+    outputs {
+        /// one row: p11…p34 (P scaled so ‖p31..p33‖ = 1), k1/k2 when fitted, intrinsics, camera centre, objective_px
+        /// (Eq. 2), rms_px
+        "calibration": Table,
+        /// per control point: u_res_px, v_res_px, dist_px, loo_dist_px (its distance when fitted without it), outlier
+        "residuals": Table,
+        /// calibration.png: control points with magnified residuals, and residual per point
+        "figures": Files,
+    }
+    examples {
+        /// the demo camera from its 14 control points, with radial distortion k1
+        super::DEMO_CAMERA => "\
 cpt_calibrate:
   type: cpt_calibrate
   inputs: [control_points]
   params:
     distortion: k1
 ",
-    }],
+    }
 }
 
 impl Stage for CptCalibrate {

@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 
 use serde_json::json;
 
-use super::{partition_path, Declared, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{partition_path, InputPart, Stage, StageContext};
 use crate::error::UserError;
 use crate::pipeline::params;
 use crate::plot::{render_png, Panel, Series};
@@ -16,8 +16,6 @@ use crate::table::{Column, ColumnData, Table};
 use crate::vision::camera::Camera;
 use crate::vision::linalg::Vec3;
 use crate::vision::project::{backproject, pair_motion, Plane};
-
-pub struct CptProject;
 
 crate::stage_params! {
     /// The parameters of `cpt_project`.
@@ -59,23 +57,21 @@ crate::choice! {
 }
 
 super::declare_stage! {
-    CptProject,
-    info: StageInfo {
-        name: "cpt_project",
-        version: 2,
-        summary: "Back-project tracked pixels onto a plane aX + bY + cZ + d = 0 (Eq. 4) with a cpt_calibrate camera; for two points on one unit, its translation and in-plane rotation (rolling) or rocking angle θ (rocking).",
-        inputs: InputKind::Datasets,
-        outputs: &[
-            OutputInfo { name: "points", description: "per frame and point: time_s, point, X_mm, Y_mm, Z_mm (NaN when the track is lost)", kind: OutputKind::TimeSeries },
-            OutputInfo { name: "motion", description: "rolling: time_s, dx_mm, dy_mm, dz_mm, yaw_rad; rocking: time_s, theta_rad, dx_mm, dy_mm, dz_mm (empty when unit_motion is none)", kind: OutputKind::TimeSeries },
-            OutputInfo { name: "figures", description: "motion.png: the unit's recovered motion", kind: OutputKind::Files },
-        ],
-        params: CptProjectParams::specs(),
-    },
-    examples: [super::Example {
-        title: "the stretcher panel's rocking angle θ(t) from two tracked markers on the plane Y = 0",
-        data: &super::DEMO_CAMERA,
-        stages: "\
+    /// Back-project tracked pixels onto a plane aX + bY + cZ + d = 0 (Eq. 4) with a cpt_calibrate camera; for two
+    /// points on one unit, its translation and in-plane rotation (rolling) or rocking angle θ (rocking).
+    pub struct CptProject: "cpt_project", version 2, reads Datasets, params CptProjectParams;
+    outputs {
+        /// per frame and point: time_s, point, X_mm, Y_mm, Z_mm (NaN when the track is lost)
+        "points": TimeSeries,
+        /// rolling: time_s, dx_mm, dy_mm, dz_mm, yaw_rad; rocking: time_s, theta_rad, dx_mm, dy_mm, dz_mm (empty when
+        /// unit_motion is none)
+        "motion": TimeSeries,
+        /// motion.png: the unit's recovered motion
+        "figures": Files,
+    }
+    examples {
+        /// the stretcher panel's rocking angle θ(t) from two tracked markers on the plane Y = 0
+        super::DEMO_CAMERA => "\
 calibrate: {type: cpt_calibrate, inputs: [control_points], params: {distortion: k1}}
 track: {type: cpt_track, inputs: [video], params: {fps: 30, points: \"M1=376.3,328.0; M2=380.2,248.8\"}}
 cpt_project:
@@ -87,7 +83,7 @@ cpt_project:
     unit_motion: rocking
     theta_zero: upright
 ",
-    }],
+    }
 }
 
 impl Stage for CptProject {

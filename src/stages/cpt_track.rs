@@ -5,7 +5,7 @@
 
 use serde_json::json;
 
-use super::{partition_path, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{partition_path, Stage, StageContext};
 use crate::error::UserError;
 use crate::io::frames::FrameReader;
 use crate::pipeline::params;
@@ -14,8 +14,6 @@ use crate::plot::{render_png, Panel, Series};
 use crate::table::{Column, ColumnData, Table};
 use crate::vision::matcher::{Kernel, Score};
 use crate::vision::track::{NamedPoint, SequenceTracker, Status, TemplatePolicy, TrackError, TrackOptions};
-
-pub struct CptTrack;
 
 crate::stage_params! {
     /// The parameters of `cpt_track`.
@@ -68,22 +66,18 @@ crate::choice! {
 }
 
 super::declare_stage! {
-    CptTrack,
-    info: StageInfo {
-        name: "cpt_track",
-        version: 3,
-        summary: "Track points through an image sequence (PNG/JPEG folder, or a video through ffmpeg): ZNCC or SSD template matching against a reference template, sub-pixel, lost points flagged, optional camera-shake correction.",
-        inputs: InputKind::Files(&[RecordFormat::Frames]),
-        outputs: &[
-            OutputInfo { name: "tracks", description: "per frame and point: frame, time_s, point, u_px, v_px, score, status (NaN positions when lost)", kind: OutputKind::TimeSeries },
-            OutputInfo { name: "figures", description: "tracks.png: u, v and score of every point over time", kind: OutputKind::Files },
-        ],
-        params: CptTrackParams::specs(),
-    },
-    examples: [super::Example {
-        title: "the four markers through the video, started where a person clicks them in the first frame",
-        data: &super::DEMO_CAMERA,
-        stages: "\
+    /// Track points through an image sequence (PNG/JPEG folder, or a video through ffmpeg): ZNCC or SSD template
+    /// matching against a reference template, sub-pixel, lost points flagged, optional camera-shake correction.
+    pub struct CptTrack: "cpt_track", version 3, reads Files(&[RecordFormat::Frames]), params CptTrackParams;
+    outputs {
+        /// per frame and point: frame, time_s, point, u_px, v_px, score, status (NaN positions when lost)
+        "tracks": TimeSeries,
+        /// tracks.png: u, v and score of every point over time
+        "figures": Files,
+    }
+    examples {
+        /// the four markers through the video, started where a person clicks them in the first frame
+        super::DEMO_CAMERA => "\
 cpt_track:
   type: cpt_track
   inputs: [video]
@@ -91,7 +85,7 @@ cpt_track:
     fps: 30
     points: \"M1=376.3,328.0; M2=380.2,248.8; M3=549.7,212.6; M4=613.4,205.8\"
 ",
-    }],
+    }
 }
 
 /// Frames decoded per batch: enough to keep every core decoding.

@@ -6,13 +6,11 @@ use super::error::{float_column, StageError};
 use rayon::prelude::*;
 use std::path::Path;
 
-use super::{split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{split_pair, Stage, StageContext};
 use crate::pipeline::params::{self, Params};
 use crate::signal::toppling::{detect_toppling, detect_toppling_on, DetectOptions, TimeBase};
 use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
-
-pub struct DetectToppling;
 
 crate::stage_params! {
     /// The parameters of `detect_toppling`.
@@ -28,28 +26,24 @@ crate::stage_params! {
 }
 
 super::declare_stage! {
-    DetectToppling,
-    info: StageInfo {
-        name: "detect_toppling",
-        version: 2,
-        summary: "Toppling impacts from top accelerometers: STA/LTA spike confirmed by a lasting amplitude drop; optional floor-vertical cross-check.",
-        inputs: InputKind::Datasets,
-        outputs: &[OutputInfo { name: "events", description: "per channel: toppled, impact_time_s, peak_mps2, confidence, and why", kind: OutputKind::Table }],
-        params: DetectTopplingParams::specs(),
-    },
-    shown: [("events", super::Shown::Toppling)],
-    examples: [super::Example {
-        title: "the top accelerometers of the shared cases: the four rocking units that overturn, at the times \
-                their truth files give, and none of the four carts on casters",
-        data: &TOP_ACCELEROMETERS,
-        stages: "\
+    /// Toppling impacts from top accelerometers: STA/LTA spike confirmed by a lasting amplitude drop; optional
+    /// floor-vertical cross-check.
+    pub struct DetectToppling: "detect_toppling", version 2, reads Datasets, params DetectTopplingParams;
+    outputs {
+        /// per channel: toppled, impact_time_s, peak_mps2, confidence, and why
+        "events": Table => Toppling,
+    }
+    examples {
+        /// the top accelerometers of the shared cases: the four rocking units that overturn, at the times their truth
+        /// files give, and none of the four carts on casters
+        TOP_ACCELEROMETERS => "\
 detect_toppling:
   type: detect_toppling
   inputs: [load]
   params:
     channels: [top_ax_mps2]
 ",
-    }],
+    }
 }
 
 /// The top accelerometers of the shared rocking (`demo`) and rolling (`rolling_demo`) cases.
@@ -261,5 +255,18 @@ mod tests {
         let cart = events("rolling_demo", "demo_01");
         assert!(matches!(column(&cart, "toppled"), ColumnData::Bool(v) if v == [false]));
         assert!(matches!(column(&cart, "impact_time_s"), ColumnData::OptF64(v) if v == [None]));
+    }
+
+    /// The one line after `run`: the records and channels that toppled, of all.
+    #[test]
+    fn the_summary_line_names_the_records_and_channels_that_toppled() {
+        use crate::stages::test_tables::{flag, part, text};
+        let dir = crate::tempdir::tempdir().unwrap();
+        part(dir.path(), "events", "motion=FB-4", vec![text("channel", &["a", "b"]), flag("toppled", &[true, false])]);
+        part(dir.path(), "events", "motion=FB-5", vec![text("channel", &["a", "b"]), flag("toppled", &[false, true])]);
+        assert_eq!(
+            DetectToppling.summary(dir.path()).unwrap(),
+            "toppling detected in 2 of 4 channel records (FB-4 a, FB-5 b)"
+        );
     }
 }

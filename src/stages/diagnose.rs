@@ -4,12 +4,10 @@
 //! `<case>/diagnosis.json` for each of several), the observed/baseline/model series and
 //! residuals (Parquet, + MCAP with `mcap: true`) and a figure with the located window shaded.
 
-use std::sync::LazyLock;
-
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::{Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{Stage, StageContext};
 use crate::diagnose::contract::Contract;
 use crate::diagnose::rolling::RollingDiagnosis;
 use crate::diagnose::{diagnose, Diagnosis, Settings};
@@ -18,25 +16,6 @@ use crate::pipeline::params::{self, ParamError, Params};
 use crate::pipeline::spec::RecordFormat;
 use crate::plot::PlotError;
 use crate::table::{Column, Table, TIME_COLUMN};
-
-pub struct Diagnose;
-
-static INFO: LazyLock<StageInfo> = LazyLock::new(|| {
-    StageInfo {
-    name: "diagnose",
-    version: 15,
-    summary: "Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt; rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted jointly with the nominal parameters the equipment file's `uncertainty` block says are known only roughly (calibrated first), ranked by BIC; `ambiguous` when two explain the records about equally well, or `unexplained`.",
-    inputs: InputKind::Files(&[RecordFormat::Case]),
-    outputs: &[
-        OutputInfo { name: "diagnosis", description: "per case: mismatch, verdict, window_start_s, window_end_s, rmse_before, rmse_after, explanation, candidates (JSON), calibration (JSON)", kind: OutputKind::Table },
-        OutputInfo { name: "accel", description: "per case: observed, baseline and model top acceleration and the residuals before/after", kind: OutputKind::TimeSeries },
-        OutputInfo { name: "camera", description: "per case: observed, baseline and model rotation and the residuals before/after", kind: OutputKind::TimeSeries },
-        OutputInfo { name: "reports", description: "<case>.png: records, models, residuals, window shaded", kind: OutputKind::Files },
-        OutputInfo { name: "diagnosis.json", description: "the contract (verdict, window, rmse before/after, candidates, explanation, calibration): at the stage folder's root for one case, in `<case>/` for each of several", kind: OutputKind::Page },
-    ],
-    params: DiagnoseParams::specs(),
-}
-});
 
 /// The contract file held-out scorers read (`shakeflow diagnose CASE --out OUT` → `OUT/diagnosis.json`).
 pub const CONTRACT: &str = "diagnosis.json";
@@ -65,20 +44,56 @@ pub fn settings(params: &Params) -> Result<Settings, ParamError> {
     })
 }
 
-impl super::StageType for Diagnose {
-    fn shown(&self) -> &'static [(&'static str, super::Shown)] {
-        &[("diagnosis", super::Shown::Diagnosis)]
+super::declare_stage! {
+    /// Where the toppling model (or, for `model: rolling` cases, the 4WMC cart) and a unit's records disagree, which
+    /// physics it left out (rocking: sliding, mass_change, restitution, flexibility, obstacle_impact, sensor_tilt;
+    /// rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted jointly with the nominal parameters the
+    /// equipment file's `uncertainty` block says are known only roughly (calibrated first), ranked by BIC; `ambiguous`
+    /// when two explain the records about equally well, or `unexplained`.
+    pub struct Diagnose: "diagnose", version 15,
+        reads Files(&[RecordFormat::Case]), params DiagnoseParams;
+    outputs {
+        /// per case: mismatch, verdict, window_start_s, window_end_s, rmse_before, rmse_after, explanation, candidates
+        /// (JSON), calibration (JSON)
+        "diagnosis": Table => Diagnosis,
+        /// per case: observed, baseline and model top acceleration and the residuals before/after
+        "accel": TimeSeries,
+        /// per case: observed, baseline and model rotation and the residuals before/after
+        "camera": TimeSeries,
+        /// <case>.png: records, models, residuals, window shaded
+        "reports": Files,
+        /// the contract (verdict, window, rmse before/after, candidates, explanation, calibration): at the stage
+        /// folder's root for one case, in `<case>/` for each of several
+        "diagnosis.json": Page,
+    }
+    examples {
+        /// a shared case whose WSU1 unit loses 15 % of its mass 4.6 s into the record (its truth file:
+        /// `effect: mass_change`), diagnosed as `mass_change`
+        CASE => "\
+diagnose:
+  type: diagnose
+  inputs: [case]
+",
     }
 }
 
-impl Stage for Diagnose {
-    fn info(&self) -> &'static StageInfo {
-        &INFO
-    }
+/// One shared diagnosis case (`../shared/cases/demo/demo_02`: a WSU1 unit on the isolated
+/// building's 4th floor; `truth/` says what is hidden, which the stage never reads).
+const CASE: super::ExampleData = super::ExampleData {
+    what: "a shared diagnosis case",
+    head: "\
+inputs:
+  case:
+    description: a WSU1 unit on the base-isolated building's 4th floor, its records and equipment file
+    format: case
+    path: ../shared/cases/demo/demo_02/equipment.yaml
+    partition: {case: demo_02}
+stages:
+",
+};
 
-    fn check_params(&self, params: &Params) -> Result<(), ParamError> {
-        params::check_typed::<DiagnoseParams>(params)
-    }
+impl Stage for Diagnose {
+    super::info_and_check_params!(DiagnoseParams);
 
     fn summary(&self, stage_dir: &std::path::Path) -> Option<String> {
         crate::summary::verdicts(stage_dir).ok()
@@ -162,12 +177,6 @@ pub fn camera_table(d: &Diagnosis) -> Table {
 }
 
 fn summary_table(rows: &[(String, Contract)]) -> Table {
-    let text = |name: &str, description: &str, v: Vec<String>| Column {
-        name: name.into(),
-        unit: String::new(),
-        description: description.into(),
-        data: crate::table::ColumnData::Str(v),
-    };
     let optional = |name: &str, description: &str, v: Vec<Option<f64>>| Column {
         name: name.into(),
         unit: "s".into(),
@@ -175,7 +184,7 @@ fn summary_table(rows: &[(String, Contract)]) -> Table {
         data: crate::table::ColumnData::OptF64(v),
     };
     let mut t = Table::new();
-    t.push(text(
+    t.push(super::text_column(
         "case",
         "the case: its partition values (`demo_01` for case=demo_01)",
         rows.iter().map(|r| r.0.clone()).collect(),
@@ -186,7 +195,7 @@ fn summary_table(rows: &[(String, Contract)]) -> Table {
         description: "the nominal model disagrees with the records beyond their noise".into(),
         data: crate::table::ColumnData::Bool(rows.iter().map(|r| r.1.mismatch).collect()),
     });
-    t.push(text(
+    t.push(super::text_column(
         "verdict",
         "none | unexplained | ambiguous; rocking: sliding | mass_change | restitution | flexibility | obstacle_impact | sensor_tilt; rolling: lateral_impact | mass_change | caster_brake | swivel_jam",
         rows.iter().map(|r| r.1.verdict.to_string()).collect(),
@@ -209,13 +218,17 @@ fn summary_table(rows: &[(String, Contract)]) -> Table {
         "the same for the accepted model",
         rows.iter().map(|r| r.1.rmse_after).collect(),
     ));
-    t.push(text("explanation", "for a test engineer", rows.iter().map(|r| r.1.explanation.clone()).collect()));
-    t.push(text(
+    t.push(super::text_column(
+        "explanation",
+        "for a test engineer",
+        rows.iter().map(|r| r.1.explanation.clone()).collect(),
+    ));
+    t.push(super::text_column(
         "candidates",
         "every fitted hypothesis (JSON)",
         rows.iter().map(|r| compact(&r.1.candidates)).collect(),
     ));
-    t.push(text(
+    t.push(super::text_column(
         "calibration",
         "per uncertain nominal parameter: stated, fitted, sd, within 3 sd (JSON; {} when the equipment file has no uncertainty block)",
         rows.iter().map(|r| compact(&r.1.calibration)).collect(),
@@ -425,4 +438,58 @@ fn rolling_figure(d: &RollingDiagnosis) -> Result<Vec<u8>, PlotError> {
         None => format!("{}: no mismatch", d.case),
     };
     render_png(&title, &panels, 1400, 1300)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::params::normalize;
+
+    /// The default settings, as a pipeline without `params:` gets them.
+    fn defaults() -> Settings {
+        settings(&normalize(INFO.params, INFO.name, Vec::new()).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn the_settings_are_the_declared_defaults() {
+        let s = defaults();
+        assert_eq!((s.exceedance_sigma, s.min_improvement, s.max_remaining_flagged), (4.0, 3.0, 0.12));
+    }
+
+    /// The shared rolling case `rolling_demo/demo_01` (its truth: `effect: none`): the verdict is
+    /// `none` without a window, the summary row says so, and the camera table carries the case's
+    /// records as its `observed_cpt.csv` gives them (`nan`: a dropout), read here by a plain split of
+    /// the text.
+    #[test]
+    fn a_rolling_case_without_a_mismatch_is_none_and_keeps_its_records() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/cases/rolling_demo/demo_01");
+        let report = diagnose_folder(&dir, "", &defaults()).unwrap();
+        assert_eq!(report.contract.verdict.to_string(), "none");
+        assert!(!report.contract.mismatch && report.contract.window.is_none());
+        let summary = summary_table(&[("demo_01".into(), report.contract)]);
+        assert_eq!(summary.column("verdict").unwrap().data, crate::table::ColumnData::Str(vec!["none".into()]));
+
+        let text = std::fs::read_to_string(dir.join("observed_cpt.csv")).unwrap();
+        let rows: Vec<Vec<f64>> =
+            text.lines().skip(1).map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+        let by_time: std::collections::HashMap<u64, &Vec<f64>> = rows.iter().map(|r| (r[0].to_bits(), r)).collect();
+        let time = report.camera.f64_column(TIME_COLUMN).unwrap();
+        assert!(time.len() + 1 >= rows.len(), "{} of {} camera rows kept", time.len(), rows.len());
+        for (k, name) in ["x_m", "y_m", "yaw_rad"].into_iter().enumerate() {
+            let observed = report.camera.f64_column(&format!("observed_{name}")).unwrap();
+            for (t, v) in time.iter().zip(observed) {
+                let expected = by_time[&t.to_bits()][k + 1];
+                assert!(*v == expected || v.is_nan() && expected.is_nan(), "{name} at {t} s: {v} against {expected}");
+            }
+        }
+    }
+
+    /// The one line after `run` counts the verdicts.
+    #[test]
+    fn the_summary_line_counts_the_verdicts() {
+        use crate::stages::test_tables::{part, text};
+        let dir = crate::tempdir::tempdir().unwrap();
+        part(dir.path(), "diagnosis", "", vec![text("verdict", &["sliding", "none", "sliding"])]);
+        assert_eq!(Diagnose.summary(dir.path()).unwrap(), "3 cases: none 1, sliding 2");
+    }
 }

@@ -7,7 +7,7 @@ use std::collections::{BTreeMap, HashMap};
 use rayon::prelude::*;
 use serde_json::json;
 
-use super::{Declared, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo, StageInput};
+use super::{InputPart, Stage, StageContext, StageInput};
 use crate::error::{did_you_mean_hint, UserError};
 use crate::io::records::{self, DelimitedOptions, RawRecord};
 use crate::pipeline::spec::{Axis, ColumnSpec, ComponentAs, GapPolicy, NonUniformPolicy, RecordFormat, SourceSpec};
@@ -15,54 +15,32 @@ use crate::signal::resample;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
 use crate::units;
 
-pub struct Load;
-
 crate::stage_params! {
     /// `load` takes no parameters (a source's reading options live in its spec).
     pub struct LoadParams {}
 }
 
 super::declare_stage! {
-    Load,
-    info: StageInfo {
-        name: "load",
-        version: 3,
-        summary: "Read record files into SI time-series tables: checks sampling, gaps and point counts, converts units.",
-        inputs: InputKind::Sources,
-        outputs: &[
-            OutputInfo {
-                name: "records",
-                description: "one table per record file: time_s plus each channel in SI",
-                kind: OutputKind::Table,
-            },
-            OutputInfo {
-                name: "flagged",
-                description: "written by the engine when a source has `on_error: skip`: one row per record that could not be read (record, file, reason with file:line:column)",
-                kind: OutputKind::Table,
-            },
-            OutputInfo {
-                name: "status",
-                description: "written by the engine: one row per record (record, status, file, reason): loaded, flagged (loaded whole, e.g. channels of unequal lengths null-padded; reason with file:line), skipped (`on_error: skip`) or failed",
-                kind: OutputKind::Table,
-            },
-        ],
-        params: LoadParams::specs(),
-    },
-    shown: [("status", super::Shown::RecordStatus)],
-    examples: [
-        super::Example {
-            title: "two NIED stations, one file per component, each read as one record in m/s² with its axes from \
-                the files' `Dir.` lines",
-            data: &KNET,
-            stages: "",
-        },
-        super::Example {
-            title: "every shared record file, each read by the format its content tells (one record per file); \
-                `on_error: skip` lists a file that cannot be read in `flagged` and goes on",
-            data: &ARCHIVE,
-            stages: "",
-        },
-    ],
+    /// Read record files into SI time-series tables: checks sampling, gaps and point counts, converts units.
+    pub struct Load: "load", version 3, reads Sources, params LoadParams;
+    outputs {
+        /// one table per record file: time_s plus each channel in SI
+        "records": Table,
+        /// written by the engine when a source has `on_error: skip`: one row per record that could not be read (record,
+        /// file, reason with file:line:column)
+        "flagged": Table,
+        /// written by the engine: one row per record (record, status, file, reason): loaded, flagged (loaded whole,
+        /// e.g. channels of unequal lengths null-padded; reason with file:line), skipped (`on_error: skip`) or failed
+        "status": Table => RecordStatus,
+    }
+    examples {
+        /// two NIED stations, one file per component, each read as one record in m/s² with its axes from the files'
+        /// `Dir.` lines
+        KNET => "",
+        /// every shared record file, each read by the format its content tells (one record per file); `on_error: skip`
+        /// lists a file that cannot be read in `flagged` and goes on
+        ARCHIVE => "",
+    }
 }
 
 /// Every file of the shared records, told by content.

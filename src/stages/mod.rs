@@ -84,6 +84,16 @@ pub fn record_title(partition: &Partition, fallback: &str) -> String {
     named.join(", ")
 }
 
+/// A text column without a unit (`case`, `verdict`, `unit`, `motion` … of the stages' tables).
+pub fn text_column(name: &str, description: &str, values: Vec<String>) -> crate::table::Column {
+    crate::table::Column {
+        name: name.into(),
+        unit: String::new(),
+        description: description.into(),
+        data: crate::table::ColumnData::Str(values),
+    }
+}
+
 /// Refuses a column parameter (`key`) naming `column` when the input's `columns` lack it.
 pub fn require_column(key: &str, column: &str, columns: &[String]) -> Result<(), ParamError> {
     if columns.iter().any(|c| c == column) {
@@ -205,28 +215,81 @@ pub enum Shown {
     RecordStatus,
 }
 
-/// A stage type's declaration in one block: its [`StageInfo`] as the file's `static INFO`
-/// (which [`info_and_check_params`] returns), and its [`StageType`]: what the report shows of its
-/// outputs (`shown`) and the example pipelines its documentation shows (`examples`), each
-/// optional.
+/// A doc comment's text as a macro sees it (`/// text` is `#[doc = " text"]`, lines joined by
+/// `concat!`) without the space after `///`: how [`declare_stage`] reads the summary, the
+/// outputs' descriptions and the examples' titles from doc comments.
+pub const fn doc_text(doc: &'static str) -> &'static str {
+    doc.trim_ascii_start()
+}
+
+/// A stage type declared in one block, read as it is written: the summary is the doc comment
+/// of the stage's struct (which the block defines), then its YAML name, version, what it reads
+/// ([`InputKind`]) and its parameter struct; each output, under its doc comment (what it holds),
+/// by name and [`OutputKind`], with `=> ` the [`Shown`] kind the study report shows it as; each
+/// example pipeline, under its doc comment (its title), by the [`ExampleData`] it reads and the
+/// YAML of its stages. The block writes the file's `static INFO` (which [`info_and_check_params`]
+/// returns) and the stage's [`StageType`] (`shown`, `examples`). A doc comment of several lines
+/// is joined with spaces.
+///
+/// ```ignore
+/// declare_stage! {
+///     /// Remove a least-squares polynomial trend from each channel.
+///     pub struct Baseline: "baseline", version 5, reads Datasets, params BaselineParams;
+///     outputs {
+///         /// the input tables with each selected channel baseline-corrected
+///         "records": TimeSeries,
+///     }
+///     examples {
+///         /// the study's cubic baseline removed from every channel
+///         super::RINALDI => "baseline:\n  type: baseline\n  inputs: [load]\n",
+///     }
+/// }
+/// ```
 macro_rules! declare_stage {
     (
-        $stage:ty,
-        info: $info:expr,
-        $(shown: [$($shown:expr),* $(,)?],)?
-        $(examples: [$($example:expr),* $(,)?],)?
+        $(#[doc = $summary:literal])+
+        pub struct $stage:ident: $name:literal, version $version:literal,
+            reads $reads:ident $(($formats:expr))?, params $params:ident;
+        outputs {
+            $($(#[doc = $description:literal])+ $output:literal: $kind:ident $(=> $shown:ident)?,)+
+        }
+        $(examples {
+            $($(#[doc = $title:literal])+ $data:path => $yaml:literal,)+
+        })?
     ) => {
-        static INFO: std::sync::LazyLock<$crate::stages::StageInfo> = std::sync::LazyLock::new(|| $info);
+        $(#[doc = $summary])+
+        pub struct $stage;
+
+        static INFO: std::sync::LazyLock<$crate::stages::StageInfo> =
+            std::sync::LazyLock::new(|| $crate::stages::StageInfo {
+                name: $name,
+                version: $version,
+                summary: $crate::stages::doc_text(concat!($($summary),+)),
+                inputs: $crate::stages::InputKind::$reads $(($formats))?,
+                outputs: {
+                    const OUTPUTS: &[$crate::stages::OutputInfo] = &[$($crate::stages::OutputInfo {
+                        name: $output,
+                        description: $crate::stages::doc_text(concat!($($description),+)),
+                        kind: $crate::stages::OutputKind::$kind,
+                    }),+];
+                    OUTPUTS
+                },
+                params: <$params as $crate::stages::Declared>::specs(),
+            });
 
         impl $crate::stages::StageType for $stage {
-            $(
-                fn shown(&self) -> &'static [(&'static str, $crate::stages::Shown)] {
-                    &[$($shown),*]
-                }
-            )?
+            fn shown(&self) -> &'static [(&'static str, $crate::stages::Shown)] {
+                &[$($(($output, $crate::stages::Shown::$shown),)?)+]
+            }
+
             $(
                 fn examples(&self) -> &'static [$crate::stages::Example] {
-                    &[$($example),*]
+                    const EXAMPLES: &[$crate::stages::Example] = &[$($crate::stages::Example {
+                        title: $crate::stages::doc_text(concat!($($title),+)),
+                        data: &$data,
+                        stages: $yaml,
+                    }),+];
+                    EXAMPLES
                 }
             )?
         }
@@ -394,19 +457,15 @@ mod tests {
     }
 }
 
-/// Each stage type's one line of results (`Stage::summary`), on outputs written as the stage writes them.
+/// Tables as stages write them, for the tests of each stage's one line of results
+/// (`Stage::summary`), which sit beside the stage.
 #[cfg(test)]
-mod summary_tests {
-    use super::registry;
+pub(crate) mod test_tables {
+    use crate::table::{Column, ColumnData, Table};
     use std::path::Path;
 
-    fn stage_line(dir: &Path, stage_type: &str) -> Option<String> {
-        registry().find(stage_type).expect("a stage type").summary(dir)
-    }
-    use crate::table::{Column, ColumnData, Table};
-
     /// One part of `<stage>/<output>` as a stage writes it (provenance, partition metadata).
-    fn part(dir: &Path, output: &str, partition: &str, columns: Vec<Column>) {
+    pub fn part(dir: &Path, output: &str, partition: &str, columns: Vec<Column>) {
         let mut t = Table::new();
         t.extend(columns);
         for (k, v) in [("shakeflow.stage", "s"), ("shakeflow.output", output), ("shakeflow.partition", partition)] {
@@ -417,7 +476,7 @@ mod summary_tests {
         crate::io::parquet::write_table(&folder.join("data.parquet"), &t).unwrap();
     }
 
-    fn text(name: &str, v: &[&str]) -> Column {
+    pub fn text(name: &str, v: &[&str]) -> Column {
         Column {
             name: name.into(),
             unit: String::new(),
@@ -426,50 +485,18 @@ mod summary_tests {
         }
     }
 
-    fn flag(name: &str, v: &[bool]) -> Column {
+    pub fn flag(name: &str, v: &[bool]) -> Column {
         Column { name: name.into(), unit: String::new(), description: "d".into(), data: ColumnData::Bool(v.to_vec()) }
     }
 
+    /// A stage type without a line, and outputs that are not there, say nothing.
     #[test]
-    fn detections_name_the_records_and_channels_that_toppled() {
+    fn a_stage_without_a_line_or_its_outputs_says_nothing() {
+        use super::Stage;
         let dir = crate::tempdir::tempdir().unwrap();
-        part(dir.path(), "events", "motion=FB-4", vec![text("channel", &["a", "b"]), flag("toppled", &[true, false])]);
-        part(dir.path(), "events", "motion=FB-5", vec![text("channel", &["a", "b"]), flag("toppled", &[false, true])]);
-        assert_eq!(
-            stage_line(dir.path(), "detect_toppling").unwrap(),
-            "toppling detected in 2 of 4 channel records (FB-4 a, FB-5 b)"
-        );
-    }
-
-    #[test]
-    fn toppling_counts_the_summary_rows_only() {
-        let dir = crate::tempdir::tempdir().unwrap();
-        let kinds = ["uplift", "impact", "overturn", "summary"];
-        part(dir.path(), "events", "record=A", vec![text("event", &kinds), flag("overturned", &[true; 4])]);
-        part(dir.path(), "events", "record=B", vec![text("event", &["summary"]), flag("overturned", &[false])]);
-        assert_eq!(stage_line(dir.path(), "simulate_toppling").unwrap(), "overturned in 1 of 2 records (A)");
-    }
-
-    #[test]
-    fn verdicts_are_counted_and_rolling_peaks_named() {
-        let dir = crate::tempdir::tempdir().unwrap();
-        part(dir.path(), "diagnosis", "", vec![text("verdict", &["sliding", "none", "sliding"])]);
-        assert_eq!(stage_line(dir.path(), "diagnose").unwrap(), "3 cases: none 1, sliding 2");
-        let events =
-            |kinds: &[&str], d: &[f64]| vec![text("event", kinds), Column::f64("displacement_m", "m", "d", d.to_vec())];
-        part(
-            dir.path(),
-            "events",
-            "motion=FB-1",
-            events(&["breakaway", "flip", "peak_displacement"], &[0.0, 0.1, 0.25]),
-        );
-        part(dir.path(), "events", "motion=FB-2", events(&["peak_displacement"], &[0.0]));
-        assert_eq!(
-            stage_line(dir.path(), "simulate_rolling").unwrap(),
-            "2 records: peak displacement 0.250 m (FB-1), started rolling in 1, 1 caster flips"
-        );
-        // Types without a line, and outputs that are not there, say nothing.
-        assert_eq!(stage_line(dir.path(), "baseline"), None);
-        assert_eq!(stage_line(&dir.path().join("absent"), "diagnose"), None);
+        part(dir.path(), "diagnosis", "", vec![text("verdict", &["none"])]);
+        assert_eq!(super::baseline::Baseline.summary(dir.path()), None);
+        assert!(super::diagnose::Diagnose.summary(dir.path()).is_some());
+        assert_eq!(super::diagnose::Diagnose.summary(&dir.path().join("absent")), None);
     }
 }

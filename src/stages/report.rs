@@ -18,14 +18,9 @@ use serde::de::DeserializeOwned;
 use super::simulate_rolling::SimulateRollingParams;
 use super::simulate_toppling::{RockingParams, SimulateTopplingParams};
 use super::transfer_function::TransferFunctionParams;
-use super::{
-    figure_stem, partition_values, Declared, InputKind, InputPart, OutputInfo, OutputKind, Shown, Stage, StageContext,
-    StageInfo, StageInput,
-};
+use super::{figure_stem, partition_values, InputPart, Shown, Stage, StageContext, StageInput};
 use crate::pipeline::params;
 use crate::table::{Column, ColumnData, Table};
-
-pub struct Report;
 
 crate::stage_params! {
     /// The parameters of `report`.
@@ -41,25 +36,26 @@ crate::stage_params! {
 }
 
 super::declare_stage! {
-    Report,
-    info: StageInfo {
-        name: "report",
-        version: 3,
-        summary: "Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time, confidence); rolling units' peak displacement, yaw and caster flips per motion; the study report index.html.",
-        inputs: InputKind::Datasets,
-        outputs: &[
-            OutputInfo { name: "summary", description: "one row per unit and toppling event (or one row when none)", kind: OutputKind::Table },
-            OutputInfo { name: "rolling", description: "one row per rolling unit and motion: peak_displacement_m, peak_yaw_rad, caster_flips, breakaway_time_s (from simulate_rolling.events inputs)", kind: OutputKind::Table },
-            OutputInfo { name: "figures", description: "<unit>.png: floor vs top acceleration in `figure_motion`, transfer functions in their band with the picked peaks, coherence", kind: OutputKind::Files },
-            OutputInfo { name: "index.html", description: "the study report for a browser: summary, per unit its frequencies, toppling events, simulations, fragility, rolling results and figures, the diagnosis, provenance (figures linked relatively: open it where `run` wrote it)", kind: OutputKind::Page },
-        ],
-        params: ReportParams::specs(),
-    },
-    examples: [super::Example {
-        title:
-            "the study report of a rocking simulation: the unit's runs, what the report lacked, the records loaded",
-        data: &super::RINALDI,
-        stages: "\
+    /// Summary per unit: identified frequencies (one column per test) and toppling events (motion, impact time,
+    /// confidence); rolling units' peak displacement, yaw and caster flips per motion; the study report index.html.
+    pub struct Report: "report", version 3, reads Datasets, params ReportParams;
+    outputs {
+        /// one row per unit and toppling event (or one row when none)
+        "summary": Table,
+        /// one row per rolling unit and motion: peak_displacement_m, peak_yaw_rad, caster_flips, breakaway_time_s (from
+        /// simulate_rolling.events inputs)
+        "rolling": Table,
+        /// <unit>.png: floor vs top acceleration in `figure_motion`, transfer functions in their band with the picked
+        /// peaks, coherence
+        "figures": Files,
+        /// the study report for a browser: summary, per unit its frequencies, toppling events, simulations, fragility,
+        /// rolling results and figures, the diagnosis, provenance (figures linked relatively: open it where `run` wrote
+        /// it)
+        "index.html": Page,
+    }
+    examples {
+        /// the study report of a rocking simulation: the unit's runs, what the report lacked, the records loaded
+        super::RINALDI => "\
 baseline:
   type: baseline
   inputs: [load]
@@ -74,7 +70,7 @@ report:
   params:
     title: Rinaldi on PS2
 ",
-    }],
+    }
 }
 
 /// What the report does with each kind of output.
@@ -319,17 +315,11 @@ fn study_page(
         }
     }
     for (motion, table) in events {
-        let toppled = match table.column("toppled").map(|c| &c.data) {
-            Some(ColumnData::Bool(v)) => v,
-            _ => anyhow::bail!("the events table has no `toppled` column"),
-        };
-        let confidence = table.f64_column("confidence").ok_or_else(|| anyhow::anyhow!("no `confidence` column"))?;
-        let times = optionals(table, "impact_time_s")?;
-        for (i, channel) in strings(table, "channel")?.iter().enumerate() {
+        for (channel, toppled, time, confidence) in toppling_rows(table)? {
             let unit = unit_entry(&mut page.units, &unit_name(channel), page.tests.len());
             unit.detected = true;
-            if toppled[i] {
-                unit.topplings.push((motion.clone(), times[i].unwrap_or(f64::NAN), confidence[i]));
+            if toppled {
+                unit.topplings.push((motion.clone(), time, confidence));
             }
         }
     }
@@ -625,15 +615,9 @@ fn summarize_rolling(rolling: &[RollingRun]) -> anyhow::Result<Table> {
         flips.push(kinds.iter().filter(|k| *k == "flip").count() as i64);
         breakaways.push(kinds.iter().position(|k| k == "breakaway").map(|i| time[i]));
     }
-    let text = |name: &str, description: &str, v: Vec<String>| Column {
-        name: name.into(),
-        unit: String::new(),
-        description: description.into(),
-        data: ColumnData::Str(v),
-    };
     let mut table = Table::new();
-    table.push(text("unit", "rolling unit (simulate_rolling)", units));
-    table.push(text("motion", "test motion", motions));
+    table.push(super::text_column("unit", "rolling unit (simulate_rolling)", units));
+    table.push(super::text_column("motion", "test motion", motions));
     table.push(Column::f64(
         "peak_displacement_m",
         "m",
@@ -684,6 +668,21 @@ fn optionals<'a>(table: &'a Table, name: &str) -> anyhow::Result<&'a [Option<f64
     }
 }
 
+/// The rows of a toppling `events` table (`Shown::Toppling`): channel, toppled, impact time
+/// (NaN without one) and confidence.
+fn toppling_rows(table: &Table) -> anyhow::Result<Vec<(&String, bool, f64, f64)>> {
+    let toppled = match table.column("toppled").map(|c| &c.data) {
+        Some(ColumnData::Bool(v)) => v,
+        _ => anyhow::bail!("the events table has no `toppled` column"),
+    };
+    let confidence = table.f64_column("confidence").ok_or_else(|| anyhow::anyhow!("no `confidence` column"))?;
+    let times = optionals(table, "impact_time_s")?;
+    let rows = strings(table, "channel")?.iter().zip(toppled).zip(times).zip(confidence);
+    Ok(rows
+        .map(|(((channel, &toppled), time), &confidence)| (channel, toppled, time.unwrap_or(f64::NAN), confidence))
+        .collect())
+}
+
 fn summarize(
     identified: Vec<(String, Arc<Table>)>,
     events: Vec<(String, Arc<Table>)>,
@@ -704,19 +703,12 @@ fn summarize(
     }
     let mut topplings: BTreeMap<String, Vec<(String, f64, f64)>> = BTreeMap::new();
     for (motion, table) in &events {
-        let toppled = match table.column("toppled").map(|c| &c.data) {
-            Some(ColumnData::Bool(v)) => v,
-            _ => anyhow::bail!("the events table has no `toppled` column"),
-        };
-        let confidence = table.f64_column("confidence").ok_or_else(|| anyhow::anyhow!("no `confidence` column"))?;
-        let times = optionals(table, "impact_time_s")?;
-        for (i, channel) in strings(table, "channel")?.iter().enumerate() {
+        for (channel, toppled, time, confidence) in toppling_rows(table)? {
             if !order.contains(channel) {
                 order.push(channel.clone());
             }
-            if toppled[i] {
-                let time = times[i].unwrap_or(f64::NAN);
-                topplings.entry(channel.clone()).or_default().push((motion.clone(), time, confidence[i]));
+            if toppled {
+                topplings.entry(channel.clone()).or_default().push((motion.clone(), time, confidence));
             }
         }
     }
@@ -727,14 +719,8 @@ fn summarize(
             None => rows.push((channel.clone(), None)),
         }
     }
-    let text = |name: &str, description: &str, v: Vec<String>| Column {
-        name: name.into(),
-        unit: String::new(),
-        description: description.into(),
-        data: ColumnData::Str(v),
-    };
     let mut table = Table::new();
-    table.push(text(
+    table.push(super::text_column(
         "unit",
         "equipment unit",
         rows.iter().map(|(c, _)| c.strip_suffix(suffix).unwrap_or(c).to_string()).collect(),

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use serde_json::{json, Map, Value};
 
 use super::error::StageError;
-use super::{Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{Declared, Stage, StageContext};
 use crate::physics::rolling::{
     self, simulate, Cart, EventKind, Excitation, Friction, FrictionLaw, LateralSlip, Method, Options, Response,
     Stribeck,
@@ -16,8 +16,6 @@ use crate::physics::rolling::{
 use crate::pipeline::params::{self, ParamError, ParamKind, Params};
 use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
-
-pub struct SimulateRolling;
 
 crate::stage_params! {
     /// The model keys, typed: what a preset, an equipment file or the stage's own values give, None
@@ -145,24 +143,23 @@ crate::choice! {
 }
 
 super::declare_stage! {
-    SimulateRolling,
-    info: StageInfo {
-        name: "simulate_rolling",
-        version: 3,
-        summary: "Rolling, turning and pivot steering of equipment on four swivel casters under the two horizontal floor components (the study's 4WMC, made well posed).",
-        inputs: InputKind::Datasets,
-        outputs: &[
-            OutputInfo { name: "trajectory", description: "on the input time base: time_s, x_m, y_m, yaw_rad, delta1_rad…delta4_rad, velocities, roll1_mps…roll4_mps, swivel rates, the platform's absolute acceleration ax_abs_mps2/ay_abs_mps2, the floor input", kind: OutputKind::TimeSeries },
-            OutputInfo { name: "events", description: "breakaway, rest and caster flip times, the peak displacement and the peak yaw: time_s, event, caster, displacement_m, yaw_rad, delta_rad", kind: OutputKind::Table },
-            OutputInfo { name: "figures", description: "<partition>.png: floor inputs, x/y displacement, yaw with the four caster angles, and the x–y orbit (the study's Figure 11)", kind: OutputKind::Files },
-        ],
-        params: SimulateRollingParams::specs(),
-    },
-    shown: [("events", super::Shown::Rolling)],
-    examples: [super::Example {
-        title: "the study's patient bed PB2 on four swivel casters under both horizontal components",
-        data: &super::RINALDI,
-        stages: "\
+    /// Rolling, turning and pivot steering of equipment on four swivel casters under the two horizontal floor
+    /// components (the study's 4WMC, made well posed).
+    pub struct SimulateRolling: "simulate_rolling", version 3, reads Datasets, params SimulateRollingParams;
+    outputs {
+        /// on the input time base: time_s, x_m, y_m, yaw_rad, delta1_rad…delta4_rad, velocities, roll1_mps…roll4_mps,
+        /// swivel rates, the platform's absolute acceleration ax_abs_mps2/ay_abs_mps2, the floor input
+        "trajectory": TimeSeries,
+        /// breakaway, rest and caster flip times, the peak displacement and the peak yaw: time_s, event, caster,
+        /// displacement_m, yaw_rad, delta_rad
+        "events": Table => Rolling,
+        /// <partition>.png: floor inputs, x/y displacement, yaw with the four caster angles, and the x–y orbit (the
+        /// study's Figure 11)
+        "figures": Files,
+    }
+    examples {
+        /// the study's patient bed PB2 on four swivel casters under both horizontal components
+        super::RINALDI => "\
 simulate_rolling:
   type: simulate_rolling
   inputs: [load]
@@ -171,7 +168,7 @@ simulate_rolling:
     x_channel: ax_mps2
     y_channel: ay_mps2
 ",
-    }],
+    }
 }
 
 impl Stage for SimulateRolling {
@@ -774,6 +771,26 @@ mod tests {
         assert!(err.message.contains("lateral_slip"), "{err:?}");
         assert!(
             Setup::resolve(&params(json!({"preset": "UI3", "trail_m": 0.0, "lateral_slip": true})), dir.path()).is_ok()
+        );
+    }
+
+    /// The one line after `run`: the peak displacement and its record, breakaways and flips.
+    #[test]
+    fn the_summary_line_names_the_peak_and_counts_breakaways_and_flips() {
+        use crate::stages::test_tables::{part, text};
+        let dir = crate::tempdir::tempdir().unwrap();
+        let events =
+            |kinds: &[&str], d: &[f64]| vec![text("event", kinds), Column::f64("displacement_m", "m", "d", d.to_vec())];
+        part(
+            dir.path(),
+            "events",
+            "motion=FB-1",
+            events(&["breakaway", "flip", "peak_displacement"], &[0.0, 0.1, 0.25]),
+        );
+        part(dir.path(), "events", "motion=FB-2", events(&["peak_displacement"], &[0.0]));
+        assert_eq!(
+            SimulateRolling.summary(dir.path()).unwrap(),
+            "2 records: peak displacement 0.250 m (FB-1), started rolling in 1, 1 caster flips"
         );
     }
 }

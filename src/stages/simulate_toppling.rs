@@ -7,15 +7,13 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
-use super::{Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{Stage, StageContext};
 use crate::error::UserError;
 use crate::io::equipment::{self, RockingGeometry, ShapeChoice};
 use crate::physics::rocking::{self, Anchorage, Block, Excitation, IsolatedBase, Method, Options, Response, Shape};
 use crate::pipeline::params::{self, ParamError, ParamKind, Params};
 use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
-
-pub struct SimulateToppling;
 
 crate::stage_params! {
     /// The parameters that describe the unit and the model, shared with `toppling_fragility`
@@ -79,24 +77,22 @@ crate::stage_params! {
 }
 
 super::declare_stage! {
-    SimulateToppling,
-    info: StageInfo {
-        name: "simulate_toppling",
-        version: 3,
-        summary: "The study's 2D rigid-block toppling model on floor records: rest, uplift (Eq. 20/21), rocking (Eq. 22), impacts (Eq. 24), overturning; adaptive integration with located events.",
-        inputs: InputKind::Datasets,
-        outputs: &[
-            OutputInfo { name: "response", description: "per record: time_s, theta_rad, theta_dot_radps, top_ax_mps2 (what a top accelerometer records), on the input time base", kind: OutputKind::TimeSeries },
-            OutputInfo { name: "events", description: "per record: uplifts, impacts, returns to rest, anchor yield/fracture, overturn; the last row (event = summary) and every row carry overturned, overturn_time_s, overturn_side", kind: OutputKind::Table },
-            OutputInfo { name: "figures", description: "<record>.png: floor and top acceleration, theta with the events marked", kind: OutputKind::Files },
-        ],
-        params: SimulateTopplingParams::specs(),
-    },
-    shown: [("events", super::Shown::Rocking)],
-    examples: [super::Example {
-        title: "the study's PS2 unit on the baseline-corrected record, both horizontal and vertical shaking",
-        data: &super::RINALDI,
-        stages: "\
+    /// The study's 2D rigid-block toppling model on floor records: rest, uplift (Eq. 20/21), rocking (Eq. 22), impacts
+    /// (Eq. 24), overturning; adaptive integration with located events.
+    pub struct SimulateToppling: "simulate_toppling", version 3, reads Datasets, params SimulateTopplingParams;
+    outputs {
+        /// per record: time_s, theta_rad, theta_dot_radps, top_ax_mps2 (what a top accelerometer records), on the input
+        /// time base
+        "response": TimeSeries,
+        /// per record: uplifts, impacts, returns to rest, anchor yield/fracture, overturn; the last row (event =
+        /// summary) and every row carry overturned, overturn_time_s, overturn_side
+        "events": Table => Rocking,
+        /// <record>.png: floor and top acceleration, theta with the events marked
+        "figures": Files,
+    }
+    examples {
+        /// the study's PS2 unit on the baseline-corrected record, both horizontal and vertical shaking
+        super::RINALDI => "\
 baseline:
   type: baseline
   inputs: [load]
@@ -108,7 +104,7 @@ simulate_toppling:
     horizontal: ax_mps2
     vertical: az_mps2
 ",
-    }],
+    }
 }
 
 impl Stage for SimulateToppling {
@@ -477,5 +473,16 @@ mod tests {
         let ColumnData::I64(side) = &events.column("side").unwrap().data else { panic!("side") };
         assert_eq!(side[0], -1);
         assert_eq!(kind.last().unwrap(), "summary");
+    }
+
+    /// The one line after `run` counts the `summary` rows only.
+    #[test]
+    fn the_summary_line_counts_the_summary_rows_only() {
+        use crate::stages::test_tables::{flag, part, text};
+        let dir = crate::tempdir::tempdir().unwrap();
+        let kinds = ["uplift", "impact", "overturn", "summary"];
+        part(dir.path(), "events", "record=A", vec![text("event", &kinds), flag("overturned", &[true; 4])]);
+        part(dir.path(), "events", "record=B", vec![text("event", &["summary"]), flag("overturned", &[false])]);
+        assert_eq!(SimulateToppling.summary(dir.path()).unwrap(), "overturned in 1 of 2 records (A)");
     }
 }

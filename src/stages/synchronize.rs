@@ -15,13 +15,11 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::{partition_path, Declared, InputKind, InputPart, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{partition_path, InputPart, Stage, StageContext};
 use crate::pipeline::params::{self, ParamError, Params};
 use crate::signal::resample_bandlimited::Resampler;
 use crate::signal::sync::estimate_lag;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
-
-pub struct Synchronize;
 
 crate::stage_params! {
     /// The parameters of `synchronize`.
@@ -46,24 +44,18 @@ crate::stage_params! {
 }
 
 super::declare_stage! {
-    Synchronize,
-    info: StageInfo {
-        name: "synchronize",
-        version: 4,
-        summary: "Align a second DAQ with the reference DAQ: band-limited resampling, FFT cross-correlation lag (sub-sample), shift onto the reference clock.",
-        inputs: InputKind::Datasets,
-        outputs: &[
-            OutputInfo { name: "records", description: "reference channels and aligned target channels on the reference time base", kind: OutputKind::TimeSeries },
-            OutputInfo { name: "lags", description: "estimated (or given) lag per target record: channel, lag_s, lag_uncertainty_s, correlation", kind: OutputKind::Table },
-        ],
-        params: SynchronizeParams::specs(),
-    },
-    shown: [("records", super::Shown::Records)],
-    examples: [super::Example {
-        title:
-            "a second DAQ (here the same record loaded again, so the lag found is 0) put on the reference's clock",
-        data: &super::RINALDI,
-        stages: "\
+    /// Align a second DAQ with the reference DAQ: band-limited resampling, FFT cross-correlation lag (sub-sample),
+    /// shift onto the reference clock.
+    pub struct Synchronize: "synchronize", version 4, reads Datasets, params SynchronizeParams;
+    outputs {
+        /// reference channels and aligned target channels on the reference time base
+        "records": TimeSeries => Records,
+        /// estimated (or given) lag per target record: channel, lag_s, lag_uncertainty_s, correlation
+        "lags": Table,
+    }
+    examples {
+        /// a second DAQ (here the same record loaded again, so the lag found is 0) put on the reference's clock
+        super::RINALDI => "\
 daq2:
   type: load
   inputs: [rinaldi]
@@ -74,7 +66,7 @@ synchronize:
     target_channel: ax_mps2
     join: station
 ",
-    }],
+    }
 }
 
 impl Stage for Synchronize {

@@ -9,13 +9,11 @@ use std::sync::Arc;
 use rayon::prelude::*;
 
 use super::simulate_toppling::{model_from_params, simulate_record, RockingParams};
-use super::{partition_values, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{partition_values, Stage, StageContext};
 use crate::pipeline::params::{self, Params};
 use crate::stats::fragility::{fit_lognormal, FitOutcome, LognormalFit};
 use crate::summary;
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
-
-pub struct TopplingFragility;
 
 crate::stage_params! {
     /// The parameters of `toppling_fragility`.
@@ -38,24 +36,22 @@ crate::choice! {
 }
 
 super::declare_stage! {
-    TopplingFragility,
-    info: StageInfo {
-        name: "toppling_fragility",
-        version: 3,
-        summary: "Overturning fragility of one unit: floor records scaled over intensities, all runs simulated in parallel, lognormal curve (median, beta) by maximum likelihood.",
-        inputs: InputKind::Datasets,
-        outputs: &[
-            OutputInfo { name: "runs", description: "every run: record, level, scale, im, overturned, overturn_time_s, overturn_side, max_abs_theta_rad, n_impacts", kind: OutputKind::Table },
-            OutputInfo { name: "fragility", description: "one row: im_measure, median, beta, log_likelihood, n_runs, n_overturned, note", kind: OutputKind::Table },
-            OutputInfo { name: "figures", description: "fragility.png: the fitted curve, every run at 0 (stood) or 1 (overturned) and the overturned fraction per level; pfa in g", kind: OutputKind::Files },
-        ],
-        params: TopplingFragilityParams::specs(),
-    },
-    shown: [("fragility", super::Shown::Fragility)],
-    examples: [super::Example {
-        title: "PS2's overturning fragility from the record scaled to three intensities",
-        data: &super::RINALDI,
-        stages: "\
+    /// Overturning fragility of one unit: floor records scaled over intensities, all runs simulated in parallel,
+    /// lognormal curve (median, beta) by maximum likelihood.
+    pub struct TopplingFragility: "toppling_fragility", version 3, reads Datasets, params TopplingFragilityParams;
+    outputs {
+        /// every run: record, level, scale, im, overturned, overturn_time_s, overturn_side, max_abs_theta_rad,
+        /// n_impacts
+        "runs": Table,
+        /// one row: im_measure, median, beta, log_likelihood, n_runs, n_overturned, note
+        "fragility": Table => Fragility,
+        /// fragility.png: the fitted curve, every run at 0 (stood) or 1 (overturned) and the overturned fraction per
+        /// level; pfa in g
+        "figures": Files,
+    }
+    examples {
+        /// PS2's overturning fragility from the record scaled to three intensities
+        super::RINALDI => "\
 toppling_fragility:
   type: toppling_fragility
   inputs: [load]
@@ -63,7 +59,7 @@ toppling_fragility:
     preset: PS2
     scales: [0.5, 1.0, 2.0]
 ",
-    }],
+    }
 }
 
 impl Stage for TopplingFragility {

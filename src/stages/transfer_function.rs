@@ -5,12 +5,10 @@
 use super::error::{float_column, StageError};
 use rayon::prelude::*;
 
-use super::{split_pair, Declared, InputKind, OutputInfo, OutputKind, Stage, StageContext, StageInfo};
+use super::{split_pair, Stage, StageContext};
 use crate::pipeline::params;
 use crate::signal::welch::{identify_peak, transfer_function, Detrend, WelchOptions, Window};
 use crate::table::{Column, ColumnData, Table, TIME_COLUMN};
-
-pub struct TransferFunction;
 
 crate::stage_params! {
     /// The parameters of `transfer_function`.
@@ -46,24 +44,19 @@ crate::choice! {
 }
 
 super::declare_stage! {
-    TransferFunction,
-    info: StageInfo {
-        name: "transfer_function",
-        version: 2,
-        summary: "Welch transfer functions H1, H2 and coherence (MATLAB tfestimate defaults) and the identified fundamental frequency with half-power damping.",
-        inputs: InputKind::Datasets,
-        outputs: &[
-            OutputInfo { name: "identified", description: "per pair: frequency_hz, damping_ratio, peak_gain, coherence, low_coherence, note", kind: OutputKind::Table },
-            OutputInfo { name: "spectra", description: "per pair and frequency: |H1|, phase, |H2|, coherence", kind: OutputKind::Table },
-        ],
-        params: TransferFunctionParams::specs(),
-    },
-    shown: [("identified", super::Shown::Frequencies), ("spectra", super::Shown::Spectra)],
-    examples: [super::Example {
-        title: "a fixed-base frame's fundamental frequency (1.0 Hz) from its ground record and its 4th floor's \
-                response; the floor record starts 1.31 s into the ground record",
-        data: &GROUND_AND_FLOOR,
-        stages: "\
+    /// Welch transfer functions H1, H2 and coherence (MATLAB tfestimate defaults) and the identified fundamental
+    /// frequency with half-power damping.
+    pub struct TransferFunction: "transfer_function", version 2, reads Datasets, params TransferFunctionParams;
+    outputs {
+        /// per pair: frequency_hz, damping_ratio, peak_gain, coherence, low_coherence, note
+        "identified": Table => Frequencies,
+        /// per pair and frequency: |H1|, phase, |H2|, coherence
+        "spectra": Table => Spectra,
+    }
+    examples {
+        /// a fixed-base frame's fundamental frequency (1.0 Hz) from its ground record and its 4th floor's response; the
+        /// floor record starts 1.31 s into the ground record
+        GROUND_AND_FLOOR => "\
 synchronize:
   type: synchronize
   inputs: [load_floor, load_ground]
@@ -80,7 +73,7 @@ transfer_function:
     band_max_hz: 3.0
     segment_s: 8.0
 ",
-    }],
+    }
 }
 
 /// The shared case demo_03: a 4th floor's record and the ground record it was made from.
@@ -226,12 +219,6 @@ fn analyse(
             }
         }
     }
-    let text = |name: &str, description: &str, v: Vec<String>| Column {
-        name: name.into(),
-        unit: String::new(),
-        description: description.into(),
-        data: ColumnData::Str(v),
-    };
     let opt = |name: &str, unit: &str, description: &str, v: Vec<Option<f64>>| Column {
         name: name.into(),
         unit: unit.into(),
@@ -239,8 +226,8 @@ fn analyse(
         data: ColumnData::OptF64(v),
     };
     let mut identified = Table::new();
-    identified.push(text("output", "output (response) channel", outputs));
-    identified.push(text("input", "input (excitation) channel", inputs));
+    identified.push(super::text_column("output", "output (response) channel", outputs));
+    identified.push(super::text_column("input", "input (excitation) channel", inputs));
     identified.push(opt(
         "frequency_hz",
         "Hz",
@@ -256,9 +243,9 @@ fn analyse(
         description: "coherence at the peak below the threshold".into(),
         data: ColumnData::Bool(low),
     });
-    identified.push(text("note", "confidence note for a test engineer", notes));
+    identified.push(super::text_column("note", "confidence note for a test engineer", notes));
     let mut spectra = Table::new();
-    spectra.push(text("output", "output (response) channel", s_out));
+    spectra.push(super::text_column("output", "output (response) channel", s_out));
     spectra.push(Column::f64("frequency_hz", "Hz", "frequency", s_freq));
     spectra.push(Column::f64("h1_gain", "", "|H1| = |Pxy/Pxx|", s_h1));
     spectra.push(Column::f64("h1_phase_rad", "rad", "phase of H1", s_phase));

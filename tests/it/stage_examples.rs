@@ -49,7 +49,8 @@ fn first(table: &shakeflow::table::Table, name: &str) -> Option<f64> {
 
 /// What the examples that show a finding found: detect_toppling's four overturned rocking units
 /// (at the shared truth files' `overturn_time_s`: 18.00, 5.87, 5.744, 7.155 s) and no cart;
-/// transfer_function's 1.0 Hz frame (truth `fundamental_period_s: 1.0`).
+/// transfer_function's 1.0 Hz frame (truth `fundamental_period_s: 1.0`); diagnose's verdict on
+/// demo_02 (truth `expected_verdict: mass_change`).
 fn check_finding(stage: &str, out: &Path) {
     match stage {
         "detect_toppling" => {
@@ -68,6 +69,14 @@ fn check_finding(stage: &str, out: &Path) {
                 f.is_some_and(|f| (f - 1.0).abs() < 0.05) && coherence.is_some_and(|c| c > 0.8),
                 "{f:?} Hz, coherence {coherence:?}"
             );
+        }
+        "diagnose" => {
+            let diagnosis = &tables(out, stage, "diagnosis")[0];
+            let verdict = match &diagnosis.column("verdict").expect("a `verdict` column").data {
+                ColumnData::Str(v) => v[0].clone(),
+                other => panic!("`verdict` is {other:?}"),
+            };
+            assert_eq!(verdict, "mass_change");
         }
         _ => {}
     }
@@ -119,9 +128,8 @@ fn every_stage_example_runs() {
             );
         }
     }
-    // The stages whose examples this file was written with; more may come, none may go silently.
-    // Only `diagnose` has none yet.
-    for stage in stage_types().iter().map(|s| s.info().name).filter(|&n| n != "diagnose") {
+    // Every stage type has an example.
+    for stage in stage_types().iter().map(|s| s.info().name) {
         assert!(ran.contains(&stage), "`{stage}` has no example");
     }
 }
