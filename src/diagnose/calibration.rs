@@ -31,6 +31,9 @@ const MAX_ITERATIONS: u64 = 80;
 const STARTS: usize = 3;
 /// Fresh simplices per horizon at most.
 const RESTARTS: usize = 3;
+/// Starts whose optima after a horizon lie within this many sd of each other (every parameter)
+/// go on as one.
+const MERGE_SD: f64 = 0.1;
 
 /// One standard deviation of a stated value's error, as the `uncertainty` block gives it:
 /// exactly one of `sd` (absolute, in the key's unit) and `rel_sd` (relative to the stated value).
@@ -312,10 +315,11 @@ pub fn calibrate(
             starts.push(initial);
         }
     }
-    let optima: Vec<Vec<f64>> = starts
-        .into_par_iter()
-        .map(|mut z| {
-            for &until in horizons {
+    let mut optima = starts;
+    for &until in horizons {
+        optima = optima
+            .into_par_iter()
+            .map(|mut z| {
                 // Restarted with a fresh simplex while it keeps improving: a shrunken one stalls
                 // in a curved valley (a block's height and centre of mass trade off).
                 let mut cost = posterior(&z, until);
@@ -327,10 +331,13 @@ pub fn calibrate(
                     }
                     (z, cost) = (found, found_cost);
                 }
-            }
-            z
-        })
-        .collect();
+                z
+            })
+            .collect();
+        // Starts that met in one optimum go on as one: the longer horizons cost the most.
+        let costs: Vec<f64> = optima.iter().map(|z| posterior(z, until)).collect();
+        optima = distinct(optima, &costs);
+    }
     let last = *horizons.last().unwrap_or(&f64::INFINITY);
     let best = optima
         .into_iter()
@@ -373,6 +380,21 @@ pub fn calibrate_model<M: UnitModel>(
     }
     all.evaluations = found.evaluations;
     all
+}
+
+/// The points (in sd) farther than [`MERGE_SD`] from every point of lower cost (the earlier on a
+/// tie), cheapest first: of starts that met in one optimum the best goes on alone.
+fn distinct(points: Vec<Vec<f64>>, costs: &[f64]) -> Vec<Vec<f64>> {
+    let mut order: Vec<usize> = (0..points.len()).collect();
+    order.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]).then(a.cmp(&b)));
+    let mut kept: Vec<Vec<f64>> = Vec::new();
+    for i in order {
+        let near = |k: &Vec<f64>| k.iter().zip(&points[i]).all(|(a, b)| (a - b).abs() <= MERGE_SD);
+        if !kept.iter().any(near) {
+            kept.push(points[i].clone());
+        }
+    }
+    kept
 }
 
 /// Starting points over ±2 sd around `centre`: a full grid while it stays small, else each axis
@@ -525,6 +547,16 @@ mod tests {
         let Entry::List { ref fitted, ref within, .. } = entries[1].1 else { panic!("offsets is a list") };
         assert_eq!((fitted.len(), within.as_slice()), (2, &[true, true][..]));
         assert!(c.beyond().is_empty());
+    }
+
+    /// Optima within 0.1 sd of a cheaper one (every parameter) are dropped, cheapest first;
+    /// one 0.1 sd off on one axis but 0.2 on another stays, and so does a far one.
+    #[test]
+    fn starts_that_met_in_one_optimum_go_on_as_one() {
+        let points = vec![vec![0.0, 0.0], vec![0.05, -0.1], vec![2.0, 1.0], vec![0.1, 0.2], vec![2.0, 1.0]];
+        let costs = [5.0, 4.0, 1.0, 3.0, 1.0];
+        let kept = distinct(points, &costs);
+        assert_eq!(kept, [vec![2.0, 1.0], vec![0.1, 0.2], vec![0.05, -0.1]]);
     }
 
     #[test]

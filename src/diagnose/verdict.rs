@@ -240,14 +240,28 @@ pub struct Diagnosis<M: Model> {
     pub discrepancy: Discrepancy,
 }
 
+/// Where the recalibration with a physics starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum JointStarts {
+    /// From the nominal calibration's values.
+    Calibrated,
+    /// From those and, when the nominal calibration moved a value beyond
+    /// [`calibration::WITHIN_SD`], from the stated values too: such a move may be the physics
+    /// absorbed by the nominal model (a higher restitution read as a slimmer block), whose basin
+    /// the physics then cannot leave.
+    AlsoStatedWhenBeyond,
+}
+
 /// The uncertain parameters fitted again with a physics in place (its fitted parameters held
-/// inside `chi2` and `whole`), from the nominal calibration's values over growing `horizons`:
-/// the better of the two by posterior over the whole record, as (calibration, prediction,
+/// inside `chi2` and `whole`) over growing `horizons`, from the `starts`: the best of those fits
+/// and the nominal calibration by posterior over the whole record, as (calibration, prediction,
 /// misfit, model runs spent). `whole` runs the physics on a calibrated unit over the whole
 /// record (`whole_runs` model runs), `kept` is the physics on the nominal calibration.
+#[allow(clippy::too_many_arguments)]
 pub fn recalibrate<M: Model>(
     stated: &M,
     calibration: &Calibration,
+    starts: JointStarts,
     horizons: &[f64],
     chi2: &(dyn Fn(&M, f64) -> f64 + Sync),
     whole: impl Fn(&M) -> Option<(M::Prediction, Misfit)>,
@@ -257,17 +271,21 @@ pub fn recalibrate<M: Model>(
     if calibration.is_empty() {
         return (calibration.clone(), kept.0, kept.1, 0);
     }
-    let joint =
-        calibration::calibrate_model(stated, &calibration.parameters, Some(&calibration.fitted), horizons, false, chi2);
-    let Some((prediction, misfit)) = joint.apply(stated).ok().and_then(|unit| whole(&unit)) else {
-        return (calibration.clone(), kept.0, kept.1, 0);
-    };
-    let spent = joint.evaluations + whole_runs;
-    if misfit.chi2 + joint.prior_chi2() < kept.1.chi2 + calibration.prior_chi2() {
-        (joint, prediction, misfit, spent)
-    } else {
-        (calibration.clone(), kept.0, kept.1, spent)
+    let mut from: Vec<Option<&[f64]>> = vec![Some(&calibration.fitted)];
+    if starts == JointStarts::AlsoStatedWhenBeyond && !calibration.beyond().is_empty() {
+        from.push(None);
     }
+    let (mut best, mut spent) = ((calibration.clone(), kept.0, kept.1), 0);
+    for start in from {
+        let joint = calibration::calibrate_model(stated, &calibration.parameters, start, horizons, false, chi2);
+        spent += joint.evaluations;
+        let Some((prediction, misfit)) = joint.apply(stated).ok().and_then(|unit| whole(&unit)) else { continue };
+        spent += whole_runs;
+        if misfit.chi2 + joint.prior_chi2() < best.2.chi2 + best.0.prior_chi2() {
+            best = (joint, prediction, misfit);
+        }
+    }
+    (best.0, best.1, best.2, spent)
 }
 
 /// Samples closer than this (s) form one cluster of exceedances.
@@ -407,6 +425,65 @@ mod tests {
         // A physics that acts all along: judged where the disagreement begins.
         let (a, b) = signature_span(None, (4.0, 20.0));
         assert!((a - 3.95).abs() < 1e-12 && (b - 4.5).abs() < 1e-12);
+    }
+
+    /// A one-parameter unit (stated 0, sd 1: the value is its own z).
+    #[derive(Clone)]
+    struct Knob(f64);
+
+    impl UnitModel for Knob {
+        fn nominal_keys(&self) -> Vec<(&'static str, usize)> {
+            vec![("v", 1)]
+        }
+        fn parameter(&self, _key: &str, _index: usize) -> Option<f64> {
+            Some(self.0)
+        }
+        fn set_parameter(
+            &mut self,
+            _key: &str,
+            _index: usize,
+            value: f64,
+        ) -> Result<(), crate::diagnose::error::ParameterError> {
+            self.0 = value;
+            Ok(())
+        }
+        fn physical_range(&self, _key: &str) -> (f64, f64) {
+            (f64::NEG_INFINITY, f64::INFINITY)
+        }
+    }
+
+    impl Model for Knob {
+        type Prediction = f64;
+        type Evidence = ();
+        type CandidateExtra = ();
+    }
+
+    /// With the physics, the records want v near 1 (posterior mode 20/21); the nominal model
+    /// absorbed the physics by moving v to 4.6 sd, beside a shallow well of its own at 4.38
+    /// behind a ridge near 3.1. From there alone the joint fit stays in that well; started from
+    /// the stated value as well it finds the records' basin. A move within 3 sd starts once.
+    #[test]
+    fn a_calibration_moved_beyond_three_sd_is_also_recalibrated_from_the_stated_values() {
+        let chi2_of = |v: f64| (20.0 * (v - 1.0).powi(2)).min(50.0 + 20.0 * (v - 4.6).powi(2));
+        let chi2 = |m: &Knob, _until: f64| chi2_of(m.0);
+        let whole = |m: &Knob| Some((m.0, Misfit { chi2: chi2_of(m.0), samples: 1 }));
+        let spread = calibration::Spread { sd: Some(1.0), rel_sd: None };
+        let parameters = calibration::uncertain_parameters(&Knob(0.0), &[("v".to_string(), spread)]).unwrap();
+        let run = |fitted: f64, starts: JointStarts| {
+            let nominal = Calibration { parameters: parameters.clone(), fitted: vec![fitted], evaluations: 0 };
+            let kept = (fitted, Misfit { chi2: chi2_of(fitted), samples: 1 });
+            recalibrate(&Knob(0.0), &nominal, starts, &[f64::INFINITY], &chi2, whole, 1, kept)
+        };
+        let (only, _, _, once) = run(4.6, JointStarts::Calibrated);
+        assert!((only.fitted[0] - 4.38).abs() < 0.02, "{}", only.fitted[0]);
+        let (both, prediction, misfit, twice) = run(4.6, JointStarts::AlsoStatedWhenBeyond);
+        assert!((both.fitted[0] - 20.0 / 21.0).abs() < 1e-3, "{}", both.fitted[0]);
+        assert_eq!((prediction, misfit.chi2), (both.fitted[0], chi2_of(both.fitted[0])));
+        assert!(twice > once, "the second start is paid for: {twice} vs {once}");
+        // Moved 2.9 sd: within the stated uncertainty, one start, the same answer either way.
+        let (a, _, _, ra) = run(2.9, JointStarts::Calibrated);
+        let (b, _, _, rb) = run(2.9, JointStarts::AlsoStatedWhenBeyond);
+        assert_eq!((a.fitted, ra), (b.fitted, rb));
     }
 
     #[test]

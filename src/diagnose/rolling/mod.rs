@@ -515,7 +515,8 @@ fn recalibrate(
         let misfit = evidence.misfit(&track);
         Some((track, misfit))
     };
-    verdict::recalibrate(stated, calibration, &horizons, &chi2, whole, 1, (fit.track.clone(), fit.misfit))
+    let starts = verdict::JointStarts::Calibrated;
+    verdict::recalibrate(stated, calibration, starts, &horizons, &chi2, whole, 1, (fit.track.clone(), fit.misfit))
 }
 
 pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiagnosis, DiagnoseError> {
