@@ -569,7 +569,8 @@ fn describe_stages(only: Option<&str>) -> anyhow::Result<String> {
 /// The worker pool of a command that runs work: `jobs` threads (default: `RAYON_NUM_THREADS`, else
 /// one per core), this thread one of them. It runs work while it waits for the pool instead of
 /// sleeping beside it, and a one-unit call starts one thread fewer (with its stack and malloc
-/// arena: ≈ 0.3 ms of a 5 ms `stage` call, docs/benchmarks.md "Per call").
+/// arena) and has no idle worker spinning: 8.2 → 6.4 ms CPU a 2-sample `stage` call on a quiet
+/// machine (docs/benchmarks.md "Per call").
 fn start_workers(jobs: Option<usize>) -> anyhow::Result<()> {
     rayon::ThreadPoolBuilder::new()
         .num_threads(jobs.map_or(0, |jobs| jobs.max(1)))

@@ -477,12 +477,7 @@ pub(crate) mod test_tables {
     }
 
     pub fn text(name: &str, v: &[&str]) -> Column {
-        Column {
-            name: name.into(),
-            unit: String::new(),
-            description: "d".into(),
-            data: ColumnData::Str(v.iter().map(|s| s.to_string()).collect()),
-        }
+        super::text_column(name, "d", v.iter().map(|s| s.to_string()).collect())
     }
 
     pub fn flag(name: &str, v: &[bool]) -> Column {
