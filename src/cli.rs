@@ -11,9 +11,9 @@ use crate::pipeline::executor::{self, Outcome, RunOptions};
 use crate::pipeline::params;
 use crate::pipeline::plan::Plan;
 use crate::pipeline::progress::Reporter;
-use crate::pipeline::sources;
-use crate::pipeline::spec::{OnError, PipelineFile, RecordFormat, SourceSpec};
-use crate::stages::{self, InputKind, InputPart};
+use crate::pipeline::spec::{PipelineFile, RecordFormat, SourceSpec};
+use crate::stages::{self, InputKind};
+use crate::validate::Refusal;
 
 #[derive(Parser)]
 #[command(
@@ -379,93 +379,23 @@ pub fn main() -> anyhow::Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         Command::Validate { pipeline, skip_inputs } => {
-            // Every error is reported, not only the first.
-            let refused = |errors: Vec<crate::error::UserError>| {
-                for e in &errors {
-                    eprintln!("error: {e}");
+            let file = PipelineFile::read(&pipeline)?;
+            let say = &mut |line: String| println!("{line}");
+            match crate::validate::validate(file, stages::registry(), skip_inputs, say) {
+                Ok(plan) => {
+                    let (sources, stages) = (plan.file.spec.inputs.len(), plan.stages.len());
+                    println!("{}: valid ({sources} source(s), {stages} stage(s))", pipeline.display());
+                    Ok(ExitCode::SUCCESS)
                 }
-                anyhow::anyhow!("{}: {} error(s)", pipeline.display(), errors.len())
-            };
-            let plan = Plan::checked(PipelineFile::read(&pipeline)?, stages::registry()).map_err(refused)?;
-            let mut input_files: Vec<PathBuf> = plan.stages.values().flat_map(|s| s.files.values().cloned()).collect();
-            let mut errors = Vec::new();
-            if !skip_inputs {
-                let mut columns = BTreeMap::new();
-                for (name, source) in &plan.file.spec.inputs {
-                    // The files as the run finds them (a `components:` record's files share a partition).
-                    let files = match executor::source_files(&plan, name, source) {
-                        Ok(files) => files,
-                        Err(e) => {
-                            errors.push(e);
-                            continue;
-                        }
-                    };
-                    println!("source {name:<16} {} file(s)", files.len());
-                    input_files.extend(files.iter().map(|f| f.path.clone()));
-                    // Under `on_error: skip` a bad record is noted (the run lists it and goes on);
-                    // the source itself is wrong when none of its first records loads.
-                    let skip = source.on_error == OnError::Skip;
-                    let records = records_of(source, &files);
-                    let mut problems = Vec::new();
-                    if let Some(components) = &source.components {
-                        for problem in incomplete_records(name, components, &records) {
-                            problems.push(
-                                plan.file
-                                    .error_at(&["inputs", name, "components"], problem)
-                                    .hint("add the missing file, or set `on_error: skip` to run the others and list it in the status table"),
-                            );
-                        }
+                // Every error is reported, not only the first.
+                Err(Refusal::Invalid(errors)) => {
+                    for e in &errors {
+                        eprintln!("error: {e}");
                     }
-                    let mut tried = Vec::new();
-                    let mut loaded = false;
-                    for record in records.iter().take(if skip { 5 } else { 1 }) {
-                        match check_record(&plan, name, source, record) {
-                            Ok(names) => {
-                                columns.extend(names.map(|names| (name.clone(), names)));
-                                loaded = true;
-                                break;
-                            }
-                            Err(e) => tried.push(e),
-                        }
-                    }
-                    if source.format.is_record() {
-                        problems.extend(
-                            files.iter().skip(1).filter_map(|f| check_record_header(name, source, &f.path).err()),
-                        );
-                    }
-                    match skip {
-                        true => {
-                            let (notes, refused) = if loaded { (tried, Vec::new()) } else { (Vec::new(), tried) };
-                            for mut note in problems.into_iter().chain(notes) {
-                                note.hint = None;
-                                println!("note: {note}; `run` will skip that record (on_error: skip)");
-                            }
-                            errors.extend(refused);
-                        }
-                        false => errors.extend(problems.into_iter().chain(tried)),
-                    }
+                    bail!("{}: {} error(s)", pipeline.display(), errors.len())
                 }
-                errors.extend(plan.column_errors(&columns));
+                Err(Refusal::Refused(e)) => Err(e.into()),
             }
-            if !errors.is_empty() {
-                return Err(refused(errors));
-            }
-            crate::pipeline::ownership::check_output_dir(&plan.file, &input_files)?;
-            let output_dir = plan.file.output_dir();
-            let lock = crate::pipeline::lock::LockFile::read(&output_dir.join(crate::pipeline::layout::LOCK_FILE))?;
-            crate::pipeline::ownership::check_pipeline(&plan.file, &lock)?;
-            crate::pipeline::ownership::check_stage_folders(&plan, &lock)?;
-            for stage in plan.stages.values() {
-                let inputs: Vec<String> = stage.inputs.iter().map(|i| i.label()).collect();
-                println!("stage  {:<16} {:<10} ← {}", stage.name, stage.stage.info().name, inputs.join(", "));
-            }
-            println!(
-                "{}: valid ({} source(s), {} stage(s))",
-                pipeline.display(),
-                plan.file.spec.inputs.len(),
-                plan.stages.len()
-            );
-            Ok(ExitCode::SUCCESS)
         }
         Command::Stage { name, inputs, output, set } => {
             start_workers(None)?;
@@ -564,8 +494,6 @@ fn describe_stages(only: Option<&str>) -> anyhow::Result<String> {
     Ok(out)
 }
 
-/// `shakeflow stage`: one stage on files, run by the executor every pipeline runs on, as a
-/// pipeline made in memory: a source per input, the stage, `output` as its output folder.
 /// The worker pool of a command that runs work: `jobs` threads (default: `RAYON_NUM_THREADS`, else
 /// one per core), this thread one of them. It runs work while it waits for the pool instead of
 /// sleeping beside it, and a one-unit call starts one thread fewer (with its stack and malloc
@@ -579,6 +507,8 @@ fn start_workers(jobs: Option<usize>) -> anyhow::Result<()> {
         .context("starting the worker threads (--jobs)")
 }
 
+/// `shakeflow stage`: one stage on files, run by the executor every pipeline runs on, as a
+/// pipeline made in memory: a source per input, the stage, `output` as its output folder.
 fn run_single_stage(name: &str, inputs: &[PathBuf], output: &Path, set: &[String]) -> anyhow::Result<ExitCode> {
     let stage = stages::registry().find(name).ok_or_else(|| {
         crate::error::UserError::new(format!("unknown stage type `{name}`"))
@@ -663,10 +593,7 @@ fn command_spec(
 fn run_command_plan(plan: &Plan, output: &Path) -> anyhow::Result<(ExitCode, bool)> {
     // The run checks the folder again under its lease; a refusal now leaves it untouched.
     let files: Vec<PathBuf> = plan.stages.values().flat_map(|s| s.files.values().cloned()).collect();
-    crate::pipeline::ownership::check_output_dir(&plan.file, &files)?;
-    let lock = crate::pipeline::lock::LockFile::read(&executor::lock_path(plan))?;
-    crate::pipeline::ownership::check_pipeline(&plan.file, &lock)?;
-    crate::pipeline::ownership::check_stage_folders(plan, &lock)?;
+    crate::validate::ownership(plan, &files)?;
     let created = !output.exists();
     let reporter = Reporter::new(false);
     let options = RunOptions { all_or_nothing: true, ..RunOptions::default() };
@@ -692,133 +619,6 @@ fn run_command_plan(plan: &Plan, output: &Path) -> anyhow::Result<(ExitCode, boo
         eprintln!("{}: {} unit(s), {ran} → {}", report.name, report.units, output.display());
     }
     Ok((exit_status(&summary), true))
-}
-
-/// `validate`'s look at a record file past a source's first: its header (`records::check_header`),
-/// and for delimited text the columns the source names (`time_column`, `columns:`).
-fn check_record_header(name: &str, source: &SourceSpec, path: &Path) -> Result<(), crate::error::UserError> {
-    let in_source = |e: crate::io::records::ParseError| {
-        let mut e = crate::error::UserError {
-            file: Some(e.path),
-            line: e.line,
-            column: e.column,
-            message: e.message,
-            hint: Some(e.hint),
-        };
-        e.message = format!("source `{name}`: {}", e.message);
-        e
-    };
-    let options = stages::load::delimited_options(source);
-    let Some(names) =
-        crate::io::records::check_header(path, &source.format.name(), options.as_ref()).map_err(in_source)?
-    else {
-        return Ok(());
-    };
-    let wanted = source.time_column.iter().map(String::as_str).chain(source.columns.values().map(|c| c.file_column()));
-    for column in wanted {
-        if !names.iter().any(|n| n == column) {
-            let suggestion = crate::error::did_you_mean_hint(column, names.iter().map(String::as_str));
-            return Err(crate::error::UserError::new(format!("source `{name}`: the file has no column `{column}`"))
-                .in_file(path)
-                .at(source.column_names.then_some((source.header_lines + 1, 1)))
-                .hint(format!("{suggestion}its columns are: {}", names.join(", "))));
-        }
-    }
-    Ok(())
-}
-
-/// `validate` reads a record of a source (its first; under `on_error: skip` the first that loads)
-/// as `load` would, so a misspelt column, a wrong `header_lines` or unit, components on two
-/// clocks show now rather than in the middle of a run; the columns `load` makes of it are
-/// returned (None: not a record source).
-fn check_record(
-    plan: &Plan,
-    name: &str,
-    source: &SourceSpec,
-    files: &[&sources::MatchedFile],
-) -> Result<Option<Vec<String>>, crate::error::UserError> {
-    if !source.format.is_record() {
-        return Ok(None);
-    }
-    let parts: Vec<InputPart> = files
-        .iter()
-        .map(|file| InputPart {
-            partition: file.partition.clone(),
-            path: file.path.clone(),
-            label: file_label(&file.path),
-            hash: String::new(),
-        })
-        .collect();
-    // A `components:` record is its files together, its clocks and axes checked as `load` does.
-    let loaded = match source.components {
-        Some(_) => stages::load::load_record_group(source, name, &plan.file.base_dir(), &parts),
-        None => stages::load::load_record(source, &parts[0]),
-    };
-    loaded.map(|table| Some(table.column_names().into_iter().map(String::from).collect())).map_err(|refused| {
-        let mut e = *refused.error;
-        let position = refused.column.as_deref().and_then(|column| {
-            let output = source.columns.iter().find(|(_, c)| c.file_column() == column).map(|(out, _)| out.as_str());
-            match output {
-                Some(out) => crate::pipeline::locate::key_position(&plan.file.text, &["inputs", name, "columns", out]),
-                None if source.time_column.as_deref() == Some(column) => {
-                    crate::pipeline::locate::key_position(&plan.file.text, &["inputs", name, "time_column"])
-                }
-                None => None,
-            }
-        });
-        e.message = format!("source `{name}`, read as `load` would: {}", e.message);
-        if let Some((line, column)) = position {
-            e.hint = Some(format!(
-                "{} (the column is named at {}:{line}:{column})",
-                e.hint.clone().unwrap_or_default(),
-                plan.file.path.display()
-            ));
-        }
-        e
-    })
-}
-
-/// A source's records in the order of their files: a `components:` record is the files that
-/// share its partition, any other record one file.
-fn records_of<'f>(source: &SourceSpec, files: &'f [sources::MatchedFile]) -> Vec<Vec<&'f sources::MatchedFile>> {
-    if source.components.is_none() {
-        return files.iter().map(|f| vec![f]).collect();
-    }
-    let mut records: indexmap::IndexMap<&crate::pipeline::layout::Partition, Vec<&sources::MatchedFile>> =
-        indexmap::IndexMap::new();
-    for file in files {
-        records.entry(&file.partition).or_default().push(file);
-    }
-    records.into_values().collect()
-}
-
-/// The records of a `components:` source with fewer files than the axes it `require`s, each said
-/// with its files: `run` would refuse them (a record's axes come from its files' headers, read
-/// by `run`; a count needs none).
-fn incomplete_records(
-    name: &str,
-    components: &crate::pipeline::spec::Components,
-    records: &[Vec<&sources::MatchedFile>],
-) -> Vec<String> {
-    let wanted = components.require.len();
-    records
-        .iter()
-        .filter(|files| files.len() < wanted)
-        .map(|files| {
-            let labels: Vec<String> = files.iter().map(|f| file_label(&f.path)).collect();
-            format!(
-                "source `{name}`: record `{}` has {} component file(s) ({}), fewer than the {wanted} axes `components: require` asks for",
-                stages::partition_path(&files[0].partition),
-                files.len(),
-                labels.join(", "),
-            )
-        })
-        .collect()
-}
-
-/// A run-independent name for a file: its file name.
-fn file_label(path: &Path) -> String {
-    path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
 }
 
 /// `shakeflow diagnose`: a `diagnose` stage over the case folders, run by the executor as

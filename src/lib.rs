@@ -25,4 +25,5 @@ pub mod table;
 #[cfg(test)]
 mod tempdir;
 pub mod units;
+pub mod validate;
 pub mod vision;
