@@ -478,7 +478,7 @@ fn describe_stages(only: Option<&str>) -> anyhow::Result<String> {
         writeln!(out, "{} (version {})\n  {}", info.name, info.version, info.summary)?;
         writeln!(out, "  reads: {}", stages::reference::reads(info))?;
         for o in info.outputs {
-            let kind = o.kind.describe();
+            let kind = stages::reference::written_as(info, o);
             writeln!(out, "  output `{}` ({kind}): {}", o.name, o.description)?;
         }
         if info.params.is_empty() {

@@ -5,7 +5,7 @@
 
 use std::fmt::Write as _;
 
-use super::{registry, stage_types, InputKind, StageInfo};
+use super::{registry, stage_types, InputKind, OutputInfo, OutputKind, StageInfo, MCAP_PARAM};
 
 /// What a stage type reads, as `shakeflow stages` and docs/stages.md say it.
 pub fn reads(info: &StageInfo) -> String {
@@ -16,6 +16,16 @@ pub fn reads(info: &StageInfo) -> String {
             "`{}` sources declared under `inputs:`",
             formats.iter().map(|f| f.name()).collect::<Vec<_>>().join("` or `")
         ),
+    }
+}
+
+/// How a stage's output is written, as `shakeflow stages` and docs/stages.md say it: a time
+/// series has MCAP twins only in a stage with the `mcap` parameter, which asks for them.
+pub fn written_as(info: &StageInfo, output: &OutputInfo) -> &'static str {
+    let twins = info.params.iter().any(|p| p.name == MCAP_PARAM.name);
+    match output.kind {
+        OutputKind::TimeSeries if !twins => OutputKind::Table.describe(),
+        kind => kind.describe(),
     }
 }
 
@@ -58,7 +68,7 @@ fn write_markdown(out: &mut String) -> std::fmt::Result {
         writeln!(out, "\n## {}\n\n{}\n\nReads {}. Version {}.\n", info.name, info.summary, reads(info), info.version)?;
         writeln!(out, "| output | written as | what it holds |\n|---|---|---|")?;
         for o in info.outputs {
-            writeln!(out, "| `{}` | {} | {} |", o.name, cell(o.kind.describe()), cell(o.description))?;
+            writeln!(out, "| `{}` | {} | {} |", o.name, cell(written_as(info, o)), cell(o.description))?;
         }
         for example in stage.examples() {
             writeln!(
@@ -114,5 +124,27 @@ mod tests {
         let text = markdown();
         assert!(text.contains("| `method` | adaptive\\|rk4 | `\"adaptive\"` |"), "{text}");
         assert!(text.contains("| `order` | integer | `3` |  | 0 to"), "{text}");
+    }
+
+    #[test]
+    fn a_time_series_has_mcap_twins_only_in_a_stage_with_the_mcap_parameter() {
+        const SERIES: OutputInfo = OutputInfo { name: "series", description: "", kind: OutputKind::TimeSeries };
+        const TABLE: OutputInfo = OutputInfo { name: "table", description: "", kind: OutputKind::Table };
+        let info = |params: &'static [crate::pipeline::params::ParamSpec]| StageInfo {
+            name: "toy",
+            version: 1,
+            summary: "",
+            inputs: InputKind::Datasets,
+            outputs: &[SERIES, TABLE],
+            params,
+        };
+        let without = info(&[]);
+        assert_eq!(written_as(&without, &SERIES), "Parquet");
+        assert_eq!(written_as(&without, &TABLE), "Parquet");
+        let with = info(&[MCAP_PARAM]);
+        assert_eq!(written_as(&with, &SERIES), "Parquet (+ MCAP with `mcap: true`)");
+        assert_eq!(written_as(&with, &TABLE), "Parquet");
+        // Every stage with a time series has the parameter, so the docs name the twins.
+        assert!(markdown().contains("| `records` | Parquet (+ MCAP with `mcap: true`) |"));
     }
 }
