@@ -385,3 +385,28 @@ fn submodules_form_no_cycle() {
     }
     assert!(cycles.is_empty(), "import cycles inside a module:\n{}", cycles.join("\n"));
 }
+
+/// The output folder's ownership checks run before anything is written: the engine makes them
+/// under its lease, and outside it only `validate::ownership` calls them (for `validate`,
+/// `shakeflow stage` and `shakeflow diagnose`), so no command keeps a copy that could drift.
+#[test]
+fn the_ownership_checks_have_one_call_site_outside_the_engine() {
+    let src = root().join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut callers = Vec::new();
+    for file in files {
+        let relative = file.strip_prefix(&src).unwrap().to_string_lossy().replace('\\', "/");
+        let Some(code) = production_code(&file) else { continue };
+        if relative.starts_with("pipeline/") {
+            continue;
+        }
+        for check in ["check_output_dir(", "check_pipeline(", "check_stage_folders("] {
+            if code.contains(check) {
+                callers.push(format!("{relative}: {check}"));
+            }
+        }
+    }
+    let one = ["validate.rs: check_output_dir(", "validate.rs: check_pipeline(", "validate.rs: check_stage_folders("];
+    assert_eq!(callers, one, "call `validate::ownership` instead of the checks themselves");
+}
