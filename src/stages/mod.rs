@@ -94,6 +94,16 @@ pub fn text_column(name: &str, description: &str, values: Vec<String>) -> crate:
     }
 }
 
+/// Float columns declared as rows `(name, unit, description, values)`, in the table's order: the
+/// simulation stages' time series read as a list of their columns.
+pub fn f64_columns<'a>(
+    rows: impl IntoIterator<Item = (&'a str, &'a str, &'a str, Vec<f64>)>,
+) -> Vec<crate::table::Column> {
+    rows.into_iter()
+        .map(|(name, unit, description, values)| crate::table::Column::f64(name, unit, description, values))
+        .collect()
+}
+
 /// Refuses a column parameter (`key`) naming `column` when the input's `columns` lack it.
 pub fn require_column(key: &str, column: &str, columns: &[String]) -> Result<(), ParamError> {
     if columns.iter().any(|c| c == column) {

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use serde_json::{json, Map, Value};
 
 use super::error::StageError;
-use super::{Declared, Stage, StageContext};
+use super::{f64_columns, Declared, Stage, StageContext};
 use crate::physics::rolling::{
     self, simulate, Cart, EventKind, Excitation, Friction, FrictionLaw, LateralSlip, Method, Options, Response,
     Stribeck,
@@ -412,62 +412,40 @@ impl Setup {
     }
 
     fn trajectory(&self, time: &[f64], ax: &[f64], ay: &[f64], r: &Response, x_name: &str, y_name: &str) -> Table {
-        let mut t = Table::new();
-        t.push(Column::f64(TIME_COLUMN, "s", "time (the input's time base)", time.to_vec()));
-        t.push(Column::f64("x_m", "m", "platform centre, floor X, from its start", r.x_m.clone()));
-        t.push(Column::f64("y_m", "m", "platform centre, floor Y, from its start", r.y_m.clone()));
-        t.push(Column::f64(
-            "yaw_rad",
-            "rad",
-            "platform yaw θ: its length axis from floor X (unwrapped)",
-            r.yaw_rad.clone(),
-        ));
-        for i in 0..4 {
-            t.push(Column::f64(
-                &format!("delta{}_rad", i + 1),
+        let columns = [
+            f64_columns([
+                (TIME_COLUMN, "s", "time (the input's time base)", time.to_vec()),
+                ("x_m", "m", "platform centre, floor X, from its start", r.x_m.clone()),
+                ("y_m", "m", "platform centre, floor Y, from its start", r.y_m.clone()),
+                ("yaw_rad", "rad", "platform yaw θ: its length axis from floor X (unwrapped)", r.yaw_rad.clone()),
+            ]),
+            casters(
+                "delta#_rad",
                 "rad",
-                &format!("caster {} steering angle δ from the length axis (unwrapped; 0 trails toward +x)", i + 1),
-                r.delta_rad[i].clone(),
-            ));
-        }
-        t.push(Column::f64(
-            "vx_mps",
-            "m/s",
-            "platform centre velocity, floor X, relative to the floor",
-            r.vx_mps.clone(),
-        ));
-        t.push(Column::f64(
-            "vy_mps",
-            "m/s",
-            "platform centre velocity, floor Y, relative to the floor",
-            r.vy_mps.clone(),
-        ));
-        t.push(Column::f64("yaw_rate_radps", "rad/s", "platform yaw rate", r.yaw_rate_radps.clone()));
-        for i in 0..4 {
-            t.push(Column::f64(
-                &format!("roll{}_mps", i + 1),
-                "m/s",
-                &format!("caster {} rolling speed: wheel centre along its heading", i + 1),
-                r.roll_speed_mps[i].clone(),
-            ));
-        }
-        for i in 0..4 {
-            t.push(Column::f64(
-                &format!("swivel{}_radps", i + 1),
-                "rad/s",
-                &format!("caster {} swivel rate dδ/dt", i + 1),
-                r.swivel_rate_radps[i].clone(),
-            ));
-        }
-        t.push(Column::f64("ax_abs_mps2", "m/s^2", "absolute acceleration of the platform centre along floor X (E-W): what a top accelerometer on the unit would record", r.ax_abs_mps2.clone()));
-        t.push(Column::f64(
-            "ay_abs_mps2",
-            "m/s^2",
-            "absolute acceleration of the platform centre along floor Y",
-            r.ay_abs_mps2.clone(),
-        ));
-        t.push(Column::f64("floor_ax_mps2", "m/s^2", &format!("floor acceleration X (input `{x_name}`)"), ax.to_vec()));
-        t.push(Column::f64("floor_ay_mps2", "m/s^2", &format!("floor acceleration Y (input `{y_name}`)"), ay.to_vec()));
+                "caster # steering angle δ from the length axis (unwrapped; 0 trails toward +x)",
+                &r.delta_rad,
+            ),
+            f64_columns([
+                ("vx_mps", "m/s", "platform centre velocity, floor X, relative to the floor", r.vx_mps.clone()),
+                ("vy_mps", "m/s", "platform centre velocity, floor Y, relative to the floor", r.vy_mps.clone()),
+                ("yaw_rate_radps", "rad/s", "platform yaw rate", r.yaw_rate_radps.clone()),
+            ]),
+            casters("roll#_mps", "m/s", "caster # rolling speed: wheel centre along its heading", &r.roll_speed_mps),
+            casters("swivel#_radps", "rad/s", "caster # swivel rate dδ/dt", &r.swivel_rate_radps),
+            f64_columns([
+                (
+                    "ax_abs_mps2",
+                    "m/s^2",
+                    "absolute acceleration of the platform centre along floor X (E-W): what a top accelerometer on the unit would record",
+                    r.ax_abs_mps2.clone(),
+                ),
+                ("ay_abs_mps2", "m/s^2", "absolute acceleration of the platform centre along floor Y", r.ay_abs_mps2.clone()),
+                ("floor_ax_mps2", "m/s^2", &format!("floor acceleration X (input `{x_name}`)"), ax.to_vec()),
+                ("floor_ay_mps2", "m/s^2", &format!("floor acceleration Y (input `{y_name}`)"), ay.to_vec()),
+            ]),
+        ];
+        let mut t = Table::new();
+        t.extend(columns.into_iter().flatten());
         t.metadata.insert("shakeflow.rolling".into(), self.metadata(r));
         t
     }
@@ -712,6 +690,15 @@ fn summary_line(dir: &Path) -> anyhow::Result<String> {
     }
     line += &format!(", started rolling in {}, {flips} caster flips", rolled.len());
     Ok(line)
+}
+
+/// A column per caster, 1 to 4: `#` in the name and description is the caster's number.
+fn casters(name: &str, unit: &str, description: &str, values: &[Vec<f64>; 4]) -> Vec<Column> {
+    let numbered = |text: &str, i: usize| text.replace('#', &(i + 1).to_string());
+    let column = |(i, values): (usize, &Vec<f64>)| {
+        Column::f64(&numbered(name, i), unit, &numbered(description, i), values.clone())
+    };
+    values.iter().enumerate().map(column).collect()
 }
 
 #[cfg(test)]

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
-use super::{Stage, StageContext};
+use super::{f64_columns, Stage, StageContext};
 use crate::error::UserError;
 use crate::io::equipment::{self, RockingGeometry, ShapeChoice};
 use crate::physics::rocking::{self, Anchorage, Block, Excitation, IsolatedBase, Method, Options, Response, Shape};
@@ -285,27 +285,24 @@ pub fn model_facts(block: &Block, options: &Options) -> serde_json::Value {
 
 fn response_table(floor: &Floor, r: &Response) -> Table {
     let mut t = Table::new();
-    t.push(Column::f64(TIME_COLUMN, "s", "time", floor.time.clone()));
-    t.push(Column::f64(
-        "theta_rad",
-        "rad",
-        "rocking angle (> 0: about the +x corner, top toward +x)",
-        r.theta_rad.clone(),
-    ));
-    t.push(Column::f64("theta_dot_radps", "rad/s", "angular velocity", r.theta_dot_radps.clone()));
-    t.push(Column::f64("theta_ddot_radps2", "rad/s^2", "angular acceleration", r.theta_ddot_radps2.clone()));
-    t.push(Column::f64(
-        "top_ax_mps2",
-        "m/s^2",
-        "absolute horizontal acceleration at the top sensor (what a top accelerometer records); after an overturn the sensor lies along the vertical and reads the floor's vertical acceleration",
-        r.top_ax_mps2.clone(),
-    ));
-    t.push(Column::f64(
-        "base_ax_mps2",
-        "m/s^2",
-        "horizontal acceleration under the block (the floor, or the isolated base)",
-        r.base_ax_mps2.clone(),
-    ));
+    t.extend(f64_columns([
+        (TIME_COLUMN, "s", "time", floor.time.clone()),
+        ("theta_rad", "rad", "rocking angle (> 0: about the +x corner, top toward +x)", r.theta_rad.clone()),
+        ("theta_dot_radps", "rad/s", "angular velocity", r.theta_dot_radps.clone()),
+        ("theta_ddot_radps2", "rad/s^2", "angular acceleration", r.theta_ddot_radps2.clone()),
+        (
+            "top_ax_mps2",
+            "m/s^2",
+            "absolute horizontal acceleration at the top sensor (what a top accelerometer records); after an overturn the sensor lies along the vertical and reads the floor's vertical acceleration",
+            r.top_ax_mps2.clone(),
+        ),
+        (
+            "base_ax_mps2",
+            "m/s^2",
+            "horizontal acceleration under the block (the floor, or the isolated base)",
+            r.base_ax_mps2.clone(),
+        ),
+    ]));
     t
 }
 
