@@ -296,12 +296,12 @@ mod tests {
     #[test]
     fn a_record_with_fewer_component_files_than_required_axes_is_named_with_its_files() {
         let spec = source(KNET);
-        let files = vec![
+        let files = [
             file("x/A.EW", &[("station", "A")]),
             file("x/A.NS", &[("station", "A")]),
             file("x/A.UD", &[("station", "A")]),
         ];
-        let short = vec![file("x/B.EW", &[("station", "B")]), file("x/B.NS", &[("station", "B")])];
+        let short = [file("x/B.EW", &[("station", "B")]), file("x/B.NS", &[("station", "B")])];
         let records = vec![files.iter().collect(), short.iter().collect()];
         let problems = incomplete_records("knet", spec.components.as_ref().unwrap(), &records);
         assert_eq!(
