@@ -219,15 +219,24 @@ fn long_functions(path: &Path, limit: usize) -> Vec<String> {
     long
 }
 
+/// The production files below `dir`: each file's path, its name relative to `dir` and its code.
+fn production_files(dir: &Path) -> Vec<(PathBuf, String, String)> {
+    let mut files = Vec::new();
+    rust_files(dir, &mut files);
+    files
+        .into_iter()
+        .filter_map(|file| {
+            let name = file.strip_prefix(dir).unwrap().to_string_lossy().replace('\\', "/");
+            let code = production_code(&file)?;
+            Some((file, name, code))
+        })
+        .collect()
+}
+
 #[test]
 fn hybrid_models_share_one_driver() {
-    let physics = root().join("src/physics");
-    let mut files = Vec::new();
-    rust_files(&physics, &mut files);
     let mut problems = Vec::new();
-    for file in &files {
-        let name = file.strip_prefix(&physics).unwrap().to_string_lossy().replace('\\', "/");
-        let Some(code) = production_code(file) else { continue };
+    for (file, name, code) in production_files(&root().join("src/physics")) {
         // Only the driver (and the integrators themselves) step an integrator.
         if name != "hybrid.rs" && name != "ode.rs" && code.contains(".advance(") {
             problems.push(format!("physics/{name} steps an integrator itself: go through physics::hybrid::drive"));
@@ -235,7 +244,7 @@ fn hybrid_models_share_one_driver() {
         if code.contains("match index") {
             problems.push(format!("physics/{name} matches event indices: map them to transitions"));
         }
-        problems.extend(long_functions(file, 120).into_iter().map(|f| format!("over 120 lines: {f}")));
+        problems.extend(long_functions(&file, 120).into_iter().map(|f| format!("over 120 lines: {f}")));
     }
     assert!(problems.is_empty(), "{}", problems.join("\n"));
 }
@@ -391,13 +400,8 @@ fn submodules_form_no_cycle() {
 /// `shakeflow stage` and `shakeflow diagnose`), so no command keeps a copy that could drift.
 #[test]
 fn the_ownership_checks_have_one_call_site_outside_the_engine() {
-    let src = root().join("src");
-    let mut files = Vec::new();
-    rust_files(&src, &mut files);
     let mut callers = Vec::new();
-    for file in files {
-        let relative = file.strip_prefix(&src).unwrap().to_string_lossy().replace('\\', "/");
-        let Some(code) = production_code(&file) else { continue };
+    for (_, relative, code) in production_files(&root().join("src")) {
         if relative.starts_with("pipeline/") {
             continue;
         }
