@@ -13,22 +13,8 @@ pub use crate::pipeline::stage::{
     Stage, StageContext, StageInfo, StageInput, WorkUnits,
 };
 
-pub mod baseline;
-pub mod compare;
-pub mod cpt_calibrate;
-pub mod cpt_project;
-pub mod cpt_track;
-pub mod detect_toppling;
-pub mod diagnose;
 pub mod error;
-pub mod load;
 pub mod reference;
-pub mod report;
-pub mod simulate_rolling;
-pub mod simulate_toppling;
-pub mod synchronize;
-pub mod toppling_fragility;
-pub mod transfer_function;
 
 /// The `mcap` parameter of every stage with a time-series output. Off by default: a twin repeats
 /// its Parquet table at about twice the size (lz4 chunks of 9-byte protobuf values against
@@ -328,15 +314,19 @@ pub(crate) use info_and_check_params;
 /// The stage types, each named once: [`registry`] for the engine and [`stage_types`] for what
 /// the engine does not ask.
 macro_rules! stage_types {
-    ($($stage:expr),* $(,)?) => {
+    ($($module:ident :: $stage:ident),* $(,)?) => {
+        // Each stage's file is declared here, from its line in the list: a stage is one file and
+        // one line.
+        $(pub mod $module;)*
+
         /// Every stage type, by the name pipelines use: the list the engine is handed.
         pub fn registry() -> Registry {
-            Registry(&[$(&$stage),*])
+            Registry(&[$(&$module::$stage),*])
         }
 
         /// Every stage type, in the registry's order, with what the engine does not ask of it.
         pub fn stage_types() -> &'static [&'static dyn StageType] {
-            &[$(&$stage),*]
+            &[$(&$module::$stage),*]
         }
     };
 }
