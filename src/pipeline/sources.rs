@@ -87,6 +87,40 @@ pub fn resolve(
     constant: &std::collections::BTreeMap<String, String>,
     folders: bool,
 ) -> Result<Vec<MatchedFile>, UserError> {
+    Resolver::default().resolve(base_dir, pattern, constant, folders)
+}
+
+/// [`resolve`] for several sources, each path pattern walked once: sources that read the same
+/// files and tell them apart by their constant keys (one DAQ export split into floors) share
+/// one walk of the folders.
+#[derive(Default)]
+pub struct Resolver(std::collections::HashMap<(PathBuf, String, bool), Vec<MatchedFile>>);
+
+impl Resolver {
+    /// [`resolve`], the walk of a pattern seen before reused.
+    pub fn resolve(
+        &mut self,
+        base_dir: &Path,
+        pattern: &str,
+        constant: &std::collections::BTreeMap<String, String>,
+        folders: bool,
+    ) -> Result<Vec<MatchedFile>, UserError> {
+        let key = (base_dir.to_path_buf(), pattern.to_string(), folders);
+        let walked = match self.0.entry(key) {
+            std::collections::hash_map::Entry::Occupied(known) => known.into_mut(),
+            std::collections::hash_map::Entry::Vacant(new) => new.insert(walk(base_dir, pattern, folders)?),
+        };
+        let mut files = walked.clone();
+        for file in &mut files {
+            file.partition.extend(constant.iter().map(|(k, v)| (k.clone(), v.clone())));
+        }
+        Ok(files)
+    }
+}
+
+/// The files (and with `folders`, folders) `pattern` matches, sorted by path, with their
+/// template keys (or `file=<stem>`), not yet the source's constant keys.
+fn walk(base_dir: &Path, pattern: &str, folders: bool) -> Result<Vec<MatchedFile>, UserError> {
     let pieces = parse_template(pattern).map_err(|e| UserError::new(e.to_string()))?;
     let has_keys = pieces.iter().any(|p| matches!(p, Piece::Key(_)));
     let glob_pattern = glob_of(&pieces);
@@ -113,7 +147,7 @@ pub fn resolve(
         if !(kind == Kind::File || folders && kind == Kind::Folder) {
             continue;
         }
-        let mut partition = if has_keys {
+        let partition = if has_keys {
             match match_path(base_dir, &glob_pattern, &pieces, &path) {
                 Some(p) => p,
                 None => continue,
@@ -124,7 +158,6 @@ pub fn resolve(
         } else {
             Vec::new()
         };
-        partition.extend(constant.iter().map(|(k, v)| (k.clone(), v.clone())));
         files.push(MatchedFile { path, partition });
     }
     files.sort_by(|a, b| a.path.cmp(&b.path));
@@ -309,6 +342,16 @@ mod tests {
         let files = resolve(dir.path(), "{motion}/DAQ1_floors.csv", &constant, false).unwrap();
         let partitions: Vec<_> = files.iter().map(|f| crate::pipeline::stage::partition_path(&f.partition)).collect();
         assert_eq!(partitions, ["motion=BI-1/floor=5", "motion=FB-4/floor=5"]);
+        // Two sources of one pattern (floors of one DAQ export): one walk, each its constants.
+        let mut resolver = Resolver::default();
+        let four = BTreeMap::from([("floor".to_string(), "4".to_string())]);
+        let fours = resolver.resolve(dir.path(), "{motion}/DAQ1_floors.csv", &four, false).unwrap();
+        std::fs::write(dir.path().join("FB-4/DAQ1_floors.csv.new"), "y").unwrap();
+        std::fs::remove_dir_all(dir.path().join("BI-1")).unwrap();
+        let fives = resolver.resolve(dir.path(), "{motion}/DAQ1_floors.csv", &constant, false).unwrap();
+        assert_eq!(fives, files, "the walk is the first one's, the constants the source's own");
+        let partitions: Vec<_> = fours.iter().map(|f| crate::pipeline::stage::partition_path(&f.partition)).collect();
+        assert_eq!(partitions, ["motion=BI-1/floor=4", "motion=FB-4/floor=4"]);
     }
 
     #[test]

@@ -80,6 +80,35 @@ fn a_slurm_run_writes_the_local_runs_artifacts_and_lockfile() {
 }
 
 #[test]
+fn a_fanned_out_slurm_run_writes_the_local_fanned_runs_artifacts_and_state() {
+    // Past one record a folder, records go one folder down (two hex digits): the submitting
+    // process decides, and the array tasks and the commit job follow (`run.json`).
+    let fan_out = [("SHAKEFLOW_FAN_OUT_ABOVE", "1")];
+    let local = small_project();
+    let out = shakeflow_env(&["run", "pipeline.yaml"], local.path(), &fan_out);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let cluster = small_project();
+    let out = slurm_run_env(cluster.path(), &["--wait"], &fan_out);
+    let log = stderr(&out);
+    assert!(out.status.success(), "{log}");
+    for stage in ["load", "baseline"] {
+        let records = cluster.path().join("out").join(stage).join("records");
+        let folders: Vec<String> = std::fs::read_dir(&records)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert!(!folders.is_empty() && folders.iter().all(|f| f.len() == 2 && !f.contains('=')), "{folders:?}");
+    }
+    assert_eq!(
+        artifacts_and_state(local.path()),
+        artifacts_and_state(cluster.path()),
+        "bit-identical artifacts, lockfile and state files, fanned out on either executor"
+    );
+    let again = slurm_run_env(cluster.path(), &[], &fan_out);
+    assert!(stderr(&again).contains("nothing submitted"), "{}", stderr(&again));
+}
+
+#[test]
 fn a_failing_record_fails_its_unit_only_on_slurm() {
     let project = small_project();
     let root = project.path();

@@ -41,6 +41,14 @@ pub struct UnitRecord {
     pub outcome: UnitOutcome,
 }
 
+impl UnitRecord {
+    /// An up-to-date unit: what the commit folds is its lockfile entry as it stands, so the
+    /// record carries its id only.
+    pub fn cached(id: &str) -> UnitRecord {
+        UnitRecord { id: id.to_string(), key: String::new(), inputs: BTreeMap::new(), outcome: UnitOutcome::Cached }
+    }
+}
+
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum UnitOutcome {
@@ -63,6 +71,8 @@ pub enum UnitOutcome {
 /// A stage's run folded into what the commit does.
 #[derive(Default)]
 pub(super) struct Folded {
+    /// The stage's new lockfile entry; None when it is its old entry unchanged (every unit
+    /// cached where it was, none gone, the engine's tables the same): nothing to write.
     pub(super) entry: Option<StageLock>,
     /// Paths relative to the output folder → where the new file is now.
     pub(super) install: BTreeMap<String, PathBuf>,
@@ -111,7 +121,11 @@ pub(super) fn entry_from_outcomes(
         status_rows.push([id.to_string(), what.to_string(), file, reason]);
     };
     let mut failed = 0;
+    // Cached units whose entry stays as it is: copied into the new entry only if it changes.
+    let mut kept: Vec<String> = Vec::new();
+    let mut only_cached = true;
     for record in records {
+        only_cached &= matches!(record.outcome, UnitOutcome::Cached);
         let old = entry.and_then(|e| e.units.get(&record.id));
         let old_files: Vec<&String> = old.map(|o| o.files.keys().collect()).unwrap_or_default();
         match record.outcome {
@@ -136,9 +150,13 @@ pub(super) fn entry_from_outcomes(
                     (None, true) => ("loaded", String::new()),
                 };
                 status(&record.id, what, record_files(&old.inputs), reason);
-                let mut unit = old.clone();
-                relayout(&mut unit, fanned, &stage_dir, staging, &at, &mut folded)?;
-                new_entry.units.insert(record.id, unit);
+                if old.files.keys().all(|f| placed(f, fanned) == f.as_str()) {
+                    kept.push(record.id);
+                } else {
+                    let mut unit = old.clone();
+                    relayout(&mut unit, fanned, &stage_dir, staging, &at, &mut folded)?;
+                    new_entry.units.insert(record.id, unit);
+                }
             }
             UnitOutcome::Ran { dir, files, notes } => {
                 for (file, hash) in &files {
@@ -243,7 +261,23 @@ pub(super) fn entry_from_outcomes(
         ownership::write_marker(staging, name, info.name)?;
         folded.install.insert(at(STAGE_MARKER), staging.join(STAGE_MARKER));
     }
-    folded.entry = Some(new_entry);
+    let old = entry.filter(|_| only_cached && vanished.is_empty());
+    let unchanged = old.is_some_and(|old| {
+        folded.install.is_empty()
+            && folded.remove.is_empty()
+            && old.units.len() == kept.len() + new_entry.units.len()
+            && new_entry.units.iter().all(|(id, unit)| old.units.get(id) == Some(unit))
+            && (&old.stage_type, old.stage_version, &old.params, &old.select)
+                == (&new_entry.stage_type, new_entry.stage_version, &new_entry.params, &new_entry.select)
+    });
+    if !unchanged {
+        let old = entry.map(|e| &e.units);
+        new_entry.units.extend(kept.into_iter().map(|id| {
+            let unit = old.and_then(|units| units.get(&id)).expect("a kept unit is in the lockfile").clone();
+            (id, unit)
+        }));
+        folded.entry = Some(new_entry);
+    }
     Ok(folded)
 }
 
@@ -345,12 +379,12 @@ pub(super) fn relative(path: &Path, dir: &Path) -> String {
 /// Takes the files of `keep: false` stages out of a commit's `install` and puts those on disk in
 /// its `remove` (paths relative to the output folder): the files of every such stage that ran in
 /// full, as did every stage reading it (cached counts: it is up to date with them). Their
-/// lockfile entries stay, hashes and all.
-pub(super) fn leave_out_not_kept(
+/// lockfile entries (`entries`: a stage's new one, else its old one) stay, hashes and all.
+pub(super) fn leave_out_not_kept<'e>(
     plan: &Plan,
     selected: &BTreeSet<String>,
     tainted: &BTreeSet<String>,
-    entries: &BTreeMap<String, StageLock>,
+    entries: &dyn Fn(&str) -> Option<&'e StageLock>,
     install: &mut BTreeSet<String>,
     remove: &mut BTreeSet<String>,
     disk: &dyn Disk,
@@ -363,7 +397,7 @@ pub(super) fn leave_out_not_kept(
         .filter(|s| {
             plan.stages.values().filter(|r| upstream_stages(r).contains(s.name.as_str())).all(|r| done(&r.name))
         })
-        .filter_map(|s| entries.get(&s.name).map(|entry| (s, entry)))
+        .filter_map(|s| entries(&s.name).map(|entry| (s, entry)))
         .flat_map(|(s, entry)| {
             entry
                 .units
@@ -469,6 +503,41 @@ mod tests {
         assert_eq!(folded.failed.len(), 1);
         let produced: Vec<&String> = folded.produced.keys().collect();
         assert_eq!(produced.len(), 3, "FB-1's table, FB-2's figure and the status table, not FB-3's: {produced:?}");
+    }
+
+    #[test]
+    fn a_stage_whose_units_are_all_cached_where_they_were_keeps_its_entry_untouched() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let (plan, entry) = committed(dir.path());
+        let stage = &plan.stages["load"];
+        let ids = ["motion=FB-1", "motion=FB-2", "motion=FB-3"];
+        let cached = || ids.iter().map(|id| UnitRecord::cached(id)).collect::<Vec<_>>();
+        // The first run with a status table writes it: the entry changes.
+        let staging = dir.path().join("staging");
+        let first = entry_from_outcomes(&plan, stage, Some(&entry), cached(), &[], false, &staging, false).unwrap();
+        let with_status = first.entry.expect("a new status table: a new entry");
+        let table = plan.stage_dir("load").join("status/data.parquet");
+        std::fs::create_dir_all(table.parent().unwrap()).unwrap();
+        std::fs::copy(staging.join("status/data.parquet"), &table).unwrap();
+        // The next one changes nothing: no entry to write, nothing to install, and what
+        // downstream stages read is every file of the old entry.
+        let again = dir.path().join("again");
+        let folded =
+            entry_from_outcomes(&plan, stage, Some(&with_status), cached(), &[], false, &again, false).unwrap();
+        assert!(folded.entry.is_none() && folded.install.is_empty() && folded.remove.is_empty());
+        assert!(folded.complete);
+        let files: usize = with_status.units.values().map(|u| u.files.len()).sum();
+        assert_eq!(folded.produced.len(), files);
+        // A unit that failed, or a record gone, makes a new entry (the same units here, a
+        // status table that says so).
+        let mut failing = cached();
+        failing[1].outcome = UnitOutcome::Failed { reason: "bad row".into() };
+        let failed = entry_from_outcomes(&plan, stage, Some(&with_status), failing, &[], false, &again, false);
+        assert!(failed.unwrap().entry.is_some());
+        let gone = ["motion=FB-3".to_string()];
+        let fewer =
+            entry_from_outcomes(&plan, stage, Some(&with_status), cached()[..2].to_vec(), &gone, false, &again, false);
+        assert!(!fewer.unwrap().entry.unwrap().units.contains_key("motion=FB-3"));
     }
 
     #[test]

@@ -47,9 +47,11 @@ pub(super) fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSo
     let mut resolved = BTreeMap::new();
     // Sources may share files (one DAQ export split into floors): each file is read once.
     let mut hashed: BTreeMap<PathBuf, String> = BTreeMap::new();
+    // ... and their folders are walked once.
+    let mut resolver = sources::Resolver::default();
     for name in used {
         let spec = &plan.file.spec.inputs[name];
-        let files = source_files(plan, name, spec)?;
+        let files = files_of(plan, name, spec, &mut resolver)?;
         let unhashed: Vec<&Path> =
             files.iter().map(|f| f.path.as_path()).filter(|p| !hashed.contains_key(*p)).collect();
         let new_hashes: Vec<String> = unhashed
@@ -82,6 +84,17 @@ pub(super) fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSo
 /// The files a source reads, with their partitions: its path matched as a pattern (a command's
 /// names one file or folder literally); a case is its folder, a dataset folder its parts.
 pub fn source_files(plan: &Plan, name: &str, spec: &SourceSpec) -> Result<Vec<sources::MatchedFile>, UserError> {
+    files_of(plan, name, spec, &mut sources::Resolver::default())
+}
+
+/// [`source_files`], through `resolver` (a pattern that another source has already walked is
+/// not walked again).
+fn files_of(
+    plan: &Plan,
+    name: &str,
+    spec: &SourceSpec,
+    resolver: &mut sources::Resolver,
+) -> Result<Vec<sources::MatchedFile>, UserError> {
     let base = plan.file.base_dir();
     let files = match plan.file.command {
         Some(_) => {
@@ -93,7 +106,7 @@ pub fn source_files(plan: &Plan, name: &str, spec: &SourceSpec) -> Result<Vec<so
             let partition = spec.partition.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
             vec![sources::MatchedFile { path, partition }]
         }
-        None => sources::resolve(&base, &spec.path, &spec.partition, spec.format.names_folders()).map_err(|e| {
+        None => resolver.resolve(&base, &spec.path, &spec.partition, spec.format.names_folders()).map_err(|e| {
             let located = plan.file.error_at(&["inputs", name, "path"], format!("source `{name}`: {}", e.message));
             match e.hint {
                 Some(h) => located.hint(h),
@@ -250,9 +263,11 @@ pub(super) fn cached_files(old: &UnitLock, stage_dir: &Path) -> Produced {
     old.files.iter().map(|(f, h)| (f.clone(), ProducedFile { path: stage_dir.join(f), hash: h.clone() })).collect()
 }
 
-/// Every file a run reads: record files and files named by parameters.
+/// Every file a run reads: record files and files named by parameters, each once (sources
+/// may share files).
 pub(super) fn input_paths(plan: &Plan, sources: &BTreeMap<String, ResolvedSource>) -> Vec<PathBuf> {
-    let records = sources.values().flat_map(|s| s.input.parts().iter().map(|p| p.path.clone()));
-    let params = plan.stages.values().flat_map(|s| s.files.values().cloned());
-    records.chain(params).collect()
+    let records = sources.values().flat_map(|s| s.input.parts().iter().map(|p| &p.path));
+    let params = plan.stages.values().flat_map(|s| s.files.values());
+    let mut seen = std::collections::HashSet::new();
+    records.chain(params).filter(|p| seen.insert(p.as_os_str())).cloned().collect()
 }

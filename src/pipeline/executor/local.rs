@@ -49,6 +49,7 @@ struct RunEnv<'a> {
 #[derive(Default)]
 struct RunState {
     produced: BTreeMap<String, Produced>,
+    /// The new lockfile entries of the stages whose entry changed (the others' stand).
     entries: BTreeMap<String, StageLock>,
     reports: BTreeMap<String, StageReport>,
     /// Entries (paths relative to the output folder) the commit installs and removes.
@@ -195,13 +196,9 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
     let records: Vec<UnitRecord> = assessed
         .units
         .iter()
-        .map(|(unit, key, _)| {
-            ran.remove(&unit.id).unwrap_or_else(|| UnitRecord {
-                id: unit.id.clone(),
-                key: key.clone(),
-                inputs: unit.hashes.clone(),
-                outcome: UnitOutcome::Cached,
-            })
+        .map(|(unit, _, _)| {
+            // A cached unit's entry is its old one: its key and inputs are not copied again.
+            ran.remove(&unit.id).unwrap_or_else(|| UnitRecord::cached(&unit.id))
         })
         .collect();
     for record in &records {
@@ -244,7 +241,9 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
     state.failed.extend(folded.failed);
     state.flagged.extend(folded.flagged);
     state.produced.insert(name.to_string(), folded.produced);
-    state.entries.insert(name.to_string(), folded.entry.expect("fold makes the entry"));
+    if let Some(entry) = folded.entry {
+        state.entries.insert(name.to_string(), entry);
+    }
     let outcome = if stale.is_empty() {
         Outcome::Cached
     } else {
@@ -357,7 +356,8 @@ impl Backend for Local {
         };
         let (selected, lock, all_or_nothing) = (&opened.selected, &opened.lock, opened.options.all_or_nothing);
         let (install, remove) = (&mut state.install, &mut state.remove);
-        leave_out_not_kept(plan, selected, &state.tainted, &state.entries, install, remove, &opened.disk);
+        let entries = |name: &str| state.entries.get(name).or_else(|| lock.stages.get(name));
+        leave_out_not_kept(plan, selected, &state.tainted, &entries, install, remove, &opened.disk);
         let changes = Changes { entries: &state.entries, install: &state.install, remove: &state.remove };
         if let Some(error) = fatal {
             // A stage could not be planned (a bad select, two records with one partition): what
@@ -376,7 +376,8 @@ impl Backend for Local {
         }
         commit(transaction, changes, plan, lock)?;
         // Under the lease still: only the run holding the folder writes the memo. The files this
-        // run wrote go in too (their hashes came from the bytes written), those written 2 s ago or more.
+        // run wrote go in too (their hashes came from the bytes written), those written 2 s ago or more;
+        // a stage whose entry did not change wrote nothing, and assessing it went through the memo.
         for (name, entry) in &state.entries {
             for (file, hash) in entry.units.values().flat_map(|u| u.files.iter()) {
                 hash::remember(&plan.stage_dir(name).join(file), hash);

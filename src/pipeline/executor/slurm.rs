@@ -681,13 +681,8 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let mut by_id: BTreeMap<String, UnitRecord> = ran.into_iter().map(|r| (r.id.clone(), r)).collect();
     let records: Vec<UnitRecord> = ours
         .iter()
-        .map(|(unit, key, _)| {
-            let mut record = by_id.remove(&unit.id).unwrap_or_else(|| UnitRecord {
-                id: unit.id.clone(),
-                key: key.clone(),
-                inputs: unit.hashes.clone(),
-                outcome: UnitOutcome::Cached,
-            });
+        .map(|(unit, _, _)| {
+            let mut record = by_id.remove(&unit.id).unwrap_or_else(|| UnitRecord::cached(&unit.id));
             if let UnitOutcome::Ran { dir, .. } = &mut record.outcome {
                 *dir = done.clone();
             }
@@ -838,12 +833,7 @@ fn commit_manifests(
                         },
                     }));
                 }
-                Err(_) => records.extend(ids.iter().map(|id| UnitRecord {
-                    id: id.clone(),
-                    key: String::new(),
-                    inputs: BTreeMap::new(),
-                    outcome: UnitOutcome::Cached,
-                })),
+                Err(_) => records.extend(ids.iter().map(|id| UnitRecord::cached(id))),
             }
         }
         let vanished: Vec<String> = vanished.into_iter().collect();
@@ -866,13 +856,16 @@ fn commit_manifests(
         let triple = |p: &UnitProblem| (p.stage.clone(), p.unit.clone(), p.reason.clone());
         summary.failed.extend(folded.failed.iter().map(triple));
         summary.flagged.extend(folded.flagged.iter().map(triple));
-        let entry = folded.entry.expect("fold makes the entry");
-        summary.committed_units += entry.units.len();
-        new_lock.stages.insert(name.clone(), entry);
+        // None: the entry stands as it is (`new_lock` is the old state with the changed entries).
+        if let Some(entry) = folded.entry {
+            new_lock.stages.insert(name.clone(), entry);
+        }
+        summary.committed_units += new_lock.stages.get(name).map_or(0, |e| e.units.len());
     }
     let options = RunOptions { force: run.force.clone(), only: run.only.clone(), ..RunOptions::default() };
     let selected = selected_stages(plan, &options)?;
-    leave_out_not_kept(plan, &selected, &tainted, &new_lock.stages, &mut install, &mut remove, &RealDisk::default());
+    let entries = |name: &str| new_lock.stages.get(name);
+    leave_out_not_kept(plan, &selected, &tainted, &entries, &mut install, &mut remove, &RealDisk::default());
     for relative in &install {
         let from = &produced[relative];
         let to = transaction.new_path(relative);
