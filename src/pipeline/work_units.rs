@@ -114,18 +114,21 @@ pub fn split(
                     inputs.len()
                 );
             };
+            // Each secondary input's companions of every primary record, asked once per input.
+            let companions: Vec<Option<Vec<Vec<InputPart>>>> = inputs
+                .iter()
+                .enumerate()
+                .map(|(i, input)| (i != primary).then(|| stage.stage.companions(&stage.params, main.parts(), input)))
+                .collect();
             main.parts()
                 .iter()
-                .map(|part| {
+                .enumerate()
+                .map(|(n, part)| {
                     let parts = inputs
                         .iter()
-                        .enumerate()
-                        .map(|(i, input)| {
-                            let chosen = if i == primary {
-                                vec![part.clone()]
-                            } else {
-                                stage.stage.companions(&stage.params, part, input)
-                            };
+                        .zip(&companions)
+                        .map(|(input, chosen)| {
+                            let chosen = chosen.as_ref().map_or_else(|| vec![part.clone()], |c| c[n].clone());
                             only(input, chosen)
                         })
                         .collect();

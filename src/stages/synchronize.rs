@@ -10,6 +10,7 @@
 //! time both cover.
 
 use super::error::StageError;
+use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -86,18 +87,25 @@ impl Stage for Synchronize {
         super::WorkUnits::PerRecordOf { primary: 1 }
     }
 
-    /// A target record reads the reference records that share its `join` key.
-    fn companions(&self, params: &Params, primary: &InputPart, other: &super::StageInput) -> Vec<InputPart> {
+    /// A target record reads the reference records that share its `join` key, found in an index
+    /// of the reference by that key (built once for all target records).
+    fn companions(&self, params: &Params, primaries: &[InputPart], other: &super::StageInput) -> Vec<Vec<InputPart>> {
         let p: SynchronizeParams = params::typed(params).expect("the planner checked the parameters (`check_params`)");
-        let key = partition_value(primary, &p.join);
-        let matched: Vec<InputPart> =
-            other.parts().iter().filter(|r| key.is_some() && partition_value(r, &p.join) == key).cloned().collect();
-        // A target record the reference lacks fails; with every reference record its error can
-        // name the values the reference has.
-        if matched.is_empty() {
-            return other.parts().to_vec();
+        let mut by_key: HashMap<&str, Vec<&InputPart>> = HashMap::new();
+        for part in other.parts() {
+            if let Some(key) = partition_value(part, &p.join) {
+                by_key.entry(key).or_default().push(part);
+            }
         }
-        matched
+        primaries
+            .iter()
+            .map(|primary| match partition_value(primary, &p.join).and_then(|key| by_key.get(key)) {
+                Some(matched) => matched.iter().map(|&r| r.clone()).collect(),
+                // A target record the reference lacks fails; with every reference record its
+                // error can name the values the reference has.
+                None => other.parts().to_vec(),
+            })
+            .collect()
     }
 
     fn run(&self, ctx: &StageContext<'_>) -> anyhow::Result<()> {
