@@ -47,6 +47,8 @@ impl Stat {
 pub struct StatMemo {
     file: PathBuf,
     known: HashMap<PathBuf, (Stat, String)>,
+    /// Whether `file` was read (else it is missing or damaged, and saving writes it anew).
+    loaded: bool,
     /// What this process hashed or reused: what [`save_memo`] keeps.
     used: Mutex<HashMap<PathBuf, (Stat, String)>>,
 }
@@ -56,11 +58,12 @@ static MEMO: OnceLock<StatMemo> = OnceLock::new();
 impl StatMemo {
     /// The memo saved in `file` (an unreadable or damaged file is an empty memo).
     pub fn load(file: &Path) -> StatMemo {
-        let known: Vec<(PathBuf, Stat, String)> =
-            std::fs::read(file).ok().and_then(|b| serde_json::from_slice(&b).ok()).unwrap_or_default();
+        let read: Option<Vec<(PathBuf, Stat, String)>> =
+            std::fs::read(file).ok().and_then(|b| serde_json::from_slice(&b).ok());
         StatMemo {
             file: file.to_path_buf(),
-            known: known.into_iter().map(|(p, s, h)| (p, (s, h))).collect(),
+            loaded: read.is_some(),
+            known: read.unwrap_or_default().into_iter().map(|(p, s, h)| (p, (s, h))).collect(),
             used: Mutex::new(HashMap::new()),
         }
     }
@@ -89,9 +92,13 @@ impl StatMemo {
         Ok(hash)
     }
 
-    /// Writes the entries this memo used (a temporary file, then a rename).
+    /// Writes the entries this memo used (a temporary file, then a rename); nothing when they
+    /// are the entries it loaded, as on a no-op rerun (1 MB of JSON at 10³ tests).
     pub fn save(&self) -> anyhow::Result<()> {
         let used = self.used.lock().expect("the memo lock is never poisoned");
+        if self.loaded && *used == self.known {
+            return Ok(());
+        }
         let mut entries: Vec<(&PathBuf, &Stat, &String)> = used.iter().map(|(p, (s, h))| (p, s, h)).collect();
         entries.sort_by(|a, b| a.0.cmp(b.0));
         if let Some(dir) = self.file.parent() {
@@ -344,5 +351,41 @@ mod tests {
         // A damaged memo is an empty one.
         std::fs::write(&file, "{not json").unwrap();
         assert!(StatMemo::load(&file).known.is_empty());
+    }
+
+    #[test]
+    fn the_stat_memo_is_saved_only_when_its_entries_changed() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.csv"), dir.path().join("b.csv"));
+        let past = std::time::SystemTime::now() - std::time::Duration::from_secs(60);
+        for (path, text) in [(&a, "1\n"), (&b, "2\n")] {
+            std::fs::write(path, text).unwrap();
+            std::fs::File::options().write(true).open(path).unwrap().set_modified(past).unwrap();
+        }
+        let file = dir.path().join("hashes.json");
+        let memo = StatMemo::load(&file);
+        memo.hash(&a).unwrap();
+        memo.save().unwrap();
+        // The same entries as loaded (a no-op rerun): the file is left as it is, its bytes too.
+        let written = std::fs::read(&file).unwrap();
+        std::fs::write(&file, [&written[..], b"\n"].concat()).unwrap();
+        let memo = StatMemo::load(&file);
+        memo.hash(&a).unwrap();
+        memo.save().unwrap();
+        assert_eq!(std::fs::read(&file).unwrap(), [&written[..], b"\n"].concat());
+        // A file hashed anew, or one no longer asked for, is saved.
+        let memo = StatMemo::load(&file);
+        memo.hash(&a).unwrap();
+        memo.hash(&b).unwrap();
+        memo.save().unwrap();
+        assert_eq!(StatMemo::load(&file).known.len(), 2);
+        let memo = StatMemo::load(&file);
+        memo.hash(&b).unwrap();
+        memo.save().unwrap();
+        assert_eq!(StatMemo::load(&file).known.keys().collect::<Vec<_>>(), [&b]);
+        // A damaged memo is written anew, even with nothing to remember.
+        std::fs::write(&file, "{not json").unwrap();
+        StatMemo::load(&file).save().unwrap();
+        assert_eq!(std::fs::read(&file).unwrap(), b"[]");
     }
 }
