@@ -161,6 +161,9 @@ pub struct Calibration {
     pub fitted: Vec<f64>,
     /// Model runs it spent.
     pub evaluations: usize,
+    /// The best values after each horizon (horizon in s, values as `fitted`), shortest first:
+    /// what the records up to each horizon alone say.
+    pub steps: Vec<(f64, Vec<f64>)>,
 }
 
 /// One key of the `calibration` contract: scalars, or lists element-wise.
@@ -175,7 +178,7 @@ impl Calibration {
     /// Nothing calibrated: the stated values.
     pub fn stated(parameters: Vec<Uncertain>) -> Calibration {
         let fitted = parameters.iter().map(|p| p.stated).collect();
-        Calibration { parameters, fitted, evaluations: 0 }
+        Calibration { parameters, fitted, evaluations: 0, steps: Vec::new() }
     }
 
     pub fn is_empty(&self) -> bool {
@@ -316,6 +319,7 @@ pub fn calibrate(
         }
     }
     let mut optima = starts;
+    let mut steps = Vec::with_capacity(horizons.len());
     for &until in horizons {
         optima = optima
             .into_par_iter()
@@ -337,15 +341,23 @@ pub fn calibrate(
         // Starts that met in one optimum go on as one: the longer horizons cost the most.
         let costs: Vec<f64> = optima.iter().map(|z| posterior(z, until)).collect();
         optima = distinct(optima, &costs);
+        if let Some(best) = optima.first() {
+            steps.push((until, best.clone()));
+        }
     }
+    // Every horizon's best competes on the last one: a longer horizon can lose a basin that a
+    // shorter one found (a change late in the record pulls the search away from the values the
+    // records before it support).
     let last = *horizons.last().unwrap_or(&f64::INFINITY);
-    let best = optima
+    let finalists: Vec<Vec<f64>> = optima.into_iter().chain(steps.iter().map(|s| s.1.clone())).collect();
+    let steps = steps.into_iter().map(|(until, z)| (until, to_values(&z))).collect();
+    let best = finalists
         .into_iter()
         .map(|z| (posterior(&z, last), z))
         .reduce(|a, b| if b.0 < a.0 { b } else { a })
         .map(|b| b.1)
         .unwrap_or_else(|| vec![0.0; dim]);
-    Calibration { parameters: parameters.to_vec(), fitted: to_values(&best), evaluations: seen.runs() }
+    Calibration { parameters: parameters.to_vec(), fitted: to_values(&best), evaluations: seen.runs(), steps }
 }
 
 /// [`calibrate`] of a unit model: the parameters its predictions depend on are fitted
@@ -375,9 +387,15 @@ pub fn calibrate_model<M: UnitModel>(
     if let Some(s) = start {
         all.fitted = s.to_vec();
     }
-    for (&i, &v) in fitted.iter().zip(&found.fitted) {
-        all.fitted[i] = v;
-    }
+    let place = |values: &[f64]| {
+        let mut full = all.fitted.clone();
+        for (&i, &v) in fitted.iter().zip(values) {
+            full[i] = v;
+        }
+        full
+    };
+    all.steps = found.steps.iter().map(|(until, values)| (*until, place(values))).collect();
+    all.fitted = place(&found.fitted);
     all.evaluations = found.evaluations;
     all
 }
@@ -557,6 +575,30 @@ mod tests {
         let costs = [5.0, 4.0, 1.0, 3.0, 1.0];
         let kept = distinct(points, &costs);
         assert_eq!(kept, [vec![2.0, 1.0], vec![0.1, 0.2], vec![0.05, -0.1]]);
+    }
+
+    /// The records up to 1 s want v = 1; up to 2 s (a change begins) only v = 3; over the whole
+    /// record v = 1 is best (χ² 0) but v = 3 keeps a local well (χ² 50; prior sd 1). The search carried from
+    /// horizon to horizon ends in the well; the first horizon's optimum, judged on the whole
+    /// record too, wins. Each horizon's best is kept in `steps`.
+    #[test]
+    fn every_horizons_optimum_competes_on_the_whole_record() {
+        let line = Line { slope: 0.0, offsets: [0.0, 0.0] };
+        let p = uncertain_parameters(&line, &block(&[("offsets", Spread { sd: Some(1.0), rel_sd: None })])).unwrap();
+        let p = &p[..1];
+        let chi2 = |v: &[f64], until: f64| match until {
+            u if u <= 1.0 => 100.0 * (v[0] - 1.0).powi(2),
+            u if u <= 2.0 => 100.0 * (v[0] - 3.0).powi(2),
+            _ => (100.0 * (v[0] - 1.0).powi(2)).min(50.0 + 10.0 * (v[0] - 3.0).powi(2)),
+        };
+        let c = calibrate(p, None, &[1.0, 2.0, f64::INFINITY], false, &chi2);
+        let steps: Vec<f64> = c.steps.iter().map(|s| s.0).collect();
+        assert_eq!(steps, [1.0, 2.0, f64::INFINITY]);
+        // The posterior modes with the prior v² added: 100/101 and 300/101, then 30/11 in the well.
+        assert!((c.steps[0].1[0] - 100.0 / 101.0).abs() < 1e-2, "{:?}", c.steps);
+        assert!((c.steps[1].1[0] - 300.0 / 101.0).abs() < 1e-2, "{:?}", c.steps);
+        assert!((c.steps[2].1[0] - 30.0 / 11.0).abs() < 1e-2, "the carried search stays in the well: {:?}", c.steps);
+        assert!((c.fitted[0] - 100.0 / 101.0).abs() < 1e-2, "{}", c.fitted[0]);
     }
 
     #[test]

@@ -9,7 +9,10 @@
 //!    (2 camera samples), first to last ([`evidence::Evidence::window`]).
 //! 3. Every effect of the library ([`effects`], one file each) is fitted over a growing horizon
 //!    past the window's start: zooming grids over its few parameters, then Nelder–Mead from the
-//!    best grid points ([`fit`]).
+//!    best grid points ([`fit`]). With an `uncertainty` block the unit's values are calibrated
+//!    first ([`calibration`]); a physics is fitted on the values the records support before it
+//!    begins ([`clean_prefix`]), then recalibrated with it from those and from the whole
+//!    record's calibration, which may have bent the unit to the physics.
 //! 4. Candidates are ranked by BIC (noise-normalised squared residuals + k ln N); the best one is
 //!    accepted when it explains the disagreement (it cuts the window's misfit at least threefold
 //!    and its own residuals flag at most 12 % of the samples the baseline's flagged); otherwise the
@@ -349,8 +352,10 @@ const FIRST_UPLIFT_S: f64 = 0.1;
 /// Horizons of a calibration after the first moment the records can tell anything (s). Steps
 /// of 2–3 s while the block rocks: each longer horizon sharpens a chaotic unit's landscape, and
 /// a 4 → 10 s step lost the basin (mis-stated seed 3301 case_13: B_m and H_m stopped 0.8 sd
-/// from the truth, whole-record χ² 528 185 against 268 059 at the truth).
-const CALIBRATION_HORIZONS_S: [f64; 6] = [1.5, 3.0, 5.0, 7.0, 10.0, f64::INFINITY];
+/// from the truth, whole-record χ² 528 185 against 268 059 at the truth). The first two, 0.5 and
+/// 1 s, are there for [`clean_prefix`]: an obstacle is often struck within a second of the first
+/// uplift (seed 3301 case_03 at 1.15 s, case_05 at 0.82 s).
+const CALIBRATION_HORIZONS_S: [f64; 8] = [0.5, 1.0, 1.5, 3.0, 5.0, 7.0, 10.0, f64::INFINITY];
 /// Horizons of the recalibration with a physics, after the window's start (s).
 const JOINT_HORIZONS_S: [f64; 3] = [1.5, 4.0, f64::INFINITY];
 
@@ -374,9 +379,9 @@ fn nominal_evidence(case: &Case, settings: &Settings) -> Result<(Evidence, Predi
 /// first moment the records can tell anything: the first uplift of the stated model, or the
 /// first disagreement if the records show one earlier. A unit that neither uplifts nor
 /// disagrees keeps its stated values (nothing in the records constrains them).
-fn calibrate_nominal(stated: &Case, settings: &Settings) -> Result<Calibration, PhysicsError> {
+fn calibrate_nominal(stated: &Case, settings: &Settings) -> Result<(Calibration, Calibration), PhysicsError> {
     if stated.uncertain.is_empty() {
-        return Ok(Calibration::default());
+        return Ok((Calibration::default(), Calibration::default()));
     }
     let (evidence, nominal) = nominal_evidence(stated, settings)?;
     let first_uplift = nominal.first(&[rocking::EventKind::Uplift]);
@@ -385,7 +390,10 @@ fn calibrate_nominal(stated: &Case, settings: &Settings) -> Result<Calibration, 
         (Some(a), Some(b)) => a.min(b),
         (a, b) => match a.or(b) {
             Some(t) => t,
-            None => return Ok(Calibration::stated(stated.uncertain.clone())),
+            None => {
+                let stated_values = Calibration::stated(stated.uncertain.clone());
+                return Ok((stated_values.clone(), stated_values));
+            }
         },
     };
     let horizons = CALIBRATION_HORIZONS_S.map(|h| from + h);
@@ -394,14 +402,32 @@ fn calibrate_nominal(stated: &Case, settings: &Settings) -> Result<Calibration, 
         cut.simulate(&cut.block, &cut.nominal_options())
             .map_or(f64::INFINITY, |(_, p)| evidence.misfit_until(&p, until).chi2)
     };
-    Ok(calibration::calibrate_model(stated, &stated.uncertain, None, &horizons, true, &chi2))
+    let whole = calibration::calibrate_model(stated, &stated.uncertain, None, &horizons, true, &chi2);
+    let clean = clean_prefix(stated, &whole, &evidence);
+    Ok((whole, clean))
+}
+
+/// The calibration after the longest horizon up to which its own model still agrees with the
+/// records (no disagreement starts before that horizon), or the stated values when none does
+/// (the unit disagrees from its first uplift on: nothing in the records tells its values apart
+/// from a physics acting all along). A physics that begins mid-record is absorbed by a calibration over the whole record (a
+/// block made wider to mimic an obstacle's push): fitted from the values the records before it
+/// support, the physics is judged against the unit the user has, not against one bent to it.
+fn clean_prefix(stated: &Case, whole: &Calibration, evidence: &Evidence) -> Calibration {
+    let clean = whole.steps.iter().rev().find(|(until, values)| {
+        let Ok(unit) = calibration::with_values(stated, &whole.parameters, values) else { return false };
+        unit.simulate(&unit.block, &unit.nominal_options())
+            .is_ok_and(|(_, p)| evidence.window(&p).is_none_or(|w| w.0 >= *until))
+    });
+    let fitted = clean.map_or_else(|| whole.parameters.iter().map(|p| p.stated).collect(), |(_, v)| v.clone());
+    Calibration { fitted, ..whole.clone() }
 }
 
 pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, DiagnoseError> {
     if stated.accel.is_none() && stated.camera.is_none() {
         return Err(DiagnoseError::NoRecords);
     }
-    let calibration = calibrate_nominal(stated, settings)?;
+    let (calibration, clean) = calibrate_nominal(stated, settings)?;
     let calibrated = calibration.apply(stated)?;
     let case = &calibrated;
     let options = case.nominal_options();
@@ -457,14 +483,23 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
         });
     };
     let before = baseline_candidate(Some(window));
+    // Each physics is fitted on the unit the records support before it begins, from where that
+    // unit first disagrees with them.
+    let clean_unit = clean.apply(stated)?;
+    let (physics_case, physics_calibration, physics_window) = if clean.fitted == calibration.fitted {
+        (case, &calibration, window)
+    } else {
+        let (_, prediction) = clean_unit.simulate(&clean_unit.block, &options)?;
+        (&clean_unit, &clean, evidence.window(&prediction).unwrap_or(window))
+    };
     let fitted: Vec<Candidate> = effects::library()
         .par_iter()
         .map(|effect| {
-            let fit = fit::fit(*effect, case, &evidence, window);
+            let fit = fit::fit(*effect, physics_case, &evidence, physics_window);
             let (calibration, prediction, misfit, evaluations) =
-                recalibrate(stated, &calibration, *effect, &fit, &evidence, window);
+                recalibrate(stated, physics_calibration, &calibration, *effect, &fit, &evidence, physics_window);
             let k = effect.parameter_names().len();
-            let (from, until) = verdict::signature_span(effect.onset(&fit.params, &prediction), window);
+            let (from, until) = verdict::signature_span(effect.onset(&fit.params, &prediction), physics_window);
             let signature_chi2 = evidence.misfit_between(&baseline, from, until).chi2
                 - evidence.misfit_between(&prediction, from, until).chi2;
             Candidate {
@@ -520,6 +555,15 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
             .zip(first_uplift)
             .filter(|(o, u)| (o - u).abs() <= FIRST_UPLIFT_S)
             .map(|(_, u)| u);
+        // Where the records leave the nominal model of the unit as this physics calibrates it:
+        // the nominal calibration without the physics may have bent the unit to it, and leave
+        // the records earlier.
+        let recalibrated = best.calibration.fitted != calibration.fitted;
+        let own = recalibrated.then(|| best.calibration.apply(stated).ok()).flatten().and_then(|unit| {
+            let (_, prediction) = unit.simulate(&unit.block, &options).ok()?;
+            evidence.window(&prediction)
+        });
+        let window = own.unwrap_or(window);
         let onset = onset.unwrap_or(window.0);
         (choice.verdict(&candidates), best.prediction.clone(), (onset.min(window.0), window.1))
     } else {
@@ -564,6 +608,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
 fn recalibrate(
     stated: &Case,
     calibration: &Calibration,
+    whole: &Calibration,
     effect: &dyn effects::Effect,
     fit: &fit::Fit,
     evidence: &Evidence,
@@ -574,7 +619,7 @@ fn recalibrate(
         effect.predict(&m.until(until), &fit.params).map_or(f64::INFINITY, |p| evidence.misfit_until(&p, until).chi2)
     };
     let predict = |c: &Case| effect.predict(c, &fit.params);
-    let whole = |case: &Case| {
+    let run_whole = |case: &Case| {
         let prediction = predict(case).and_then(|p| case.with_sensitivity(evidence, p, predict)).ok()?;
         let misfit = evidence.misfit(&prediction);
         Some((prediction, misfit))
@@ -583,7 +628,8 @@ fn recalibrate(
     // higher restitution read as a slimmer block: seed 3301 mis-stated case_14, B_m −4.7 sd
     // against a truth of −1.2): the physics is also fitted from the stated values.
     let starts = verdict::JointStarts::AlsoStatedWhenBeyond;
-    verdict::recalibrate(stated, calibration, starts, &horizons, &chi2, whole, 2, (fit.prediction.clone(), fit.misfit))
+    let kept = (fit.prediction.clone(), fit.misfit);
+    verdict::recalibrate(stated, calibration, starts, Some(&whole.fitted), &horizons, &chi2, run_whole, 2, kept)
 }
 
 fn explain_none(case: &Case, evidence: &Evidence, rmse: f64) -> String {

@@ -255,13 +255,15 @@ pub enum JointStarts {
 /// The uncertain parameters fitted again with a physics in place (its fitted parameters held
 /// inside `chi2` and `whole`) over growing `horizons`, from the `starts`: the best of those fits
 /// and the nominal calibration by posterior over the whole record, as (calibration, prediction,
-/// misfit, model runs spent). `whole` runs the physics on a calibrated unit over the whole
+/// misfit, model runs spent); `also` is one more start (the nominal calibration over the whole
+/// record, where the physics was fitted on an earlier one). `whole` runs the physics on a calibrated unit over the whole
 /// record (`whole_runs` model runs), `kept` is the physics on the nominal calibration.
 #[allow(clippy::too_many_arguments)]
 pub fn recalibrate<M: Model>(
     stated: &M,
     calibration: &Calibration,
     starts: JointStarts,
+    also: Option<&[f64]>,
     horizons: &[f64],
     chi2: &(dyn Fn(&M, f64) -> f64 + Sync),
     whole: impl Fn(&M) -> Option<(M::Prediction, Misfit)>,
@@ -274,6 +276,9 @@ pub fn recalibrate<M: Model>(
     let mut from: Vec<Option<&[f64]>> = vec![Some(&calibration.fitted)];
     if starts == JointStarts::AlsoStatedWhenBeyond && !calibration.beyond().is_empty() {
         from.push(None);
+    }
+    if let Some(values) = also.filter(|v| *v != calibration.fitted.as_slice()) {
+        from.push(Some(values));
     }
     let (mut best, mut spent) = ((calibration.clone(), kept.0, kept.1), 0);
     for start in from {
@@ -470,9 +475,10 @@ mod tests {
         let spread = calibration::Spread { sd: Some(1.0), rel_sd: None };
         let parameters = calibration::uncertain_parameters(&Knob(0.0), &[("v".to_string(), spread)]).unwrap();
         let run = |fitted: f64, starts: JointStarts| {
-            let nominal = Calibration { parameters: parameters.clone(), fitted: vec![fitted], evaluations: 0 };
+            let nominal =
+                Calibration { parameters: parameters.clone(), fitted: vec![fitted], ..Calibration::default() };
             let kept = (fitted, Misfit { chi2: chi2_of(fitted), samples: 1 });
-            recalibrate(&Knob(0.0), &nominal, starts, &[f64::INFINITY], &chi2, whole, 1, kept)
+            recalibrate(&Knob(0.0), &nominal, starts, None, &[f64::INFINITY], &chi2, whole, 1, kept)
         };
         let (only, _, _, once) = run(4.6, JointStarts::Calibrated);
         assert!((only.fitted[0] - 4.38).abs() < 0.02, "{}", only.fitted[0]);

@@ -516,7 +516,7 @@ fn recalibrate(
         Some((track, misfit))
     };
     let starts = verdict::JointStarts::Calibrated;
-    verdict::recalibrate(stated, calibration, starts, &horizons, &chi2, whole, 1, (fit.track.clone(), fit.misfit))
+    verdict::recalibrate(stated, calibration, starts, None, &horizons, &chi2, whole, 1, (fit.track.clone(), fit.misfit))
 }
 
 pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiagnosis, DiagnoseError> {
