@@ -5,7 +5,8 @@ rerun of the whole archive.
 
 Prints, per executor: wall time, work units run, wall time per unit, files created (artifacts
 and lockfile, not shakeflow's state folder), their bytes, the state's size (the lockfile, now a
-root, and every stage's state file in `.shakeflow/state/`) and the commit's time; for Slurm also
+root, and every stage's state file in `.shakeflow/state/`), the commit's time and the planning
+time (`run --dry-run`, on the empty output folder and on the committed state); for Slurm also
 array tasks, the per-task overhead over the local run, the commit job's time (Slurm's start/end,
 1 s resolution), the state each array task read (its own log line: the root and its stage's and
 upstream stages' state files), and whether both states (root and state files) are identical. The no-op
@@ -141,10 +142,10 @@ def main():
         growth.append((tests, measure(a, tests)))
     if len(growth) > 1:
         print("\ngrowth with the archive (local executor):")
-        print(f"{'tests':>6} {'units':>6} {'wall s':>8} {'commit s':>9} {'no-op s':>8} {'ms/unit':>8} "
+        print(f"{'tests':>6} {'units':>6} {'wall s':>8} {'plan s':>7} {'commit s':>9} {'no-op s':>8} {'ms/unit':>8} "
               f"{'state KB/task':>14} {'memo KB':>8} {'most entries':>13} {'Slurm commit job s':>19}")
         for tests, r in growth:
-            print(f"{tests:6d} {r['units']:6d} {r['wall']:8.2f} {r['commit']:9.2f} {r['noop']:8.2f} "
+            print(f"{tests:6d} {r['units']:6d} {r['wall']:8.2f} {r['plan_fresh']:7.2f} {r['commit']:9.2f} {r['noop']:8.2f} "
                   f"{1000 * r['noop'] / max(r['checked'], 1):8.3f} {r['state'] / 1e3:14.1f} {r['memo'] / 1e3:8.1f} {r['most'][0]:13d} "
                   f"{r.get('slurm_commit', float('nan')):19.0f}")
 
@@ -168,6 +169,9 @@ def measure(a, tests):
 
     # Local.
     local = project(work / "local", archive)
+    # Planning: `run --dry-run` (sources hashed, every stage split into units and assessed),
+    # on the empty output folder and, after the run, on its committed state.
+    plan_fresh, _, _ = timed_run([shakeflow, "run", "pipeline.yaml", *stages, "--dry-run"], local)
     env = dict(os.environ, SHAKEFLOW_FAILPOINT="trace")
     wall, lines, code = timed_run([shakeflow, "run", "pipeline.yaml", *stages], local, env)
     if code != 0:
@@ -191,9 +195,12 @@ def measure(a, tests):
         noops.append(w)
     w, lines, _ = timed_run([shakeflow, "status", "pipeline.yaml"], local)
     status_wall = w
+    plan_committed, _, _ = timed_run([shakeflow, "run", "pipeline.yaml", *stages, "--dry-run"], local)
     memo = local / "out/.shakeflow/hashes.json"
     report["local"].update(
         noop=min(noops),
+        plan_fresh=plan_fresh,
+        plan_committed=plan_committed,
         # Every unit of the covered stages is checked by a no-op: the state's entries.
         checked=state_units(local / "out"),
         memo=memo.stat().st_size if memo.exists() else 0,
@@ -271,6 +278,8 @@ def measure(a, tests):
         )
         report["local"]["slurm_commit"] = s["commit"]
     print("no-op reruns: " + ", ".join(f"{w:.2f} s" for w in noops) + f"; status {status_wall:.2f} s")
+    print(f"planning (`run --dry-run`): {plan_fresh:.2f} s on the empty output folder, "
+          f"{plan_committed:.2f} s on the committed state")
     r = report["local"]
     print(
         f"engine overhead per unit (no-op / units checked): {1000 * r['noop'] / max(r['checked'], 1):.3f} ms "

@@ -8,6 +8,7 @@
 
 use std::path::{Component, Path, PathBuf};
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::layout::{LOCK_FILE, STAGE_MARKER, STATE_DIR};
@@ -120,11 +121,20 @@ pub fn check_output_dir(file: &PipelineFile, files: &[PathBuf]) -> Result<(), Us
             });
         }
     }
+    // Which files are links, asked of all at once: one `lstat` each, the run's largest share of
+    // them (one per record file), and the folders resolved once each below.
+    let links: Vec<bool> = files.par_iter().map(|f| is_link(f)).collect();
     let mut folders = ResolvedFolders::default();
-    if let Some(input) = files.iter().find(|f| folders.resolve(f).starts_with(&output_dir)) {
+    if let Some((input, _)) =
+        files.iter().zip(links).find(|(f, link)| folders.resolve_known(f, *link).starts_with(&output_dir))
+    {
         return Err(inside(&input.display().to_string()));
     }
     Ok(())
+}
+
+fn is_link(path: &Path) -> bool {
+    std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink())
 }
 
 /// [`resolved`] for many files, most of them side by side: a file or folder is its folder's
@@ -136,16 +146,17 @@ pub fn check_output_dir(file: &PipelineFile, files: &[PathBuf]) -> Result<(), Us
 struct ResolvedFolders(std::collections::HashMap<PathBuf, PathBuf>);
 
 impl ResolvedFolders {
-    fn resolve(&mut self, path: &Path) -> PathBuf {
+    /// `path` resolved, `link` telling whether it is a symbolic link (its `lstat`, asked by the caller).
+    fn resolve_known(&mut self, path: &Path, link: bool) -> PathBuf {
         let folder = path.parent().filter(|f| !f.as_os_str().is_empty());
         let (Some(folder), Some(name)) = (folder, path.file_name()) else { return resolved(path) };
-        if std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink()) {
+        if link {
             return resolved(path);
         }
         if let Some(known) = self.0.get(folder) {
             return known.join(name);
         }
-        let real = self.resolve(folder);
+        let real = self.resolve_known(folder, is_link(folder));
         let joined = real.join(name);
         self.0.insert(folder.to_path_buf(), real);
         joined
@@ -298,10 +309,12 @@ mod tests {
             "data/b/new/deeper/d.csv",
             "data/a/../b/o.csv",
         ] {
-            assert_eq!(folders.resolve(&d.join(file)), resolved(&d.join(file)), "{file}");
+            assert_eq!(folders.resolve_known(&d.join(file), is_link(&d.join(file))), resolved(&d.join(file)), "{file}");
         }
-        assert_eq!(folders.resolve(Path::new("r.csv")), resolved(Path::new("r.csv")));
+        assert_eq!(folders.resolve_known(Path::new("r.csv"), false), resolved(Path::new("r.csv")));
         // What the output folder check relies on: a link into it is seen through.
-        assert!(folders.resolve(&d.join("data/a/link.csv")).starts_with(d.canonicalize().unwrap().join("out")));
+        assert!(folders
+            .resolve_known(&d.join("data/a/link.csv"), true)
+            .starts_with(d.canonicalize().unwrap().join("out")));
     }
 }

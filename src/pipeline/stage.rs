@@ -51,11 +51,10 @@ pub struct InputPart {
     pub hash: String,
 }
 
-// A handful exist per run: boxing the source spec would buy nothing.
-#[allow(clippy::large_enum_variant)]
+/// One per work unit (each holding its record's parts): the source's spec is shared, not copied.
 #[derive(Debug, Clone)]
 pub enum StageInput {
-    Source { name: String, spec: SourceSpec, base_dir: PathBuf, files: Vec<InputPart> },
+    Source { name: String, spec: Arc<SourceSpec>, base_dir: PathBuf, files: Vec<InputPart> },
     Dataset { name: String, parts: Vec<InputPart> },
 }
 

@@ -3,6 +3,7 @@
 
 use std::collections::BTreeMap;
 
+use rayon::prelude::*;
 use serde_json::json;
 
 use super::plan::PlannedStage;
@@ -40,7 +41,7 @@ impl Unit {
             StageInput::Source { name, spec, files, .. }
                 if files.len() == 1 || spec.components.is_some() && !files.is_empty() =>
             {
-                Some((name.as_str(), spec, &files[0]))
+                Some((name.as_str(), spec.as_ref(), &files[0]))
             }
             _ => None,
         })
@@ -77,7 +78,7 @@ pub fn split(
         .iter()
         .filter_map(|input| match input {
             StageInput::Source { name, spec, .. } => {
-                let spec = crate::pipeline::spec::SourceSpec { on_error: Default::default(), ..spec.clone() };
+                let spec = crate::pipeline::spec::SourceSpec { on_error: Default::default(), ..spec.as_ref().clone() };
                 let how = serde_json::to_string(&spec).expect("specs serialise");
                 Some((format!("source {name}"), hash::hash_bytes(how.as_bytes())))
             }
@@ -98,13 +99,19 @@ pub fn split(
         }
         Unit { id, inputs, hashes }
     };
+    // Units are built in parallel: a no-op rerun builds every unit of every stage.
     let mut units: Vec<Unit> = match stage.stage.work_units() {
         WorkUnits::Gather => vec![unit(GATHER.to_string(), inputs.to_vec())],
-        WorkUnits::EachRecord => inputs
-            .iter()
-            .flat_map(|input| record_files(input).into_iter().map(move |parts| (input, parts)))
-            .map(|(input, parts)| unit(partition_path(&parts[0].partition), vec![only(input, parts)]))
-            .collect(),
+        WorkUnits::EachRecord => {
+            let records: Vec<(&StageInput, Vec<InputPart>)> = inputs
+                .iter()
+                .flat_map(|input| record_files(input).into_iter().map(move |parts| (input, parts)))
+                .collect();
+            records
+                .into_par_iter()
+                .map(|(input, parts)| unit(partition_path(&parts[0].partition), vec![only(input, parts)]))
+                .collect()
+        }
         WorkUnits::PerRecordOf { primary } => {
             let Some(main) = inputs.get(primary) else {
                 anyhow::bail!(
@@ -114,24 +121,33 @@ pub fn split(
                     inputs.len()
                 );
             };
-            // Each secondary input's companions of every primary record, asked once per input.
-            let companions: Vec<Option<Vec<Vec<InputPart>>>> = inputs
+            // Each secondary input's companions of every primary record, asked once per input,
+            // then handed to the records they belong to (moved, not copied).
+            let mut companions: Vec<Option<std::vec::IntoIter<Vec<InputPart>>>> = inputs
                 .iter()
                 .enumerate()
-                .map(|(i, input)| (i != primary).then(|| stage.stage.companions(&stage.params, main.parts(), input)))
+                .map(|(i, input)| {
+                    (i != primary).then(|| stage.stage.companions(&stage.params, main.parts(), input).into_iter())
+                })
                 .collect();
-            main.parts()
+            let records: Vec<(&InputPart, Vec<Vec<InputPart>>)> = main
+                .parts()
                 .iter()
-                .enumerate()
-                .map(|(n, part)| {
-                    let parts = inputs
-                        .iter()
-                        .zip(&companions)
-                        .map(|(input, chosen)| {
-                            let chosen = chosen.as_ref().map_or_else(|| vec![part.clone()], |c| c[n].clone());
-                            only(input, chosen)
+                .map(|part| {
+                    let chosen = companions
+                        .iter_mut()
+                        .map(|c| match c {
+                            Some(c) => c.next().expect("one list of companions per primary record"),
+                            None => vec![part.clone()],
                         })
                         .collect();
+                    (part, chosen)
+                })
+                .collect();
+            records
+                .into_par_iter()
+                .map(|(part, chosen)| {
+                    let parts = inputs.iter().zip(chosen).map(|(input, chosen)| only(input, chosen)).collect();
                     unit(partition_path(&part.partition), parts)
                 })
                 .collect()

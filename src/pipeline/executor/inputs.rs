@@ -72,9 +72,12 @@ pub(super) fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSo
             .collect();
         let input = match spec.format {
             RecordFormat::Dataset => StageInput::Dataset { name: name.to_string(), parts },
-            _ => {
-                StageInput::Source { name: name.to_string(), spec: spec.clone(), base_dir: base.clone(), files: parts }
-            }
+            _ => StageInput::Source {
+                name: name.to_string(),
+                spec: std::sync::Arc::new(spec.clone()),
+                base_dir: base.clone(),
+                files: parts,
+            },
         };
         resolved.insert(name.to_string(), ResolvedSource { input });
     }

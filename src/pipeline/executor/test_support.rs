@@ -59,7 +59,7 @@ pub fn sources(plan: &Plan, records: &[(&str, &str)]) -> BTreeMap<String, Resolv
         .collect();
     let input = StageInput::Source {
         name: "daq".into(),
-        spec: plan.file.spec.inputs["daq"].clone(),
+        spec: std::sync::Arc::new(plan.file.spec.inputs["daq"].clone()),
         base_dir: plan.file.base_dir(),
         files,
     };
