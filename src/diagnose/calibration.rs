@@ -578,9 +578,9 @@ mod tests {
     }
 
     /// The records up to 1 s want v = 1; up to 2 s (a change begins) only v = 3; over the whole
-    /// record v = 1 is best (χ² 0) but v = 3 keeps a local well (χ² 50; prior sd 1). The search carried from
-    /// horizon to horizon ends in the well; the first horizon's optimum, judged on the whole
-    /// record too, wins. Each horizon's best is kept in `steps`.
+    /// record v = 1 is best (χ² 0) but v = 3 keeps a local well (χ² 50; prior sd 1). The search
+    /// carried from horizon to horizon ends in the well; the first horizon's optimum, judged on
+    /// the whole record too, wins. Each horizon's best is kept in `steps`.
     #[test]
     fn every_horizons_optimum_competes_on_the_whole_record() {
         let line = Line { slope: 0.0, offsets: [0.0, 0.0] };

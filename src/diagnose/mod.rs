@@ -410,17 +410,24 @@ fn calibrate_nominal(stated: &Case, settings: &Settings) -> Result<(Calibration,
 /// The calibration after the longest horizon up to which its own model still agrees with the
 /// records (no disagreement starts before that horizon), or the stated values when none does
 /// (the unit disagrees from its first uplift on: nothing in the records tells its values apart
-/// from a physics acting all along). A physics that begins mid-record is absorbed by a calibration over the whole record (a
-/// block made wider to mimic an obstacle's push): fitted from the values the records before it
-/// support, the physics is judged against the unit the user has, not against one bent to it.
+/// from a physics acting all along). A physics that begins mid-record is absorbed by a
+/// calibration over the whole record (a block made wider to mimic an obstacle's push): fitted
+/// from the values the records before it support, the physics is judged against the unit the
+/// user has, not against one bent to it.
 fn clean_prefix(stated: &Case, whole: &Calibration, evidence: &Evidence) -> Calibration {
     let clean = whole.steps.iter().rev().find(|(until, values)| {
         let Ok(unit) = calibration::with_values(stated, &whole.parameters, values) else { return false };
-        unit.simulate(&unit.block, &unit.nominal_options())
-            .is_ok_and(|(_, p)| evidence.window(&p).is_none_or(|w| w.0 >= *until))
+        nominal_window(&unit, evidence).is_ok_and(|w| w.is_none_or(|w| w.0 >= *until))
     });
     let fitted = clean.map_or_else(|| whole.parameters.iter().map(|p| p.stated).collect(), |(_, v)| v.clone());
     Calibration { fitted, ..whole.clone() }
+}
+
+/// Where the records leave the nominal model of `unit` (its plain run, without the chaotic
+/// spread): None when they never do.
+fn nominal_window(unit: &Case, evidence: &Evidence) -> Result<Option<(f64, f64)>, PhysicsError> {
+    let (_, prediction) = unit.simulate(&unit.block, &unit.nominal_options())?;
+    Ok(evidence.window(&prediction))
 }
 
 pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, DiagnoseError> {
@@ -485,12 +492,12 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
     let before = baseline_candidate(Some(window));
     // Each physics is fitted on the unit the records support before it begins, from where that
     // unit first disagrees with them.
-    let clean_unit = clean.apply(stated)?;
+    let clean_unit;
     let (physics_case, physics_calibration, physics_window) = if clean.fitted == calibration.fitted {
         (case, &calibration, window)
     } else {
-        let (_, prediction) = clean_unit.simulate(&clean_unit.block, &options)?;
-        (&clean_unit, &clean, evidence.window(&prediction).unwrap_or(window))
+        clean_unit = clean.apply(stated)?;
+        (&clean_unit, &clean, nominal_window(&clean_unit, &evidence)?.unwrap_or(window))
     };
     let fitted: Vec<Candidate> = effects::library()
         .par_iter()
@@ -558,11 +565,9 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
         // Where the records leave the nominal model of the unit as this physics calibrates it:
         // the nominal calibration without the physics may have bent the unit to it, and leave
         // the records earlier.
-        let recalibrated = best.calibration.fitted != calibration.fitted;
-        let own = recalibrated.then(|| best.calibration.apply(stated).ok()).flatten().and_then(|unit| {
-            let (_, prediction) = unit.simulate(&unit.block, &options).ok()?;
-            evidence.window(&prediction)
-        });
+        let own = (best.calibration.fitted != calibration.fitted)
+            .then(|| nominal_window(&best.calibration.apply(stated).ok()?, &evidence).ok()?)
+            .flatten();
         let window = own.unwrap_or(window);
         let onset = onset.unwrap_or(window.0);
         (choice.verdict(&candidates), best.prediction.clone(), (onset.min(window.0), window.1))

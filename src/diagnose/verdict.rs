@@ -256,8 +256,9 @@ pub enum JointStarts {
 /// inside `chi2` and `whole`) over growing `horizons`, from the `starts`: the best of those fits
 /// and the nominal calibration by posterior over the whole record, as (calibration, prediction,
 /// misfit, model runs spent); `also` is one more start (the nominal calibration over the whole
-/// record, where the physics was fitted on an earlier one). `whole` runs the physics on a calibrated unit over the whole
-/// record (`whole_runs` model runs), `kept` is the physics on the nominal calibration.
+/// record, where the physics was fitted on an earlier one). `whole` runs the physics on a
+/// calibrated unit over the whole record (`whole_runs` model runs), `kept` is the physics on the
+/// calibration it was fitted on.
 #[allow(clippy::too_many_arguments)]
 pub fn recalibrate<M: Model>(
     stated: &M,
