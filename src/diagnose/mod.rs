@@ -10,9 +10,11 @@
 //! 3. Every effect of the library ([`effects`], one file each) is fitted over a growing horizon
 //!    past the window's start: zooming grids over its few parameters, then Nelder–Mead from the
 //!    best grid points ([`fit`]). With an `uncertainty` block the unit's values are calibrated
-//!    first ([`calibration`]); a physics is fitted on the values the records support before it
-//!    begins ([`clean_prefix`]), then recalibrated with it from those and from the whole
-//!    record's calibration, which may have bent the unit to the physics.
+//!    first ([`calibration`]); a physics is searched jointly with them from the values the
+//!    records support before it begins ([`clean_prefix`]), then recalibrated with it from those
+//!    and from the whole record's calibration, which may have bent the unit to the physics. Its
+//!    signature is judged against the nominal model on its own values, and those compete as
+//!    the nominal calibration.
 //! 4. Candidates are ranked by BIC (noise-normalised squared residuals + k ln N); the best one is
 //!    accepted when it explains the disagreement (it cuts the window's misfit at least threefold
 //!    and its own residuals flag at most 12 % of the samples the baseline's flagged); otherwise the
@@ -358,6 +360,8 @@ const FIRST_UPLIFT_S: f64 = 0.1;
 const CALIBRATION_HORIZONS_S: [f64; 8] = [0.5, 1.0, 1.5, 3.0, 5.0, 7.0, 10.0, f64::INFINITY];
 /// Horizons of the recalibration with a physics, after the window's start (s).
 const JOINT_HORIZONS_S: [f64; 3] = [1.5, 4.0, f64::INFINITY];
+/// ... and after the unit's first uplift, where that comes later (s).
+const JOINT_UPLIFT_HORIZONS_S: [f64; 2] = [1.5, 4.0];
 
 /// The evidence of the nominal model as `case` states it: the model under the usual and under
 /// other solver settings (samples where they differ are not evidence).
@@ -434,100 +438,100 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
     if stated.accel.is_none() && stated.camera.is_none() {
         return Err(DiagnoseError::NoRecords);
     }
-    let (calibration, clean) = calibrate_nominal(stated, settings)?;
+    let (mut calibration, clean) = calibrate_nominal(stated, settings)?;
     let calibrated = calibration.apply(stated)?;
     let case = &calibrated;
-    let options = case.nominal_options();
     let (evidence, nominal) = nominal_evidence(case, settings)?;
-    let baseline = case.with_sensitivity(&evidence, nominal, |c| Ok(c.simulate(&c.block, &options)?.1))?;
-    let base_misfit = evidence.misfit(&baseline);
-    let window = evidence.window(&baseline);
+    let with_spread = |unit: &Case, plain: Prediction| {
+        unit.with_sensitivity(&evidence, plain, |c| Ok(c.simulate(&c.block, &c.nominal_options())?.1))
+    };
+    let plain_chi2 = evidence.misfit(&nominal).chi2;
+    let mut baseline = with_spread(case, nominal)?;
+    let mut base_misfit = evidence.misfit(&baseline);
     let n = base_misfit.samples.max(1) as f64;
     // Every calibrated parameter is paid for, by every candidate: its prior and ln N.
     let calibrated_count = calibration.parameters.iter().filter(|p| case.constrains(&p.key)).count() as f64;
     let price = |c: &Calibration, k: usize| c.prior_chi2() + (k as f64 + calibrated_count) * n.ln();
-    let baseline_candidate = |window: Option<(f64, f64)>| Candidate {
-        effect: "none",
-        params: Vec::new(),
-        rmse: evidence.window_rmse(&baseline, window),
-        bic: base_misfit.chi2 + price(&calibration, 0),
-        score: 0.0,
-        flagged: evidence.flagged(&baseline),
-        misfit: base_misfit,
-        evaluations: 1 + calibration.evaluations,
-        sentence: "the nominal rigid-block model (Eq. 20-24) as the equipment file describes it".into(),
-        prediction: baseline.clone(),
-        signature_chi2: None,
-        calibration: calibration.clone(),
-        extra: (),
-    };
     let noise = Noise { accel_mps2: case.accel_noise_mps2, camera_m: None, camera_rad: case.camera_noise_rad };
-    let Some(window) = window else {
-        let mut only = baseline_candidate(None);
-        only.score = 1.0;
-        let rmse = only.rmse;
-        let discrepancy = verdict::Discrepancy::new(
-            std::slice::from_ref(&only),
-            rmse,
-            evidence.largest(&baseline, (f64::NEG_INFINITY, f64::INFINITY)),
-        );
-        return Ok(Diagnosis {
-            case: case.name.clone(),
-            mismatch: false,
-            verdict: Verdict::None,
-            window: None,
-            rmse_before: rmse,
-            rmse_after: rmse,
-            explanation: explain_none(case, &evidence, rmse) + &calibration.note(true),
-            candidates: vec![only],
-            noise,
-            predictability: None,
-            model: baseline.clone(),
-            baseline,
-            evidence,
-            calibration,
-            discrepancy,
-        });
+    let Some(first_window) = evidence.window(&baseline) else {
+        return Ok(settled(case, &evidence, baseline, calibration, price, noise));
     };
-    let before = baseline_candidate(Some(window));
     // Each physics is fitted on the unit the records support before it begins, from where that
     // unit first disagrees with them.
     let clean_unit;
     let (physics_case, physics_calibration, physics_window) = if clean.fitted == calibration.fitted {
-        (case, &calibration, window)
+        (case, &calibration, first_window)
     } else {
         clean_unit = clean.apply(stated)?;
-        (&clean_unit, &clean, nominal_window(&clean_unit, &evidence)?.unwrap_or(window))
+        (&clean_unit, &clean, nominal_window(&clean_unit, &evidence)?.unwrap_or(first_window))
     };
-    let fitted: Vec<Candidate> = effects::library()
+    // The physics is searched jointly with the uncertain parameters its predictions depend on.
+    let joint: Vec<usize> =
+        (0..calibration.parameters.len()).filter(|&i| case.constrains(&calibration.parameters[i].key)).collect();
+    let joint_parameters: Vec<Uncertain> = joint.iter().map(|&i| calibration.parameters[i].clone()).collect();
+    let fitted: Vec<(Candidate, Option<(Prediction, Misfit, f64)>)> = effects::library()
         .par_iter()
         .map(|effect| {
-            let fit = fit::fit(*effect, physics_case, &evidence, physics_window);
-            let (calibration, prediction, misfit, evaluations) =
-                recalibrate(stated, physics_calibration, &calibration, *effect, &fit, &evidence, physics_window);
+            let fit = fit::fit(*effect, physics_case, &evidence, physics_window, &joint_parameters);
+            let mut fitted_with = physics_calibration.clone();
+            for (&i, &v) in joint.iter().zip(&fit.values) {
+                fitted_with.fitted[i] = v;
+            }
+            let (own, prediction, misfit, evaluations) =
+                recalibrate(stated, &fitted_with, &calibration, *effect, &fit, &evidence, physics_window);
+            // The nominal model of the unit as this physics calibrates it: what the physics adds
+            // to its own calibration is its signature, and that calibration competes as the
+            // nominal one (a joint search can find a basin the nominal calibration missed).
+            let own_nominal = (own.fitted != calibration.fitted)
+                .then(|| {
+                    let unit = own.apply(stated).ok()?;
+                    let (_, plain) = unit.simulate(&unit.block, &unit.nominal_options()).ok()?;
+                    let plain_chi2 = evidence.misfit(&plain).chi2;
+                    let spread = with_spread(&unit, plain).ok()?;
+                    let misfit = evidence.misfit(&spread);
+                    Some((spread, misfit, plain_chi2))
+                })
+                .flatten();
+            let without = own_nominal.as_ref().map_or(&baseline, |o| &o.0);
             let k = effect.parameter_names().len();
             let (from, until) = verdict::signature_span(effect.onset(&fit.params, &prediction), physics_window);
-            let signature_chi2 = evidence.misfit_between(&baseline, from, until).chi2
+            let signature_chi2 = evidence.misfit_between(without, from, until).chi2
                 - evidence.misfit_between(&prediction, from, until).chi2;
-            Candidate {
+            let candidate = Candidate {
                 effect: effect.name(),
                 params: effect.parameter_names().iter().copied().zip(fit.params.iter().copied()).collect(),
-                bic: misfit.chi2 + price(&calibration, k),
-                rmse: evidence.window_rmse(&prediction, Some(window)),
+                bic: misfit.chi2 + price(&own, k),
+                rmse: evidence.window_rmse(&prediction, Some(first_window)),
                 score: 0.0,
                 flagged: evidence.flagged(&prediction),
-                sentence: effect.explain(&calibration.apply(stated).unwrap_or_else(|_| case.clone()), &fit.params),
+                sentence: effect.explain(&own.apply(stated).unwrap_or_else(|_| case.clone()), &fit.params),
                 misfit,
-                evaluations: fit.evaluations + evaluations,
+                evaluations: fit.evaluations + evaluations + 2 * usize::from(own_nominal.is_some()),
                 prediction,
                 signature_chi2: Some(signature_chi2),
-                calibration,
+                calibration: own,
                 extra: (),
-            }
+            };
+            (candidate, own_nominal)
         })
         .collect();
-    let mut candidates = vec![before];
-    candidates.extend(fitted);
+    // The best nominal calibration found, by posterior over the whole record as the nominal
+    // calibration judges it (its plain run: a chaotic spread that covers the records is not a
+    // calibration that explains them).
+    let better = fitted
+        .iter()
+        .filter_map(|(c, own)| own.as_ref().map(|(p, m, plain)| (plain + c.calibration.prior_chi2(), c, p, m)))
+        .filter(|o| o.0 < plain_chi2 + calibration.prior_chi2())
+        .reduce(|a, b| if b.0 < a.0 { b } else { a });
+    if let Some((_, c, p, m)) = better {
+        (calibration, baseline, base_misfit) = (c.calibration.clone(), p.clone(), *m);
+    }
+    let Some(window) = evidence.window(&baseline) else {
+        return Ok(settled(case, &evidence, baseline, calibration, price, noise));
+    };
+    let bic = base_misfit.chi2 + price(&calibration, 0);
+    let mut candidates = vec![nominal_candidate(&evidence, &baseline, base_misfit, &calibration, bic, Some(window))];
+    candidates.extend(fitted.into_iter().map(|(c, _)| c));
     verdict::rank(&mut candidates);
     let (base_bic, base_rmse) = (candidates[0].bic, candidates[0].rmse);
     let flagged_before = candidates[0].flagged.max(1) as f64;
@@ -608,6 +612,70 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
     })
 }
 
+/// What the nominal model is called in a diagnosis.
+const NOMINAL_SENTENCE: &str = "the nominal rigid-block model (Eq. 20-24) as the equipment file describes it";
+
+/// The nominal model as a candidate, its misfit `rmse` within `window` (None: the whole record).
+fn nominal_candidate(
+    evidence: &Evidence,
+    baseline: &Prediction,
+    misfit: Misfit,
+    calibration: &Calibration,
+    bic: f64,
+    window: Option<(f64, f64)>,
+) -> Candidate {
+    Candidate {
+        effect: "none",
+        params: Vec::new(),
+        rmse: evidence.window_rmse(baseline, window),
+        bic,
+        score: 0.0,
+        flagged: evidence.flagged(baseline),
+        misfit,
+        evaluations: 1 + calibration.evaluations,
+        sentence: NOMINAL_SENTENCE.into(),
+        prediction: baseline.clone(),
+        signature_chi2: None,
+        calibration: calibration.clone(),
+        extra: (),
+    }
+}
+
+/// The diagnosis of a unit whose records its (calibrated) nominal model explains.
+fn settled(
+    case: &Case,
+    evidence: &Evidence,
+    baseline: Prediction,
+    calibration: Calibration,
+    price: impl Fn(&Calibration, usize) -> f64,
+    noise: Noise,
+) -> Diagnosis {
+    let misfit = evidence.misfit(&baseline);
+    let bic = misfit.chi2 + price(&calibration, 0);
+    let only = Candidate { score: 1.0, ..nominal_candidate(evidence, &baseline, misfit, &calibration, bic, None) };
+    let rmse = only.rmse;
+    let everywhere = (f64::NEG_INFINITY, f64::INFINITY);
+    let discrepancy =
+        verdict::Discrepancy::new(std::slice::from_ref(&only), rmse, evidence.largest(&baseline, everywhere));
+    Diagnosis {
+        case: case.name.clone(),
+        mismatch: false,
+        verdict: Verdict::None,
+        window: None,
+        rmse_before: rmse,
+        rmse_after: rmse,
+        explanation: explain_none(case, evidence, rmse) + &calibration.note(true),
+        candidates: vec![only],
+        noise,
+        predictability: None,
+        model: baseline.clone(),
+        baseline,
+        evidence: evidence.clone(),
+        calibration,
+        discrepancy,
+    }
+}
+
 /// The uncertain parameters fitted again with a physics in place ([`verdict::recalibrate`]): the
 /// rocking model's prediction with its chaotic sensitivity (two runs) over the whole record.
 fn recalibrate(
@@ -619,7 +687,15 @@ fn recalibrate(
     evidence: &Evidence,
     window: (f64, f64),
 ) -> (Calibration, Prediction, Misfit, usize) {
-    let horizons = JOINT_HORIZONS_S.map(|h| window.0 + h);
+    let mut horizons = JOINT_HORIZONS_S.map(|h| window.0 + h).to_vec();
+    // Where the unit first rocks long after the disagreement began, its dimensions are fitted
+    // from there too: before it they change nothing.
+    if let Some(uplift) = fit::first_uplift(&calibration.apply(stated).unwrap_or_else(|_| stated.clone()))
+        .filter(|u| *u > window.0 + JOINT_HORIZONS_S[0])
+    {
+        horizons.extend(JOINT_UPLIFT_HORIZONS_S.map(|h| uplift + h));
+        horizons.sort_by(f64::total_cmp);
+    }
     let chi2 = |m: &Case, until: f64| {
         effect.predict(&m.until(until), &fit.params).map_or(f64::INFINITY, |p| evidence.misfit_until(&p, until).chi2)
     };
@@ -712,7 +788,7 @@ mod tests {
 
     /// A slender block (B 0.5 m, H 1.5 m) on a 1.2 Hz floor strong enough to rock it hard, with
     /// a vertical component: 12 s at 200 Hz.
-    fn rocking_case() -> Case {
+    pub(crate) fn rocking_case() -> Case {
         let block = Block::new(Shape::Rectangular { b_m: 0.5, h_m: 1.5, f: 0.0 }, 100.0, 9.81).unwrap();
         let (dt, n) = (0.005, 2400);
         let wave = |amplitude: f64, hz: f64| -> Vec<f64> {
