@@ -204,16 +204,17 @@ fn an_uncertainty_key_that_is_not_a_nominal_parameter_is_refused_at_its_line() {
 /// Demo cases whose stated geometry is off (../shared/cases/misstated_demo/rocking: `f`, `H_m`,
 /// `B_m` stated 0.5–1.5 sd off, with their `uncertainty` block): `diagnosis.json` carries
 /// `calibration` for each uncertain parameter, and the verdict is still the concealed one (demo_01
-/// a tilting sensor, demo_03 a clock offset, `unexplained`, demo_04 an obstacle). demo_04's
-/// obstacle is absorbed by a calibration over the whole record: it is named because the physics
-/// is fitted on the unit the records before it support, which also puts every value at least
-/// twice as close to the truth as the stated one and the onset at the first contact. (demo_02, a
-/// mass change, is `unexplained`: docs/models/diagnosis.md, "Measured".)
+/// a tilting sensor, demo_02 a mass change, demo_03 a clock offset, `unexplained`, demo_04 an
+/// obstacle). demo_04's obstacle is absorbed by a calibration over the whole record: it is named
+/// because the physics is fitted on the unit the records before it support, which also puts every
+/// value at least twice as close to the truth as the stated one and the onset at the first
+/// contact. demo_02 is named since the physics is searched jointly with the dimensions
+/// (`diagnose` v18; before, `unexplained`).
 #[test]
 fn misstated_rocking_cases_are_calibrated_before_a_physics_is_named() {
     let out = crate::tempdir::tempdir().unwrap();
     let base = shared_dir().join("cases/misstated_demo/rocking");
-    let ids = ["demo_01", "demo_03", "demo_04"];
+    let ids = ["demo_01", "demo_02", "demo_03", "demo_04"];
     let dirs: Vec<String> = ids.iter().map(|id| base.join(id).display().to_string()).collect();
     let mut args = vec!["diagnose"];
     args.extend(dirs.iter().map(String::as_str));
