@@ -163,7 +163,7 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
     let mut horizons: Vec<(f64, f64, usize)> = HORIZONS.map(|(h, span, levels)| (window.0 + h, span, levels)).to_vec();
     // The block's dimensions show only once it rocks: a physics seen long before the first
     // uplift (a flexible mount) is searched with them from there too.
-    if let Some(uplift) = first_uplift(case).filter(|u| !joint.is_empty() && *u > window.0 + HORIZONS[0].0) {
+    if let Some(uplift) = case.first_uplift().filter(|u| !joint.is_empty() && *u > window.0 + HORIZONS[0].0) {
         horizons.extend(UPLIFT_HORIZONS.map(|(h, span, levels)| (uplift + h, span, levels)));
         horizons.sort_by(|a, b| a.0.total_cmp(&b.0));
     }
@@ -316,12 +316,6 @@ impl Space<'_> {
         let cost = state.get_best_cost();
         (cost <= start_cost).then(|| (cost, Scaled { space: self, until, template: start }.params(&u)))
     }
-}
-
-/// When the nominal model of `case` first lifts off (None: it never does, or cannot run).
-pub fn first_uplift(case: &Case) -> Option<f64> {
-    let (_, prediction) = case.simulate(&case.block, &case.nominal_options()).ok()?;
-    prediction.first(&[crate::physics::rocking::EventKind::Uplift])
 }
 
 /// What a model that cannot run predicts: nothing (every residual is NaN, never accepted).

@@ -184,6 +184,16 @@ impl Case {
         Options { sensor_height_m: self.sensor_height_m, ..Options::default() }
     }
 
+    /// The nominal model's plain run (without the chaotic spread).
+    pub fn nominal(&self) -> Result<Prediction, PhysicsError> {
+        Ok(self.simulate(&self.block, &self.nominal_options())?.1)
+    }
+
+    /// When the nominal model first lifts off (None: it never does, or cannot run).
+    pub fn first_uplift(&self) -> Option<f64> {
+        self.nominal().ok()?.first(&[rocking::EventKind::Uplift])
+    }
+
     /// Runs the rocking model with `options` and reads the top accelerometer the usual way.
     pub fn simulate(&self, block: &Block, options: &Options) -> Result<(rocking::Response, Prediction), PhysicsError> {
         let response = rocking::simulate(block, &self.excitation(), options)?;
@@ -402,9 +412,7 @@ fn calibrate_nominal(stated: &Case, settings: &Settings) -> Result<(Calibration,
     };
     let horizons = CALIBRATION_HORIZONS_S.map(|h| from + h);
     let chi2 = |m: &Case, until: f64| {
-        let cut = m.until(until);
-        cut.simulate(&cut.block, &cut.nominal_options())
-            .map_or(f64::INFINITY, |(_, p)| evidence.misfit_until(&p, until).chi2)
+        m.until(until).nominal().map_or(f64::INFINITY, |p| evidence.misfit_until(&p, until).chi2)
     };
     let whole = calibration::calibrate_model(stated, &stated.uncertain, None, &horizons, true, &chi2);
     let clean = clean_prefix(stated, &whole, &evidence);
@@ -430,8 +438,7 @@ fn clean_prefix(stated: &Case, whole: &Calibration, evidence: &Evidence) -> Cali
 /// Where the records leave the nominal model of `unit` (its plain run, without the chaotic
 /// spread): None when they never do.
 fn nominal_window(unit: &Case, evidence: &Evidence) -> Result<Option<(f64, f64)>, PhysicsError> {
-    let (_, prediction) = unit.simulate(&unit.block, &unit.nominal_options())?;
-    Ok(evidence.window(&prediction))
+    Ok(evidence.window(&unit.nominal()?))
 }
 
 pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, DiagnoseError> {
@@ -442,9 +449,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
     let calibrated = calibration.apply(stated)?;
     let case = &calibrated;
     let (evidence, nominal) = nominal_evidence(case, settings)?;
-    let with_spread = |unit: &Case, plain: Prediction| {
-        unit.with_sensitivity(&evidence, plain, |c| Ok(c.simulate(&c.block, &c.nominal_options())?.1))
-    };
+    let with_spread = |unit: &Case, plain: Prediction| unit.with_sensitivity(&evidence, plain, Case::nominal);
     let plain_chi2 = evidence.misfit(&nominal).chi2;
     let mut baseline = with_spread(case, nominal)?;
     let mut base_misfit = evidence.misfit(&baseline);
@@ -485,7 +490,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
             let own_nominal = (own.fitted != calibration.fitted)
                 .then(|| {
                     let unit = own.apply(stated).ok()?;
-                    let (_, plain) = unit.simulate(&unit.block, &unit.nominal_options()).ok()?;
+                    let plain = unit.nominal().ok()?;
                     let plain_chi2 = evidence.misfit(&plain).chi2;
                     let spread = with_spread(&unit, plain).ok()?;
                     let misfit = evidence.misfit(&spread);
@@ -690,7 +695,10 @@ fn recalibrate(
     let mut horizons = JOINT_HORIZONS_S.map(|h| window.0 + h).to_vec();
     // Where the unit first rocks long after the disagreement began, its dimensions are fitted
     // from there too: before it they change nothing.
-    if let Some(uplift) = fit::first_uplift(&calibration.apply(stated).unwrap_or_else(|_| stated.clone()))
+    if let Some(uplift) = calibration
+        .apply(stated)
+        .unwrap_or_else(|_| stated.clone())
+        .first_uplift()
         .filter(|u| *u > window.0 + JOINT_HORIZONS_S[0])
     {
         horizons.extend(JOINT_UPLIFT_HORIZONS_S.map(|h| uplift + h));
