@@ -31,10 +31,7 @@
 //!    the first 5 s of the window (later, a correct physics with parameters a hair off drifts
 //!    away on a sensitive cart). A fit with a lower BIC that fails a test does not hide one that
 //!    passes; the explanation names it and says which test it failed. None passes:
-//!    `unexplained`. No disagreement: `none`. A physics recalibrated with the cart shows its
-//!    signature against the nominal cart of its own calibration, and where that plain nominal
-//!    cart explains the records with a better posterior than the nominal calibration's, the
-//!    verdict is `none` on that calibration.
+//!    `unexplained`. No disagreement: `none`.
 //!
 //! Pure numerics: a [`RollingCase`] in, a [`RollingDiagnosis`] out.
 
@@ -598,24 +595,10 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
     // A later round may have bent the cart towards a physics that begins where it looked: the
     // recalibration with a physics also starts from the first round's values.
     let first_round = rounds.first().filter(|_| rounds.len() > 1);
-    let moved = calibration.parameters.iter().zip(&calibration.fitted).any(|(p, v)| p.stated != *v);
-    let baseline = if moved { calibration.apply(stated)?.nominal()? } else { stated_track };
-    diagnose_calibrated(stated, settings, &evidence, calibration, first_round, baseline)
-}
-
-/// The diagnosis of `stated` on the nominal cart calibrated as `calibration`, whose run is
-/// `baseline`; `first_round`: the nominal calibration's first round, where a later one moved on.
-fn diagnose_calibrated(
-    stated: &RollingCase,
-    settings: &Settings,
-    evidence: &Evidence,
-    calibration: Calibration,
-    first_round: Option<&Vec<f64>>,
-    baseline: Track,
-) -> Result<RollingDiagnosis, DiagnoseError> {
-    let evidence = evidence.clone();
     let calibrated = calibration.apply(stated)?;
     let case = &calibrated;
+    let moved = calibration.parameters.iter().zip(&calibration.fitted).any(|(p, v)| p.stated != *v);
+    let baseline = if moved { case.nominal()? } else { stated_track };
     let window = evidence.window(&baseline);
     // Twins only where there is something to explain, each run to the record's end: whether
     // they part before the disagreement decides if anything is blamed; where they part after it
@@ -722,8 +705,7 @@ fn diagnose_calibrated(
     }
     let n = base_misfit.samples.max(1) as f64;
     let before = baseline_candidate(Some(window));
-    let nominal_values = &calibration.fitted;
-    let fitted: Vec<(Candidate, Option<Track>)> = effects::library()
+    let fitted: Vec<Candidate> = effects::library()
         .par_iter()
         .map(|effect| {
             let fit = fit::fit(*effect, case, &baseline, &evidence, window, judged.map_or(window.1, |j| j.1));
@@ -738,17 +720,9 @@ fn diagnose_calibrated(
             } else {
                 (calibration.clone(), fit.track.clone(), fit.misfit, 0)
             };
-            // The nominal cart as this physics calibrates it: what the physics adds to its own
-            // calibration is its signature, and that calibration competes as the nominal one.
-            let own_nominal = (calibration.fitted != *nominal_values)
-                .then(|| calibration.apply(stated).ok()?.nominal().ok())
-                .flatten();
-            let signature_chi2 = own_nominal.as_ref().map_or(signature_chi2, |own| {
-                evidence.misfit_between(own, from, until).chi2 - evidence.misfit_between(&track, from, until).chi2
-            });
             // Every candidate pays for its own parameters and every calibrated one.
             let price = calibration.prior_chi2() + calibration.parameters.len() as f64 * n.ln();
-            let candidate = Candidate {
+            Candidate {
                 effect: effect.name(),
                 params: effect.parameter_names().iter().copied().zip(fit.params.iter().copied()).collect(),
                 bic: misfit.chi2 + effect.parameter_names().len() as f64 * n.ln() + price,
@@ -757,7 +731,7 @@ fn diagnose_calibrated(
                 flagged: evidence.flagged(&track),
                 sentence: effect.explain(case, &baseline, &fit.params),
                 misfit,
-                evaluations: fit.evaluations + runs + usize::from(own_nominal.is_some()),
+                evaluations: fit.evaluations + runs,
                 extra: Judged {
                     rmse_judged: evidence.window_rmse(&track, judged),
                     flagged_early: flagged_early(&evidence, &track, window),
@@ -765,25 +739,11 @@ fn diagnose_calibrated(
                 prediction: track,
                 signature_chi2: Some(signature_chi2),
                 calibration,
-            };
-            (candidate, own_nominal)
+            }
         })
         .collect();
-    // A physics's calibration under which the plain nominal cart explains the records, with a
-    // better posterior over the whole record than the nominal calibration's: the joint search
-    // found a calibration the nominal one missed, and calibration alone explains the records.
-    let posterior = |track: &Track, c: &Calibration| evidence.misfit(track).chi2 + c.prior_chi2();
-    let settles = fitted
-        .iter()
-        .filter_map(|(c, own)| own.as_ref().filter(|own| evidence.window(own).is_none()).map(|own| (c, own)))
-        .map(|(c, own)| (posterior(own, &c.calibration), c, own))
-        .filter(|s| s.0 < posterior(&baseline, &calibration))
-        .reduce(|a, b| if b.0 < a.0 { b } else { a });
-    if let Some((_, c, own)) = settles {
-        return diagnose_calibrated(stated, settings, &evidence, c.calibration.clone(), None, own.clone());
-    }
     let mut candidates = vec![before];
-    candidates.extend(fitted.into_iter().map(|(c, _)| c));
+    candidates.extend(fitted);
     verdict::rank(&mut candidates);
     // Disagreement left is counted over the first seconds after the window's start only: a
     // correct physics with parameters a hair off drifts away late (the cart is sensitive), a
