@@ -327,7 +327,7 @@ mod tests {
     use crate::diagnose::rolling::cut_beyond_noise;
     use crate::diagnose::rolling::effects::{library, Effect};
     use crate::diagnose::rolling::evidence::Evidence;
-    use crate::diagnose::rolling::{test_cart, Camera, RollingCase};
+    use crate::diagnose::rolling::{gentle_then_strong_floor, test_cart, Camera, RollingCase};
     use crate::diagnose::Observed;
     use crate::physics::rolling::Options;
     use crate::signal::synthetic_motion::SplitMix64 as Rng;
@@ -341,12 +341,7 @@ mod tests {
     /// cart's own with the sensors' noise (seeded).
     fn dragging_cart() -> RollingCase {
         let (dt, n) = (0.005, 2000);
-        let ax: Vec<f64> = (0..n)
-            .map(|k| {
-                let t = k as f64 * dt;
-                (if t < 6.0 { 0.47 } else { 4.0 }) * (2.0 * std::f64::consts::PI * 0.8 * t).sin()
-            })
-            .collect();
+        let ax = gentle_then_strong_floor(n, 6.0);
         let options = Options {
             yaw0_rad: 0.2,
             steer0_rad: [0.3, -0.2, 0.1, 0.4],

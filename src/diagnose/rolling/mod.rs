@@ -349,6 +349,18 @@ impl RollingCase {
     }
 }
 
+/// The tests' floor: 0.8 Hz along X at 200 Hz, `n` samples, gentle (0.47 m/s², just enough to
+/// roll MC2) until `strong_from_s`, then strong (4 m/s²).
+#[cfg(test)]
+pub(crate) fn gentle_then_strong_floor(n: usize, strong_from_s: f64) -> Vec<f64> {
+    (0..n)
+        .map(|k| {
+            let t = k as f64 * 0.005;
+            (if t < strong_from_s { 0.47 } else { 4.0 }) * (2.0 * std::f64::consts::PI * 0.8 * t).sin()
+        })
+        .collect()
+}
+
 /// The tests' cart: the study's MC2 on a floor sampled at 200 Hz from t = 0, with the demo
 /// cases' sensor noise and no records yet.
 #[cfg(test)]
@@ -908,12 +920,7 @@ mod tests {
     /// `mu_k_roll`.
     fn cart_misstated_late() -> (RollingCase, f64) {
         let (dt, n) = (0.005, 2400);
-        let ax: Vec<f64> = (0..n)
-            .map(|k| {
-                let t = k as f64 * dt;
-                (if t < 8.0 { 0.47 } else { 4.0 }) * (2.0 * std::f64::consts::PI * 0.8 * t).sin()
-            })
-            .collect();
+        let ax = gentle_then_strong_floor(n, 8.0);
         let ay = ax.iter().map(|a| 0.3 * a).collect();
         let options =
             Options { yaw0_rad: 0.2, steer0_rad: [0.3, -0.2, 0.1, 0.4], method: METHOD, ..Options::default() };
