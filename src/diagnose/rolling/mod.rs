@@ -475,13 +475,17 @@ const CALIBRATION_ROUNDS: usize = 4;
 /// worse (its cart disagrees no earlier). Mis-stated rolling seed
 /// 4401: the `none` cases case_01 and case_08 were left disagreeing from 7.77 s and 24.15 s,
 /// past a calibration that stopped at 6.0 s; a second round explains both (misfit 1.08, 1.17).
-/// Returns the calibration with its rounds' values (the first round's first).
-fn calibrate_nominal(stated: &RollingCase, evidence: &Evidence, stated_track: &Track) -> (Calibration, Vec<Vec<f64>>) {
+/// Returns the calibration and, where a later round was kept, the first round's values.
+fn calibrate_nominal(
+    stated: &RollingCase,
+    evidence: &Evidence,
+    stated_track: &Track,
+) -> (Calibration, Option<Vec<f64>>) {
     if stated.uncertain.is_empty() {
-        return (Calibration::default(), Vec::new());
+        return (Calibration::default(), None);
     }
     let Some(window) = evidence.window(stated_track) else {
-        return (Calibration::stated(stated.uncertain.clone()), Vec::new());
+        return (Calibration::stated(stated.uncertain.clone()), None);
     };
     let horizons = |from: f64| CALIBRATION_HORIZONS_S.map(|h| (from + h).min(stated.end_s()));
     let per_sample = stated_track.evaluations as f64 / stated.samples() as f64;
@@ -494,14 +498,15 @@ fn calibrate_nominal(stated: &RollingCase, evidence: &Evidence, stated_track: &T
     };
     let mut calibrated = horizons(window.0);
     let mut calibration = calibration::calibrate_model(stated, &stated.uncertain, None, &calibrated, false, &chi2);
-    let mut rounds = vec![calibration.fitted.clone()];
+    let first_round = calibration.fitted.clone();
+    let mut moved_on = false;
     // The whole record's posterior under a calibration's plain nominal cart, and where that cart
     // disagrees with the records.
     let judge = |c: &Calibration| {
         let track = c.apply(stated).ok()?.nominal().ok()?;
         Some((evidence.misfit(&track).chi2 + c.prior_chi2(), evidence.window(&track)))
     };
-    let Some(mut current) = judge(&calibration) else { return (calibration, rounds) };
+    let Some(mut current) = judge(&calibration) else { return (calibration, None) };
     let mut runs = calibration.evaluations + 1;
     for _ in 1..CALIBRATION_ROUNDS {
         let last = calibrated[calibrated.len() - 1];
@@ -522,12 +527,12 @@ fn calibrate_nominal(stated: &RollingCase, evidence: &Evidence, stated_track: &T
         // record is fitted better.
         let earlier = |j: &(f64, Option<(f64, f64)>)| j.1.is_some_and(|w| w.0 < left.0);
         let Some(judged) = judge(&next).filter(|j| j.0 < current.0 && !earlier(j)) else { break };
-        rounds.push(next.fitted.clone());
+        moved_on = true;
         let steps = [std::mem::take(&mut calibration.steps), next.steps.clone()].concat();
         (calibration, current) = (Calibration { steps, ..next }, judged);
     }
     calibration.evaluations = runs;
-    (calibration, rounds)
+    (calibration, moved_on.then_some(first_round))
 }
 
 /// `effect` with `params` on the cart `m` from rest until `until_s` (the nominal cart until the
@@ -560,7 +565,7 @@ const JOINT_HORIZONS_S: [f64; 3] = [1.0, 3.0, 6.0];
 fn recalibrate(
     stated: &RollingCase,
     calibration: &Calibration,
-    also: Option<&Vec<f64>>,
+    also: Option<&[f64]>,
     effect: &dyn effects::Effect,
     fit: &fit::Fit,
     evidence: &Evidence,
@@ -581,17 +586,7 @@ fn recalibrate(
         Some((track, misfit))
     };
     let starts = verdict::JointStarts::Calibrated;
-    verdict::recalibrate(
-        stated,
-        calibration,
-        starts,
-        also.map(Vec::as_slice),
-        &horizons,
-        &chi2,
-        whole,
-        1,
-        (fit.track.clone(), fit.misfit),
-    )
+    verdict::recalibrate(stated, calibration, starts, also, &horizons, &chi2, whole, 1, (fit.track.clone(), fit.misfit))
 }
 
 pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiagnosis, DiagnoseError> {
@@ -603,10 +598,9 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
     }
     let evidence = Evidence::new(stated, settings.exceedance_sigma);
     let stated_track = stated.nominal()?;
-    let (calibration, rounds) = calibrate_nominal(stated, &evidence, &stated_track);
     // A later round may have bent the cart towards a physics that begins where it looked: the
     // recalibration with a physics also starts from the first round's values.
-    let first_round = rounds.first().filter(|_| rounds.len() > 1);
+    let (calibration, first_round) = calibrate_nominal(stated, &evidence, &stated_track);
     let calibrated = calibration.apply(stated)?;
     let case = &calibrated;
     let moved = calibration.parameters.iter().zip(&calibration.fitted).any(|(p, v)| p.stated != *v);
@@ -728,7 +722,7 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
             let signature_chi2 = evidence.misfit_between(&baseline, from, until).chi2
                 - evidence.misfit_between(&fit.track, from, until).chi2;
             let (calibration, track, misfit, runs) = if signature_chi2 >= verdict::SIGNATURE_CHI2 {
-                recalibrate(stated, &calibration, first_round, *effect, &fit, &evidence, window, &baseline)
+                recalibrate(stated, &calibration, first_round.as_deref(), *effect, &fit, &evidence, window, &baseline)
             } else {
                 (calibration.clone(), fit.track.clone(), fit.misfit, 0)
             };
@@ -956,13 +950,14 @@ mod tests {
         let stated = case.nominal().unwrap();
         let first = evidence.window(&stated).expect("the stated yaw shows at once").0;
         assert!(first + CALIBRATION_HORIZONS_S[2] < 8.0, "the first round ends before the shaking: {first}");
-        let (calibration, rounds) = calibrate_nominal(&case, &evidence, &stated);
+        let (calibration, first_round) = calibrate_nominal(&case, &evidence, &stated);
         let run = |values: &[f64]| calibration::with_values(&case, &case.uncertain, values).unwrap().nominal().unwrap();
-        // The first round fits the yaw, and leaves the cart disagreeing once it rolls fast.
-        let left = evidence.window(&run(&rounds[0])).map(|w| w.0);
+        // A later round was kept ...
+        let first_round = first_round.expect("a round after the first is kept");
+        // ... after the first fitted the yaw and left the cart disagreeing once it rolls fast.
+        let left = evidence.window(&run(&first_round)).map(|w| w.0);
         assert!(left.is_some_and(|t| t > first + CALIBRATION_HORIZONS_S[2]), "left by the first round: {left:?}");
-        // A later round, from there, finds the friction: the calibrated cart explains the records.
-        assert!(rounds.len() >= 2, "{rounds:?}");
+        // The later round, from there, finds the friction: the calibrated cart explains the records.
         let fitted = calibration.apply(&case).unwrap();
         assert!(evidence.window(&run(&calibration.fitted)).is_none(), "{}", calibration.describe());
         let off = (fitted.friction.roll.mu_k / mu_k - 1.0).abs();
