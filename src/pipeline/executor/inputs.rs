@@ -2,7 +2,8 @@
 //! the files its `Path` parameters name, and the parts its upstream stages produced, restricted
 //! by its `select:`.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
@@ -45,28 +46,29 @@ pub(super) fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSo
         })
         .collect();
     let mut resolved = BTreeMap::new();
-    // Sources may share files (one DAQ export split into floors): each file is read once.
-    let mut hashed: BTreeMap<PathBuf, String> = BTreeMap::new();
+    // Sources may share files (one DAQ export split into floors): each file is read once. By
+    // their paths' bytes: hashed and compared whole, not component by component.
+    let mut hashed: HashMap<OsString, String> = HashMap::new();
     // ... and their folders are walked once.
     let mut resolver = sources::Resolver::default();
     for name in used {
         let spec = &plan.file.spec.inputs[name];
         let files = files_of(plan, name, spec, &mut resolver)?;
         let unhashed: Vec<&Path> =
-            files.iter().map(|f| f.path.as_path()).filter(|p| !hashed.contains_key(*p)).collect();
+            files.iter().map(|f| f.path.as_path()).filter(|p| !hashed.contains_key(p.as_os_str())).collect();
         let new_hashes: Vec<String> = unhashed
             .par_iter()
             .map(|p| hash::hash_path(p))
             .collect::<anyhow::Result<_>>()
             .map_err(|e| UserError::new(format!("source `{name}`: {e:#}")))?;
-        hashed.extend(unhashed.into_iter().map(Path::to_path_buf).zip(new_hashes));
+        hashed.extend(unhashed.into_iter().map(|p| p.as_os_str().to_os_string()).zip(new_hashes));
         let parts: Vec<InputPart> = files
             .into_iter()
             .map(|f| {
                 let relative = f.path.strip_prefix(&base).unwrap_or(&f.path).to_string_lossy().replace('\\', "/");
                 // A dataset's records are labelled alike in either layout (`layout::placed`).
                 let relative = placed(&relative, false).into_owned();
-                let hash = hashed[&f.path].clone();
+                let hash = hashed[f.path.as_os_str()].clone();
                 InputPart { partition: f.partition, path: f.path, label: relative, hash }
             })
             .collect();
