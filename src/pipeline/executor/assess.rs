@@ -4,6 +4,8 @@
 //! stages, Slurm's shards and each Slurm task's units all come from here.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
+use std::ffi::{OsStr, OsString};
+use std::os::unix::ffi::OsStrExt;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
@@ -33,25 +35,31 @@ pub(super) trait Disk: Sync {
 /// commit: one `RealDisk` serves one run (or one `status`).
 #[derive(Default)]
 pub(super) struct RealDisk {
-    missing: std::sync::RwLock<HashSet<PathBuf>>,
+    /// By their paths' bytes (see [`folders`]).
+    missing: std::sync::RwLock<HashSet<Vec<u8>>>,
+}
+
+/// The folders of `path`, deepest first, as its bytes before each `/`: hashed and compared whole,
+/// not parsed component by component (`Path::ancestors`), which took longer than the `stat`s
+/// it saves at 10⁴ tests. A path spelled unusually (`a/./b`) is merely not found among them.
+fn folders(path: &Path) -> impl Iterator<Item = &[u8]> {
+    let bytes = path.as_os_str().as_bytes();
+    memchr::memrchr_iter(b'/', bytes).filter(|&at| at > 0).map(move |at| &bytes[..at])
 }
 
 impl RealDisk {
     /// Whether a folder of `path` is known to be missing.
     fn below_missing(&self, path: &Path) -> bool {
         let missing = self.missing.read().expect("never poisoned");
-        !missing.is_empty() && path.ancestors().skip(1).any(|a| missing.contains(a))
+        !missing.is_empty() && folders(path).any(|f| missing.contains(f))
     }
 
     /// `path` is missing: remembers which of its folders are missing too.
     fn note_missing(&self, path: &Path) {
-        let gone: Vec<&Path> = path
-            .ancestors()
-            .skip(1)
-            .take_while(|a| !a.as_os_str().is_empty() && std::fs::symlink_metadata(a).is_err())
-            .collect();
+        let gone: Vec<&[u8]> =
+            folders(path).take_while(|f| std::fs::symlink_metadata(Path::new(OsStr::from_bytes(f))).is_err()).collect();
         if !gone.is_empty() {
-            self.missing.write().expect("never poisoned").extend(gone.into_iter().map(Path::to_path_buf));
+            self.missing.write().expect("never poisoned").extend(gone.into_iter().map(<[u8]>::to_vec));
         }
     }
 }
@@ -259,19 +267,25 @@ pub struct Prediction {
 /// the files they wrote last time (or one table per output at their partition), with a
 /// [`PENDING`] hash. A unit of a `keep: false` stage whose files are gone but that a stale unit
 /// reads is made again: it stands for its recorded hashes (it writes the same bytes).
-pub(super) fn predict(plan: &Plan, known: &Known<'_>) -> Result<Prediction, UserError> {
+/// With `only` (a run's selection, which holds what its stages read), the other stages are not
+/// assessed: they do not run, so they neither run stale nor need anything made again.
+pub(super) fn predict(
+    plan: &Plan,
+    known: &Known<'_>,
+    only: Option<&BTreeSet<String>>,
+) -> Result<Prediction, UserError> {
     let mut produced: BTreeMap<String, Produced> = BTreeMap::new();
     let mut lines = Vec::new();
     // Removed files of up-to-date `keep: false` units → (stage, unit); and, in run order, the
     // units reading some of them: (stage, unit, stale, the units whose files it reads).
-    let mut removed: HashMap<PathBuf, (String, String)> = HashMap::new();
+    let mut removed: HashMap<OsString, (String, String)> = HashMap::new();
     let mut readers: Vec<(String, String, bool, BTreeSet<(String, String)>)> = Vec::new();
     let error = |e: anyhow::Error| match e.downcast::<UserError>() {
         Ok(user) => user,
         Err(e) => UserError::new(format!("{e:#}")),
     };
     let mut assessments: BTreeMap<String, AssessedStage> = BTreeMap::new();
-    for stage in plan.stages.values() {
+    for stage in plan.stages.values().filter(|s| only.is_none_or(|only| only.contains(&s.name))) {
         let assessed = assess_stage(plan, stage, known, &produced).map_err(error)?;
         let stage_dir = plan.stage_dir(&stage.name);
         let entry = known.lock.stages.get(&stage.name);
@@ -288,8 +302,12 @@ pub(super) fn predict(plan: &Plan, known: &Known<'_>) -> Result<Prediction, User
         };
         for (unit, _, reasons) in &assessed.units {
             let old = entry.and_then(|e| e.units.get(&unit.id));
-            let reads: BTreeSet<(String, String)> =
-                unit.inputs.iter().flat_map(|i| i.parts()).filter_map(|p| removed.get(&p.path).cloned()).collect();
+            let reads: BTreeSet<(String, String)> = unit
+                .inputs
+                .iter()
+                .flat_map(|i| i.parts())
+                .filter_map(|p| removed.get(p.path.as_os_str()).cloned())
+                .collect();
             if !reads.is_empty() {
                 readers.push((stage.name.clone(), unit.id.clone(), !reasons.is_empty(), reads));
             }
@@ -298,7 +316,7 @@ pub(super) fn predict(plan: &Plan, known: &Known<'_>) -> Result<Prediction, User
                     let cached = cached_files(old, &stage_dir);
                     if !stage.keep {
                         for file in cached.values().filter(|f| !known.disk.exists(&f.path)) {
-                            removed.insert(file.path.clone(), (stage.name.clone(), unit.id.clone()));
+                            removed.insert(file.path.clone().into_os_string(), (stage.name.clone(), unit.id.clone()));
                         }
                     }
                     mine.extend(cached);
@@ -496,6 +514,25 @@ mod tests {
         );
     }
 
+    /// `load` not kept, its files gone, and `baseline` never run: the whole plan's prediction
+    /// makes `load` again for `baseline`; a run of `load` alone does not (`baseline` does not run).
+    #[test]
+    fn a_prediction_of_selected_stages_makes_nothing_again_for_a_stage_not_selected() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let plan = plan(dir.path(), &PIPELINE.replace("inputs: [daq]", "inputs: [daq]\n    keep: false"));
+        let records = [("FB-1", "a"), ("FB-2", "b")];
+        let (lock, mut disk) = ran(&plan, &records);
+        disk.files.clear();
+        let (files, rerun, sources) = (BTreeMap::new(), Rerun::default(), sources(&plan, &records));
+        let known = Known { lock: &lock, sources: &sources, files: &files, rerun: &rerun, disk: &disk };
+        let whole = predict(&plan, &known, None).unwrap();
+        assert_eq!(whole.remake["load"].keys().collect::<Vec<_>>(), ["motion=FB-1", "motion=FB-2"]);
+        let only = predict(&plan, &known, Some(&["load".to_string()].into())).unwrap();
+        assert!(only.remake.is_empty(), "{:?}", only.remake);
+        assert_eq!(only.lines.iter().map(|l| (l.name.as_str(), l.is_stale())).collect::<Vec<_>>(), [("load", false)]);
+        assert!(only.settled.contains_key("load"));
+    }
+
     #[test]
     fn a_prediction_carries_a_stale_unit_to_the_units_reading_it() {
         let dir = crate::tempdir::tempdir().unwrap();
@@ -505,7 +542,7 @@ mod tests {
         let edited = sources(&plan, &[("FB-1", "a"), ("FB-2", "B")]);
         let (files, rerun) = (BTreeMap::new(), Rerun::default());
         let known = Known { lock: &lock, sources: &edited, files: &files, rerun: &rerun, disk: &disk };
-        let prediction = predict(&plan, &known).unwrap();
+        let prediction = predict(&plan, &known, None).unwrap();
         let stale: Vec<(&str, Vec<&str>)> = prediction
             .lines
             .iter()

@@ -226,7 +226,7 @@ impl Backend for SlurmOptions {
 fn submit(opened: Opened<'_>, slurm: &SlurmOptions, reporter: &Reporter) -> anyhow::Result<RunSummary> {
     let (plan, options, selected) = (opened.plan, opened.options, &opened.selected);
     let output_dir = plan.file.output_dir();
-    let prediction = predict(plan, &opened.known())?;
+    let prediction = predict(plan, &opened.known(), Some(&opened.selected))?;
     let lease = opened.lease;
     save_hash_memo(reporter);
     let client = Slurm::new();
@@ -333,7 +333,7 @@ fn run_in_allocation(opened: Opened<'_>, slurm: &SlurmOptions, reporter: &Report
     let allocation = crate::pipeline::slurm::Allocation::current()?;
     let (plan, options) = (opened.plan, opened.options);
     let output_dir = plan.file.output_dir();
-    let prediction = predict(plan, &opened.known())?;
+    let prediction = predict(plan, &opened.known(), Some(&opened.selected))?;
     let lease = opened.lease;
     save_hash_memo(reporter);
     let cut = cut_shards(&prediction.lines, &opened.selected, slurm.units_per_task);
@@ -922,8 +922,8 @@ fn resubmit(run: &RunFile, plan: &Plan, lock: &LockFile, retries_left: u32) -> a
     let options = RunOptions { only: run.only.clone(), keep_going: run.keep_going, ..RunOptions::default() };
     let selected = selected_stages(plan, &options)?;
     let (sources, files, rerun) = (resolve_sources(plan)?, param_file_hashes(plan)?, Rerun::default());
-    let prediction =
-        predict(plan, &Known { lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk::default() })?;
+    let known = Known { lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk::default() };
+    let prediction = predict(plan, &known, Some(&selected))?;
     let mut slurm = run.options.clone();
     slurm.executor.retries = Some(retries_left);
     let client = Slurm::new();
