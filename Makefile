@@ -27,7 +27,7 @@ help:
 	@echo "make wheel   the PyPI wheel (manylinux2014, baseline x86-64, zig) and sdist in dist/ (docs/packaging.md)"
 	@echo "make bench   the demo study's artifact footprint vs its raw archive; load+baseline and the whole demo study vs numpy/scipy/pyarrow scripts; the rocking and rolling models vs scipy and RK4; CPT matching and 1080p tracking vs OpenCV"
 	@echo "make convergence  the convergence study of the models' numerical defaults over the shared real records (docs/convergence.md)"
-	@echo "make bench-scale  the per-record stages over a generated archive of TESTS=200 tests, local and on the test Slurm; no-op rerun"
+	@echo "make bench-scale  the per-record stages over a generated archive of TESTS=200 tests (e.g. TESTS=100,1000,10000), local and on the test Slurm; no-op rerun"
 	@echo "make prove   fresh concealed-effect cases (prove/generate_cases.py) scored against shakeflow diagnose"
 	@echo "             [SEED=n] [PER_EFFECT=5] [PROVE_JOBS=2]; make prove-check re-checks the generator's physics"
 	@echo "make prove-rolling   the same for rolling units (prove/rolling/) [SEED=n] [ROLLING_PER_EFFECT=4]"
@@ -117,6 +117,7 @@ convergence:
 
 # Scale: the demo's per-record stages over a generated archive of TESTS tests, local and on the
 # multi-node test Slurm (started and stopped here when it was not running; needs root), no-op rerun.
+# Above 1000 tests the archive repeats the 1000-test one's variation tests as hard links (10⁴: 2.3 GB).
 TESTS ?= 200
 bench-scale: release $(PY_STAMP)
 	$(VENV_PY) bench/scale.py --shakeflow $(BIN) --tests $(TESTS)

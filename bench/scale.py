@@ -1,5 +1,6 @@
 """`make bench-scale`: the per-record stages of the demo study over a generated archive of
---tests tests (`shakeflow demo-archive --tests N`; several sizes as `--tests 100,1000`), through
+--tests tests (`shakeflow demo-archive --tests N`, above `--generate-up-to` that archive's variation
+tests repeated as hard links; several sizes as `--tests 100,1000,10000`), through
 the local executor and through the multi-node test Slurm (`tests/system/slurm.sh`), and a no-op
 rerun of the whole archive.
 
@@ -135,6 +136,8 @@ def main():
     ap.add_argument("--units-per-task", type=int, default=50)
     ap.add_argument("--noop-repeat", type=int, default=3)
     ap.add_argument("--no-slurm", action="store_true")
+    ap.add_argument("--generate-up-to", type=int, default=1000,
+                    help="larger archives repeat this size's variation tests under new ids, as hard links")
     ap.add_argument("--force", default="load_floors", help="the stage a second Slurm run forces, to measure what its tasks read")
     a = ap.parse_args()
     growth = []
@@ -150,20 +153,57 @@ def main():
                   f"{r.get('slurm_commit', float('nan')):19.0f}")
 
 
+def make_archive(shakeflow: str, works: pathlib.Path, tests: int, generate_up_to: int) -> pathlib.Path:
+    """`works`/tests-N/archive, an archive of `tests` tests: generated (`demo-archive`) up to
+    `generate_up_to` tests, above that the generated archive of `generate_up_to` tests with its
+    variation tests repeated under new test ids (hard links: the same bytes under other names).
+    The engine's work depends on how many files and units there are, not on what they hold; a
+    generated 10⁴-test archive would take ≈ 22 GB and an hour to write. An archive made before
+    (a stamp beside it) is used again."""
+    work = works / f"tests-{tests}"
+    archive, stamp = work / "archive", work / "archive.tests"
+    if stamp.exists() and stamp.read_text() == str(tests) and archive.is_dir():
+        return archive
+    work.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(archive, ignore_errors=True)
+    if tests <= generate_up_to:
+        subprocess.run([shakeflow, "demo-archive", str(archive), "--tests", str(tests)], check=True)
+    else:
+        base = make_archive(shakeflow, works, generate_up_to, generate_up_to)
+        replicate(base, archive, tests - generate_up_to)
+    stamp.write_text(str(tests))
+    return archive
+
+
+def replicate(base: pathlib.Path, archive: pathlib.Path, more: int):
+    """`archive`: `base` hard-linked, and `more` tests besides: copy k of `base`'s variation
+    tests (`Experiment-3/Trial-N`, files `V-NNNN_…`) as `Experiment-(3+k)/Trial-N`, files
+    `V-kNNNN_…`, as many copies as it takes (the last one partial)."""
+    shutil.copytree(base, archive, copy_function=os.link)
+    groups = archive / "NEES-2009-0722.groups"
+    trials = sorted((groups / "Experiment-3").iterdir(), key=lambda t: int(t.name.split("-")[1]))
+    if not trials:
+        sys.exit(f"{base}: no variation tests in Experiment-3 to repeat")
+    k = 0
+    while more > 0:
+        k += 1
+        for trial in trials[:more]:
+            for f in sorted(trial.rglob("*")):
+                if not f.is_file():
+                    continue
+                name = re.sub(r"^V-(\d+)", lambda m: f"V-{k}{m.group(1)}", f.name)
+                dest = groups / f"Experiment-{3 + k}" / trial.name / f.parent.relative_to(trial) / name
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                os.link(f, dest)
+        more -= min(more, len(trials))
+
+
 def measure(a, tests):
     """Runs the local (and Slurm) measurements on an archive of `tests` tests; prints them and
     returns the local figures."""
     shakeflow = str(pathlib.Path(a.shakeflow).resolve())
     work = pathlib.Path(a.work).resolve() / f"tests-{tests}"
-    archive = work / "archive"
-    work.mkdir(parents=True, exist_ok=True)
-    # An archive this script generated before (same size, a stamp beside it) is used again:
-    # generating 10³ tests takes minutes.
-    stamp = work / "archive.tests"
-    if not (stamp.exists() and stamp.read_text() == str(tests) and archive.is_dir()):
-        shutil.rmtree(archive, ignore_errors=True)
-        subprocess.run([shakeflow, "demo-archive", str(archive), "--tests", str(tests)], check=True)
-        stamp.write_text(str(tests))
+    archive = make_archive(shakeflow, pathlib.Path(a.work).resolve(), tests, a.generate_up_to)
     stages = a.stages.split(",")
     report = {}
 
