@@ -199,6 +199,32 @@ fn retries_resubmit_the_shard_whose_task_died_and_requeue_reaches_sbatch() {
 }
 
 #[test]
+fn a_commit_job_that_dies_says_so_and_a_rerun_ends_in_the_local_runs_state() {
+    let local = small_project();
+    assert!(shakeflow(&["run", "pipeline.yaml"], local.path()).status.success());
+    let project = small_project();
+    let root = project.path();
+    // The commit job is killed (SIGKILL, as out of memory or on a lost node) before it commits.
+    let out = slurm_run_env(root, &["--wait"], &[("SHAKEFLOW_FAILPOINT", "commit.write_lockfile")]);
+    let log = stderr(&out);
+    assert!(!out.status.success(), "{log}");
+    assert!(log.contains("ended without its summary") && log.contains("it died"), "{log}");
+    assert!(log.contains("its log is in `") && log.contains("running again finishes the run"), "{log}");
+    assert!(!root.join("out/shakeflow.lock").exists(), "nothing committed: {log}");
+    // The dead job's lease, which another host cannot see is dead, removed as the hint says.
+    let lease = root.join("out/.shakeflow/lease");
+    assert!(lease.exists());
+    std::fs::remove_file(lease).unwrap();
+    let rerun = slurm_run(root, &["--wait"]);
+    assert!(rerun.status.success(), "{}", stderr(&rerun));
+    assert_eq!(
+        artifacts_and_state(local.path()),
+        artifacts_and_state(project.path()),
+        "bit-identical artifacts, lockfile and state files"
+    );
+}
+
+#[test]
 fn in_allocation_runs_the_shards_as_srun_steps_with_the_local_runs_artifacts() {
     let local = small_project();
     assert!(shakeflow(&["run", "pipeline.yaml"], local.path()).status.success());

@@ -40,7 +40,7 @@ use super::{
     forced_stages, selected_stages, upstream_stages, Backend, Opened, Rerun, RunOptions, RunSummary, UnitProblem,
 };
 use crate::error::UserError;
-use crate::pipeline::layout::{fan_out_above, fans_out, LOCK_FILE, RUNS_DIR, STATE_DIR};
+use crate::pipeline::layout::{fan_out_above, fans_out, LEASE_FILE, LOCK_FILE, RUNS_DIR, STATE_DIR};
 use crate::pipeline::lease::Lease;
 use crate::pipeline::lock::LockFile;
 use crate::pipeline::memo::TableMemo;
@@ -541,9 +541,23 @@ fn wait(
             reporter.line(&format!("Slurm run `{}`: {} task(s) not finished", run.id, s.unfinished()))
         })?;
         let path = runs_dir(output_dir).join(format!("{}{SUMMARY_SUFFIX}", run.id));
-        let summary: Summary = serde_json::from_slice(
-            &std::fs::read(&path).with_context(|| format!("the commit job left no summary `{}`", path.display()))?,
-        )?;
+        let bytes = std::fs::read(&path).map_err(|e| {
+            UserError::new(format!(
+                "the commit job {} of the Slurm run `{}` ended without its summary `{}` ({e}): it did not \
+                 start, or it died (out of disk space or memory, its node lost)",
+                run.commit_job(),
+                run.id,
+                path.display()
+            ))
+            .hint(format!(
+                "its log is in `{}`; the commit is all or nothing: `shakeflow status` says what is committed, \
+                 and running again finishes the run once the dead job's lease is free (taken over 10 minutes \
+                 after its last heartbeat, or `{}` deleted by you once you know the job is gone)",
+                runs_dir(output_dir).join(&run.id).join("logs").display(),
+                output_dir.join(STATE_DIR).join(LEASE_FILE).display()
+            ))
+        })?;
+        let summary: Summary = serde_json::from_slice(&bytes)?;
         if let Some(error) = &summary.error {
             bail!("the commit job of the Slurm run `{}` committed nothing: {error}", run.id);
         }
