@@ -7,7 +7,6 @@
 //! folder holding the pipeline file or its inputs.
 
 use std::collections::{HashMap, HashSet};
-use std::os::unix::ffi::OsStrExt;
 use std::path::{Component, Path, PathBuf};
 
 use rayon::prelude::*;
@@ -15,6 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use super::layout::{LOCK_FILE, STAGE_MARKER, STATE_DIR};
 use super::lock::LockFile;
+use super::paths;
 use super::plan::Plan;
 use super::spec::PipelineFile;
 use crate::error::UserError;
@@ -153,55 +153,50 @@ struct ResolvedFolders<'a> {
     known: HashMap<&'a [u8], PathBuf>,
 }
 
-/// The folder of a plain path (absolute, with no `.` or `..` component and no doubled or
-/// trailing `/`, as a walk of the file system makes them): its bytes before the last `/`. None
-/// for the root and its children, and for a path that is not plain.
-fn folder_of(path: &[u8]) -> Option<&[u8]> {
-    let plain = path.first() == Some(&b'/')
+/// Whether a path's bytes are plain: absolute, with no `.` or `..` component and no doubled or
+/// trailing `/`, as a walk of the file system makes them. Its [`paths::folders`] are then its
+/// folders as [`resolved`] would walk them.
+fn is_plain_path(path: &[u8]) -> bool {
+    path.first() == Some(&b'/')
         && !path.ends_with(b"/")
         && !path.windows(2).any(|w| w == b"//")
-        && !path.split(|&b| b == b'/').any(|c| c == b"." || c == b"..");
-    let at = memchr::memrchr(b'/', path).filter(|&at| plain && at > 0)?;
-    Some(&path[..at])
+        && !path.split(|&b| b == b'/').any(|c| c == b"." || c == b"..")
 }
 
-fn bytes(path: &Path) -> &[u8] {
-    path.as_os_str().as_bytes()
-}
-
-fn path(bytes: &[u8]) -> &Path {
-    Path::new(std::ffi::OsStr::from_bytes(bytes))
+/// The folder of a plain path; None for the root and its children, and for a path not plain.
+fn folder_of(path: &[u8]) -> Option<&[u8]> {
+    paths::folders(path).next().filter(|_| is_plain_path(path))
 }
 
 impl<'a> ResolvedFolders<'a> {
     /// For `files`: the folders above them asked whether they are links, all at once.
     fn above(files: &'a [PathBuf]) -> ResolvedFolders<'a> {
         let mut folders = HashSet::new();
-        for file in files {
-            let mut below = bytes(file);
+        for file in files.iter().map(|f| paths::bytes(f)).filter(|f| is_plain_path(f)) {
             // Up to the first folder seen before: its own folders are in already.
-            while let Some(folder) = folder_of(below) {
+            for folder in paths::folders(file) {
                 if !folders.insert(folder) {
                     break;
                 }
-                below = folder;
             }
         }
-        let links = folders.into_par_iter().map(|f| (f, is_link(path(f)))).collect();
+        let links = folders.into_par_iter().map(|f| (f, is_link(paths::from_bytes(f)))).collect();
         ResolvedFolders { links, known: HashMap::new() }
     }
 
     /// `file` resolved, `link` telling whether it is a symbolic link (its `lstat`, asked by the caller).
     fn resolve_known(&mut self, file: &'a Path, link: bool) -> PathBuf {
-        let (Some(folder), Some(name)) = (folder_of(bytes(file)), file.file_name()) else { return resolved(file) };
+        let (Some(folder), Some(name)) = (folder_of(paths::bytes(file)), file.file_name()) else {
+            return resolved(file);
+        };
         if link {
             return resolved(file);
         }
         if let Some(known) = self.known.get(folder) {
             return known.join(name);
         }
-        let folder_link = self.links.get(folder).copied().unwrap_or_else(|| is_link(path(folder)));
-        let real = self.resolve_known(path(folder), folder_link);
+        let folder_link = self.links.get(folder).copied().unwrap_or_else(|| is_link(paths::from_bytes(folder)));
+        let real = self.resolve_known(paths::from_bytes(folder), folder_link);
         let joined = real.join(name);
         self.known.insert(folder, real);
         joined

@@ -4,6 +4,13 @@
 //! a user chose (stage, partition key, constant partition value) is refused at its YAML line unless it
 //! is a plain component; a value read from the archive (a `{key}` matched in a file name) is
 //! percent-encoded instead (`%2F` for `/`), as Hive partitioning does and pyarrow and polars decode.
+//!
+//! And paths as their bytes ([`bytes`], [`from_bytes`], [`folders`]): where a run asks after 10⁴
+//! files or more, hashing and comparing a path's bytes whole is cheaper than `Path`'s `Hash` and
+//! `Ord`, which parse components.
+
+use std::os::unix::ffi::OsStrExt;
+use std::path::Path;
 
 /// Characters a component may hold as they are: letters, digits, `_`, `.`, `-`.
 fn is_plain(byte: u8) -> bool {
@@ -77,9 +84,37 @@ pub fn decode_component(component: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
+/// `path`'s bytes.
+pub fn bytes(path: &Path) -> &[u8] {
+    path.as_os_str().as_bytes()
+}
+
+/// The path of `bytes` (the inverse of [`bytes`]).
+pub fn from_bytes(bytes: &[u8]) -> &Path {
+    Path::new(std::ffi::OsStr::from_bytes(bytes))
+}
+
+/// The folders of a path's bytes, deepest first: its bytes before each `/` but a leading one
+/// (`/a/b/c` → `/a/b`, `/a`). Not normalised: a path spelled unusually (`a/./b`) gives its
+/// folders as spelled.
+pub fn folders(path: &[u8]) -> impl Iterator<Item = &[u8]> {
+    memchr::memrchr_iter(b'/', path).filter(|&at| at > 0).map(move |at| &path[..at])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// What `Path::ancestors` gives below the root, for the paths a walk makes.
+    #[test]
+    fn a_paths_folders_are_its_ancestors_below_the_root() {
+        for path in ["/a/b/c.csv", "/a", "rel/x/y", "rel", "/a b/ü/c"] {
+            let path = Path::new(path);
+            let ancestors: Vec<&Path> =
+                path.ancestors().skip(1).filter(|a| !a.as_os_str().is_empty() && *a != Path::new("/")).collect();
+            assert_eq!(folders(bytes(path)).map(from_bytes).collect::<Vec<_>>(), ancestors, "{}", path.display());
+        }
+    }
 
     #[test]
     fn plain_names_pass_and_escapes_are_refused() {

@@ -4,8 +4,7 @@
 //! stages, Slurm's shards and each Slurm task's units all come from here.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
-use std::ffi::{OsStr, OsString};
-use std::os::unix::ffi::OsStrExt;
+use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
@@ -17,6 +16,7 @@ use crate::error::UserError;
 use crate::io::hash;
 use crate::pipeline::layout::{DATA_FILE, FLAGGED, STATUS};
 use crate::pipeline::lock::{LockFile, StageLock, UnitLock};
+use crate::pipeline::paths;
 use crate::pipeline::plan::{Plan, PlannedStage};
 use crate::pipeline::stage::OutputKind;
 use crate::pipeline::work_units::{self, Unit, GATHER};
@@ -35,29 +35,24 @@ pub(super) trait Disk: Sync {
 /// commit: one `RealDisk` serves one run (or one `status`).
 #[derive(Default)]
 pub(super) struct RealDisk {
-    /// By their paths' bytes (see [`folders`]).
+    /// By their paths' bytes ([`paths::folders`]: not parsed component by component, which took
+    /// longer than the `stat`s it saves at 10⁴ tests; an unusually spelled path is merely not
+    /// found among them).
     missing: std::sync::RwLock<HashSet<Vec<u8>>>,
-}
-
-/// The folders of `path`, deepest first, as its bytes before each `/`: hashed and compared whole,
-/// not parsed component by component (`Path::ancestors`), which took longer than the `stat`s
-/// it saves at 10⁴ tests. A path spelled unusually (`a/./b`) is merely not found among them.
-fn folders(path: &Path) -> impl Iterator<Item = &[u8]> {
-    let bytes = path.as_os_str().as_bytes();
-    memchr::memrchr_iter(b'/', bytes).filter(|&at| at > 0).map(move |at| &bytes[..at])
 }
 
 impl RealDisk {
     /// Whether a folder of `path` is known to be missing.
     fn below_missing(&self, path: &Path) -> bool {
         let missing = self.missing.read().expect("never poisoned");
-        !missing.is_empty() && folders(path).any(|f| missing.contains(f))
+        !missing.is_empty() && paths::folders(paths::bytes(path)).any(|f| missing.contains(f))
     }
 
     /// `path` is missing: remembers which of its folders are missing too.
     fn note_missing(&self, path: &Path) {
-        let gone: Vec<&[u8]> =
-            folders(path).take_while(|f| std::fs::symlink_metadata(Path::new(OsStr::from_bytes(f))).is_err()).collect();
+        let gone: Vec<&[u8]> = paths::folders(paths::bytes(path))
+            .take_while(|f| std::fs::symlink_metadata(paths::from_bytes(f)).is_err())
+            .collect();
         if !gone.is_empty() {
             self.missing.write().expect("never poisoned").extend(gone.into_iter().map(<[u8]>::to_vec));
         }
