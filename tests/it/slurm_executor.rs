@@ -59,8 +59,7 @@ fn wait_for_commit(root: &Path) {
 
 #[test]
 fn a_slurm_run_writes_the_local_runs_artifacts_and_lockfile() {
-    let local = small_project();
-    assert!(shakeflow(&["run", "pipeline.yaml"], local.path()).status.success());
+    let local = small_project_run_locally();
     let cluster = small_project();
     let out = slurm_run(cluster.path(), &["--wait"]);
     let log = stderr(&out);
@@ -156,8 +155,7 @@ fn a_cancelled_task_is_the_only_shard_a_rerun_submits_and_status_follows_the_run
 
 #[test]
 fn retries_resubmit_the_shard_whose_task_died_and_requeue_reaches_sbatch() {
-    let local = small_project();
-    assert!(shakeflow(&["run", "pipeline.yaml"], local.path()).status.success());
+    let local = small_project_run_locally();
     let project = small_project();
     let root = project.path();
     // The task of load's shard 1 dies (SIGKILL, as on a node that crashed) the first time only.
@@ -200,8 +198,7 @@ fn retries_resubmit_the_shard_whose_task_died_and_requeue_reaches_sbatch() {
 
 #[test]
 fn a_commit_job_that_dies_says_so_and_a_rerun_ends_in_the_local_runs_state() {
-    let local = small_project();
-    assert!(shakeflow(&["run", "pipeline.yaml"], local.path()).status.success());
+    let local = small_project_run_locally();
     let project = small_project();
     let root = project.path();
     // The commit job is killed (SIGKILL, as out of memory or on a lost node) before it commits.
@@ -226,8 +223,7 @@ fn a_commit_job_that_dies_says_so_and_a_rerun_ends_in_the_local_runs_state() {
 
 #[test]
 fn in_allocation_runs_the_shards_as_srun_steps_with_the_local_runs_artifacts() {
-    let local = small_project();
-    assert!(shakeflow(&["run", "pipeline.yaml"], local.path()).status.success());
+    let local = small_project_run_locally();
     let project = small_project();
     let root = project.path();
     test_slurm(); // fails, saying how to start it, when the test Slurm is not running

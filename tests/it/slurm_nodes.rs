@@ -133,8 +133,7 @@ fn the_hash_memo_of_the_login_node_serves_the_tasks_on_other_nodes() {
 /// (local) run's state.
 #[test]
 fn a_node_lost_mid_array_ends_in_a_clean_runs_state() {
-    let local = small_project();
-    assert!(shakeflow(&["run", "pipeline.yaml"], local.path()).status.success());
+    let local = small_project_run_locally();
     let project = small_project();
     let root = project.path();
     // Shard 1 of `load` pauses 20 s as it starts: time to lose its node under it.

@@ -127,6 +127,14 @@ pub fn pipeline_with_twins() -> String {
 }
 
 /// [`small_project`] whose `baseline` also writes MCAP twins.
+/// A [`small_project`] run locally: the reference a run elsewhere (Slurm, another node) must match.
+pub fn small_project_run_locally() -> crate::tempdir::TempDir {
+    let dir = small_project();
+    let out = shakeflow(&["run", "pipeline.yaml"], dir.path());
+    assert!(out.status.success(), "{}", stderr(&out));
+    dir
+}
+
 pub fn small_project_with_twins() -> crate::tempdir::TempDir {
     let dir = small_project();
     std::fs::write(dir.path().join("pipeline.yaml"), pipeline_with_twins()).unwrap();
