@@ -5,6 +5,7 @@
 //!   shakeflow.lock                     LOCK_FILE: the state's root, naming each stage's state file
 //!   .shakeflow/                        STATE_DIR: shakeflow's own state
 //!     state/<stage>.<hash>.json        STATE_FILES: a stage's entry: what each unit ran with and wrote
+//!     state/<stage>.<xx>.<hash>.json   the same, one file per bucket past FAN_OUT_ABOVE records
 //!     lease, lease.break               LEASE_FILE, BREAK_FILE: one run at a time
 //!     txn-<pid>-<nanos>/               TXN_PREFIX: a transaction (`new/`, `old/`, JOURNAL)
 //!     hashes.json                      HASH_MEMO: the stat/hash memo
@@ -80,8 +81,14 @@ pub fn fans_out<'a>(ids: impl IntoIterator<Item = &'a str>, limit: usize) -> boo
 /// The folder a record goes in under a fanned-out dataset: two hex digits of the blake3 of its
 /// partition path's first segment (all of a motion's floors share one).
 pub fn fan_folder(partition_path: &str) -> String {
+    format!("{:02x}", fan_bucket(partition_path))
+}
+
+/// The number of [`fan_folder`]'s folder (0–255): also the bucket of a unit's state and of the
+/// Slurm shard that runs it.
+pub fn fan_bucket(partition_path: &str) -> u8 {
     let first = partition_path.split('/').next().unwrap_or_default();
-    format!("{:02x}", blake3::hash(first.as_bytes()).as_bytes()[0])
+    blake3::hash(first.as_bytes()).as_bytes()[0]
 }
 
 fn is_fan_folder(segment: &str) -> bool {

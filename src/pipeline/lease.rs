@@ -8,7 +8,9 @@
 //! - held on this host by a process that is gone (its pid no longer exists, or now belongs to a
 //!   process that started later): a stale lease, taken over;
 //! - held on another host: a pid there means nothing here, so the lease is stale only when its
-//!   heartbeat stopped more than [`STALE_AFTER`] ago.
+//!   heartbeat stopped more than [`STALE_AFTER`] ago — or, for a holder that ran inside a Slurm
+//!   job (a commit job, an in-allocation run: `$SLURM_JOB_ID`), as soon as `squeue` no longer
+//!   knows that job (killed with its node, out of memory: nothing else tells another host).
 //!
 //! Taking over is itself exclusive: the taker first creates `lease.break` (`O_EXCL`), checks the
 //! lease is still the stale one it read, removes it and creates its own; a `lease.break` left by
@@ -54,6 +56,10 @@ pub struct Holder {
     /// Set while a Slurm run holds the lease: its commit job's id.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub slurm_job: Option<String>,
+    /// The Slurm job the holding process runs in (`$SLURM_JOB_ID`), if any: once Slurm no longer
+    /// knows it, the holder is gone, whatever host asks.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub in_job: Option<String>,
 }
 
 impl Holder {
@@ -87,8 +93,8 @@ pub struct Lease {
     token: String,
     stop: Arc<AtomicBool>,
     heartbeat: Option<std::thread::JoinHandle<()>>,
-    /// What a stale lease's takeover replaced, for the user to hear.
-    pub took_over: Option<Holder>,
+    /// What a stale lease's takeover replaced, and why it was stale, for the user to hear.
+    pub took_over: Option<(Holder, String)>,
 }
 
 impl Lease {
@@ -115,6 +121,7 @@ impl Lease {
             command: std::env::args().collect::<Vec<_>>().join(" "),
             token: format!("{}-{}-{}", hostname(), std::process::id(), now_nanos()),
             slurm_job: None,
+            in_job: current_job(),
         };
         let mut took_over = None;
         for _attempt in 0..50 {
@@ -161,9 +168,9 @@ impl Lease {
                         STALE_AFTER.as_secs() / 60
                     )));
                 }
-                Some(_why) => {
+                Some(why) => {
                     if break_stale(&dir, &path, &current) {
-                        took_over = Some(current);
+                        took_over = Some((current, why));
                     } else {
                         std::thread::sleep(Duration::from_millis(50));
                     }
@@ -191,6 +198,7 @@ impl Lease {
             command: std::env::args().collect::<Vec<_>>().join(" "),
             token: run.to_string(),
             slurm_job: Some(job.to_string()),
+            in_job: None,
         };
         replace_holder(&self.path, &holder)
     }
@@ -230,6 +238,7 @@ impl Lease {
             command: std::env::args().collect::<Vec<_>>().join(" "),
             token: format!("{}-{}-{}", hostname(), std::process::id(), now_nanos()),
             slurm_job: None,
+            in_job: current_job(),
         };
         replace_holder(&path, &holder)?;
         let stop = Arc::new(AtomicBool::new(false));
@@ -290,10 +299,7 @@ fn read_holder(path: &Path) -> Option<Holder> {
 fn staleness(path: &Path, holder: &Holder) -> Option<String> {
     if let Some(job) = &holder.slurm_job {
         // Alive while Slurm knows its commit job; where `squeue` cannot answer, it holds.
-        let out = std::process::Command::new("squeue").args(["-h", "-j", job, "-o", "%T"]).output().ok()?;
-        let known = out.status.success() && !String::from_utf8_lossy(&out.stdout).trim().is_empty();
-        let gone = String::from_utf8_lossy(&out.stderr).contains("Invalid job id");
-        return (!known && (out.status.success() || gone)).then(|| format!("Slurm no longer knows job {job}"));
+        return (!slurm_knows(job)?).then(|| format!("Slurm no longer knows job {job}"));
     }
     if holder.host == hostname() {
         if !process_exists(holder.pid) {
@@ -305,9 +311,28 @@ fn staleness(path: &Path, holder: &Holder) -> Option<String> {
         }
         return None;
     }
+    if let Some(job) = &holder.in_job {
+        if slurm_knows(job) == Some(false) {
+            return Some(format!("its Slurm job {job} has ended"));
+        }
+    }
     let beat = fs::metadata(path).and_then(|m| m.modified()).ok()?;
     let silent = SystemTime::now().duration_since(beat).unwrap_or_default();
     (silent > STALE_AFTER).then(|| format!("no heartbeat for {}", format_age(silent.as_secs())))
+}
+
+/// Whether Slurm still knows job `job` (pending, running, completing); None when `squeue`
+/// cannot answer here (not installed, no controller).
+fn slurm_knows(job: &str) -> Option<bool> {
+    let out = std::process::Command::new("squeue").args(["-h", "-j", job, "-o", "%T"]).output().ok()?;
+    let known = out.status.success() && !String::from_utf8_lossy(&out.stdout).trim().is_empty();
+    let gone = String::from_utf8_lossy(&out.stderr).contains("Invalid job id");
+    (known || out.status.success() || gone).then_some(known)
+}
+
+/// The Slurm job this process runs in, if any.
+fn current_job() -> Option<String> {
+    std::env::var("SLURM_JOB_ID").ok().filter(|j| !j.is_empty())
 }
 
 /// Removes the stale lease `seen` under the exclusive `lease.break`; false when another taker
@@ -449,6 +474,7 @@ mod tests {
             command: "shakeflow run p.yaml".into(),
             token: "t".into(),
             slurm_job: None,
+            in_job: None,
         }
     }
 
@@ -460,7 +486,7 @@ mod tests {
         child.wait().unwrap();
         write_lease(dir.path(), &holder(&hostname(), pid));
         let lease = Lease::acquire(dir.path()).expect("stale lease taken over");
-        assert_eq!(lease.took_over.as_ref().map(|h| h.pid), Some(pid));
+        assert_eq!(lease.took_over.as_ref().map(|(h, _)| h.pid), Some(pid));
     }
 
     #[test]
@@ -482,6 +508,6 @@ mod tests {
         let old = SystemTime::now() - STALE_AFTER - Duration::from_secs(5);
         File::options().write(true).open(&path).unwrap().set_modified(old).unwrap();
         let lease = Lease::acquire(dir.path()).expect("a silent lease of another host is taken over");
-        assert_eq!(lease.took_over.as_ref().map(|h| h.host.as_str()), Some("node-that-is-not-here"));
+        assert_eq!(lease.took_over.as_ref().map(|(h, _)| h.host.as_str()), Some("node-that-is-not-here"));
     }
 }

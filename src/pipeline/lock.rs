@@ -1,15 +1,21 @@
 //! The output folder's state: what each work unit last ran with and what it wrote (after
 //! `dvc.lock`), sharded by stage (after git's trees and DVC's `.dir` listings).
 //!
-//! On disk (format 3):
+//! On disk (format 3, or 4 when a stage is cut into buckets):
 //! - `shakeflow.lock`, the root: the format, the pipeline owning the folder, and per stage the
-//!   name of its state file — one line a stage, whatever the size of the archive;
+//!   name of its state file — one line a stage — or, for a stage of more records than a folder
+//!   holds (`layout::fans_out`), the name of each bucket's file;
 //! - `.shakeflow/state/<stage>.<hash>.json`, one per stage: the stage's entry ([`StageLock`]),
-//!   named by the blake3 of its bytes (32 hex digits) and never changed once written.
+//!   named by the blake3 of its bytes (32 hex digits) and never changed once written;
+//! - `.shakeflow/state/<stage>.<xx>.<hash>.json` instead, for a large stage: the units whose id
+//!   falls in bucket `xx` (`layout::fan_folder`, the two-level folders' 256 buckets), each file
+//!   a whole [`StageLock`] of those units. A motion's records share a bucket in every stage, so
+//!   a Slurm task cut by bucket reads its buckets of its stage and of the stages it reads.
 //!
 //! A reader takes the root and only the stage files it needs ([`LockFile::read_stages`]: a
-//! Slurm task reads its stage's and its upstream stages'). A commit writes a file only for a
-//! stage whose entry changed, and a new root naming them ([`LockFile::encode`]); the transaction
+//! Slurm task reads its stage's and its upstream stages', only its buckets of each where they
+//! are aligned). A commit writes a file only for a stage (or bucket) whose entry changed, and a
+//! new root naming them ([`LockFile::encode`]); the transaction
 //! (`txn.rs`) installs the new files before the root, so renaming the journal stays its one
 //! commit point, and removes the files only the old root named after the new root is in place.
 //! Same entries, same bytes, same names: the state is deterministic like the artifacts.
@@ -33,6 +39,9 @@ use super::layout::{STATE_DIR, STATE_FILES};
 use crate::error::UserError;
 
 const LOCK_FORMAT: u32 = 3;
+/// Format 3 with stages cut into buckets: written only when one is, so a folder of small stages
+/// stays readable by the shakeflow that wrote format 3.
+const FORMAT_4: u32 = 4;
 /// The format that kept every stage's entry in the lockfile itself.
 const FORMAT_2: u32 = 2;
 /// The unit of a stage written by a shakeflow whose lockfile had no work units (format 1).
@@ -51,10 +60,10 @@ pub struct LockFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pipeline: Option<String>,
     pub stages: BTreeMap<String, StageLock>,
-    /// Stage → the state file its entry was read from (format 3): a commit keeps the file of a
-    /// stage whose entry it leaves as it was.
+    /// Stage → the state file(s) its entry was read from (formats 3 and 4): a commit keeps the
+    /// file of a stage (or bucket) whose entry it leaves as it was.
     #[serde(skip)]
-    pub state_files: BTreeMap<String, String>,
+    pub state_files: BTreeMap<String, StateFiles>,
     /// Some stages' files were not read ([`LockFile::read_stages`]): not to be written.
     #[serde(skip)]
     partial: bool,
@@ -92,14 +101,79 @@ pub struct UnitLock {
     pub notes: Vec<String>,
 }
 
-/// The root of a format-3 state: per stage, its state file.
+/// Where a stage's entry is on disk: one file, or one per bucket of its units.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum StateFiles {
+    One(String),
+    Buckets(BTreeMap<String, String>),
+}
+
+impl StateFiles {
+    /// The one file of a stage not cut into buckets.
+    #[cfg(test)]
+    pub fn one(&self) -> &str {
+        match self {
+            StateFiles::One(name) => name,
+            StateFiles::Buckets(_) => panic!("a stage in buckets"),
+        }
+    }
+
+    /// Every file name, in order.
+    pub fn names(&self) -> Vec<&str> {
+        match self {
+            StateFiles::One(name) => vec![name.as_str()],
+            StateFiles::Buckets(files) => files.values().map(String::as_str).collect(),
+        }
+    }
+}
+
+/// The root of a format-3 or -4 state: per stage, its state file(s).
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Root {
     version: u32,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pipeline: Option<String>,
-    stages: BTreeMap<String, String>,
+    stages: BTreeMap<String, StateFiles>,
+}
+
+/// Which buckets of a stage a reader wants: all (None), or these (`layout::fan_folder` names).
+pub type Wanted = BTreeMap<String, Option<BTreeSet<String>>>;
+
+/// The bucket of a unit id (`layout::fan_folder` of its first segment).
+pub fn bucket_of(id: &str) -> String {
+    super::layout::fan_folder(id)
+}
+
+/// Whether a stage's entry is kept in buckets: it has more records than a folder holds.
+fn in_buckets(entry: &StageLock) -> bool {
+    super::layout::fans_out(entry.units.keys().map(String::as_str), super::layout::fan_out_above())
+}
+
+/// A stage's entry cut into buckets: each its own entry (the same type, version, params, select).
+fn buckets(entry: &StageLock) -> BTreeMap<String, StageLock> {
+    let mut out: BTreeMap<String, StageLock> = BTreeMap::new();
+    for (id, unit) in &entry.units {
+        out.entry(bucket_of(id))
+            .or_insert_with(|| StageLock { units: BTreeMap::new(), ..entry.header() })
+            .units
+            .insert(id.clone(), unit.clone());
+    }
+    out
+}
+
+impl StageLock {
+    /// The entry without its units.
+    fn header(&self) -> StageLock {
+        StageLock {
+            stage_type: self.stage_type.clone(),
+            stage_version: self.stage_version,
+            params: self.params.clone(),
+            select: self.select.clone(),
+            units: BTreeMap::new(),
+        }
+    }
 }
 
 /// How much of the state a read took: files and bytes.
@@ -125,19 +199,34 @@ pub fn state_dir(lock_path: &Path) -> PathBuf {
     lock_path.parent().unwrap_or(Path::new(".")).join(STATE_DIR).join(STATE_FILES)
 }
 
-/// `<stage>.<32 hex digits of blake3>.json`.
-fn state_file_name(stage: &str, bytes: &[u8]) -> String {
-    format!("{stage}.{}.json", &crate::io::hash::hash_bytes(bytes)[..32])
+/// `<stage>.<32 hex digits of blake3>.json`, or `<stage>.<bucket>.<…>.json` for a bucket's.
+fn state_file_name(stage: &str, bucket: Option<&str>, bytes: &[u8]) -> String {
+    let hash = &crate::io::hash::hash_bytes(bytes)[..32];
+    match bucket {
+        Some(bucket) => format!("{stage}.{bucket}.{hash}.json"),
+        None => format!("{stage}.{hash}.json"),
+    }
 }
 
-/// Whether a root's `file` for `stage` has the shape shakeflow gives its state files (so a
-/// hand-edited root can name nothing outside the state folder, nor a file of the user's).
-fn is_state_file_name(stage: &str, file: &str) -> bool {
-    let hex = file.strip_prefix(stage).and_then(|r| r.strip_prefix('.')).and_then(|r| r.strip_suffix(".json"));
-    !stage.is_empty()
-        && !stage.contains('/')
-        && !stage.starts_with('.')
-        && hex.is_some_and(|h| h.len() == 32 && h.bytes().all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b)))
+/// Whether a root's `file` for `stage` (and `bucket`) has the shape shakeflow gives its state
+/// files (so a hand-edited root can name nothing outside the state folder, nor a user's file).
+fn is_state_file_name(stage: &str, bucket: Option<&str>, file: &str) -> bool {
+    let is_hex =
+        |h: &str, len: usize| h.len() == len && h.bytes().all(|b| b.is_ascii_digit() || (b'a'..=b'f').contains(&b));
+    let mut rest = file.strip_prefix(stage).and_then(|r| r.strip_prefix('.'));
+    if let Some(bucket) = bucket {
+        rest =
+            rest.and_then(|r| r.strip_prefix(bucket)).and_then(|r| r.strip_prefix('.')).filter(|_| is_hex(bucket, 2));
+    }
+    let hex = rest.and_then(|r| r.strip_suffix(".json"));
+    !stage.is_empty() && !stage.contains('/') && !stage.starts_with('.') && hex.is_some_and(|h| is_hex(h, 32))
+}
+
+/// The bytes of a state file: the entry's JSON and a newline.
+fn encoded(entry: &StageLock) -> anyhow::Result<Vec<u8>> {
+    let mut bytes = serde_json::to_vec(entry)?;
+    bytes.push(b'\n');
+    Ok(bytes)
 }
 
 impl LockFile {
@@ -148,7 +237,7 @@ impl LockFile {
     /// Whether it was read from a lockfile of an older format that holds entries (format 2): the
     /// next commit writes it as format 3, even when nothing else changes.
     pub fn is_older_format(&self) -> bool {
-        self.version != LOCK_FORMAT && !self.stages.is_empty()
+        self.version < LOCK_FORMAT && !self.stages.is_empty()
     }
 
     /// Every stage's entry. A missing lockfile is an empty one; an unreadable or damaged one (or
@@ -159,10 +248,11 @@ impl LockFile {
         Ok(read_with(path, None, &|p| std::fs::read(p))?.0)
     }
 
-    /// The root and the entries of `stages` only (the others' state files are not opened), and
-    /// how much that read: what a Slurm task plans its shard with.
-    pub fn read_stages(path: &Path, stages: &BTreeSet<String>) -> Result<(LockFile, StateRead), UserError> {
-        read_with(path, Some(stages), &|p| std::fs::read(p))
+    /// The root and the entries of the `wanted` stages only, of a stage kept in buckets only the
+    /// wanted buckets' units (the other files are not opened), and how much that read: what a
+    /// Slurm task plans its shard with.
+    pub fn read_stages(path: &Path, wanted: &Wanted) -> Result<(LockFile, StateRead), UserError> {
+        read_with(path, Some(wanted), &|p| std::fs::read(p))
     }
 
     /// The new root and the state files of the stages whose entry differs from `previous`
@@ -174,35 +264,65 @@ impl LockFile {
         let mut files = Vec::new();
         for (stage, entry) in &self.stages {
             let was = previous.state_files.get(stage);
-            let name = match was.filter(|_| previous.stages.get(stage) == Some(entry)) {
-                Some(kept) => kept.clone(),
-                None => {
-                    let mut bytes = serde_json::to_vec(entry)?;
-                    bytes.push(b'\n');
-                    let name = state_file_name(stage, &bytes);
-                    if was != Some(&name) {
-                        files.push((name.clone(), bytes));
-                    }
-                    name
-                }
+            let before = previous.stages.get(stage);
+            let split = in_buckets(entry);
+            // An entry as it was keeps its file(s), unless it has crossed the fan-out limit.
+            if let Some(kept) = was.filter(|w| before == Some(entry) && matches!(w, StateFiles::Buckets(_)) == split) {
+                names.insert(stage.clone(), kept.clone());
+                continue;
+            }
+            let mut write = |bucket: Option<&str>, entry: &StageLock| -> anyhow::Result<String> {
+                let bytes = encoded(entry)?;
+                let name = state_file_name(stage, bucket, &bytes);
+                files.push((name.clone(), bytes));
+                Ok(name)
             };
-            names.insert(stage.clone(), name);
+            let named = if split {
+                // A bucket whose units are as they were keeps its file, unencoded.
+                let old: BTreeMap<String, StageLock> = match (was, before) {
+                    (Some(StateFiles::Buckets(_)), Some(before)) => buckets(before),
+                    _ => BTreeMap::new(),
+                };
+                let mut named = BTreeMap::new();
+                for (bucket, part) in buckets(entry) {
+                    let kept = match was {
+                        Some(StateFiles::Buckets(old_files)) if old.get(&bucket) == Some(&part) => {
+                            old_files.get(&bucket).cloned()
+                        }
+                        _ => None,
+                    };
+                    let name = match kept {
+                        Some(name) => name,
+                        None => write(Some(&bucket), &part)?,
+                    };
+                    named.insert(bucket, name);
+                }
+                StateFiles::Buckets(named)
+            } else {
+                StateFiles::One(write(None, entry)?)
+            };
+            names.insert(stage.clone(), named);
         }
-        let live: BTreeSet<&String> = names.values().collect();
-        let retired = previous.state_files.values().filter(|n| !live.contains(n)).cloned().collect();
-        let root = Root { version: LOCK_FORMAT, pipeline: self.pipeline.clone(), stages: names };
+        // A file written again under the name it had (the same bytes) is not new.
+        let old_names: BTreeSet<&str> = previous.state_files.values().flat_map(StateFiles::names).collect();
+        files.retain(|(name, _)| !old_names.contains(name.as_str()));
+        let live: BTreeSet<&str> = names.values().flat_map(StateFiles::names).collect();
+        let retired = old_names.into_iter().filter(|n| !live.contains(n)).map(String::from).collect();
+        let version = if names.values().any(|f| matches!(f, StateFiles::Buckets(_))) { FORMAT_4 } else { LOCK_FORMAT };
+        let root = Root { version, pipeline: self.pipeline.clone(), stages: names };
         let mut bytes = HEADER.as_bytes().to_vec();
         bytes.extend(serde_yaml::to_string(&root)?.into_bytes());
         Ok(NewState { root: bytes, files, retired })
     }
 }
 
-/// Reads the lockfile at `path` and the state files of the `wanted` stages (all: None) through
-/// `read`, counting what it reads. The state files are read and parsed in parallel (at 10⁴
-/// tests a no-op run's largest read); the first error, in the stages' order, is the one told.
+/// Reads the lockfile at `path` and the state files of the `wanted` stages and buckets (all:
+/// None) through `read`, counting what it reads. The state files are read and parsed in
+/// parallel (at 10⁴ tests a no-op run's largest read); the first error, in the stages' order,
+/// is the one told.
 fn read_with(
     path: &Path,
-    wanted: Option<&BTreeSet<String>>,
+    wanted: Option<&Wanted>,
     read: &(dyn Fn(&Path) -> std::io::Result<Vec<u8>> + Sync),
 ) -> Result<(LockFile, StateRead), UserError> {
     let mut count = StateRead::default();
@@ -228,7 +348,7 @@ fn read_with(
             let lock: LockFile = serde_yaml::from_value(value).map_err(yaml)?;
             return Ok((lock, count));
         }
-        Some(v) if v == u64::from(LOCK_FORMAT) => {}
+        Some(v) if v == u64::from(LOCK_FORMAT) || v == u64::from(FORMAT_4) => {}
         _ => {
             let version = value.get("version").map_or("none".into(), |v| format!("{v:?}"));
             return Err(UserError::new(format!("lockfile format {version} is not supported"))
@@ -237,18 +357,48 @@ fn read_with(
         }
     }
     let root: Root = serde_yaml::from_value(value).map_err(yaml)?;
-    if let Some((stage, file)) = root.stages.iter().find(|(stage, file)| !is_state_file_name(stage, file)) {
-        return Err(damaged(format!("`{file}` is not the name of stage `{stage}`'s state file"), None));
+    for (stage, files) in &root.stages {
+        let bad = match files {
+            StateFiles::One(file) => (!is_state_file_name(stage, None, file)).then_some(file),
+            StateFiles::Buckets(files) => {
+                files.iter().find(|(b, f)| !is_state_file_name(stage, Some(b), f)).map(|(_, f)| f)
+            }
+        };
+        if let Some(file) = bad {
+            return Err(damaged(format!("`{file}` is not the name of stage `{stage}`'s state file"), None));
+        }
     }
     let dir = state_dir(path);
     let mut lock = LockFile { version: LOCK_FORMAT, pipeline: root.pipeline, ..LockFile::default() };
-    let (read_now, later): (Vec<(String, String)>, Vec<(String, String)>) =
-        root.stages.into_iter().partition(|(stage, _)| wanted.is_none_or(|w| w.contains(stage)));
-    lock.partial = !later.is_empty();
-    lock.state_files.extend(later);
-    let entries: Vec<Result<(StageLock, u64), UserError>> = read_now
+    // (stage, bucket, file) of every file to read; a stage whose wanted buckets have no file yet
+    // still reads one, for its type, version and params.
+    let mut to_read: Vec<(String, Option<String>, String)> = Vec::new();
+    for (stage, files) in &root.stages {
+        let Some(buckets) = wanted.map_or(Some(&None), |w| w.get(stage)) else {
+            lock.partial = true;
+            continue;
+        };
+        match files {
+            StateFiles::One(file) => to_read.push((stage.clone(), None, file.clone())),
+            StateFiles::Buckets(files) => {
+                let some = files.iter().filter(|(b, _)| buckets.as_ref().is_none_or(|w| w.contains(*b)));
+                let mut some: Vec<(String, Option<String>, String)> =
+                    some.map(|(b, f)| (stage.clone(), Some(b.clone()), f.clone())).collect();
+                if some.len() < files.len() {
+                    lock.partial = true;
+                }
+                if some.is_empty() {
+                    // Only the header is used (its units are not the reader's).
+                    let (b, f) = files.iter().next().expect("a stage in buckets has one");
+                    some.push((stage.clone(), Some(format!("{b} (header)")), f.clone()));
+                }
+                to_read.extend(some);
+            }
+        }
+    }
+    let entries: Vec<Result<(StageLock, u64), UserError>> = to_read
         .par_iter()
-        .map(|(stage, file)| {
+        .map(|(stage, bucket, file)| {
             let state = dir.join(file);
             let unreadable = |what: String| {
                 UserError::new(format!("the state of stage `{stage}` {what}"))
@@ -256,20 +406,45 @@ fn read_with(
                     .hint(format!("delete `{}` to recompute every stage", path.display()))
             };
             let bytes = read(&state).map_err(|e| unreadable(format!("cannot be read: {e}")))?;
-            if state_file_name(stage, &bytes) != *file {
+            let bucket = bucket.as_deref().map(|b| b.trim_end_matches(" (header)"));
+            if state_file_name(stage, bucket, &bytes) != *file {
                 return Err(unreadable("is damaged: its content does not match its name".into()));
             }
-            let entry = serde_json::from_slice(&bytes).map_err(|e| unreadable(format!("is damaged: {e}")))?;
+            let entry: StageLock =
+                serde_json::from_slice(&bytes).map_err(|e| unreadable(format!("is damaged: {e}")))?;
+            if let Some(b) = bucket {
+                if let Some(id) = entry.units.keys().find(|id| bucket_of(id) != b) {
+                    return Err(unreadable(format!("is damaged: unit `{id}` is not of bucket {b}")));
+                }
+            }
             Ok((entry, bytes.len() as u64))
         })
         .collect();
-    for ((stage, file), entry) in read_now.into_iter().zip(entries) {
+    // A stage in buckets: its header, and its buckets' units gathered, then made one map at
+    // once (merging 256 maps one by one into a growing one took a third of a no-op at 10⁴ tests).
+    let mut gathered: BTreeMap<String, (StageLock, Vec<(String, UnitLock)>)> = BTreeMap::new();
+    for ((stage, bucket, _), entry) in to_read.into_iter().zip(entries) {
         let (entry, bytes) = entry?;
         count.files += 1;
         count.bytes += bytes;
-        lock.stages.insert(stage.clone(), entry);
-        lock.state_files.insert(stage, file);
+        let Some(bucket) = bucket else {
+            lock.stages.insert(stage, entry);
+            continue;
+        };
+        let StageLock { stage_type, stage_version, params, select, units } = entry;
+        let units = if bucket.ends_with(" (header)") { BTreeMap::new() } else { units };
+        let header = StageLock { stage_type, stage_version, params, select, units: BTreeMap::new() };
+        let (first, all) = gathered.entry(stage.clone()).or_insert_with(|| (header.clone(), Vec::new()));
+        if *first != header {
+            let file = root.stages[&stage].names().join(", ");
+            return Err(damaged(format!("the buckets of stage `{stage}` disagree ({file})"), None));
+        }
+        all.extend(units);
     }
+    for (stage, (header, units)) in gathered {
+        lock.stages.insert(stage, StageLock { units: units.into_iter().collect(), ..header });
+    }
+    lock.state_files = root.stages;
     Ok((lock, count))
 }
 
@@ -392,7 +567,7 @@ mod tests {
         assert_eq!(whole.pipeline, lock.pipeline);
 
         let opened = std::sync::Mutex::new(Vec::new());
-        let wanted = BTreeSet::from(["load".to_string(), "baseline".to_string()]);
+        let wanted = Wanted::from([("load".to_string(), None), ("baseline".to_string(), None)]);
         let (some, read) = read_with(&path, Some(&wanted), &|p| {
             opened.lock().unwrap().push(p.file_name().unwrap().to_string_lossy().into_owned());
             std::fs::read(p)
@@ -403,8 +578,8 @@ mod tests {
         assert!(opened[0] == "shakeflow.lock" && !opened.iter().any(|f| f.starts_with("report.")), "{opened:?}");
         let size = |f: &str| std::fs::metadata(state_dir(&path).join(f)).unwrap().len();
         let expected = std::fs::metadata(&path).unwrap().len()
-            + size(&some.state_files["load"])
-            + size(&some.state_files["baseline"]);
+            + size(some.state_files["load"].one())
+            + size(some.state_files["baseline"].one());
         assert_eq!(read, StateRead { files: 3, bytes: expected });
         assert_eq!(some.stages.keys().collect::<Vec<_>>(), ["baseline", "load"]);
         assert_eq!(some.stages["load"], lock.stages["load"]);
@@ -434,7 +609,7 @@ mod tests {
         let new = after.encode(&before).unwrap();
         assert_eq!(new.files.len(), 1);
         assert!(new.files[0].0.starts_with("s07."), "{:?}", new.files[0].0);
-        assert_eq!(new.retired, [before.state_files["s07"].clone()]);
+        assert_eq!(new.retired, [before.state_files["s07"].one().to_string()]);
         install(&path, &new);
         let read = LockFile::read(&path).unwrap();
         assert_eq!(read.stages, after.stages);
@@ -447,7 +622,7 @@ mod tests {
         fewer.stages.remove("s49");
         let new = fewer.encode(&read).unwrap();
         assert!(new.files.is_empty());
-        assert_eq!(new.retired, [read.state_files["s49"].clone()]);
+        assert_eq!(new.retired, [read.state_files["s49"].one().to_string()]);
     }
 
     #[test]
@@ -460,7 +635,7 @@ mod tests {
         let root = String::from_utf8(a.root).unwrap();
         assert!(root.contains("version: 3\npipeline: ../pipeline.yaml\nstages:\n  baseline: baseline."), "{root}");
         for (name, bytes) in &a.files {
-            assert_eq!(*name, state_file_name(name.split('.').next().unwrap(), bytes));
+            assert_eq!(*name, state_file_name(name.split('.').next().unwrap(), None, bytes));
         }
     }
 
@@ -469,7 +644,7 @@ mod tests {
         let dir = crate::tempdir::tempdir().unwrap();
         let path = dir.path().join("shakeflow.lock");
         install(&path, &state(&[("load", &["a"])]).encode(&LockFile::empty()).unwrap());
-        let file = state_dir(&path).join(&LockFile::read(&path).unwrap().state_files["load"]);
+        let file = state_dir(&path).join(LockFile::read(&path).unwrap().state_files["load"].one());
         let good = std::fs::read(&file).unwrap();
         std::fs::write(&file, String::from_utf8(good.clone()).unwrap().replace("in-a", "in-b")).unwrap();
         let error = LockFile::read(&path).unwrap_err().to_string();
@@ -484,8 +659,13 @@ mod tests {
             let error = LockFile::read(&path).unwrap_err().to_string();
             assert!(error.contains("is not the name of stage `load`'s state file"), "{bad}: {error}");
         }
-        assert!(is_state_file_name("load", &name));
-        assert!(!is_state_file_name("..", "...0123456789abcdef0123456789abcdef.json"));
+        assert!(is_state_file_name("load", None, &name));
+        assert!(!is_state_file_name("..", None, "...0123456789abcdef0123456789abcdef.json"));
+        let hex = "0123456789abcdef0123456789abcdef";
+        assert!(is_state_file_name("load", Some("3f"), &format!("load.3f.{hex}.json")));
+        assert!(!is_state_file_name("load", Some("3f"), &format!("load.4f.{hex}.json")), "another bucket's");
+        assert!(!is_state_file_name("load", Some("../x"), &format!("load.../x.{hex}.json")));
+        assert!(!is_state_file_name("load", None, &format!("load.3f.{hex}.json")));
     }
 
     #[test]
@@ -499,7 +679,7 @@ mod tests {
         let read = LockFile::read(&path).unwrap();
         assert_eq!(read.stages, old.stages);
         assert!(read.is_older_format() && read.state_files.is_empty());
-        let (_, partly) = LockFile::read_stages(&path, &BTreeSet::from(["load".to_string()])).unwrap();
+        let (_, partly) = LockFile::read_stages(&path, &Wanted::from([("load".to_string(), None)])).unwrap();
         assert_eq!(partly.files, 1, "format 2: the one file holds everything");
         let new = read.encode(&read).unwrap();
         assert_eq!(new.files.len(), 2, "every stage gets its file");
@@ -508,5 +688,80 @@ mod tests {
         let now = LockFile::read(&path).unwrap();
         assert_eq!(now.stages, old.stages);
         assert!(!now.is_older_format());
+    }
+
+    /// `n` motions of two floors each (`motion=M0007/floor=4`): past the fan-out limit when
+    /// there are more than a folder holds.
+    fn many(n: usize) -> StageLock {
+        let ids: Vec<String> =
+            (0..n).flat_map(|m| [format!("motion=M{m:04}/floor=4"), format!("motion=M{m:04}/floor=5")]).collect();
+        stage(&ids.iter().map(String::as_str).collect::<Vec<_>>())
+    }
+
+    #[test]
+    fn a_large_stage_is_kept_in_buckets_and_a_reader_of_some_buckets_reads_only_their_files() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let path = dir.path().join("shakeflow.lock");
+        let motions = crate::pipeline::layout::FAN_OUT_ABOVE + 200;
+        let mut lock = state(&[("report", &["*"])]);
+        lock.stages.insert("load".into(), many(motions));
+        let new = lock.encode(&LockFile::empty()).unwrap();
+        install(&path, &new);
+        let root = String::from_utf8(new.root.clone()).unwrap();
+        assert!(root.contains("version: 4\n") && root.contains("  load:\n    '00': load.00."), "{root}");
+        assert_eq!(state_files(&path).len(), 257, "256 buckets of load, one file of report");
+        let whole = LockFile::read(&path).unwrap();
+        assert_eq!(whole.stages, lock.stages, "the buckets read back as the one entry");
+        assert!(!whole.is_older_format());
+
+        // A reader of two buckets opens the root and those two files; a motion's floors share one.
+        let wanted_buckets = BTreeSet::from(["3f".to_string(), "a0".to_string()]);
+        let opened = std::sync::Mutex::new(Vec::new());
+        let wanted = Wanted::from([("load".to_string(), Some(wanted_buckets.clone()))]);
+        let (some, read) = read_with(&path, Some(&wanted), &|p| {
+            opened.lock().unwrap().push(p.file_name().unwrap().to_string_lossy().into_owned());
+            std::fs::read(p)
+        })
+        .unwrap();
+        let opened = opened.into_inner().unwrap();
+        assert_eq!(opened.len(), 3, "{opened:?}");
+        assert_eq!(read.files, 3);
+        let expected: BTreeMap<&String, &UnitLock> =
+            lock.stages["load"].units.iter().filter(|(id, _)| wanted_buckets.contains(&bucket_of(id))).collect();
+        assert!(expected.len() > 4, "{} units in two buckets", expected.len());
+        assert_eq!(some.stages["load"].units.iter().collect::<BTreeMap<_, _>>(), expected);
+        assert_eq!(some.stages["load"].params, lock.stages["load"].params);
+        assert!(some.encode(&whole).is_err(), "a partly read state is not committed");
+
+        // One record more: one bucket's file is new and its old one retired; the rest stay.
+        let mut after = whole.clone();
+        let id = "motion=N0001/floor=4";
+        after.stages.get_mut("load").unwrap().units.insert(id.into(), unit("n"));
+        let new = after.encode(&whole).unwrap();
+        assert_eq!(new.files.len(), 1);
+        assert!(new.files[0].0.starts_with(&format!("load.{}.", bucket_of(id))), "{}", new.files[0].0);
+        assert_eq!(new.retired.len(), 1);
+        install(&path, &new);
+        assert_eq!(LockFile::read(&path).unwrap().stages, after.stages);
+
+        // A bucket's file naming a unit of another bucket is damaged, not merged.
+        let file = new.files[0].0.clone();
+        let bucket = &file["load.".len().."load.".len() + 2];
+        let stranger = (0..).map(|i| format!("motion=X{i}")).find(|id| bucket_of(id) != bucket).unwrap();
+        let mut moved: StageLock = serde_json::from_slice(&new.files[0].1).unwrap();
+        moved.units.insert(stranger, unit("x"));
+        let bytes = encoded(&moved).unwrap();
+        let renamed = state_file_name("load", Some(bucket), &bytes);
+        std::fs::write(state_dir(&path).join(&renamed), &bytes).unwrap();
+        std::fs::write(&path, std::fs::read_to_string(&path).unwrap().replace(&file, &renamed)).unwrap();
+        let error = LockFile::read(&path).unwrap_err().to_string();
+        assert!(error.contains("is not of bucket"), "{error}");
+
+        // Fewer records than a folder holds: one file again, format 3.
+        let mut small = state(&[("load", &["a", "b"])]);
+        small.pipeline = after.pipeline.clone();
+        let back = small.encode(&after).unwrap();
+        assert!(String::from_utf8(back.root).unwrap().contains("version: 3\n"));
+        assert_eq!(back.retired.len(), 257);
     }
 }

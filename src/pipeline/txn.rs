@@ -553,7 +553,7 @@ mod tests {
         Transaction::begin(&lease).unwrap().commit(&[], &[], Some((&first, &LockFile::empty()))).unwrap();
         let read = LockFile::read(&lock_path).unwrap();
         assert_eq!(read.stages, first.stages);
-        let old = read.state_files["load"].clone();
+        let old = read.state_files["load"].one().to_string();
         assert_eq!(names(&states), [old.as_str()]);
 
         // Committed, then "crashed" right after the commit point: the next lease holder installs

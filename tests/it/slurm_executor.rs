@@ -107,6 +107,86 @@ fn a_fanned_out_slurm_run_writes_the_local_fanned_runs_artifacts_and_state() {
     assert!(stderr(&again).contains("nothing submitted"), "{}", stderr(&again));
 }
 
+/// Every line of the run's task logs (`out/.shakeflow/slurm/<run>/logs/`) containing `what`.
+fn task_log_lines(root: &Path, what: &str) -> Vec<String> {
+    let mut lines = Vec::new();
+    for run in std::fs::read_dir(root.join("out/.shakeflow/slurm")).unwrap().flatten() {
+        for log in std::fs::read_dir(run.path().join("logs")).into_iter().flatten().flatten() {
+            let text = std::fs::read_to_string(log.path()).unwrap_or_default();
+            lines.extend(text.lines().filter(|l| l.contains(what)).map(String::from));
+        }
+    }
+    lines.sort();
+    lines
+}
+
+#[test]
+fn a_fanned_out_slurm_run_cuts_shards_by_bucket_reads_only_their_state_and_drops_what_it_read() {
+    // Past the fan-out limit a stage's state is kept in buckets and its shards are cut by
+    // bucket: a `baseline` task reads the root and its own bucket of `baseline` and of `load`
+    // (of the five state files), and removes `load`'s shard (`keep: false`) once it has read it.
+    let fan_out = [("SHAKEFLOW_FAN_OUT_ABOVE", "1")];
+    let text = PIPELINE.replace("    inputs: [daq]\n", "    inputs: [daq]\n    keep: false\n");
+    let local = small_project();
+    let cluster = small_project();
+    for project in [&local, &cluster] {
+        std::fs::write(project.path().join("pipeline.yaml"), &text).unwrap();
+    }
+    let out = shakeflow_env(&["run", "pipeline.yaml"], local.path(), &fan_out);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = slurm_run_env(cluster.path(), &["--wait"], &fan_out);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(artifacts_and_state(local.path()), artifacts_and_state(cluster.path()));
+    let buckets = std::fs::read_dir(cluster.path().join("out/baseline/records")).unwrap().count();
+    assert_eq!(buckets, 2, "the two motions fall in two buckets (two shards)");
+    let root = std::fs::read_to_string(cluster.path().join("out/shakeflow.lock")).unwrap();
+    assert!(root.contains("version: 4\n"), "{root}");
+    let state = std::fs::read_dir(cluster.path().join("out/.shakeflow/state")).unwrap().count();
+    assert!(state >= 4, "two stages of two buckets or more each (load's status table has its own): {state}");
+
+    // Again, forced: each `baseline` task reads the root and its buckets' files of `baseline`
+    // and `load` (the shards' bucket ranges cut the 256 buckets: each file is read by one task,
+    // `load`'s status table by the shard whose range holds its bucket), and drops `load`'s shard.
+    for project in [&local, &cluster] {
+        let _ = std::fs::remove_dir_all(project.path().join("out/.shakeflow/slurm"));
+    }
+    let out = shakeflow_env(&["run", "pipeline.yaml", "--force", "baseline"], local.path(), &fan_out);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = slurm_run_env(cluster.path(), &["--wait", "--force", "baseline"], &fan_out);
+    let log = stderr(&out);
+    assert!(out.status.success(), "{log}");
+    assert!(log.contains("load               submitted: 2 of 2 shard(s)"), "remade for baseline: {log}");
+    let reads = task_log_lines(cluster.path(), "baseline shard");
+    let read_lines: Vec<&String> = reads.iter().filter(|l| l.contains("state file(s)")).collect();
+    assert_eq!(read_lines.len(), 2, "{reads:?}");
+    let files_read: Vec<usize> = read_lines
+        .iter()
+        .map(|l| l.split("read ").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap())
+        .collect();
+    assert!(files_read.iter().all(|&n| n < 1 + state), "fewer than the root and {state} files: {reads:?}");
+    assert_eq!(files_read.iter().sum::<usize>(), 2 + state, "each state file read once: {reads:?}");
+    let dropped = reads.iter().filter(|l| l.contains("removed `load`'s shard")).count();
+    assert_eq!(dropped, 2, "{reads:?}");
+    assert_eq!(artifacts_and_state(local.path()), artifacts_and_state(cluster.path()));
+    assert!(!cluster.path().join("out/load/records").exists(), "load's tables went");
+
+    // Forced once more, `baseline`'s shard 1 dies: the commit keeps `load`'s shard 1 for the
+    // rerun (its reader failed) without the shard 0 its reader dropped, and the same command
+    // run again ends in the local run's state.
+    let kill = [("SHAKEFLOW_FAN_OUT_ABOVE", "1"), ("SHAKEFLOW_FAILPOINT", "slurm-task.baseline.1")];
+    let out = slurm_run_env(cluster.path(), &["--wait", "--force", "baseline"], &kill);
+    let log = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{log}");
+    assert!(log.contains("did not finish") && !log.contains("moving"), "{log}");
+    let kept = std::fs::read_dir(cluster.path().join("out/load/records")).unwrap().count();
+    assert_eq!(kept, 1, "shard 1's load table kept for the rerun, shard 0's dropped: {log}");
+    let out = slurm_run_env(cluster.path(), &["--wait", "--force", "baseline"], &fan_out);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let names = |root: &Path| artifacts_and_state(root).into_iter().map(|(name, _)| name).collect::<Vec<_>>();
+    assert_eq!(names(local.path()), names(cluster.path()), "{}", stderr(&out));
+    assert_eq!(artifacts_and_state(local.path()), artifacts_and_state(cluster.path()));
+}
+
 #[test]
 fn a_failing_record_fails_its_unit_only_on_slurm() {
     let project = small_project();
@@ -208,12 +288,14 @@ fn a_commit_job_that_dies_says_so_and_a_rerun_ends_in_the_local_runs_state() {
     assert!(log.contains("ended without its summary") && log.contains("it died"), "{log}");
     assert!(log.contains("its log is in `") && log.contains("running again finishes the run"), "{log}");
     assert!(!root.join("out/shakeflow.lock").exists(), "nothing committed: {log}");
-    // The dead job's lease, which another host cannot see is dead, removed as the hint says.
-    let lease = root.join("out/.shakeflow/lease");
-    assert!(lease.exists());
-    std::fs::remove_file(lease).unwrap();
+    // The dead job's lease, held on its node's host: taken over, since Slurm no longer knows
+    // the job (a heartbeat alone would hold it for 10 minutes).
+    let lease = std::fs::read_to_string(root.join("out/.shakeflow/lease")).unwrap();
+    assert!(lease.contains("\"in_job\""), "{lease}");
     let rerun = slurm_run(root, &["--wait"]);
-    assert!(rerun.status.success(), "{}", stderr(&rerun));
+    let rerun_log = stderr(&rerun);
+    assert!(rerun.status.success(), "{rerun_log}");
+    assert!(rerun_log.contains("has ended"), "the take-over says why: {rerun_log}");
     assert_eq!(
         artifacts_and_state(local.path()),
         artifacts_and_state(project.path()),

@@ -214,6 +214,10 @@ pub struct StatusLine {
     pub flagged: Vec<UnitStatus>,
     /// `keep: false`: its files go once the stages reading them are up to date.
     pub keep: bool,
+    /// Every unit reads only records of its own first partition segment (`motion=FB-4`), so of
+    /// its own bucket (`layout::fan_bucket`): a Slurm task cut by bucket needs only its buckets
+    /// of the stages it reads.
+    pub closed: bool,
 }
 
 impl StatusLine {
@@ -294,6 +298,7 @@ pub(super) fn predict(
             vanished: assessed.vanished.clone(),
             flagged: Vec::new(),
             keep: stage.keep,
+            closed: assessed.units.par_iter().all(|(unit, _, _)| reads_own_segment(unit)),
         };
         for (unit, _, reasons) in &assessed.units {
             let old = entry.and_then(|e| e.units.get(&unit.id));
@@ -363,6 +368,17 @@ pub(super) fn predict(
     Ok(Prediction { lines, remake, settled })
 }
 
+/// Whether every part `unit` reads from a dataset has the unit's first partition segment.
+fn reads_own_segment(unit: &Unit) -> bool {
+    let own = crate::pipeline::layout::partition_of(unit.id.split('/').next().unwrap_or_default());
+    unit.inputs.iter().all(|input| match input {
+        crate::pipeline::stage::StageInput::Dataset { parts, .. } => {
+            parts.iter().all(|p| p.partition.first() == own.first() && !own.is_empty())
+        }
+        crate::pipeline::stage::StageInput::Source { .. } => true,
+    })
+}
+
 /// A stage split into units, each with its cache key and why it is stale (empty: cached).
 pub(super) struct AssessedStage {
     pub(super) units: Vec<(Unit, String, Vec<String>)>,
@@ -416,6 +432,28 @@ pub(super) fn assess_stage(
 mod tests {
     use super::super::test_support::{assess_load, entry_after, plan, sources, FakeDisk, PIPELINE};
     use super::*;
+
+    #[test]
+    fn a_unit_reading_only_records_of_its_own_first_segment_is_closed() {
+        use crate::pipeline::stage::{InputPart, StageInput};
+        let part = |partition: &[(&str, &str)]| InputPart {
+            partition: partition.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect(),
+            path: PathBuf::new(),
+            label: String::new(),
+            hash: String::new(),
+        };
+        let unit = |id: &str, parts: Vec<InputPart>| Unit {
+            id: id.into(),
+            inputs: vec![StageInput::Dataset { name: "up.records".into(), parts }],
+            hashes: BTreeMap::new(),
+        };
+        let floors = vec![part(&[("motion", "FB 1"), ("floor", "4")]), part(&[("motion", "FB 1"), ("floor", "5")])];
+        assert!(reads_own_segment(&unit("motion=FB%201", floors.clone())), "encoded ids, decoded partitions");
+        assert!(reads_own_segment(&unit("motion=FB%201/floor=4", floors[..1].to_vec())));
+        let other = vec![floors[0].clone(), part(&[("motion", "FB-2"), ("floor", "4")])];
+        assert!(!reads_own_segment(&unit("motion=FB%201", other)), "a reference of another motion");
+        assert!(!reads_own_segment(&unit("*", floors)), "a gathering unit");
+    }
 
     fn reasons(assessed: &AssessedStage) -> Vec<(String, Vec<String>)> {
         assessed.units.iter().map(|(u, _, r)| (u.id.clone(), r.clone())).collect()

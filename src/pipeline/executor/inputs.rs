@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use crate::error::UserError;
 use crate::io::hash;
-use crate::pipeline::layout::{partition_of, placed, DATA_FILE, HASH_MEMO, STATE_DIR};
+use crate::pipeline::layout::{partition_of, partition_path, placed, DATA_FILE, HASH_MEMO, STATE_DIR};
 use crate::pipeline::lock::UnitLock;
 use crate::pipeline::plan::{InputRef, Plan, PlannedStage};
 use crate::pipeline::sources;
@@ -33,12 +33,24 @@ pub(super) struct ProducedFile {
 pub(super) type Produced = BTreeMap<String, ProducedFile>;
 
 pub(super) fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, UserError> {
+    resolve_sources_of(plan, None, None)
+}
+
+/// [`resolve_sources`] of the sources `stage` reads only (all: None), and of them only the
+/// records of `buckets` (`layout::fan_bucket` of their partition; all: None), whose files alone
+/// are hashed: what a Slurm task of a bucketed stage needs.
+pub(super) fn resolve_sources_of(
+    plan: &Plan,
+    stage: Option<&str>,
+    buckets: Option<&BTreeSet<String>>,
+) -> Result<BTreeMap<String, ResolvedSource>, UserError> {
     // A no-op rerun then reads no file whose size and times are unchanged.
     hash::use_memo(&plan.file.output_dir().join(STATE_DIR).join(HASH_MEMO));
     let base = plan.file.base_dir();
     let used: BTreeSet<&str> = plan
         .stages
         .values()
+        .filter(|s| stage.is_none_or(|only| s.name == only))
         .flat_map(|s| s.inputs.iter())
         .filter_map(|i| match i {
             InputRef::Source(name) => Some(name.as_str()),
@@ -53,7 +65,10 @@ pub(super) fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSo
     let mut resolver = sources::Resolver::default();
     for name in used {
         let spec = &plan.file.spec.inputs[name];
-        let files = files_of(plan, name, spec, &mut resolver)?;
+        let mut files = files_of(plan, name, spec, &mut resolver)?;
+        if let Some(buckets) = buckets {
+            files.retain(|f| buckets.contains(&crate::pipeline::layout::fan_folder(&partition_path(&f.partition))));
+        }
         let unhashed: Vec<&Path> =
             files.iter().map(|f| f.path.as_path()).filter(|p| !hashed.contains_key(p.as_os_str())).collect();
         let new_hashes: Vec<String> = unhashed

@@ -269,9 +269,9 @@ fn take_output_folder(
             .hint("choose a writable `output_dir` (relative to the pipeline file)")
     })?;
     let lease = Lease::acquire(&output_dir)?;
-    if let Some(holder) = &lease.took_over {
+    if let Some((holder, why)) = &lease.took_over {
         reporter.line(&format!(
-            "took over the lease of an earlier run that is gone (pid {} on `{}`, started {})",
+            "took over the lease of an earlier run that is gone ({why}: pid {} on `{}`, started {})",
             holder.pid,
             holder.host,
             super::lease::format_utc(holder.started)

@@ -3,7 +3,10 @@
 //! `shakeflow run P.yaml --executor slurm` plans on the login node as a local run does, then:
 //! 1. takes the output folder's lease and writes the run's folder
 //!    `<output_dir>/.shakeflow/slurm/<run>/` (`run.json`: the pipeline, the options, and per stage
-//!    its shards — the predicted unit ids, in order, cut into shards of `units_per_task`);
+//!    its shards — the predicted unit ids, in order, cut into shards of `units_per_task`; a
+//!    per-record stage of more records than a folder holds is cut by bucket instead
+//!    (`layout::fan_bucket`: the 256 buckets in contiguous ranges of about `units_per_task`
+//!    units, the same ranges for every such stage, so shard i of each holds the same motions);
 //! 2. submits one job array per stage with stale units (only the shards that hold one), named
 //!    after the run, each task `shakeflow slurm-task <run folder> <stage>` with its shard in
 //!    `$SLURM_ARRAY_TASK_ID`: `aftercorr` on the upstream array when both are per-record stages
@@ -12,11 +15,14 @@
 //!    (`afterany`);
 //! 3. hands the lease to the run (its holder names the run and the commit job) and returns.
 //!
-//! A task computes its stage's units from the committed outputs and the upstream tasks'
-//! manifests, runs the stale units of its shard (rayon inside) into
-//! `results/<stage>/<shard>.tmp-<host>-<job>/`, renames that to `results/<stage>/<shard>/`,
+//! A task reads the state of its stage and of the stages it reads — of a bucketed stage only its
+//! buckets, when each unit reads records of its own bucket only (`StatusLine::closed`), so what
+//! it reads is ∝ its shard, not the archive — computes its stage's units from the committed
+//! outputs and the upstream tasks' manifests, runs the stale units of its shard (rayon inside)
+//! into `results/<stage>/<shard>.tmp-<host>-<job>/`, renames that to `results/<stage>/<shard>/`,
 //! and writes `manifests/<stage>/<shard>.json` (what became of each unit) the same way. It
-//! exits 1 when a unit failed. No task writes the lockfile or a stage folder: the commit job
+//! exits 1 when a unit failed; when none did, it removes the results of the `keep: false`
+//! shards it alone read (`drop_consumed`). No task writes the lockfile or a stage folder: the commit job
 //! takes the lease back, folds the manifests as a local run folds its units, moves the results
 //! into a transaction and commits it. Rerunning the same command resubmits only the shards
 //! whose units are still stale (a cancelled task's, a failed unit's); with `retries` the commit
@@ -34,15 +40,15 @@ use serde::{Deserialize, Serialize};
 
 use super::assess::{assess_stage, predict, Known, Prediction, RealDisk, StatusLine};
 use super::commit::{entry_from_outcomes, leave_out_not_kept, UnitOutcome, UnitRecord};
-use super::inputs::{cached_files, param_file_hashes, resolve_sources, Produced, ProducedFile};
+use super::inputs::{cached_files, param_file_hashes, resolve_sources, resolve_sources_of, Produced, ProducedFile};
 use super::local::execute;
 use super::{
     forced_stages, selected_stages, upstream_stages, Backend, Opened, Rerun, RunOptions, RunSummary, UnitProblem,
 };
 use crate::error::UserError;
-use crate::pipeline::layout::{fan_out_above, fans_out, LEASE_FILE, LOCK_FILE, RUNS_DIR, STATE_DIR};
+use crate::pipeline::layout::{fan_bucket, fan_out_above, fans_out, LOCK_FILE, RUNS_DIR, STATE_DIR};
 use crate::pipeline::lease::Lease;
-use crate::pipeline::lock::LockFile;
+use crate::pipeline::lock::{bucket_of, LockFile, Wanted};
 use crate::pipeline::memo::TableMemo;
 use crate::pipeline::ownership;
 use crate::pipeline::plan::Plan;
@@ -92,6 +98,18 @@ struct RunFile {
     /// planner from all of a stage's units, so every task and the commit job agree.
     #[serde(default)]
     fanned: BTreeSet<String>,
+    /// The per-record stages of `fanned`, cut into shards by bucket (`layout::fan_bucket`)
+    /// rather than by consecutive ids: shard i of each runs the units of buckets `ranges[i]`.
+    #[serde(default)]
+    bucketed: BTreeSet<String>,
+    /// The 256 buckets cut into contiguous ranges `[first, end)`, one per shard of the
+    /// bucketed stages.
+    #[serde(default)]
+    ranges: Vec<[u16; 2]>,
+    /// The bucketed stages each of whose units reads only records of its own bucket
+    /// (`StatusLine::closed`): their task i needs only shard i of the bucketed stages they read.
+    #[serde(default)]
+    closed: BTreeSet<String>,
 }
 
 impl RunFile {
@@ -118,12 +136,26 @@ impl RunFile {
             allocation,
             remake: BTreeMap::new(),
             fanned: BTreeSet::new(),
+            bucketed: BTreeSet::new(),
+            ranges: Vec::new(),
+            closed: BTreeSet::new(),
         })
     }
 
     /// Whether shard `shard` of `stage` was submitted (has a task) in this run.
     fn submitted(&self, stage: &str, shard: usize) -> bool {
         self.tasks.get(stage).is_some_and(|t| t.contains(&(shard as u32)))
+    }
+
+    /// The buckets of shard `shard` of a bucketed stage.
+    fn buckets(&self, shard: usize) -> BTreeSet<String> {
+        let [first, end] = self.ranges.get(shard).copied().unwrap_or([0, 0]);
+        (first..end).map(|b| format!("{b:02x}")).collect()
+    }
+
+    /// The shard of a bucketed stage that runs the units of bucket `bucket`.
+    fn shard_of(&self, bucket: u8) -> usize {
+        self.ranges.iter().position(|[first, end]| (*first..*end).contains(&u16::from(bucket))).unwrap_or(0)
     }
 
     fn commit_job(&self) -> String {
@@ -292,24 +324,78 @@ fn submit_run(
 }
 
 /// Per stage in run order, its shards cut from the predicted units, and those holding a stale
-/// unit (the shards to run); stages with none are left out.
+/// unit (the shards to run); stages with none are left out. Decides which stages fan out and
+/// which are cut by bucket (`run.fanned`, `bucketed`, `ranges`, `closed`): a bucketed stage's
+/// shard i holds the units of buckets `ranges[i]`, consecutive ids otherwise. A bucketed stage
+/// also runs the shards holding a unit gone from its inputs: their task, which reads only its
+/// buckets of the state, is the one that sees it gone.
 fn cut_shards(
+    run: &mut RunFile,
+    plan: &Plan,
     lines: &[StatusLine],
     selected: &BTreeSet<String>,
     per_task: usize,
 ) -> Vec<(String, Vec<Vec<String>>, BTreeSet<u32>)> {
+    let per_task = per_task.max(1);
+    run.fanned = fanned_stages(lines);
+    let per_record = |name: &str| plan.stages[name].stage.work_units() != WorkUnits::Gather;
+    run.bucketed = lines
+        .iter()
+        .filter(|l| selected.contains(&l.name) && run.fanned.contains(&l.name) && per_record(&l.name))
+        .map(|l| l.name.clone())
+        .collect();
+    run.closed = lines.iter().filter(|l| l.closed && run.bucketed.contains(&l.name)).map(|l| l.name.clone()).collect();
+    run.ranges = bucket_ranges(lines.iter().filter(|l| run.bucketed.contains(&l.name)), per_task);
     lines
         .iter()
         .filter(|l| selected.contains(&l.name) && !l.stale.is_empty())
         .map(|line| {
-            let shards: Vec<Vec<String>> = line.ids.chunks(per_task.max(1)).map(<[String]>::to_vec).collect();
             let stale: BTreeSet<&str> = line.stale.iter().map(|u| u.id.as_str()).collect();
-            let only = (0..shards.len() as u32)
-                .filter(|&i| shards[i as usize].iter().any(|id| stale.contains(id.as_str())))
-                .collect();
+            let (shards, only) = if run.bucketed.contains(&line.name) {
+                let mut shards: Vec<Vec<String>> = vec![Vec::new(); run.ranges.len()];
+                for id in &line.ids {
+                    shards[run.shard_of(fan_bucket(id))].push(id.clone());
+                }
+                let mut only: BTreeSet<u32> = (0..shards.len() as u32)
+                    .filter(|&i| shards[i as usize].iter().any(|id| stale.contains(id.as_str())))
+                    .collect();
+                only.extend(line.vanished.iter().map(|id| run.shard_of(fan_bucket(id)) as u32));
+                (shards, only)
+            } else {
+                let shards: Vec<Vec<String>> = line.ids.chunks(per_task).map(<[String]>::to_vec).collect();
+                let only = (0..shards.len() as u32)
+                    .filter(|&i| shards[i as usize].iter().any(|id| stale.contains(id.as_str())))
+                    .collect();
+                (shards, only)
+            };
             (line.name.clone(), shards, only)
         })
         .collect()
+}
+
+/// The 256 buckets cut into contiguous ranges of about `per_task` units each of the largest of
+/// `lines` (every bucketed stage takes the same ranges, so shard i of each holds the same
+/// motions); none without a line.
+fn bucket_ranges<'a>(lines: impl Iterator<Item = &'a StatusLine>, per_task: usize) -> Vec<[u16; 2]> {
+    let Some(largest) = lines.max_by_key(|l| l.ids.len()) else { return Vec::new() };
+    let mut counts = [0usize; 256];
+    for id in &largest.ids {
+        counts[usize::from(fan_bucket(id))] += 1;
+    }
+    let total = largest.ids.len();
+    let shards = total.div_ceil(per_task).clamp(1, 256);
+    let mut ranges = Vec::with_capacity(shards);
+    let (mut first, mut sum) = (0u16, 0usize);
+    for (bucket, count) in counts.iter().enumerate() {
+        sum += count;
+        // Close a range once it holds its share of the units (the last takes the rest).
+        if ranges.len() + 1 < shards && sum * shards >= (ranges.len() + 1) * total {
+            ranges.push([first, bucket as u16 + 1]);
+            first = bucket as u16 + 1;
+        }
+    }
+    ranges.push([first, 256]);
+    ranges
 }
 
 /// The stages with more records than one folder should hold (`layout::fans_out`).
@@ -318,12 +404,15 @@ fn fanned_stages(lines: &[StatusLine]) -> BTreeSet<String> {
     lines.iter().filter(|l| fans_out(l.ids.iter().map(String::as_str), limit)).map(|l| l.name.clone()).collect()
 }
 
-/// Whether shard i of `stage` reads only shard i of `upstream`: both per-record, cut alike.
+/// Whether shard i of `stage` reads only shard i of `upstream`: both per-record and cut alike,
+/// or both cut by the same buckets and each unit of `stage` reading only its own bucket.
 fn aligned(plan: &Plan, run: &RunFile, stage: &str, upstream: &str) -> bool {
-    plan.stages[stage].stage.work_units() == WorkUnits::EachRecord
-        && plan.stages[upstream].stage.work_units() == WorkUnits::EachRecord
-        && run.shards.contains_key(upstream)
-        && run.shards.get(upstream) == run.shards.get(stage)
+    let by_bucket = run.closed.contains(stage) && run.bucketed.contains(upstream) && run.shards.contains_key(upstream);
+    by_bucket
+        || plan.stages[stage].stage.work_units() == WorkUnits::EachRecord
+            && plan.stages[upstream].stage.work_units() == WorkUnits::EachRecord
+            && run.shards.contains_key(upstream)
+            && run.shards.get(upstream) == run.shards.get(stage)
 }
 
 /// `--in-allocation`: inside one `sbatch`/`salloc` allocation, each stage's shards run as
@@ -336,16 +425,15 @@ fn run_in_allocation(opened: Opened<'_>, slurm: &SlurmOptions, reporter: &Report
     let prediction = predict(plan, &opened.known(), Some(&opened.selected))?;
     let lease = opened.lease;
     save_hash_memo(reporter);
-    let cut = cut_shards(&prediction.lines, &opened.selected, slurm.units_per_task);
+    let id = new_run_id(plan);
+    let mut run = RunFile::new(&id, plan, options, slurm, Some(allocation.job_id.clone()))?;
+    let cut = cut_shards(&mut run, plan, &prediction.lines, &opened.selected, slurm.units_per_task);
     if cut.is_empty() {
         reporter.line("every unit is up to date: nothing to run");
         return Ok(RunSummary::default());
     }
-    let id = new_run_id(plan);
     let run_dir = runs_dir(&output_dir).join(&id);
-    let mut run = RunFile::new(&id, plan, options, slurm, Some(allocation.job_id.clone()))?;
     run.remake = prediction.remake;
-    run.fanned = fanned_stages(&prediction.lines);
     let order: Vec<String> = cut.iter().map(|(name, _, _)| name.clone()).collect();
     for (name, shards, only) in cut {
         run.shards.insert(name.clone(), shards);
@@ -458,11 +546,10 @@ fn submit_arrays(
     let lines = &prediction.lines;
     let mut run = RunFile::new(id, plan, options, slurm, None)?;
     run.remake = prediction.remake.clone();
-    run.fanned = fanned_stages(lines);
     let quote = |p: &Path| format!("'{}'", p.display().to_string().replace('\'', r"'\''"));
     let stale_units: BTreeMap<&str, (usize, usize)> =
         lines.iter().map(|l| (l.name.as_str(), (l.stale.len(), l.units))).collect();
-    for (name, shards, only) in cut_shards(lines, selected, per_task) {
+    for (name, shards, only) in cut_shards(&mut run, plan, lines, selected, per_task) {
         let stage = &plan.stages[&name];
         run.shards.insert(name.clone(), shards.clone());
         let mut dependencies = Vec::new();
@@ -551,10 +638,9 @@ fn wait(
             ))
             .hint(format!(
                 "its log is in `{}`; the commit is all or nothing: `shakeflow status` says what is committed, \
-                 and running again finishes the run once the dead job's lease is free (taken over 10 minutes \
-                 after its last heartbeat, or `{}` deleted by you once you know the job is gone)",
+                 and running again finishes the run (the dead job's lease is taken over once Slurm no longer \
+                 knows the job)",
                 runs_dir(output_dir).join(&run.id).join("logs").display(),
-                output_dir.join(STATE_DIR).join(LEASE_FILE).display()
             ))
         })?;
         let summary: Summary = serde_json::from_slice(&bytes)?;
@@ -606,6 +692,9 @@ fn upstream_produced(
                 let own = aligned(plan, run, stage, name).then_some(shard);
                 for (index, ids) in shards.iter().enumerate() {
                     let counts = own.is_none_or(|own| own == index);
+                    if !counts && run.bucketed.contains(name) {
+                        continue; // another shard's buckets, whose state this task did not read
+                    }
                     let path = run_dir.join("manifests").join(name).join(format!("{index}.json"));
                     let Ok(bytes) = std::fs::read(&path) else {
                         // Not submitted (all cached) or not finished: what is committed stands
@@ -652,22 +741,55 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
         shards.get(shard).ok_or_else(|| anyhow!("no shard {shard}"))?.iter().map(String::as_str).collect();
     let known: BTreeSet<&str> = shards.iter().flatten().map(String::as_str).collect();
     let last = shard + 1 == shards.len();
+    let bucketed = run.bucketed.contains(stage_name);
+    let buckets = run.buckets(shard);
     let output_dir = plan.file.output_dir();
-    // Only this stage's state and its upstream stages': what the task plans with.
-    let (lock, read) = LockFile::read_stages(&output_dir.join(LOCK_FILE), &plan.with_upstream([stage_name]))?;
+    // Only this stage's state and the stages it reads: of each cut by the same buckets, only
+    // this shard's buckets. That is what the task plans with.
+    let mut wanted: Wanted = BTreeMap::from([(stage_name.to_string(), bucketed.then(|| buckets.clone()))]);
+    for upstream in upstream_stages(stage) {
+        let own = aligned(&plan, &run, stage_name, upstream) && run.bucketed.contains(upstream);
+        wanted.insert(upstream.to_string(), own.then(|| buckets.clone()));
+    }
+    let (lock, read) = LockFile::read_stages(&output_dir.join(LOCK_FILE), &wanted)?;
     eprintln!("{stage_name} shard {shard}: read {} state file(s), {} bytes", read.files, read.bytes);
-    let sources = resolve_sources(&plan)?;
+    // The sources this stage reads, of a closed bucketed stage only its buckets' records.
+    let own_records = (bucketed && run.closed.contains(stage_name)).then_some(&buckets);
+    let sources = resolve_sources_of(&plan, Some(stage_name), own_records)?;
     let files = param_file_hashes(&plan)?;
     let (produced, upstream_tainted) = upstream_produced(run_dir, &run, &plan, &lock, stage_name, shard)?;
     let rerun = Rerun { stages: forced_stages(&plan, &run.force), remake: run.remake.clone() };
     let state = Known { lock: &lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk::default() };
     let assessed = assess_stage(&plan, stage, &state, &produced)?;
-    // A unit nobody predicted (a partition no earlier output had) goes to the last shard.
+    // A unit nobody predicted (a partition no earlier output had) goes to the last shard, or
+    // to the shard of its bucket.
     let ours: Vec<&(crate::pipeline::work_units::Unit, String, Vec<String>)> = assessed
         .units
         .iter()
-        .filter(|(u, _, _)| mine.contains(u.id.as_str()) || (last && !known.contains(u.id.as_str())))
+        .filter(|(u, _, _)| match bucketed {
+            true => run.shard_of(fan_bucket(&u.id)) == shard,
+            false => mine.contains(u.id.as_str()) || (last && !known.contains(u.id.as_str())),
+        })
         .collect();
+    if bucketed && read.files > 0 {
+        // What the planner found (each unit reads only its own bucket) must hold for what this
+        // task saw: a unit reading a record of a bucket it did not read would run on a part.
+        let elsewhere = |p: &crate::pipeline::stage::InputPart| {
+            !p.partition.is_empty()
+                && !buckets.contains(&bucket_of(&crate::pipeline::layout::partition_path(&p.partition)))
+        };
+        for (unit, _, _) in &ours {
+            let dataset =
+                unit.inputs.iter().filter(|i| matches!(i, crate::pipeline::stage::StageInput::Dataset { .. }));
+            if let Some(part) = dataset.flat_map(|i| i.parts()).find(|p| elsewhere(p)) {
+                bail!(
+                    "{} reads `{}`, of a bucket this task did not read; run again (the planner will read whole stages)",
+                    crate::pipeline::work_units::describe(&unit.id),
+                    part.label
+                );
+            }
+        }
+    }
     let stale: Vec<&(crate::pipeline::work_units::Unit, String, Vec<String>)> =
         ours.iter().copied().filter(|(_, _, r)| !r.is_empty()).collect();
     let results = run_dir.join("results").join(stage_name);
@@ -717,7 +839,31 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     std::fs::create_dir_all(&manifests)?;
     publish(&manifests.join(format!("{shard}.json")), &serde_json::to_vec(&manifest)?)?;
     eprintln!("{stage_name} shard {shard}: {} unit(s), {} ran, {failed} failed", ours.len(), stale.len());
+    if failed == 0 && !upstream_tainted {
+        drop_consumed(run_dir, &run, &plan, stage_name, shard);
+    }
     Ok(failed == 0)
+}
+
+/// Removes the results of shard `shard` of each `keep: false` stage that only `stage` reads,
+/// aligned with it, once this task (shard `shard` of `stage`) has read them and succeeded:
+/// the run's scratch then holds a stage's intermediates only until their reader is done, not
+/// until the commit job (at 10⁴ tests, 39 GB of them at once). The commit installs none of
+/// them when every reader succeeded; one it would keep for a failed reader is never dropped.
+fn drop_consumed(run_dir: &Path, run: &RunFile, plan: &Plan, stage: &str, shard: usize) {
+    for upstream in upstream_stages(&plan.stages[stage]) {
+        let readers = plan.stages.values().filter(|s| upstream_stages(s).contains(upstream)).count();
+        if plan.stages[upstream].keep || readers != 1 || !aligned(plan, run, stage, upstream) {
+            continue;
+        }
+        let results = run_dir.join("results").join(upstream).join(shard.to_string());
+        if results.exists() {
+            match std::fs::remove_dir_all(&results) {
+                Ok(()) => eprintln!("{stage} shard {shard}: removed `{upstream}`'s shard {shard}, read and not kept"),
+                Err(e) => eprintln!("warning: `{}` was not removed: {e}", results.display()),
+            }
+        }
+    }
 }
 
 /// What the commit job spent, step by step, in its log: wall and CPU seconds since it started.
@@ -880,6 +1026,14 @@ fn commit_manifests(
     let selected = selected_stages(plan, &options)?;
     let entries = |name: &str| new_lock.stages.get(name);
     leave_out_not_kept(plan, &selected, &tainted, &entries, &mut install, &mut remove, &RealDisk::default());
+    // Files of `keep: false` stages kept for a reader that failed: those their reader's other
+    // shards had read and removed (`drop_consumed`) are not needed, and not there.
+    let results = run_dir.join("results");
+    let not_kept: Vec<PathBuf> = plan.stages.values().filter(|s| !s.keep).map(|s| results.join(&s.name)).collect();
+    install.retain(|relative| {
+        let from = &produced[relative];
+        !not_kept.iter().any(|folder| from.starts_with(folder)) || from.exists()
+    });
     for relative in &install {
         let from = &produced[relative];
         let to = transaction.new_path(relative);
@@ -986,6 +1140,70 @@ pub fn progress(output_dir: &Path) -> Vec<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn line(ids: Vec<String>) -> StatusLine {
+        StatusLine {
+            name: "load".into(),
+            stage_type: "load",
+            units: ids.len(),
+            ids,
+            stale: Vec::new(),
+            vanished: Vec::new(),
+            flagged: Vec::new(),
+            keep: true,
+            closed: true,
+        }
+    }
+
+    #[test]
+    fn bucket_ranges_cut_the_256_buckets_into_contiguous_ranges_of_about_the_units_per_task() {
+        let ids: Vec<String> =
+            (0..5000).flat_map(|m| [format!("motion=M{m}/floor=4"), format!("motion=M{m}/floor=5")]).collect();
+        let largest = line(ids.clone());
+        let smaller = line(ids.iter().step_by(2).cloned().collect());
+        let ranges = bucket_ranges([&smaller, &largest].into_iter(), 1000);
+        assert_eq!(ranges.len(), 10, "10 000 units of the largest stage, 1000 a task");
+        assert_eq!((ranges[0][0], ranges[9][1]), (0, 256));
+        assert!(ranges.windows(2).all(|w| w[0][1] == w[1][0] && w[0][0] < w[0][1]), "{ranges:?}");
+        let mut per_bucket = [0usize; 256];
+        for id in &ids {
+            per_bucket[usize::from(fan_bucket(id))] += 1;
+        }
+        let most = per_bucket.iter().max().copied().unwrap();
+        for [first, end] in &ranges {
+            let units: usize = per_bucket[usize::from(*first)..usize::from(*end)].iter().sum();
+            assert!(units.abs_diff(1000) <= most, "{units} units in [{first}, {end}) (a bucket holds ≤ {most})");
+        }
+        assert_eq!(bucket_ranges([&largest].into_iter(), 100_000), [[0, 256]]);
+        let finest = bucket_ranges([&largest].into_iter(), 1).len();
+        assert!((200..=256).contains(&finest), "a bucket is the smallest shard: {finest}");
+        assert!(bucket_ranges(std::iter::empty(), 10).is_empty());
+        // A run's shard of a bucket is the range that holds it.
+        let run = RunFile {
+            id: "r".into(),
+            pipeline: PathBuf::from("p.yaml"),
+            pipeline_hash: String::new(),
+            force: Vec::new(),
+            only: Vec::new(),
+            keep_going: false,
+            options: SlurmOptions { executor: Default::default(), units_per_task: 1000, wait: false },
+            shards: BTreeMap::new(),
+            tasks: BTreeMap::new(),
+            arrays: BTreeMap::new(),
+            commit: None,
+            allocation: None,
+            remake: BTreeMap::new(),
+            fanned: BTreeSet::new(),
+            bucketed: BTreeSet::new(),
+            ranges: ranges.clone(),
+            closed: BTreeSet::new(),
+        };
+        for (i, [first, end]) in ranges.iter().enumerate() {
+            assert_eq!(run.shard_of(*first as u8), i);
+            assert_eq!(run.shard_of((*end - 1) as u8), i);
+            assert_eq!(run.buckets(i).len(), usize::from(end - first));
+        }
+    }
 
     #[test]
     fn a_committed_runs_results_and_manifests_go_and_its_logs_and_run_file_stay() {

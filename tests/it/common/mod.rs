@@ -126,7 +126,6 @@ pub fn pipeline_with_twins() -> String {
     text
 }
 
-/// [`small_project`] whose `baseline` also writes MCAP twins.
 /// A [`small_project`] run locally: the reference a run elsewhere (Slurm, another node) must match.
 pub fn small_project_run_locally() -> crate::tempdir::TempDir {
     let dir = small_project();
@@ -135,6 +134,7 @@ pub fn small_project_run_locally() -> crate::tempdir::TempDir {
     dir
 }
 
+/// [`small_project`] whose `baseline` also writes MCAP twins.
 pub fn small_project_with_twins() -> crate::tempdir::TempDir {
     let dir = small_project();
     std::fs::write(dir.path().join("pipeline.yaml"), pipeline_with_twins()).unwrap();
