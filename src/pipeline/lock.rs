@@ -360,6 +360,9 @@ fn read_with(
     for (stage, files) in &root.stages {
         let bad = match files {
             StateFiles::One(file) => (!is_state_file_name(stage, None, file)).then_some(file),
+            StateFiles::Buckets(files) if files.is_empty() => {
+                return Err(damaged(format!("stage `{stage}` names no state file"), None));
+            }
             StateFiles::Buckets(files) => {
                 files.iter().find(|(b, f)| !is_state_file_name(stage, Some(b), f)).map(|(_, f)| f)
             }
@@ -370,27 +373,36 @@ fn read_with(
     }
     let dir = state_dir(path);
     let mut lock = LockFile { version: LOCK_FORMAT, pipeline: root.pipeline, ..LockFile::default() };
-    // (stage, bucket, file) of every file to read; a stage whose wanted buckets have no file yet
-    // still reads one, for its type, version and params.
-    let mut to_read: Vec<(String, Option<String>, String)> = Vec::new();
+    // Every file to read; a stage whose wanted buckets have no file yet still reads one, for
+    // its type, version and params.
+    struct ToRead {
+        stage: String,
+        bucket: Option<String>,
+        file: String,
+        header_only: bool,
+    }
+    let one = |stage: &String, bucket: Option<&String>, file: &String, header_only| ToRead {
+        stage: stage.clone(),
+        bucket: bucket.cloned(),
+        file: file.clone(),
+        header_only,
+    };
+    let mut to_read: Vec<ToRead> = Vec::new();
     for (stage, files) in &root.stages {
         let Some(buckets) = wanted.map_or(Some(&None), |w| w.get(stage)) else {
             lock.partial = true;
             continue;
         };
         match files {
-            StateFiles::One(file) => to_read.push((stage.clone(), None, file.clone())),
+            StateFiles::One(file) => to_read.push(one(stage, None, file, false)),
             StateFiles::Buckets(files) => {
                 let some = files.iter().filter(|(b, _)| buckets.as_ref().is_none_or(|w| w.contains(*b)));
-                let mut some: Vec<(String, Option<String>, String)> =
-                    some.map(|(b, f)| (stage.clone(), Some(b.clone()), f.clone())).collect();
+                let mut some: Vec<ToRead> = some.map(|(b, f)| one(stage, Some(b), f, false)).collect();
                 if some.len() < files.len() {
                     lock.partial = true;
                 }
-                if some.is_empty() {
-                    // Only the header is used (its units are not the reader's).
-                    let (b, f) = files.iter().next().expect("a stage in buckets has one");
-                    some.push((stage.clone(), Some(format!("{b} (header)")), f.clone()));
+                if let (true, Some((b, f))) = (some.is_empty(), files.iter().next()) {
+                    some.push(one(stage, Some(b), f, true)); // its units are not the reader's
                 }
                 to_read.extend(some);
             }
@@ -398,7 +410,7 @@ fn read_with(
     }
     let entries: Vec<Result<(StageLock, u64), UserError>> = to_read
         .par_iter()
-        .map(|(stage, bucket, file)| {
+        .map(|ToRead { stage, bucket, file, .. }| {
             let state = dir.join(file);
             let unreadable = |what: String| {
                 UserError::new(format!("the state of stage `{stage}` {what}"))
@@ -406,7 +418,7 @@ fn read_with(
                     .hint(format!("delete `{}` to recompute every stage", path.display()))
             };
             let bytes = read(&state).map_err(|e| unreadable(format!("cannot be read: {e}")))?;
-            let bucket = bucket.as_deref().map(|b| b.trim_end_matches(" (header)"));
+            let bucket = bucket.as_deref();
             if state_file_name(stage, bucket, &bytes) != *file {
                 return Err(unreadable("is damaged: its content does not match its name".into()));
             }
@@ -423,16 +435,16 @@ fn read_with(
     // A stage in buckets: its header, and its buckets' units gathered, then made one map at
     // once (merging 256 maps one by one into a growing one took a third of a no-op at 10⁴ tests).
     let mut gathered: BTreeMap<String, (StageLock, Vec<(String, UnitLock)>)> = BTreeMap::new();
-    for ((stage, bucket, _), entry) in to_read.into_iter().zip(entries) {
+    for (ToRead { stage, bucket, header_only, .. }, entry) in to_read.into_iter().zip(entries) {
         let (entry, bytes) = entry?;
         count.files += 1;
         count.bytes += bytes;
-        let Some(bucket) = bucket else {
+        if bucket.is_none() {
             lock.stages.insert(stage, entry);
             continue;
-        };
+        }
         let StageLock { stage_type, stage_version, params, select, units } = entry;
-        let units = if bucket.ends_with(" (header)") { BTreeMap::new() } else { units };
+        let units = if header_only { BTreeMap::new() } else { units };
         let header = StageLock { stage_type, stage_version, params, select, units: BTreeMap::new() };
         let (first, all) = gathered.entry(stage.clone()).or_insert_with(|| (header.clone(), Vec::new()));
         if *first != header {
@@ -659,6 +671,9 @@ mod tests {
             let error = LockFile::read(&path).unwrap_err().to_string();
             assert!(error.contains("is not the name of stage `load`'s state file"), "{bad}: {error}");
         }
+        std::fs::write(&path, root.replace(&name, "{}")).unwrap(); // `load: {}`: no bucket
+        let error = LockFile::read(&path).unwrap_err().to_string();
+        assert!(error.contains("stage `load` names no state file"), "{error}");
         assert!(is_state_file_name("load", None, &name));
         assert!(!is_state_file_name("..", None, "...0123456789abcdef0123456789abcdef.json"));
         let hex = "0123456789abcdef0123456789abcdef";

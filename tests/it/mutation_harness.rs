@@ -1,5 +1,5 @@
-//! A bounded, deterministic mutation harness over every reader of user files and the pipeline
-//! parser, run by `make test` (the coverage-guided fuzzers in `fuzz/` go further; see
+//! A bounded, deterministic mutation harness over every reader of user files, the pipeline
+//! parser and the output folder's state (a lockfile root over stages kept in buckets), run by `make test` (the coverage-guided fuzzers in `fuzz/` go further; see
 //! docs/fuzzing.md). Seeds are the real files in ../shared/data, the case files and the demo
 //! pipeline; a fixed-seed PRNG mutates their bytes (bit flips, random bytes, truncations, runs
 //! of digits such as 99999999999, duplicated, dropped and swapped lines, NULs, byte-order
@@ -72,11 +72,38 @@ fn seeds() -> Vec<(String, Vec<u8>)> {
         b"# surveyed\npoint,X_mm,Y_mm,Z_mm,u_px,v_px\nA,0,0,0,10.5,20\nB,100,0,0,110,21\nC,0,100,50,12,90\n".to_vec(),
     ));
     seeds.push((PIPELINE_NAME.into(), PIPELINE.as_bytes().to_vec()));
+    seeds.push(("shakeflow.lock".into(), lock_seed().root));
     assert!(seeds.len() > 30, "too few seeds: {}", seeds.len());
     seeds
 }
 
 const PIPELINE_NAME: &str = "small_pipeline.yaml";
+
+/// A state of two stages, one past the fan-out limit (kept in buckets): its root is the
+/// lockfile reader's seed, its files what the mutated roots name.
+fn lock_seed() -> shakeflow::pipeline::lock::NewState {
+    use shakeflow::pipeline::lock::{LockFile, StageLock, UnitLock};
+    use std::collections::BTreeMap;
+    let unit = |id: &str| UnitLock {
+        key: format!("k-{id}"),
+        inputs: BTreeMap::from([("source daq".to_string(), format!("in-{id}"))]),
+        files: BTreeMap::from([(format!("records/{id}/data.parquet"), format!("out-{id}"))]),
+        flagged: None,
+        notes: Vec::new(),
+    };
+    let stage = |ids: Vec<String>| StageLock {
+        stage_type: "load".into(),
+        stage_version: 3,
+        params: json!({}),
+        select: BTreeMap::new(),
+        units: ids.iter().map(|id| (id.clone(), unit(id))).collect(),
+    };
+    let mut lock = LockFile::empty();
+    lock.pipeline = Some("../pipeline.yaml".into());
+    lock.stages.insert("load".into(), stage((0..1100).map(|m| format!("motion=M{m}")).collect()));
+    lock.stages.insert("report".into(), stage(vec!["*".into()]));
+    lock.encode(&LockFile::empty()).unwrap()
+}
 
 fn below(rng: &mut SplitMix64, n: usize) -> usize {
     (rng.next_u64() % n.max(1) as u64) as usize
@@ -203,6 +230,21 @@ fn readers() -> Vec<(&'static str, Reader)> {
                 drop(shakeflow::pipeline::plan::Plan::new(file, shakeflow::stages::registry()));
             }
         }),
+        ("lockfile", |b, scratch| {
+            use shakeflow::pipeline::lock::{state_dir, LockFile, Wanted};
+            let root = scratch.with_file_name("state-root").join("shakeflow.lock");
+            let states = state_dir(&root);
+            if !states.is_dir() {
+                std::fs::create_dir_all(&states).unwrap();
+                for (name, bytes) in lock_seed().files {
+                    std::fs::write(states.join(name), bytes).unwrap();
+                }
+            }
+            std::fs::write(&root, b).unwrap();
+            drop(LockFile::read(&root));
+            let some = Wanted::from([("load".to_string(), Some(["00", "3f", "zz"].map(String::from).into()))]);
+            drop(LockFile::read_stages(&root, &some));
+        }),
         ("load", |b, scratch| {
             std::fs::write(scratch, b).unwrap();
             let part =
@@ -230,6 +272,7 @@ fn own_format(reader: &str, seed: &str) -> bool {
         "delimited" | "control_points" => lower.ends_with(".csv"),
         "equipment" => lower == "equipment.yaml",
         "pipeline" => lower.ends_with(".yaml") && lower != "equipment.yaml",
+        "lockfile" => lower == "shakeflow.lock",
         _ => true,
     }
 }
