@@ -9,8 +9,10 @@
 //!   process that started later): a stale lease, taken over;
 //! - held on another host: a pid there means nothing here, so the lease is stale only when its
 //!   heartbeat stopped more than [`STALE_AFTER`] ago — or, for a holder that ran inside a Slurm
-//!   job (a commit job, an in-allocation run: `$SLURM_JOB_ID`), as soon as `squeue` no longer
-//!   knows that job (killed with its node, out of memory: nothing else tells another host).
+//!   job (a commit job, an in-allocation run: `$SLURM_JOB_ID`), once `squeue` no longer knows
+//!   that job and its heartbeat has missed two beats (killed with its node, out of memory:
+//!   nothing else tells another host; the heartbeat too, since `squeue` may not show a live job
+//!   of another user's).
 //!
 //! Taking over is itself exclusive: the taker first creates `lease.break` (`O_EXCL`), checks the
 //! lease is still the stale one it read, removes it and creates its own; a `lease.break` left by
@@ -40,6 +42,9 @@ pub const HEARTBEAT: Duration = Duration::from_secs(30);
 /// that differ between a cluster's nodes.
 pub const STALE_AFTER: Duration = Duration::from_secs(600);
 const BREAK_STALE_AFTER: Duration = Duration::from_secs(60);
+/// A lease from another host whose holder ran in a Slurm job `squeue` no longer knows is stale
+/// once its heartbeat is this old (two missed beats), not [`STALE_AFTER`].
+const JOB_GONE_AFTER: Duration = Duration::from_secs(2 * HEARTBEAT.as_secs() + 5);
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Holder {
@@ -311,13 +316,15 @@ fn staleness(path: &Path, holder: &Holder) -> Option<String> {
         }
         return None;
     }
-    if let Some(job) = &holder.in_job {
-        if slurm_knows(job) == Some(false) {
-            return Some(format!("its Slurm job {job} has ended"));
-        }
-    }
     let beat = fs::metadata(path).and_then(|m| m.modified()).ok()?;
     let silent = SystemTime::now().duration_since(beat).unwrap_or_default();
+    // Its job gone from `squeue` *and* its heartbeat stopped: `squeue` alone can say a live
+    // job is unknown (another user's under `PrivateData=jobs`, another cluster's id).
+    if let Some(job) = holder.in_job.as_ref().filter(|_| silent > JOB_GONE_AFTER) {
+        if slurm_knows(job) == Some(false) {
+            return Some(format!("its Slurm job {job} has ended, no heartbeat for {}", format_age(silent.as_secs())));
+        }
+    }
     (silent > STALE_AFTER).then(|| format!("no heartbeat for {}", format_age(silent.as_secs())))
 }
 
@@ -509,5 +516,19 @@ mod tests {
         File::options().write(true).open(&path).unwrap().set_modified(old).unwrap();
         let lease = Lease::acquire(dir.path()).expect("a silent lease of another host is taken over");
         assert_eq!(lease.took_over.as_ref().map(|(h, _)| h.host.as_str()), Some("node-that-is-not-here"));
+    }
+
+    #[test]
+    fn a_holder_in_a_slurm_job_with_a_fresh_heartbeat_holds_whatever_squeue_says() {
+        // `squeue` may not show a live job (another user's, another cluster's id): a fresh
+        // heartbeat holds; the job's end counts only once two beats were missed.
+        let dir = crate::tempdir::tempdir().unwrap();
+        let in_job = Holder { in_job: Some("999999999".into()), ..holder("node-that-is-not-here", 1) };
+        let path = write_lease(dir.path(), &in_job);
+        assert_eq!(staleness(&path, &in_job), None);
+        let a_minute_ago = SystemTime::now() - JOB_GONE_AFTER + Duration::from_secs(5);
+        File::options().write(true).open(&path).unwrap().set_modified(a_minute_ago).unwrap();
+        assert_eq!(staleness(&path, &in_job), None, "not yet two beats missed");
+        assert!(JOB_GONE_AFTER > 2 * HEARTBEAT && JOB_GONE_AFTER < STALE_AFTER);
     }
 }

@@ -363,6 +363,9 @@ fn read_with(
             StateFiles::Buckets(files) if files.is_empty() => {
                 return Err(damaged(format!("stage `{stage}` names no state file"), None));
             }
+            StateFiles::Buckets(_) if root.version == LOCK_FORMAT => {
+                return Err(damaged(format!("stage `{stage}` is in buckets in a format-3 root"), None));
+            }
             StateFiles::Buckets(files) => {
                 files.iter().find(|(b, f)| !is_state_file_name(stage, Some(b), f)).map(|(_, f)| f)
             }
@@ -394,7 +397,11 @@ fn read_with(
             continue;
         };
         match files {
-            StateFiles::One(file) => to_read.push(one(stage, None, file, false)),
+            StateFiles::One(file) => {
+                // A stage not (yet) in buckets, read for some: only their units are the reader's.
+                lock.partial |= buckets.is_some();
+                to_read.push(one(stage, None, file, false))
+            }
             StateFiles::Buckets(files) => {
                 let some = files.iter().filter(|(b, _)| buckets.as_ref().is_none_or(|w| w.contains(*b)));
                 let mut some: Vec<ToRead> = some.map(|(b, f)| one(stage, Some(b), f, false)).collect();
@@ -440,6 +447,10 @@ fn read_with(
         count.files += 1;
         count.bytes += bytes;
         if bucket.is_none() {
+            let mut entry = entry;
+            if let Some(Some(only)) = wanted.and_then(|w| w.get(&stage)) {
+                entry.units.retain(|id, _| only.contains(&bucket_of(id)));
+            }
             lock.stages.insert(stage, entry);
             continue;
         }

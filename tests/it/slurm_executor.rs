@@ -188,6 +188,28 @@ fn a_fanned_out_slurm_run_cuts_shards_by_bucket_reads_only_their_state_and_drops
 }
 
 #[test]
+fn a_stage_crossing_the_fan_out_limit_on_slurm_keeps_every_cached_record() {
+    // Committed below the limit (one state file a stage), then a record more, run past the
+    // limit: the task of the new record's shard reads only its buckets of the one file, and
+    // calls none of the other shards' records gone (which would remove their files).
+    let fan_out = [("SHAKEFLOW_FAN_OUT_ABOVE", "1")];
+    let local = small_project_run_locally();
+    let cluster = small_project_run_locally();
+    for project in [&local, &cluster] {
+        write_daq_csv(&project.path().join("archive/FB-3/daq.csv"), 400, 200.0, 2.0);
+    }
+    let out = shakeflow_env(&["run", "pipeline.yaml"], local.path(), &fan_out);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = slurm_run_env(cluster.path(), &["--wait"], &fan_out);
+    let log = stderr(&out);
+    assert!(out.status.success(), "{log}");
+    let names = |root: &Path| artifacts_and_state(root).into_iter().map(|(name, _)| name).collect::<Vec<_>>();
+    assert_eq!(names(local.path()), names(cluster.path()), "{log}");
+    assert_eq!(artifacts_and_state(local.path()), artifacts_and_state(cluster.path()));
+    assert_eq!(std::fs::read_dir(cluster.path().join("out/baseline/records")).unwrap().count(), 3, "{log}");
+}
+
+#[test]
 fn a_failing_record_fails_its_unit_only_on_slurm() {
     let project = small_project();
     let root = project.path();
@@ -288,10 +310,13 @@ fn a_commit_job_that_dies_says_so_and_a_rerun_ends_in_the_local_runs_state() {
     assert!(log.contains("ended without its summary") && log.contains("it died"), "{log}");
     assert!(log.contains("its log is in `") && log.contains("running again finishes the run"), "{log}");
     assert!(!root.join("out/shakeflow.lock").exists(), "nothing committed: {log}");
-    // The dead job's lease, held on its node's host: taken over, since Slurm no longer knows
-    // the job (a heartbeat alone would hold it for 10 minutes).
-    let lease = std::fs::read_to_string(root.join("out/.shakeflow/lease")).unwrap();
-    assert!(lease.contains("\"in_job\""), "{lease}");
+    // The dead job's lease, held on its node's host: taken over once its heartbeat has missed
+    // two beats (here: made two minutes old), since Slurm no longer knows the job (outside a
+    // job it would hold for 10 minutes).
+    let lease = root.join("out/.shakeflow/lease");
+    assert!(std::fs::read_to_string(&lease).unwrap().contains("\"in_job\""));
+    let two_minutes_ago = std::time::SystemTime::now() - Duration::from_secs(120);
+    std::fs::File::options().write(true).open(&lease).unwrap().set_modified(two_minutes_ago).unwrap();
     let rerun = slurm_run(root, &["--wait"]);
     let rerun_log = stderr(&rerun);
     assert!(rerun.status.success(), "{rerun_log}");

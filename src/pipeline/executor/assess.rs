@@ -368,15 +368,11 @@ pub(super) fn predict(
     Ok(Prediction { lines, remake, settled })
 }
 
-/// Whether every part `unit` reads from a dataset has the unit's first partition segment.
+/// Whether every part `unit` reads (a source's files, a dataset's records) has the unit's first
+/// partition segment.
 fn reads_own_segment(unit: &Unit) -> bool {
     let own = crate::pipeline::layout::partition_of(unit.id.split('/').next().unwrap_or_default());
-    unit.inputs.iter().all(|input| match input {
-        crate::pipeline::stage::StageInput::Dataset { parts, .. } => {
-            parts.iter().all(|p| p.partition.first() == own.first() && !own.is_empty())
-        }
-        crate::pipeline::stage::StageInput::Source { .. } => true,
-    })
+    !own.is_empty() && unit.inputs.iter().flat_map(|i| i.parts()).all(|p| p.partition.first() == own.first())
 }
 
 /// A stage split into units, each with its cache key and why it is stale (empty: cached).

@@ -327,8 +327,9 @@ fn submit_run(
 /// unit (the shards to run); stages with none are left out. Decides which stages fan out and
 /// which are cut by bucket (`run.fanned`, `bucketed`, `ranges`, `closed`): a bucketed stage's
 /// shard i holds the units of buckets `ranges[i]`, consecutive ids otherwise. A bucketed stage
-/// also runs the shards holding a unit gone from its inputs: their task, which reads only its
-/// buckets of the state, is the one that sees it gone.
+/// with stale units also runs the shards holding a unit gone from its inputs: their task, which
+/// reads only its buckets of the state, is the one that sees it gone (a stage whose only change
+/// is a unit gone has no array, as before: the next run that has work for it removes it).
 fn cut_shards(
     run: &mut RunFile,
     plan: &Plan,
@@ -395,6 +396,7 @@ fn bucket_ranges<'a>(lines: impl Iterator<Item = &'a StatusLine>, per_task: usiz
         }
     }
     ranges.push([first, 256]);
+    ranges.retain(|[first, end]| first < end); // the last may hold nothing when buckets are skewed
     ranges
 }
 
@@ -638,8 +640,9 @@ fn wait(
             ))
             .hint(format!(
                 "its log is in `{}`; the commit is all or nothing: `shakeflow status` says what is committed, \
-                 and running again finishes the run (the dead job's lease is taken over once Slurm no longer \
-                 knows the job)",
+                 and running again finishes the run once the dead job's lease is free (taken over a minute \
+                 after its last heartbeat once Slurm no longer knows the job, else after 10 minutes, or \
+                 deleted by you once you know the job is gone)",
                 runs_dir(output_dir).join(&run.id).join("logs").display(),
             ))
         })?;
@@ -771,9 +774,10 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
             false => mine.contains(u.id.as_str()) || (last && !known.contains(u.id.as_str())),
         })
         .collect();
-    if bucketed && read.files > 0 {
-        // What the planner found (each unit reads only its own bucket) must hold for what this
-        // task saw: a unit reading a record of a bucket it did not read would run on a part.
+    if bucketed {
+        // What the planner found (each unit reads only its own bucket) must still hold for what
+        // this task sees. (A part of a bucket it did not read is invisible to it: this catches a
+        // unit reading another bucket's record through what it did read, not every change.)
         let elsewhere = |p: &crate::pipeline::stage::InputPart| {
             !p.partition.is_empty()
                 && !buckets.contains(&bucket_of(&crate::pipeline::layout::partition_path(&p.partition)))
@@ -834,7 +838,12 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
             );
         }
     }
-    let manifest = Manifest { records, vanished: assessed.vanished.clone(), upstream_tainted };
+    // Of a bucketed stage, only this shard's buckets are this task's to call gone.
+    let mut vanished = assessed.vanished.clone();
+    if bucketed {
+        vanished.retain(|id| run.shard_of(fan_bucket(id)) == shard);
+    }
+    let manifest = Manifest { records, vanished, upstream_tainted };
     let manifests = run_dir.join("manifests").join(stage_name);
     std::fs::create_dir_all(&manifests)?;
     publish(&manifests.join(format!("{shard}.json")), &serde_json::to_vec(&manifest)?)?;
@@ -849,7 +858,9 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
 /// aligned with it, once this task (shard `shard` of `stage`) has read them and succeeded:
 /// the run's scratch then holds a stage's intermediates only until their reader is done, not
 /// until the commit job (at 10⁴ tests, 39 GB of them at once). The commit installs none of
-/// them when every reader succeeded; one it would keep for a failed reader is never dropped.
+/// them when every reader succeeded; when another shard's reader failed, it keeps the shards
+/// not dropped (a local run would keep all): the entry holds every file's hash either way, and
+/// a rerun makes again what it reads.
 fn drop_consumed(run_dir: &Path, run: &RunFile, plan: &Plan, stage: &str, shard: usize) {
     for upstream in upstream_stages(&plan.stages[stage]) {
         let readers = plan.stages.values().filter(|s| upstream_stages(s).contains(upstream)).count();
@@ -858,12 +869,22 @@ fn drop_consumed(run_dir: &Path, run: &RunFile, plan: &Plan, stage: &str, shard:
         }
         let results = run_dir.join("results").join(upstream).join(shard.to_string());
         if results.exists() {
+            // Marked first: the commit then knows these files are gone on purpose.
+            if let Err(e) = std::fs::write(dropped_marker(&results), b"") {
+                eprintln!("warning: `{}` was kept: {e}", results.display());
+                continue;
+            }
             match std::fs::remove_dir_all(&results) {
                 Ok(()) => eprintln!("{stage} shard {shard}: removed `{upstream}`'s shard {shard}, read and not kept"),
                 Err(e) => eprintln!("warning: `{}` was not removed: {e}", results.display()),
             }
         }
     }
+}
+
+/// The mark `drop_consumed` leaves beside a shard's results it removed: `<shard>.dropped`.
+fn dropped_marker(results: &Path) -> PathBuf {
+    results.with_extension("dropped")
 }
 
 /// What the commit job spent, step by step, in its log: wall and CPU seconds since it started.
@@ -997,6 +1018,14 @@ fn commit_manifests(
             }
         }
         let vanished: Vec<String> = vanished.into_iter().collect();
+        // One task owns each unit: one saying it is gone and another running or keeping it is
+        // a contradiction, and removing its files on that word could lose them.
+        if let Some(both) = records.iter().find(|r| vanished.binary_search(&r.id).is_ok()) {
+            bail!(
+                "stage `{name}`: {} is both gone and kept by this run's tasks; nothing committed, run again",
+                both.id
+            );
+        }
         steps.done(&format!("{name}: {} manifest record(s) read", records.len()));
         let staging = transaction.new_path(plan.stage_path(name));
         let entry = lock.stages.get(name);
@@ -1026,14 +1055,19 @@ fn commit_manifests(
     let selected = selected_stages(plan, &options)?;
     let entries = |name: &str| new_lock.stages.get(name);
     leave_out_not_kept(plan, &selected, &tainted, &entries, &mut install, &mut remove, &RealDisk::default());
-    // Files of `keep: false` stages kept for a reader that failed: those their reader's other
-    // shards had read and removed (`drop_consumed`) are not needed, and not there.
-    let results = run_dir.join("results");
-    let not_kept: Vec<PathBuf> = plan.stages.values().filter(|s| !s.keep).map(|s| results.join(&s.name)).collect();
-    install.retain(|relative| {
-        let from = &produced[relative];
-        !not_kept.iter().any(|folder| from.starts_with(folder)) || from.exists()
-    });
+    // Files of `keep: false` stages kept for a reader that failed: those of the shards a reader
+    // that succeeded had read and dropped (`drop_consumed`, which marks them) are not there.
+    let dropped: Vec<PathBuf> = plan
+        .stages
+        .values()
+        .filter(|s| !s.keep)
+        .flat_map(|s| {
+            let shards = run.shards.get(&s.name).map_or(0, Vec::len);
+            let results = run_dir.join("results").join(&s.name);
+            (0..shards).map(move |i| results.join(i.to_string())).filter(|f| dropped_marker(f).exists())
+        })
+        .collect();
+    install.retain(|relative| !dropped.iter().any(|shard| produced[relative].starts_with(shard)));
     for relative in &install {
         let from = &produced[relative];
         let to = transaction.new_path(relative);
