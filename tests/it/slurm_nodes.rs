@@ -15,6 +15,13 @@ fn slurm_command(program: &str) -> Command {
     command
 }
 
+/// `shakeflow run` on the login node, where Slurm's client commands reach the test cluster (as
+/// `squeue` reaches a real one): what the lease asks when its holder ran in a job.
+fn login_run(root: &Path) -> Output {
+    let mut command = slurm_command(env!("CARGO_BIN_EXE_shakeflow"));
+    command.args(["run", "pipeline.yaml"]).current_dir(root).output().unwrap()
+}
+
 fn run_ok(command: &mut Command) -> String {
     let out: Output = command.output().unwrap();
     assert!(out.status.success(), "{command:?}: {}{}", stdout(&out), stderr(&out));
@@ -71,14 +78,14 @@ fn a_lease_held_on_another_node_is_taken_over_once_its_slurm_job_has_ended() {
         "the lease names the node's host name, not the login node's: {holder}"
     );
     assert_eq!(holder["in_job"].as_str(), Some(job.as_str()), "{holder}");
-    let refused = shakeflow(&["run", "pipeline.yaml"], root);
+    let refused = login_run(root);
     assert_eq!(refused.status.code(), Some(1), "{}", stderr(&refused));
     assert!(stderr(&refused).contains(&format!("on host `{host}`")), "{}", stderr(&refused));
     run_ok(slurm_command("scancel").args(["--signal=KILL", "--full", &job]));
     wait_until(60, "the job to end", || run_ok(slurm_command("squeue").args(["-h", "-j", &job])).trim().is_empty());
     assert!(lease.is_file(), "a killed run leaves its lease");
     // Its heartbeat fresh: it holds (`squeue` may not show a live job of another user's).
-    let still = shakeflow(&["run", "pipeline.yaml"], root);
+    let still = login_run(root);
     assert_eq!(still.status.code(), Some(1), "taken over from another host while its heartbeat is fresh");
     assert!(stderr(&still).contains(&format!("on host `{host}`")), "{}", stderr(&still));
     // Two minutes without a heartbeat: outside a Slurm job it still holds (10 minutes) ...
@@ -86,12 +93,12 @@ fn a_lease_held_on_another_node_is_taken_over_once_its_slurm_job_has_ended() {
     outside.as_object_mut().unwrap().remove("in_job");
     std::fs::write(&lease, serde_json::to_vec(&outside).unwrap()).unwrap();
     set_mtime(&lease, SystemTime::now() - Duration::from_secs(120));
-    let still = shakeflow(&["run", "pipeline.yaml"], root);
+    let still = login_run(root);
     assert_eq!(still.status.code(), Some(1), "{}", stderr(&still));
     // ... in its job, which Slurm no longer knows, it is gone.
     std::fs::write(&lease, &text).unwrap();
     set_mtime(&lease, SystemTime::now() - Duration::from_secs(120));
-    let taken = shakeflow(&["run", "pipeline.yaml"], root);
+    let taken = login_run(root);
     assert!(taken.status.success(), "{}", stderr(&taken));
     let said = stderr(&taken);
     let why =

@@ -46,7 +46,7 @@ use super::{
     forced_stages, selected_stages, upstream_stages, Backend, Opened, Rerun, RunOptions, RunSummary, UnitProblem,
 };
 use crate::error::UserError;
-use crate::pipeline::layout::{fan_bucket, fan_out_above, fans_out, LOCK_FILE, RUNS_DIR, STATE_DIR};
+use crate::pipeline::layout::{fan_bucket, fan_out_above, fans_out, LEASE_FILE, LOCK_FILE, RUNS_DIR, STATE_DIR};
 use crate::pipeline::lease::Lease;
 use crate::pipeline::lock::{bucket_of, LockFile, Wanted};
 use crate::pipeline::memo::TableMemo;
@@ -642,8 +642,9 @@ fn wait(
                 "its log is in `{}`; the commit is all or nothing: `shakeflow status` says what is committed, \
                  and running again finishes the run once the dead job's lease is free (taken over a minute \
                  after its last heartbeat once Slurm no longer knows the job, else after 10 minutes, or \
-                 deleted by you once you know the job is gone)",
+                 `{}` deleted by you once you know the job is gone)",
                 runs_dir(output_dir).join(&run.id).join("logs").display(),
+                output_dir.join(STATE_DIR).join(LEASE_FILE).display()
             ))
         })?;
         let summary: Summary = serde_json::from_slice(&bytes)?;
@@ -1019,8 +1020,11 @@ fn commit_manifests(
         }
         let vanished: Vec<String> = vanished.into_iter().collect();
         // One task owns each unit: one saying it is gone and another running or keeping it is
-        // a contradiction, and removing its files on that word could lose them.
-        if let Some(both) = records.iter().find(|r| vanished.binary_search(&r.id).is_ok()) {
+        // a contradiction, and removing its files on that word could lose them. (A unit whose
+        // task failed, or never ran, is seen gone by the others when its upstream unit failed:
+        // the stage is incomplete then, and keeps it.)
+        let failed = |r: &&UnitRecord| matches!(r.outcome, UnitOutcome::Failed { .. });
+        if let Some(both) = records.iter().filter(|r| !failed(r)).find(|r| vanished.binary_search(&r.id).is_ok()) {
             bail!(
                 "stage `{name}`: {} is both gone and kept by this run's tasks; nothing committed, run again",
                 both.id
