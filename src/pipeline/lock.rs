@@ -35,7 +35,7 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use super::layout::{STATE_DIR, STATE_FILES};
+use super::layout::{fan_bucket, fan_folder, STATE_DIR, STATE_FILES};
 use crate::error::UserError;
 
 const LOCK_FORMAT: u32 = 3;
@@ -138,13 +138,8 @@ struct Root {
     stages: BTreeMap<String, StateFiles>,
 }
 
-/// Which buckets of a stage a reader wants: all (None), or these (`layout::fan_folder` names).
-pub type Wanted = BTreeMap<String, Option<BTreeSet<String>>>;
-
-/// The bucket of a unit id (`layout::fan_folder` of its first segment).
-pub fn bucket_of(id: &str) -> String {
-    super::layout::fan_folder(id)
-}
+/// Which buckets of a stage a reader wants: all (None), or these (`layout::fan_bucket`).
+pub type Wanted = BTreeMap<String, Option<BTreeSet<u8>>>;
 
 /// Whether a stage's entry is kept in buckets: it has more records than a folder holds.
 fn in_buckets(entry: &StageLock) -> bool {
@@ -155,7 +150,7 @@ fn in_buckets(entry: &StageLock) -> bool {
 fn buckets(entry: &StageLock) -> BTreeMap<String, StageLock> {
     let mut out: BTreeMap<String, StageLock> = BTreeMap::new();
     for (id, unit) in &entry.units {
-        out.entry(bucket_of(id))
+        out.entry(fan_folder(id))
             .or_insert_with(|| StageLock { units: BTreeMap::new(), ..entry.header() })
             .units
             .insert(id.clone(), unit.clone());
@@ -403,7 +398,10 @@ fn read_with(
                 to_read.push(one(stage, None, file, false))
             }
             StateFiles::Buckets(files) => {
-                let some = files.iter().filter(|(b, _)| buckets.as_ref().is_none_or(|w| w.contains(*b)));
+                // (Each name is two hex digits: checked with the file names above.)
+                let wanted =
+                    |b: &str| u8::from_str_radix(b, 16).is_ok_and(|b| buckets.as_ref().is_none_or(|w| w.contains(&b)));
+                let some = files.iter().filter(|(b, _)| wanted(b));
                 let mut some: Vec<ToRead> = some.map(|(b, f)| one(stage, Some(b), f, false)).collect();
                 if some.len() < files.len() {
                     lock.partial = true;
@@ -432,7 +430,7 @@ fn read_with(
             let entry: StageLock =
                 serde_json::from_slice(&bytes).map_err(|e| unreadable(format!("is damaged: {e}")))?;
             if let Some(b) = bucket {
-                if let Some(id) = entry.units.keys().find(|id| bucket_of(id) != b) {
+                if let Some(id) = entry.units.keys().find(|id| fan_folder(id) != b) {
                     return Err(unreadable(format!("is damaged: unit `{id}` is not of bucket {b}")));
                 }
             }
@@ -449,7 +447,7 @@ fn read_with(
         if bucket.is_none() {
             let mut entry = entry;
             if let Some(Some(only)) = wanted.and_then(|w| w.get(&stage)) {
-                entry.units.retain(|id, _| only.contains(&bucket_of(id)));
+                entry.units.retain(|id, _| only.contains(&fan_bucket(id)));
             }
             lock.stages.insert(stage, entry);
             continue;
@@ -741,7 +739,7 @@ mod tests {
         assert!(!whole.is_older_format());
 
         // A reader of two buckets opens the root and those two files; a motion's floors share one.
-        let wanted_buckets = BTreeSet::from(["3f".to_string(), "a0".to_string()]);
+        let wanted_buckets = BTreeSet::from([0x3f, 0xa0]);
         let opened = std::sync::Mutex::new(Vec::new());
         let wanted = Wanted::from([("load".to_string(), Some(wanted_buckets.clone()))]);
         let (some, read) = read_with(&path, Some(&wanted), &|p| {
@@ -753,7 +751,7 @@ mod tests {
         assert_eq!(opened.len(), 3, "{opened:?}");
         assert_eq!(read.files, 3);
         let expected: BTreeMap<&String, &UnitLock> =
-            lock.stages["load"].units.iter().filter(|(id, _)| wanted_buckets.contains(&bucket_of(id))).collect();
+            lock.stages["load"].units.iter().filter(|(id, _)| wanted_buckets.contains(&fan_bucket(id))).collect();
         assert!(expected.len() > 4, "{} units in two buckets", expected.len());
         assert_eq!(some.stages["load"].units.iter().collect::<BTreeMap<_, _>>(), expected);
         assert_eq!(some.stages["load"].params, lock.stages["load"].params);
@@ -765,7 +763,7 @@ mod tests {
         after.stages.get_mut("load").unwrap().units.insert(id.into(), unit("n"));
         let new = after.encode(&whole).unwrap();
         assert_eq!(new.files.len(), 1);
-        assert!(new.files[0].0.starts_with(&format!("load.{}.", bucket_of(id))), "{}", new.files[0].0);
+        assert!(new.files[0].0.starts_with(&format!("load.{}.", fan_folder(id))), "{}", new.files[0].0);
         assert_eq!(new.retired.len(), 1);
         install(&path, &new);
         assert_eq!(LockFile::read(&path).unwrap().stages, after.stages);
@@ -773,7 +771,7 @@ mod tests {
         // A bucket's file naming a unit of another bucket is damaged, not merged.
         let file = new.files[0].0.clone();
         let bucket = &file["load.".len().."load.".len() + 2];
-        let stranger = (0..).map(|i| format!("motion=X{i}")).find(|id| bucket_of(id) != bucket).unwrap();
+        let stranger = (0..).map(|i| format!("motion=X{i}")).find(|id| fan_folder(id) != bucket).unwrap();
         let mut moved: StageLock = serde_json::from_slice(&new.files[0].1).unwrap();
         moved.units.insert(stranger, unit("x"));
         let bytes = encoded(&moved).unwrap();

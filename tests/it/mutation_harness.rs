@@ -242,7 +242,7 @@ fn readers() -> Vec<(&'static str, Reader)> {
             }
             std::fs::write(&root, b).unwrap();
             drop(LockFile::read(&root));
-            let some = Wanted::from([("load".to_string(), Some(["00", "3f", "zz"].map(String::from).into()))]);
+            let some = Wanted::from([("load".to_string(), Some([0x00, 0x3f, 0xff].into()))]);
             drop(LockFile::read_stages(&root, &some));
         }),
         ("load", |b, scratch| {

@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use crate::error::UserError;
 use crate::io::hash;
-use crate::pipeline::layout::{partition_of, partition_path, placed, DATA_FILE, HASH_MEMO, STATE_DIR};
+use crate::pipeline::layout::{fan_bucket, partition_of, partition_path, placed, DATA_FILE, HASH_MEMO, STATE_DIR};
 use crate::pipeline::lock::UnitLock;
 use crate::pipeline::plan::{InputRef, Plan, PlannedStage};
 use crate::pipeline::sources;
@@ -42,7 +42,7 @@ pub(super) fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSo
 pub(super) fn resolve_sources_of(
     plan: &Plan,
     stage: Option<&str>,
-    buckets: Option<&BTreeSet<String>>,
+    buckets: Option<&BTreeSet<u8>>,
 ) -> Result<BTreeMap<String, ResolvedSource>, UserError> {
     // A no-op rerun then reads no file whose size and times are unchanged.
     hash::use_memo(&plan.file.output_dir().join(STATE_DIR).join(HASH_MEMO));
@@ -67,7 +67,7 @@ pub(super) fn resolve_sources_of(
         let spec = &plan.file.spec.inputs[name];
         let mut files = files_of(plan, name, spec, &mut resolver)?;
         if let Some(buckets) = buckets {
-            files.retain(|f| buckets.contains(&crate::pipeline::layout::fan_folder(&partition_path(&f.partition))));
+            files.retain(|f| buckets.contains(&fan_bucket(&partition_path(&f.partition))));
         }
         let unhashed: Vec<&Path> =
             files.iter().map(|f| f.path.as_path()).filter(|p| !hashed.contains_key(p.as_os_str())).collect();

@@ -48,7 +48,7 @@ use super::{
 use crate::error::UserError;
 use crate::pipeline::layout::{fan_bucket, fan_out_above, fans_out, LEASE_FILE, LOCK_FILE, RUNS_DIR, STATE_DIR};
 use crate::pipeline::lease::Lease;
-use crate::pipeline::lock::{bucket_of, LockFile, Wanted};
+use crate::pipeline::lock::{LockFile, Wanted};
 use crate::pipeline::memo::TableMemo;
 use crate::pipeline::ownership;
 use crate::pipeline::plan::Plan;
@@ -148,9 +148,9 @@ impl RunFile {
     }
 
     /// The buckets of shard `shard` of a bucketed stage.
-    fn buckets(&self, shard: usize) -> BTreeSet<String> {
+    fn buckets(&self, shard: usize) -> BTreeSet<u8> {
         let [first, end] = self.ranges.get(shard).copied().unwrap_or([0, 0]);
-        (first..end).map(|b| format!("{b:02x}")).collect()
+        (first..end).filter_map(|b| u8::try_from(b).ok()).collect()
     }
 
     /// The shard of a bucketed stage that runs the units of bucket `bucket`.
@@ -781,7 +781,7 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
         // unit reading another bucket's record through what it did read, not every change.)
         let elsewhere = |p: &crate::pipeline::stage::InputPart| {
             !p.partition.is_empty()
-                && !buckets.contains(&bucket_of(&crate::pipeline::layout::partition_path(&p.partition)))
+                && !buckets.contains(&fan_bucket(&crate::pipeline::layout::partition_path(&p.partition)))
         };
         for (unit, _, _) in &ours {
             let dataset =
