@@ -85,12 +85,12 @@ def task_logs(out: pathlib.Path):
     return set((out / ".shakeflow/slurm").glob("*/logs/*"))
 
 
-def task_reads(out: pathlib.Path, seen=frozenset()):
-    """Bytes of state each array task read, from its log line (`read N state file(s), B bytes`),
-    in the logs not in `seen`."""
+def task_reads(out: pathlib.Path, seen=frozenset(), what="state"):
+    """Bytes of state (or of the hash memo: `what="hash memo"`) each array task read, from its
+    log line (`read N state file(s), B bytes`), in the logs not in `seen`."""
     reads = []
     for log in task_logs(out) - set(seen):
-        for m in re.finditer(r"read (\d+) state file\(s\), (\d+) bytes", log.read_text(errors="replace")):
+        for m in re.finditer(rf"read (\d+) {what} file\(s\), (\d+) bytes", log.read_text(errors="replace")):
             reads.append(int(m.group(2)))
     return reads
 
@@ -146,10 +146,11 @@ def main():
     if len(growth) > 1:
         print("\ngrowth with the archive (local executor):")
         print(f"{'tests':>6} {'units':>6} {'wall s':>8} {'plan s':>7} {'commit s':>9} {'no-op s':>8} {'ms/unit':>8} "
-              f"{'state KB/task':>14} {'memo KB':>8} {'most entries':>13} {'Slurm commit job s':>19}")
+              f"{'state KB/task':>14} {'memo KB':>8} {'memo KB/task':>13} {'most entries':>13} {'Slurm commit job s':>19}")
         for tests, r in growth:
             print(f"{tests:6d} {r['units']:6d} {r['wall']:8.2f} {r['plan_fresh']:7.2f} {r['commit']:9.2f} {r['noop']:8.2f} "
-                  f"{1000 * r['noop'] / max(r['checked'], 1):8.3f} {r['state'] / 1e3:14.1f} {r['memo'] / 1e3:8.1f} {r['most'][0]:13d} "
+                  f"{1000 * r['noop'] / max(r['checked'], 1):8.3f} {r['state'] / 1e3:14.1f} {r['memo'] / 1e3:8.1f} "
+                  f"{r['memo_task'][2] / 1e3 if 'memo_task' in r else float('nan'):13.1f} {r['most'][0]:13d} "
                   f"{r.get('slurm_commit', float('nan')):19.0f}")
 
 
@@ -236,14 +237,14 @@ def measure(a, tests):
     w, lines, _ = timed_run([shakeflow, "status", "pipeline.yaml"], local)
     status_wall = w
     plan_committed, _, _ = timed_run([shakeflow, "run", "pipeline.yaml", *stages, "--dry-run"], local)
-    memo = local / "out/.shakeflow/hashes.json"
+    memo = [local / "out/.shakeflow/hashes.json", *(local / "out/.shakeflow/hashes").glob("*.json")]
     report["local"].update(
         noop=min(noops),
         plan_fresh=plan_fresh,
         plan_committed=plan_committed,
         # Every unit of the covered stages is checked by a no-op: the state's entries.
         checked=state_units(local / "out"),
-        memo=memo.stat().st_size if memo.exists() else 0,
+        memo=sum(f.stat().st_size for f in memo if f.exists()),
         # Without Slurm: what a task of the largest stage reads (the root and that stage's file).
         state=max((len(b) for n, b in state_files(local / "out").items() if n.endswith(".json")), default=0)
         + (local / "out/shakeflow.lock").stat().st_size,
@@ -285,6 +286,9 @@ def measure(a, tests):
             reads = task_reads(cluster / "out", seen)
             if reads:
                 report["local"].update(state=max(reads), state_mean=sum(reads) / len(reads), state_min=min(reads))
+            memo_reads = task_reads(cluster / "out", seen, "hash memo")
+            if memo_reads:
+                report["local"].update(memo_task=(min(memo_reads), sum(memo_reads) / len(memo_reads), max(memo_reads)))
             report["slurm"] = dict(
                 wall=wall,
                 units=report["local"]["units"],
@@ -329,7 +333,9 @@ def measure(a, tests):
         f"engine overhead per unit (no-op / units checked): {1000 * r['noop'] / max(r['checked'], 1):.3f} ms "
         f"({r['checked']} units); state a task reads: {r.get('state_min', float('nan')) / 1e3:.1f}–{r['state'] / 1e3:.1f} KB, "
         f"mean {r['state_mean'] / 1e3:.1f} KB of {r['lock'] / 1e3:.1f} KB "
-        f"(root + its stage's and upstream stages' files), and the hash memo {r['memo'] / 1e3:.1f} KB; "
+        f"(root + its stage's and upstream stages' files); the hash memo {r['memo'] / 1e3:.1f} KB, of which a task "
+        f"reads {'–'.join(f'{b / 1e3:.1f}' for b in r['memo_task'][::2]) if 'memo_task' in r else '?'} KB "
+        f"(mean {r['memo_task'][1] / 1e3 if 'memo_task' in r else float('nan'):.1f}); "
         f"most entries in one folder: {r['most'][0]} (`{r['most'][1]}`)"
     )
     return r

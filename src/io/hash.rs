@@ -44,47 +44,96 @@ impl Stat {
     }
 }
 
-/// Hashes by path and [`Stat`], loaded from and saved to one file (see the module's docs).
+/// Hashes by path and [`Stat`], loaded from and saved to files (see the module's docs): the root
+/// file, and per bucket (a record's `layout::fan_bucket`, given by the caller or read from the
+/// path) one file in the folder named as the root file without `.json`
+/// (`hashes.json` → `hashes/3f.json`), read only when a file of that bucket is asked after: a
+/// Slurm task reads the buckets of its shard, not the archive's memo.
 pub struct StatMemo {
     file: PathBuf,
-    /// By the bytes of [`memo_key`]'s path: hashing and comparing bytes, not path components
-    /// (at 10⁴ tests, 2·10⁴ files asked after in a no-op run).
+    /// The root file's entries: files of no bucket (and an older memo's, all in one file).
+    root: Entries,
+    /// Each bucket's entries, read on first use.
+    buckets: Box<[OnceLock<Entries>]>,
+    /// A file's bucket when its caller does not say (a fanned-out record's table: its fan folder).
+    bucket_of: fn(&Path) -> Option<u8>,
+    /// What this process hashed or reused, with its bucket: what [`save_memo`] keeps.
+    used: Mutex<HashMap<OsString, (Option<u8>, Stat, String)>>,
+    /// Memo files read and their bytes.
+    read: Mutex<(usize, u64)>,
+}
+
+/// One memo file's entries. By the bytes of [`memo_key`]'s path: hashing and comparing bytes, not
+/// path components (at 10⁴ tests, 2·10⁴ files asked after in a no-op run).
+#[derive(Default)]
+struct Entries {
     known: HashMap<OsString, (Stat, String)>,
-    /// Whether `file` was read (else it is missing or damaged, and saving writes it anew).
+    /// Whether the file was read (else it is missing or damaged, and saving writes it anew).
     loaded: bool,
-    /// What this process hashed or reused: what [`save_memo`] keeps.
-    used: Mutex<HashMap<OsString, (Stat, String)>>,
 }
 
 static MEMO: OnceLock<StatMemo> = OnceLock::new();
 
 impl StatMemo {
-    /// The memo saved in `file` (an unreadable or damaged file is an empty memo).
-    pub fn load(file: &Path) -> StatMemo {
-        let read: Option<Vec<(PathBuf, Stat, String)>> =
-            std::fs::read(file).ok().and_then(|b| serde_json::from_slice(&b).ok());
-        StatMemo {
+    /// The memo saved in `file` and its buckets' folder (an unreadable or damaged file is an
+    /// empty memo); `bucket_of` names a file's bucket where its caller does not.
+    pub fn load(file: &Path, bucket_of: fn(&Path) -> Option<u8>) -> StatMemo {
+        let memo = StatMemo {
             file: file.to_path_buf(),
-            loaded: read.is_some(),
-            known: read.unwrap_or_default().into_iter().map(|(p, s, h)| (p.into_os_string(), (s, h))).collect(),
+            root: Entries::default(),
+            buckets: (0..=u8::MAX).map(|_| OnceLock::new()).collect(),
+            bucket_of,
             used: Mutex::new(HashMap::new()),
+            read: Mutex::new((0, 0)),
+        };
+        StatMemo { root: memo.read_entries(file), ..memo }
+    }
+
+    fn read_entries(&self, file: &Path) -> Entries {
+        let bytes = std::fs::read(file).ok();
+        if let Some(bytes) = &bytes {
+            let mut read = self.read.lock().expect("the memo lock is never poisoned");
+            read.0 += 1;
+            read.1 += bytes.len() as u64;
         }
+        let entries: Option<Vec<(PathBuf, Stat, String)>> = bytes.as_ref().and_then(|b| serde_json::from_slice(b).ok());
+        Entries {
+            loaded: entries.is_some(),
+            known: entries.unwrap_or_default().into_iter().map(|(p, s, h)| (p.into_os_string(), (s, h))).collect(),
+        }
+    }
+
+    fn buckets_dir(&self) -> PathBuf {
+        self.file.with_extension("")
+    }
+
+    fn bucket_file(&self, bucket: u8) -> PathBuf {
+        self.buckets_dir().join(format!("{bucket:02x}.json"))
+    }
+
+    fn bucket(&self, bucket: u8) -> &Entries {
+        self.buckets[usize::from(bucket)].get_or_init(|| self.read_entries(&self.bucket_file(bucket)))
     }
 
     /// `path`'s content hash: the remembered one while its stat is unchanged, else read.
     pub fn hash(&self, path: &Path) -> anyhow::Result<String> {
         let Ok(meta) = std::fs::metadata(path) else { return read_and_hash(path) };
-        self.hash_with(path, &meta)
+        self.hash_with(path, &meta, None)
     }
 
-    /// [`hash`](Self::hash) of a file whose metadata the caller has just read.
-    fn hash_with(&self, path: &Path, meta: &std::fs::Metadata) -> anyhow::Result<String> {
+    /// [`hash`](Self::hash) of a file whose metadata the caller has just read, remembered in
+    /// `bucket` (None: where `bucket_of` puts it).
+    fn hash_with(&self, path: &Path, meta: &std::fs::Metadata, bucket: Option<u8>) -> anyhow::Result<String> {
         let stat = Stat::of(meta);
         let key = memo_key(path);
+        let bucket = bucket.or_else(|| (self.bucket_of)(path));
         let remember = |stat: Stat, hash: &String| {
-            self.used.lock().expect("the memo lock is never poisoned").insert(key.clone(), (stat, hash.clone()));
+            self.used.lock().expect("the memo lock is never poisoned").insert(key.clone(), (bucket, stat, hash.clone()));
         };
-        if let Some((_, hash)) = self.known.get(&key).filter(|(s, _)| *s == stat) {
+        // An entry saved before its file had a bucket (a folder grown past the fan-out limit)
+        // is found in the root file, and saved in its bucket's.
+        let known = bucket.and_then(|b| self.bucket(b).known.get(&key)).or_else(|| self.root.known.get(&key));
+        if let Some((_, hash)) = known.filter(|(s, _)| *s == stat) {
             remember(stat, hash);
             return Ok(hash.clone());
         }
@@ -95,22 +144,58 @@ impl StatMemo {
         Ok(hash)
     }
 
-    /// Writes the entries this memo used (a temporary file, then a rename); nothing when they
-    /// are the entries it loaded, as on a no-op rerun (1 MB of JSON at 10³ tests).
+    /// Writes the entries this memo used, each file whose entries changed (a temporary file,
+    /// then a rename), and removes the buckets' files it used nothing of: nothing is written
+    /// when the entries are those it loaded, as on a no-op rerun (1 MB of JSON at 10³ tests).
     pub fn save(&self) -> anyhow::Result<()> {
         let used = self.used.lock().expect("the memo lock is never poisoned");
-        if self.loaded && *used == self.known {
-            return Ok(());
+        let mut by_bucket: HashMap<Option<u8>, HashMap<&OsString, (&Stat, &String)>> = HashMap::new();
+        for (path, (bucket, stat, hash)) in used.iter() {
+            by_bucket.entry(*bucket).or_default().insert(path, (stat, hash));
         }
-        let mut entries: Vec<(&Path, &Stat, &String)> = used.iter().map(|(p, (s, h))| (Path::new(p), s, h)).collect();
-        entries.sort_by(|a, b| a.0.cmp(b.0));
-        if let Some(dir) = self.file.parent() {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating `{}`", dir.display()))?;
+        write_entries(&self.file, &self.root, &by_bucket.remove(&None).unwrap_or_default())?;
+        for (bucket, entries) in &by_bucket {
+            let bucket = bucket.expect("the root's entries were taken out");
+            write_entries(&self.bucket_file(bucket), self.bucket(bucket), entries)?;
         }
-        let tmp = self.file.with_extension(format!("tmp-{}", std::process::id()));
-        std::fs::write(&tmp, serde_json::to_vec(&entries)?).with_context(|| format!("writing `{}`", tmp.display()))?;
-        std::fs::rename(&tmp, &self.file).with_context(|| format!("renaming into `{}`", self.file.display()))
+        // Buckets of which nothing was used, as the root file keeps only what was.
+        let dir = self.buckets_dir();
+        let Ok(listing) = std::fs::read_dir(&dir) else { return Ok(()) };
+        for entry in listing.flatten() {
+            let name = entry.file_name();
+            let bucket = name.to_str().and_then(|n| n.strip_suffix(".json")).and_then(|n| u8::from_str_radix(n, 16).ok());
+            if bucket.is_some_and(|b| !by_bucket.contains_key(&Some(b))) {
+                std::fs::remove_file(entry.path()).with_context(|| format!("removing `{}`", entry.path().display()))?;
+            }
+        }
+        if by_bucket.is_empty() {
+            let _ = std::fs::remove_dir(&dir);
+        }
+        Ok(())
     }
+
+    /// Memo files read so far, and their bytes.
+    pub fn files_read(&self) -> (usize, u64) {
+        *self.read.lock().expect("the memo lock is never poisoned")
+    }
+}
+
+/// Writes `entries` to `file` unless they are what `old` loaded from it.
+fn write_entries(file: &Path, old: &Entries, entries: &HashMap<&OsString, (&Stat, &String)>) -> anyhow::Result<()> {
+    let same = old.loaded
+        && old.known.len() == entries.len()
+        && entries.iter().all(|(p, (s, h))| old.known.get(*p).is_some_and(|(os, oh)| os == *s && oh == *h));
+    if same {
+        return Ok(());
+    }
+    let mut sorted: Vec<(&Path, &Stat, &String)> = entries.iter().map(|(p, (s, h))| (Path::new(p), *s, *h)).collect();
+    sorted.sort_by(|a, b| a.0.cmp(b.0));
+    if let Some(dir) = file.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating `{}`", dir.display()))?;
+    }
+    let tmp = file.with_extension(format!("tmp-{}", std::process::id()));
+    std::fs::write(&tmp, serde_json::to_vec(&sorted)?).with_context(|| format!("writing `{}`", tmp.display()))?;
+    std::fs::rename(&tmp, file).with_context(|| format!("renaming into `{}`", file.display()))
 }
 
 /// How the memo names a file: its absolute path (not resolved), so a run from another folder or
@@ -125,10 +210,16 @@ fn memo_key(path: &Path) -> OsString {
     absolute.unwrap_or_else(|_| path.to_path_buf()).into_os_string()
 }
 
-/// From now on [`hash_file`] goes through the memo saved in `file`. The first call in a
-/// process wins; later ones are ignored.
-pub fn use_memo(file: &Path) {
-    MEMO.get_or_init(|| StatMemo::load(file));
+/// From now on [`hash_file`] goes through the memo saved in `file` (and its buckets' folder),
+/// `bucket_of` naming a file's bucket where the caller does not ([`StatMemo::load`]). The first
+/// call in a process wins; later ones are ignored.
+pub fn use_memo(file: &Path, bucket_of: fn(&Path) -> Option<u8>) {
+    MEMO.get_or_init(|| StatMemo::load(file, bucket_of));
+}
+
+/// The process's memo files read so far, and their bytes (none without a memo).
+pub fn memo_files_read() -> (usize, u64) {
+    MEMO.get().map_or((0, 0), StatMemo::files_read)
 }
 
 /// Records `hash` as `path`'s content in the process's memo, if it has one and the file is
@@ -138,10 +229,11 @@ pub fn remember(path: &Path, hash: &str) {
     let Some(memo) = MEMO.get() else { return };
     let Ok(meta) = std::fs::metadata(path) else { return };
     if settled(&meta) {
+        let bucket = (memo.bucket_of)(path);
         memo.used
             .lock()
             .expect("the memo lock is never poisoned")
-            .insert(memo_key(path), (Stat::of(&meta), hash.to_string()));
+            .insert(memo_key(path), (bucket, Stat::of(&meta), hash.to_string()));
     }
 }
 
@@ -169,7 +261,7 @@ pub fn hash_file(path: &Path) -> anyhow::Result<String> {
 pub fn hash_if_present(path: &Path) -> Option<String> {
     let meta = std::fs::metadata(path).ok()?;
     match MEMO.get() {
-        Some(memo) => memo.hash_with(path, &meta).ok(),
+        Some(memo) => memo.hash_with(path, &meta, None).ok(),
         None => read_and_hash(path).ok(),
     }
 }
@@ -240,12 +332,13 @@ pub fn hash_dir_known(dir: &Path, known: &KnownHashes) -> anyhow::Result<(String
     Ok((hash_bytes(combined.as_bytes()), files.len()))
 }
 
-/// Hash of a source path: a file's content, or a folder's file names and contents.
+/// Hash of a source path: a file's content, or a folder's file names and contents, remembered
+/// in `bucket` (a fanned-out source's record's; None: where the memo puts it).
 /// One `stat` for a file, which the memo then uses (a no-op rerun asks this of every record file).
-pub fn hash_path(path: &Path) -> anyhow::Result<String> {
+pub fn hash_path(path: &Path, bucket: Option<u8>) -> anyhow::Result<String> {
     match (std::fs::metadata(path), MEMO.get()) {
         (Ok(meta), _) if meta.is_dir() => Ok(hash_dir(path)?.0),
-        (Ok(meta), Some(memo)) => memo.hash_with(path, &meta),
+        (Ok(meta), Some(memo)) => memo.hash_with(path, &meta, bucket),
         _ => hash_file(path),
     }
 }
@@ -287,6 +380,10 @@ impl<W: std::io::Write> std::io::Write for HashingWriter<W> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn no_bucket(_: &Path) -> Option<u8> {
+        None
+    }
 
     #[test]
     fn memo_keys_are_the_absolute_paths_the_working_folder_gives() {
@@ -330,13 +427,13 @@ mod tests {
         let set_mtime = |p: &Path| std::fs::File::options().write(true).open(p).unwrap().set_modified(past).unwrap();
         set_mtime(&old);
         let file = dir.path().join("memo/hashes.json");
-        let memo = StatMemo::load(&file);
+        let memo = StatMemo::load(&file, no_bucket);
         assert_eq!(memo.hash(&old).unwrap(), read_and_hash(&old).unwrap());
         assert_eq!(memo.hash(&fresh).unwrap(), read_and_hash(&fresh).unwrap());
         memo.save().unwrap();
         // Remembered: the settled file only (one just written could change within its mtime's tick).
-        let memo = StatMemo::load(&file);
-        assert_eq!(memo.known.keys().collect::<Vec<_>>(), [old.as_os_str()]);
+        let memo = StatMemo::load(&file, no_bucket);
+        assert_eq!(memo.root.known.keys().collect::<Vec<_>>(), [old.as_os_str()]);
         assert_eq!(memo.hash(&old).unwrap(), read_and_hash(&old).unwrap());
         // Same size, modification time put back: the change time still differs, so it is read again.
         std::fs::write(&old, "1,2,4\n").unwrap();
@@ -350,10 +447,10 @@ mod tests {
         entries[0][1]["dev"] = serde_json::json!(0xfeed);
         entries[0][2] = serde_json::json!("remembered");
         std::fs::write(&file, serde_json::to_vec(&entries).unwrap()).unwrap();
-        assert_eq!(StatMemo::load(&file).hash(&old).unwrap(), "remembered");
+        assert_eq!(StatMemo::load(&file, no_bucket).hash(&old).unwrap(), "remembered");
         // A damaged memo is an empty one.
         std::fs::write(&file, "{not json").unwrap();
-        assert!(StatMemo::load(&file).known.is_empty());
+        assert!(StatMemo::load(&file, no_bucket).root.known.is_empty());
     }
 
     #[test]
@@ -366,29 +463,102 @@ mod tests {
             std::fs::File::options().write(true).open(path).unwrap().set_modified(past).unwrap();
         }
         let file = dir.path().join("hashes.json");
-        let memo = StatMemo::load(&file);
+        let memo = StatMemo::load(&file, no_bucket);
         memo.hash(&a).unwrap();
         memo.save().unwrap();
         // The same entries as loaded (a no-op rerun): the file is left as it is, its bytes too.
         let written = std::fs::read(&file).unwrap();
         std::fs::write(&file, [&written[..], b"\n"].concat()).unwrap();
-        let memo = StatMemo::load(&file);
+        let memo = StatMemo::load(&file, no_bucket);
         memo.hash(&a).unwrap();
         memo.save().unwrap();
         assert_eq!(std::fs::read(&file).unwrap(), [&written[..], b"\n"].concat());
         // A file hashed anew, or one no longer asked for, is saved.
-        let memo = StatMemo::load(&file);
+        let memo = StatMemo::load(&file, no_bucket);
         memo.hash(&a).unwrap();
         memo.hash(&b).unwrap();
         memo.save().unwrap();
-        assert_eq!(StatMemo::load(&file).known.len(), 2);
-        let memo = StatMemo::load(&file);
+        assert_eq!(StatMemo::load(&file, no_bucket).root.known.len(), 2);
+        let memo = StatMemo::load(&file, no_bucket);
         memo.hash(&b).unwrap();
         memo.save().unwrap();
-        assert_eq!(StatMemo::load(&file).known.keys().collect::<Vec<_>>(), [b.as_os_str()]);
+        assert_eq!(StatMemo::load(&file, no_bucket).root.known.keys().collect::<Vec<_>>(), [b.as_os_str()]);
         // A damaged memo is written anew, even with nothing to remember.
         std::fs::write(&file, "{not json").unwrap();
-        StatMemo::load(&file).save().unwrap();
+        StatMemo::load(&file, no_bucket).save().unwrap();
         assert_eq!(std::fs::read(&file).unwrap(), b"[]");
+    }
+
+    /// Past the fan-out limit a record's entry is in its bucket's file, which only a process
+    /// asking after a file of that bucket reads; an entry from the root file moves to its bucket.
+    #[test]
+    fn the_stat_memo_reads_only_the_buckets_asked_after() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let past = std::time::SystemTime::now() - std::time::Duration::from_secs(60);
+        let files: Vec<PathBuf> = ["a.csv", "b.csv", "0f/x=1/data.parquet", "plain.yaml"]
+            .iter()
+            .map(|name| {
+                let path = dir.path().join(name);
+                std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+                std::fs::write(&path, name).unwrap();
+                std::fs::File::options().write(true).open(&path).unwrap().set_modified(past).unwrap();
+                path
+            })
+            .collect();
+        // Tables of a fanned-out record name their bucket in their path; the others have none.
+        fn fan_folder(path: &Path) -> Option<u8> {
+            let folder = path.parent()?.parent()?.file_name()?.to_str()?;
+            u8::from_str_radix(folder, 16).ok().filter(|_| folder.len() == 2)
+        }
+        let file = dir.path().join("memo/hashes.json");
+        // An older memo: everything in the root file.
+        let memo = StatMemo::load(&file, no_bucket);
+        for path in &files {
+            memo.hash(path).unwrap();
+        }
+        memo.save().unwrap();
+        assert!(!dir.path().join("memo/hashes").exists());
+        // Now with buckets (the sources' from their caller, the table's from its path): the
+        // root file's entries still serve (a replaced hash shows the file was not read), and move
+        // to their buckets' files.
+        let mut entries: Vec<serde_json::Value> = serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+        let a = entries.iter_mut().find(|e| e[0].as_str().unwrap().ends_with("a.csv")).unwrap();
+        a[2] = serde_json::json!("from-the-root");
+        std::fs::write(&file, serde_json::to_vec(&entries).unwrap()).unwrap();
+        let path_hash = |memo: &StatMemo, path: &Path, bucket| memo.hash_with(path, &path.metadata().unwrap(), bucket);
+        let memo = StatMemo::load(&file, fan_folder);
+        assert_eq!(path_hash(&memo, &files[0], Some(0xa0)).unwrap(), "from-the-root");
+        path_hash(&memo, &files[1], Some(0xb1)).unwrap();
+        memo.hash(&files[2]).unwrap();
+        memo.hash(&files[3]).unwrap();
+        memo.save().unwrap();
+        let mut saved: Vec<String> = std::fs::read_dir(dir.path().join("memo/hashes"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        saved.sort();
+        assert_eq!(saved, ["0f.json", "a0.json", "b1.json"]);
+        assert_eq!(StatMemo::load(&file, fan_folder).root.known.len(), 1, "the plain file stays in the root");
+        // A process asking after one bucket's file reads the root and that bucket only, and
+        // takes its hash from there (a replaced hash shows it was not read again).
+        let bucket_a = dir.path().join("memo/hashes/a0.json");
+        let mut entries: Vec<serde_json::Value> = serde_json::from_slice(&std::fs::read(&bucket_a).unwrap()).unwrap();
+        assert_eq!(entries[0][2], "from-the-root");
+        entries[0][2] = serde_json::json!("remembered");
+        std::fs::write(&bucket_a, serde_json::to_vec(&entries).unwrap()).unwrap();
+        let memo = StatMemo::load(&file, fan_folder);
+        assert_eq!(path_hash(&memo, &files[0], Some(0xa0)).unwrap(), "remembered");
+        let root_bytes = std::fs::metadata(&file).unwrap().len();
+        assert_eq!(memo.files_read(), (2, root_bytes + std::fs::metadata(&bucket_a).unwrap().len()));
+        // Unchanged entries are not written again; a bucket nothing was used of goes.
+        let before = std::fs::read(&bucket_a).unwrap();
+        memo.hash(&files[2]).unwrap();
+        memo.save().unwrap();
+        assert_eq!(std::fs::read(&bucket_a).unwrap(), before);
+        assert!(!dir.path().join("memo/hashes/b1.json").exists());
+        assert!(dir.path().join("memo/hashes/0f.json").exists());
+        // Nothing of any bucket used: the folder goes too.
+        StatMemo::load(&file, fan_folder).save().unwrap();
+        assert!(!dir.path().join("memo/hashes").exists());
     }
 }

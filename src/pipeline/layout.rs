@@ -9,6 +9,7 @@
 //!     lease, lease.break               LEASE_FILE, BREAK_FILE: one run at a time
 //!     txn-<pid>-<nanos>/               TXN_PREFIX: a transaction (`new/`, `old/`, JOURNAL)
 //!     hashes.json                      HASH_MEMO: the stat/hash memo
+//!     hashes/<xx>.json                 HASH_MEMO_BUCKETS: the same, per bucket past FAN_OUT_ABOVE records
 //!     slurm/<run>/                     RUNS_DIR: Slurm runs (run.json, results/, manifests/, logs/)
 //!   <stage>/                           a stage's folder (a command's: the output folder itself)
 //!     .shakeflow-stage                 STAGE_MARKER: whose folder it is
@@ -34,8 +35,11 @@ pub const BREAK_FILE: &str = "lease.break";
 /// A transaction's folder in [`STATE_DIR`] starts with this; its commit point is [`JOURNAL`].
 pub const TXN_PREFIX: &str = "txn-";
 pub const JOURNAL: &str = "journal";
-/// The stat/hash memo in [`STATE_DIR`] ([`crate::io::hash::StatMemo`]).
+/// The stat/hash memo in [`STATE_DIR`] ([`crate::io::hash::StatMemo`]), and the folder of its
+/// buckets' files (the memo's name without `.json`): a fanned-out record's files are remembered
+/// in its bucket's ([`memo_bucket`]).
 pub const HASH_MEMO: &str = "hashes.json";
+pub const HASH_MEMO_BUCKETS: &str = "hashes";
 /// Where Slurm runs keep their folders, in [`STATE_DIR`].
 pub const RUNS_DIR: &str = "slurm";
 /// The marker naming the stage (and its type) whose folder holds it.
@@ -89,6 +93,20 @@ pub fn fan_folder(partition_path: &str) -> String {
 pub fn fan_bucket(partition_path: &str) -> u8 {
     let first = partition_path.split('/').next().unwrap_or_default();
     blake3::hash(first.as_bytes()).as_bytes()[0]
+}
+
+/// The memo's bucket of a file a stage wrote (the memo's `bucket_of`): a record's table or
+/// MCAP twin in a fanned-out layout is in its bucket's folder (`records/3f/motion=FB-4/…`);
+/// any other file has none.
+pub fn memo_bucket(path: &std::path::Path) -> Option<u8> {
+    let name = path.file_name()?;
+    if name != DATA_FILE && name != MCAP_FILE {
+        return None;
+    }
+    let segments: Vec<&str> = path.iter().map(|s| s.to_str().unwrap_or_default()).collect();
+    let first = segments.iter().position(|s| s.contains('='))?;
+    let fan = segments[..first].last().filter(|s| is_fan_folder(s))?;
+    u8::from_str_radix(fan, 16).ok()
 }
 
 fn is_fan_folder(segment: &str) -> bool {
@@ -166,6 +184,8 @@ mod tests {
         assert!(!fans_out(["*"], 0), "a gathering stage's one unit has no partition");
         assert!(!fans_out([""], 0));
         assert_eq!(fan_out_above(), FAN_OUT_ABOVE, "tests run without SHAKEFLOW_FAN_OUT_ABOVE");
+        // The memo finds its buckets' folder by its own name (`io::hash` knows no layout).
+        assert_eq!(std::path::Path::new(HASH_MEMO).with_extension(""), std::path::Path::new(HASH_MEMO_BUCKETS));
     }
 
     #[test]
@@ -179,6 +199,10 @@ mod tests {
         assert_eq!(placed(&two, false), flat);
         assert_eq!(placed(flat, false), flat);
         assert_eq!(placed(&two, true), two);
+        let bucket = Some(fan_bucket("motion=FB-4"));
+        assert_eq!(memo_bucket(std::path::Path::new(&format!("/out/baseline/{two}"))), bucket);
+        assert_eq!(memo_bucket(std::path::Path::new(&format!("/out/{fan}/baseline/{flat}"))), None);
+        assert_eq!(memo_bucket(std::path::Path::new(&format!("/out/baseline/records/{fan}/motion=X/x.png"))), None);
         let mcap = "mcap/records/motion=FB-4/data.mcap";
         assert_eq!(placed(mcap, true), format!("mcap/records/{fan}/motion=FB-4/data.mcap"));
         assert_eq!(placed(&placed(mcap, true), false), mcap);

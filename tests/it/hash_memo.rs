@@ -6,11 +6,6 @@ use crate::common::*;
 use std::path::Path;
 use std::time::{Duration, SystemTime};
 
-/// Sets a file's modification time to `when` (as `touch -d` would).
-fn set_mtime(path: &Path, when: SystemTime) {
-    std::fs::File::options().write(true).open(path).unwrap().set_modified(when).unwrap();
-}
-
 #[test]
 fn a_rerun_sees_a_change_that_keeps_size_and_modification_time() {
     let project = small_project();

@@ -129,8 +129,12 @@ fn a_fanned_out_slurm_run_cuts_shards_by_bucket_reads_only_their_state_and_drops
     let text = PIPELINE.replace("    inputs: [daq]\n", "    inputs: [daq]\n    keep: false\n");
     let local = small_project();
     let cluster = small_project();
+    let past = std::time::SystemTime::now() - Duration::from_secs(60);
     for project in [&local, &cluster] {
         std::fs::write(project.path().join("pipeline.yaml"), &text).unwrap();
+        for motion in ["FB-1", "FB-2"] {
+            set_mtime(&project.path().join(format!("archive/{motion}/daq.csv")), past);
+        }
     }
     let out = shakeflow_env(&["run", "pipeline.yaml"], local.path(), &fan_out);
     assert!(out.status.success(), "{}", stderr(&out));
@@ -165,6 +169,14 @@ fn a_fanned_out_slurm_run_cuts_shards_by_bucket_reads_only_their_state_and_drops
         .collect();
     assert!(files_read.iter().all(|&n| n < 1 + state), "fewer than the root and {state} files: {reads:?}");
     assert_eq!(files_read.iter().sum::<usize>(), 2 + state, "each state file read once: {reads:?}");
+    // The hash memo is kept by bucket too: a `load` task reads the root file (which remembers
+    // nothing here) and its own bucket's file, the one that remembers its source file.
+    let memo = std::fs::read_dir(cluster.path().join("out/.shakeflow/hashes")).unwrap().count();
+    assert_eq!(memo, 2, "a memo file per motion's bucket");
+    let memo_reads: Vec<String> =
+        task_log_lines(cluster.path(), "load shard").into_iter().filter(|l| l.contains("hash memo")).collect();
+    assert_eq!(memo_reads.len(), 2, "{memo_reads:?}");
+    assert!(memo_reads.iter().all(|l| l.contains("read 2 hash memo file(s)")), "{memo_reads:?}");
     let dropped = reads.iter().filter(|l| l.contains("removed `load`'s shard")).count();
     assert_eq!(dropped, 2, "{reads:?}");
     assert_eq!(artifacts_and_state(local.path()), artifacts_and_state(cluster.path()));

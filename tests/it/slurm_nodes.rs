@@ -41,10 +41,6 @@ fn wait_until(seconds: u64, what: &str, mut done: impl FnMut() -> bool) {
     }
 }
 
-fn set_mtime(path: &Path, when: SystemTime) {
-    std::fs::File::options().write(true).open(path).unwrap().set_modified(when).unwrap();
-}
-
 /// A run on a node holds the lease under that node's host name. The login node refuses while it
 /// holds it. Once the job is killed (no chance to remove its lease), a pid of another host means
 /// nothing here: a holder outside any Slurm job stays until its heartbeat has stopped for 10

@@ -10,7 +10,10 @@ use rayon::prelude::*;
 
 use crate::error::UserError;
 use crate::io::hash;
-use crate::pipeline::layout::{fan_bucket, partition_of, partition_path, placed, DATA_FILE, HASH_MEMO, STATE_DIR};
+use crate::pipeline::layout::{
+    fan_bucket, fan_out_above, fans_out, memo_bucket, partition_of, partition_path, placed, DATA_FILE, HASH_MEMO,
+    STATE_DIR,
+};
 use crate::pipeline::lock::UnitLock;
 use crate::pipeline::plan::{InputRef, Plan, PlannedStage};
 use crate::pipeline::sources;
@@ -45,7 +48,7 @@ pub(super) fn resolve_sources_of(
     buckets: Option<&BTreeSet<u8>>,
 ) -> Result<BTreeMap<String, ResolvedSource>, UserError> {
     // A no-op rerun then reads no file whose size and times are unchanged.
-    hash::use_memo(&plan.file.output_dir().join(STATE_DIR).join(HASH_MEMO));
+    hash::use_memo(&plan.file.output_dir().join(STATE_DIR).join(HASH_MEMO), memo_bucket);
     let base = plan.file.base_dir();
     let used: BTreeSet<&str> = plan
         .stages
@@ -65,21 +68,29 @@ pub(super) fn resolve_sources_of(
     let mut resolver = sources::Resolver::default();
     for name in used {
         let spec = &plan.file.spec.inputs[name];
-        let mut files = files_of(plan, name, spec, &mut resolver)?;
+        let files = files_of(plan, name, spec, &mut resolver)?;
+        // A source of more records than a folder holds has its files remembered by bucket, as
+        // its records' state is: a task reads the memo of its own buckets.
+        let ids: Vec<String> = files.iter().map(|f| partition_path(&f.partition)).collect();
+        let fanned = fans_out(ids.iter().map(String::as_str), fan_out_above());
+        let mut files: Vec<(u8, _)> = files.into_iter().zip(&ids).map(|(f, id)| (fan_bucket(id), f)).collect();
         if let Some(buckets) = buckets {
-            files.retain(|f| buckets.contains(&fan_bucket(&partition_path(&f.partition))));
+            files.retain(|(bucket, _)| buckets.contains(bucket));
         }
-        let unhashed: Vec<&Path> =
-            files.iter().map(|f| f.path.as_path()).filter(|p| !hashed.contains_key(p.as_os_str())).collect();
+        let unhashed: Vec<(&Path, Option<u8>)> = files
+            .iter()
+            .map(|(bucket, f)| (f.path.as_path(), fanned.then_some(*bucket)))
+            .filter(|(p, _)| !hashed.contains_key(p.as_os_str()))
+            .collect();
         let new_hashes: Vec<String> = unhashed
             .par_iter()
-            .map(|p| hash::hash_path(p))
+            .map(|(p, bucket)| hash::hash_path(p, *bucket))
             .collect::<anyhow::Result<_>>()
             .map_err(|e| UserError::new(format!("source `{name}`: {e:#}")))?;
-        hashed.extend(unhashed.into_iter().map(|p| p.as_os_str().to_os_string()).zip(new_hashes));
+        hashed.extend(unhashed.into_iter().map(|(p, _)| p.as_os_str().to_os_string()).zip(new_hashes));
         let parts: Vec<InputPart> = files
             .into_iter()
-            .map(|f| {
+            .map(|(_, f)| {
                 let relative = f.path.strip_prefix(&base).unwrap_or(&f.path).to_string_lossy().replace('\\', "/");
                 // A dataset's records are labelled alike in either layout (`layout::placed`).
                 let relative = placed(&relative, false).into_owned();

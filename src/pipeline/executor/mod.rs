@@ -40,7 +40,7 @@ pub use local::Local;
 
 use self::assess::{predict, Known, RealDisk};
 use self::inputs::{input_paths, param_file_hashes, resolve_sources, ResolvedSource};
-use super::layout::{HASH_MEMO, LOCK_FILE, RUNS_DIR, STATE_DIR, STATE_FILES};
+use super::layout::{HASH_MEMO, HASH_MEMO_BUCKETS, LOCK_FILE, RUNS_DIR, STATE_DIR, STATE_FILES};
 use super::lease::Lease;
 use super::lock::LockFile;
 use super::ownership;
@@ -177,10 +177,10 @@ pub fn lock_path(plan: &Plan) -> PathBuf {
 /// know besides (a run in progress, an interrupted commit completed, orphaned folders).
 pub fn status(plan: &Plan, notes: &mut Vec<String>) -> Result<Vec<StatusLine>, UserError> {
     let output_dir = plan.file.output_dir();
-    // A lease or an unfinished commit, not merely the hash memo or finished Slurm runs' folders:
+    // A lease or an unfinished commit, not merely the hash memo (and its buckets) or finished Slurm runs' folders:
     // `status` takes the lease only then, so a run starting meanwhile is not refused.
     let in_progress = std::fs::read_dir(output_dir.join(STATE_DIR))
-        .map(|d| d.flatten().any(|e| ![HASH_MEMO, RUNS_DIR, STATE_FILES].iter().any(|n| e.file_name() == *n)))
+        .map(|d| d.flatten().any(|e| ![HASH_MEMO, HASH_MEMO_BUCKETS, RUNS_DIR, STATE_FILES].iter().any(|n| e.file_name() == *n)))
         .unwrap_or(false);
     if in_progress {
         // An interrupted commit is completed first, so the answer is about what is on disk now;

@@ -765,6 +765,8 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let rerun = Rerun { stages: forced_stages(&plan, &run.force), remake: run.remake.clone() };
     let state = Known { lock: &lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk::default() };
     let assessed = assess_stage(&plan, stage, &state, &produced)?;
+    let (memo_files, memo_bytes) = crate::io::hash::memo_files_read();
+    eprintln!("{stage_name} shard {shard}: read {memo_files} hash memo file(s), {memo_bytes} bytes");
     // A unit nobody predicted (a partition no earlier output had) goes to the last shard, or
     // to the shard of its bucket.
     let ours: Vec<&(crate::pipeline::work_units::Unit, String, Vec<String>)> = assessed
