@@ -10,7 +10,7 @@
 //! [`MEMO_SETTLED`] when hashed are remembered (so a write within the file system's timestamp
 //! granularity after hashing cannot go unseen); the hash stays what is compared.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, OnceLock};
@@ -128,7 +128,10 @@ impl StatMemo {
         let key = memo_key(path);
         let bucket = bucket.or_else(|| (self.bucket_of)(path));
         let remember = |stat: Stat, hash: &String| {
-            self.used.lock().expect("the memo lock is never poisoned").insert(key.clone(), (bucket, stat, hash.clone()));
+            self.used
+                .lock()
+                .expect("the memo lock is never poisoned")
+                .insert(key.clone(), (bucket, stat, hash.clone()));
         };
         // An entry saved before its file had a bucket (a folder grown past the fan-out limit)
         // is found in the root file, and saved in its bucket's.
@@ -149,7 +152,7 @@ impl StatMemo {
     /// when the entries are those it loaded, as on a no-op rerun (1 MB of JSON at 10³ tests).
     pub fn save(&self) -> anyhow::Result<()> {
         let used = self.used.lock().expect("the memo lock is never poisoned");
-        let mut by_bucket: HashMap<Option<u8>, HashMap<&OsString, (&Stat, &String)>> = HashMap::new();
+        let mut by_bucket: BTreeMap<Option<u8>, HashMap<&OsString, (&Stat, &String)>> = BTreeMap::new();
         for (path, (bucket, stat, hash)) in used.iter() {
             by_bucket.entry(*bucket).or_default().insert(path, (stat, hash));
         }
@@ -163,7 +166,12 @@ impl StatMemo {
         let Ok(listing) = std::fs::read_dir(&dir) else { return Ok(()) };
         for entry in listing.flatten() {
             let name = entry.file_name();
-            let bucket = name.to_str().and_then(|n| n.strip_suffix(".json")).and_then(|n| u8::from_str_radix(n, 16).ok());
+            // Only the names this memo writes (two lower-case hex digits).
+            let bucket = name
+                .to_str()
+                .and_then(|n| n.strip_suffix(".json"))
+                .filter(|n| n.len() == 2 && n.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f')))
+                .and_then(|n| u8::from_str_radix(n, 16).ok());
             if bucket.is_some_and(|b| !by_bucket.contains_key(&Some(b))) {
                 std::fs::remove_file(entry.path()).with_context(|| format!("removing `{}`", entry.path().display()))?;
             }
@@ -194,8 +202,13 @@ fn write_entries(file: &Path, old: &Entries, entries: &HashMap<&OsString, (&Stat
         std::fs::create_dir_all(dir).with_context(|| format!("creating `{}`", dir.display()))?;
     }
     let tmp = file.with_extension(format!("tmp-{}", std::process::id()));
-    std::fs::write(&tmp, serde_json::to_vec(&sorted)?).with_context(|| format!("writing `{}`", tmp.display()))?;
-    std::fs::rename(&tmp, file).with_context(|| format!("renaming into `{}`", file.display()))
+    let written = std::fs::write(&tmp, serde_json::to_vec(&sorted)?)
+        .with_context(|| format!("writing `{}`", tmp.display()))
+        .and_then(|()| std::fs::rename(&tmp, file).with_context(|| format!("renaming into `{}`", file.display())));
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
 }
 
 /// How the memo names a file: its absolute path (not resolved), so a run from another folder or

@@ -9,7 +9,8 @@
 //!     lease, lease.break               LEASE_FILE, BREAK_FILE: one run at a time
 //!     txn-<pid>-<nanos>/               TXN_PREFIX: a transaction (`new/`, `old/`, JOURNAL)
 //!     hashes.json                      HASH_MEMO: the stat/hash memo
-//!     hashes/<xx>.json                 HASH_MEMO_BUCKETS: the same, per bucket past FAN_OUT_ABOVE records
+//!     hashes/<xx>.json                 HASH_MEMO_BUCKETS: the same, per bucket, for the records of
+//!                                      a source or stage past FAN_OUT_ABOVE first partition segments
 //!     slurm/<run>/                     RUNS_DIR: Slurm runs (run.json, results/, manifests/, logs/)
 //!   <stage>/                           a stage's folder (a command's: the output folder itself)
 //!     .shakeflow-stage                 STAGE_MARKER: whose folder it is
@@ -103,10 +104,11 @@ pub fn memo_bucket(path: &std::path::Path) -> Option<u8> {
     if name != DATA_FILE && name != MCAP_FILE {
         return None;
     }
-    let segments: Vec<&str> = path.iter().map(|s| s.to_str().unwrap_or_default()).collect();
-    let first = segments.iter().position(|s| s.contains('='))?;
-    let fan = segments[..first].last().filter(|s| is_fan_folder(s))?;
-    u8::from_str_radix(fan, 16).ok()
+    // Back from the file over its partition's `key=value` folders: the one before them (an
+    // ancestor of the output folder may have `=` in its name too).
+    let mut folders = path.parent()?.iter().rev().map(|s| s.to_str().unwrap_or_default());
+    let fan = folders.find(|s| !s.contains('='))?;
+    is_fan_folder(fan).then(|| u8::from_str_radix(fan, 16).ok()).flatten()
 }
 
 fn is_fan_folder(segment: &str) -> bool {
@@ -203,6 +205,8 @@ mod tests {
         assert_eq!(memo_bucket(std::path::Path::new(&format!("/out/baseline/{two}"))), bucket);
         assert_eq!(memo_bucket(std::path::Path::new(&format!("/out/{fan}/baseline/{flat}"))), None);
         assert_eq!(memo_bucket(std::path::Path::new(&format!("/out/baseline/records/{fan}/motion=X/x.png"))), None);
+        assert_eq!(memo_bucket(std::path::Path::new(&format!("/data/campaign=2024/out/baseline/{two}"))), bucket);
+        assert_eq!(memo_bucket(std::path::Path::new(&format!("/data/ab/campaign=2024/baseline/{flat}"))), None);
         let mcap = "mcap/records/motion=FB-4/data.mcap";
         assert_eq!(placed(mcap, true), format!("mcap/records/{fan}/motion=FB-4/data.mcap"));
         assert_eq!(placed(&placed(mcap, true), false), mcap);

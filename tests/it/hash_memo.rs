@@ -3,7 +3,6 @@
 //! included (its change time moves).
 
 use crate::common::*;
-use std::path::Path;
 use std::time::{Duration, SystemTime};
 
 #[test]

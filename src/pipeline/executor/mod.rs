@@ -180,7 +180,10 @@ pub fn status(plan: &Plan, notes: &mut Vec<String>) -> Result<Vec<StatusLine>, U
     // A lease or an unfinished commit, not merely the hash memo (and its buckets) or finished Slurm runs' folders:
     // `status` takes the lease only then, so a run starting meanwhile is not refused.
     let in_progress = std::fs::read_dir(output_dir.join(STATE_DIR))
-        .map(|d| d.flatten().any(|e| ![HASH_MEMO, HASH_MEMO_BUCKETS, RUNS_DIR, STATE_FILES].iter().any(|n| e.file_name() == *n)))
+        .map(|d| {
+            d.flatten()
+                .any(|e| ![HASH_MEMO, HASH_MEMO_BUCKETS, RUNS_DIR, STATE_FILES].iter().any(|n| e.file_name() == *n))
+        })
         .unwrap_or(false);
     if in_progress {
         // An interrupted commit is completed first, so the answer is about what is on disk now;

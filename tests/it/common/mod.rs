@@ -110,13 +110,13 @@ stages:
       order: 3
 ";
 
-/// A project folder with the pipeline above and two motions of 400 samples each.
 /// Sets a file's modification time to `when` (as `touch -d` would): a file older than the hash
 /// memo's 2 s is remembered.
 pub fn set_mtime(path: &Path, when: std::time::SystemTime) {
     std::fs::File::options().write(true).open(path).unwrap().set_modified(when).unwrap();
 }
 
+/// A project folder with the pipeline above and two motions of 400 samples each.
 pub fn small_project() -> crate::tempdir::TempDir {
     let dir = crate::tempdir::tempdir().unwrap();
     std::fs::write(dir.path().join("pipeline.yaml"), PIPELINE).unwrap();
