@@ -11,7 +11,7 @@
 //!     hashes.json                      HASH_MEMO: the stat/hash memo
 //!     hashes/<xx>.json                 HASH_MEMO_BUCKETS: the same, per bucket, for the records of
 //!                                      a source or stage past FAN_OUT_ABOVE first partition segments
-//!     slurm/<run>/                     RUNS_DIR: Slurm runs (run.json, results/, manifests/, logs/)
+//!     slurm/<run>/                     RUNS_DIR: Slurm runs (run.json, listings/, results/, manifests/, logs/)
 //!   <stage>/                           a stage's folder (a command's: the output folder itself)
 //!     .shakeflow-stage                 STAGE_MARKER: whose folder it is
 //!     <output>/<key>=<value>/…/data.parquet   DATA_FILE, one record's table (`partition_path`)

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use super::stage::Partition;
 use crate::error::UserError;
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct MatchedFile {
     pub path: PathBuf,
     pub partition: Partition,

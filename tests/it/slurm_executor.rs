@@ -177,6 +177,14 @@ fn a_fanned_out_slurm_run_cuts_shards_by_bucket_reads_only_their_state_and_drops
         task_log_lines(cluster.path(), "load shard").into_iter().filter(|l| l.contains("hash memo")).collect();
     assert_eq!(memo_reads.len(), 2, "{memo_reads:?}");
     assert!(memo_reads.iter().all(|l| l.contains("read 2 hash memo file(s)")), "{memo_reads:?}");
+    // Nor does a `load` task walk the archive: the planner listed each shard's source files.
+    let listed: Vec<String> =
+        task_log_lines(cluster.path(), "load shard").into_iter().filter(|l| l.contains("planner listed")).collect();
+    assert_eq!(listed.len(), 2, "{listed:?}");
+    assert!(
+        listed.iter().all(|l| l.contains(": 1 source file(s) as the planner listed them (0 gone since)")),
+        "{listed:?}"
+    );
     let dropped = reads.iter().filter(|l| l.contains("removed `load`'s shard")).count();
     assert_eq!(dropped, 2, "{reads:?}");
     assert_eq!(artifacts_and_state(local.path()), artifacts_and_state(cluster.path()));
@@ -197,6 +205,57 @@ fn a_fanned_out_slurm_run_cuts_shards_by_bucket_reads_only_their_state_and_drops
     let names = |root: &Path| artifacts_and_state(root).into_iter().map(|(name, _)| name).collect::<Vec<_>>();
     assert_eq!(names(local.path()), names(cluster.path()), "{}", stderr(&out));
     assert_eq!(artifacts_and_state(local.path()), artifacts_and_state(cluster.path()));
+}
+
+#[test]
+fn a_record_gone_after_the_planner_listed_it_is_gone_for_its_task_too() {
+    // A task of a closed, fanned-out stage takes its source files from the planner's listing;
+    // a file deleted after the listing (while the task waits to start) is a record gone, as a
+    // walk of the archive would find: the run ends in the state of a local run without it.
+    let fan_out = [("SHAKEFLOW_FAN_OUT_ABOVE", "1")];
+    let (local, cluster) = (small_project(), small_project());
+    for project in [&local, &cluster] {
+        write_daq_csv(&project.path().join("archive/FB-3/daq.csv"), 400, 200.0, 2.0);
+    }
+    // The first shard's motion (the lowest bucket): the one deleted under its paused task.
+    let first = ["FB-1", "FB-2", "FB-3"]
+        .into_iter()
+        .min_by_key(|m| shakeflow::pipeline::layout::fan_bucket(&format!("motion={m}")))
+        .unwrap();
+    std::fs::remove_file(local.path().join(format!("archive/{first}/daq.csv"))).unwrap();
+    let out = shakeflow_env(&["run", "pipeline.yaml"], local.path(), &fan_out);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_shakeflow"))
+        .args(["run", "pipeline.yaml", "--executor", "slurm", "--units-per-task", "1", "--wait"])
+        .envs(fan_out)
+        .env("SHAKEFLOW_FAILPOINT", "slurm-task.load.0:sleep=15000")
+        .env("SLURM_CONF", test_slurm_conf())
+        .current_dir(cluster.path())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let runs = cluster.path().join("out/.shakeflow/slurm");
+    let listed =
+        || std::fs::read_dir(&runs).ok()?.flatten().map(|r| r.path().join("listings/load/0.json")).find(|p| p.exists());
+    let started = Instant::now();
+    let listing = loop {
+        if let Some(listing) = listed() {
+            break listing;
+        }
+        assert!(started.elapsed() < Duration::from_secs(60), "no listing for load's shard 0");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    assert!(std::fs::read_to_string(&listing).unwrap().contains(&format!("{first}/daq.csv")));
+    std::fs::remove_file(cluster.path().join(format!("archive/{first}/daq.csv"))).unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let tasks = task_log_lines(cluster.path(), "load shard 0");
+    assert!(
+        tasks.iter().any(|l| l.contains(": 0 source file(s) as the planner listed them (1 gone since)")),
+        "{tasks:?}"
+    );
+    assert_eq!(artifacts_and_state(local.path()), artifacts_and_state(cluster.path()), "{}", stderr(&out));
 }
 
 #[test]

@@ -36,16 +36,51 @@ pub(super) struct ProducedFile {
 pub(super) type Produced = BTreeMap<String, ProducedFile>;
 
 pub(super) fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSource>, UserError> {
-    resolve_sources_of(plan, None, None)
+    resolve_sources_of(plan, None, None, None)
+}
+
+/// A source's files as the Slurm planner listed them for one shard (its buckets' records), so
+/// the shard's task need not walk the archive; `fanned`: whether the whole source is past the
+/// fan-out limit (its files' hashes are remembered by bucket).
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+pub(super) struct Listed {
+    pub(super) fanned: bool,
+    pub(super) files: Vec<sources::MatchedFile>,
+}
+
+/// Per source, the files of `sources` (resolved) in `buckets`, as [`Listed`].
+pub(super) fn listing(
+    sources: &BTreeMap<String, ResolvedSource>,
+    names: &BTreeSet<&str>,
+    buckets: &BTreeSet<u8>,
+) -> BTreeMap<String, Listed> {
+    names
+        .iter()
+        .filter_map(|name| sources.get(*name).map(|s| (*name, s)))
+        .map(|(name, source)| {
+            let ids: Vec<String> = source.input.parts().iter().map(|p| partition_path(&p.partition)).collect();
+            let files = source
+                .input
+                .parts()
+                .iter()
+                .zip(&ids)
+                .filter(|(_, id)| buckets.contains(&fan_bucket(id)))
+                .map(|(p, _)| sources::MatchedFile { path: p.path.clone(), partition: p.partition.clone() })
+                .collect();
+            (name.to_string(), Listed { fanned: fans_out(ids.iter().map(String::as_str), fan_out_above()), files })
+        })
+        .collect()
 }
 
 /// [`resolve_sources`] of the sources `stage` reads only (all: None), and of them only the
 /// records of `buckets` (`layout::fan_bucket` of their partition; all: None), whose files alone
-/// are hashed: what a Slurm task of a bucketed stage needs.
+/// are hashed: what a Slurm task of a bucketed stage needs. A source in `listed` is not walked:
+/// its files are the listed ones.
 pub(super) fn resolve_sources_of(
     plan: &Plan,
     stage: Option<&str>,
     buckets: Option<&BTreeSet<u8>>,
+    listed: Option<&BTreeMap<String, Listed>>,
 ) -> Result<BTreeMap<String, ResolvedSource>, UserError> {
     // A no-op rerun then reads no file whose size and times are unchanged.
     hash::use_memo(&plan.file.output_dir().join(STATE_DIR).join(HASH_MEMO), memo_bucket);
@@ -68,11 +103,14 @@ pub(super) fn resolve_sources_of(
     let mut resolver = sources::Resolver::default();
     for name in used {
         let spec = &plan.file.spec.inputs[name];
-        let files = files_of(plan, name, spec, &mut resolver)?;
+        let (files, fanned) = match listed.and_then(|l| l.get(name)) {
+            Some(listed) => (listed.files.clone(), Some(listed.fanned)),
+            None => (files_of(plan, name, spec, &mut resolver)?, None),
+        };
         // A source of more records than a folder holds has its files remembered by bucket, as
         // its records' state is: a task reads the memo of its own buckets.
         let ids: Vec<String> = files.iter().map(|f| partition_path(&f.partition)).collect();
-        let fanned = fans_out(ids.iter().map(String::as_str), fan_out_above());
+        let fanned = fanned.unwrap_or_else(|| fans_out(ids.iter().map(String::as_str), fan_out_above()));
         let mut files: Vec<(u8, _)> = files.into_iter().zip(&ids).map(|(f, id)| (fan_bucket(id), f)).collect();
         if let Some(buckets) = buckets {
             files.retain(|(bucket, _)| buckets.contains(bucket));

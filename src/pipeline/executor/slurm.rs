@@ -40,7 +40,10 @@ use serde::{Deserialize, Serialize};
 
 use super::assess::{assess_stage, predict, Known, Prediction, RealDisk, StatusLine};
 use super::commit::{entry_from_outcomes, leave_out_not_kept, UnitOutcome, UnitRecord};
-use super::inputs::{cached_files, param_file_hashes, resolve_sources, resolve_sources_of, Produced, ProducedFile};
+use super::inputs::{
+    cached_files, listing, param_file_hashes, resolve_sources, resolve_sources_of, Listed, Produced, ProducedFile,
+    ResolvedSource,
+};
 use super::local::execute;
 use super::{
     forced_stages, selected_stages, upstream_stages, Backend, Opened, Rerun, RunOptions, RunSummary, UnitProblem,
@@ -51,7 +54,7 @@ use crate::pipeline::lease::Lease;
 use crate::pipeline::lock::{LockFile, Wanted};
 use crate::pipeline::memo::TableMemo;
 use crate::pipeline::ownership;
-use crate::pipeline::plan::Plan;
+use crate::pipeline::plan::{InputRef, Plan};
 use crate::pipeline::progress::Reporter;
 use crate::pipeline::slurm::{ArrayJob, DepKind, Dependency, ExecutorOptions, Slurm, SubmittedArray};
 use crate::pipeline::spec::PipelineFile;
@@ -263,7 +266,9 @@ fn submit(opened: Opened<'_>, slurm: &SlurmOptions, reporter: &Reporter) -> anyh
     save_hash_memo(reporter);
     let client = Slurm::new();
     let limits = client.limits()?;
-    let Some(run) = submit_run(plan, options, slurm, reporter, &prediction, selected, &client, &limits)? else {
+    let sources = &opened.sources;
+    let Some(run) = submit_run(plan, options, slurm, reporter, (&prediction, sources), selected, &client, &limits)?
+    else {
         reporter.line("every unit is up to date: nothing submitted");
         return Ok(RunSummary::default());
     };
@@ -287,6 +292,11 @@ fn save_hash_memo(reporter: &Reporter) {
     }
 }
 
+/// Where the planner lists the source files of shard `shard` of a closed stage.
+fn listing_path(run_dir: &Path, stage: &str, shard: usize) -> PathBuf {
+    run_dir.join("listings").join(stage).join(format!("{shard}.json"))
+}
+
 /// A new run's id: `shakeflow-<pipeline file stem>-<clock>`, a Slurm job name.
 fn new_run_id(plan: &Plan) -> String {
     let stem = plan.file.path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
@@ -296,6 +306,10 @@ fn new_run_id(plan: &Plan) -> String {
     format!("shakeflow-{stem}-{:x}", nanos % 0xffff_ffff)
 }
 
+/// What planning found: the prediction, and the sources it resolved (a closed stage's shards get
+/// their sources' files listed from these).
+type Planned<'a> = (&'a Prediction, &'a BTreeMap<String, ResolvedSource>);
+
 /// Makes a run folder and submits the arrays of `lines`' stale units and the commit job; None
 /// (and no folder) when nothing is stale. The caller hands its lease to the run.
 #[allow(clippy::too_many_arguments)]
@@ -304,7 +318,7 @@ fn submit_run(
     options: &RunOptions,
     slurm: &SlurmOptions,
     reporter: &Reporter,
-    prediction: &Prediction,
+    planned: Planned<'_>,
     selected: &BTreeSet<String>,
     client: &Slurm,
     limits: &crate::pipeline::slurm::ClusterLimits,
@@ -315,7 +329,7 @@ fn submit_run(
     let shakeflow = std::env::current_exe().context("locating the shakeflow binary")?;
     std::fs::create_dir_all(&run_dir)?;
     let naming = RunNaming { id: &id, run_dir: &run_dir, shakeflow: &shakeflow };
-    let submitted = submit_arrays(plan, options, slurm, reporter, prediction, selected, client, limits, naming);
+    let submitted = submit_arrays(plan, options, slurm, reporter, planned, selected, client, limits, naming);
     if !matches!(submitted, Ok(Some(_))) {
         let _ = std::fs::remove_dir_all(&run_dir);
         let _ = std::fs::remove_dir(runs_dir(&output_dir));
@@ -537,7 +551,7 @@ fn submit_arrays(
     options: &RunOptions,
     slurm: &SlurmOptions,
     reporter: &Reporter,
-    prediction: &Prediction,
+    (prediction, sources): Planned<'_>,
     selected: &BTreeSet<String>,
     client: &Slurm,
     limits: &crate::pipeline::slurm::ClusterLimits,
@@ -566,6 +580,27 @@ fn submit_arrays(
                 DepKind::AfterOk
             };
             dependencies.push(Dependency { on: array.clone(), kind });
+        }
+        if run.closed.contains(&name) {
+            // Each shard's records of the sources this stage reads, listed here once: its task
+            // reads them instead of walking the archive.
+            let names: BTreeSet<&str> = stage
+                .inputs
+                .iter()
+                .filter_map(|i| match i {
+                    InputRef::Source(source) => Some(source.as_str()),
+                    InputRef::Stage { .. } => None,
+                })
+                .collect();
+            if !names.is_empty() {
+                for &shard in &only {
+                    let listed = listing(sources, &names, &run.buckets(shard as usize));
+                    let path = listing_path(run_dir, &name, shard as usize);
+                    std::fs::create_dir_all(path.parent().expect("a listing is in a folder"))?;
+                    std::fs::write(&path, serde_json::to_vec(&listed)?)
+                        .with_context(|| format!("writing `{}`", path.display()))?;
+                }
+            }
         }
         let command = format!("{} slurm-task {} {name}", quote(shakeflow), quote(run_dir));
         let job = ArrayJob {
@@ -759,7 +794,29 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     eprintln!("{stage_name} shard {shard}: read {} state file(s), {} bytes", read.files, read.bytes);
     // The sources this stage reads, of a closed bucketed stage only its buckets' records.
     let own_records = (bucketed && run.closed.contains(stage_name)).then_some(&buckets);
-    let sources = resolve_sources_of(&plan, Some(stage_name), own_records)?;
+    // Their files as the planner listed them for this shard, where it did (not in an allocation).
+    let listed: Option<BTreeMap<String, Listed>> = match own_records {
+        Some(_) => match std::fs::read(listing_path(run_dir, stage_name, shard)) {
+            Ok(bytes) => Some(serde_json::from_slice(&bytes).context("reading the planner's listing")?),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
+            Err(e) => return Err(anyhow!(e).context("reading the planner's listing")),
+        },
+        None => None,
+    };
+    let listed = listed.map(|mut listed| {
+        // A file gone since is a record gone, as a walk of the archive would find.
+        let before: usize = listed.values().map(|l| l.files.len()).sum();
+        for source in listed.values_mut() {
+            source.files.retain(|f| std::fs::symlink_metadata(&f.path).is_ok());
+        }
+        let kept: usize = listed.values().map(|l| l.files.len()).sum();
+        eprintln!(
+            "{stage_name} shard {shard}: {kept} source file(s) as the planner listed them ({} gone since)",
+            before - kept
+        );
+        listed
+    });
+    let sources = resolve_sources_of(&plan, Some(stage_name), own_records, listed.as_ref())?;
     let files = param_file_hashes(&plan)?;
     let (produced, upstream_tainted) = upstream_produced(run_dir, &run, &plan, &lock, stage_name, shard)?;
     let rerun = Rerun { stages: forced_stages(&plan, &run.force), remake: run.remake.clone() };
@@ -1136,7 +1193,7 @@ fn resubmit(run: &RunFile, plan: &Plan, lock: &LockFile, retries_left: u32) -> a
     slurm.executor.retries = Some(retries_left);
     let client = Slurm::new();
     let limits = client.limits()?;
-    submit_run(plan, &options, &slurm, &Reporter::new(false), &prediction, &selected, &client, &limits)
+    submit_run(plan, &options, &slurm, &Reporter::new(false), (&prediction, &sources), &selected, &client, &limits)
 }
 
 /// What `status` says of a Slurm run holding the folder: per stage, its tasks' states.
