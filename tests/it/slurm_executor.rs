@@ -211,7 +211,10 @@ fn a_fanned_out_slurm_run_cuts_shards_by_bucket_reads_only_their_state_and_drops
 fn a_record_gone_after_the_planner_listed_it_is_gone_for_its_task_too() {
     // A task of a closed, fanned-out stage takes its source files from the planner's listing;
     // a file deleted after the listing (while the task waits to start) is a record gone, as a
-    // walk of the archive would find: the run ends in the state of a local run without it.
+    // walk of the archive would find: the run ends in the state of a local run without it. The
+    // run is submitted from the project's parent folder (`<project>/pipeline.yaml`): the
+    // listing's paths are the pipeline folder's, as the task's walk would find them, so the
+    // inputs' labels are too.
     let fan_out = [("SHAKEFLOW_FAN_OUT_ABOVE", "1")];
     let (local, cluster) = (small_project(), small_project());
     for project in [&local, &cluster] {
@@ -225,12 +228,14 @@ fn a_record_gone_after_the_planner_listed_it_is_gone_for_its_task_too() {
     std::fs::remove_file(local.path().join(format!("archive/{first}/daq.csv"))).unwrap();
     let out = shakeflow_env(&["run", "pipeline.yaml"], local.path(), &fan_out);
     assert!(out.status.success(), "{}", stderr(&out));
+    let (parent, project) = (cluster.path().parent().unwrap(), cluster.path().file_name().unwrap());
+    let pipeline = Path::new(project).join("pipeline.yaml");
     let child = std::process::Command::new(env!("CARGO_BIN_EXE_shakeflow"))
-        .args(["run", "pipeline.yaml", "--executor", "slurm", "--units-per-task", "1", "--wait"])
+        .args(["run", pipeline.to_str().unwrap(), "--executor", "slurm", "--units-per-task", "1", "--wait"])
         .envs(fan_out)
         .env("SHAKEFLOW_FAILPOINT", "slurm-task.load.0:sleep=15000")
         .env("SLURM_CONF", test_slurm_conf())
-        .current_dir(cluster.path())
+        .current_dir(parent)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -246,7 +251,8 @@ fn a_record_gone_after_the_planner_listed_it_is_gone_for_its_task_too() {
         assert!(started.elapsed() < Duration::from_secs(60), "no listing for load's shard 0");
         std::thread::sleep(Duration::from_millis(100));
     };
-    assert!(std::fs::read_to_string(&listing).unwrap().contains(&format!("{first}/daq.csv")));
+    let listing = std::fs::read_to_string(&listing).unwrap();
+    assert!(listing.contains(&format!("\"archive/{first}/daq.csv\"")), "relative to the pipeline: {listing}");
     std::fs::remove_file(cluster.path().join(format!("archive/{first}/daq.csv"))).unwrap();
     let out = child.wait_with_output().unwrap();
     assert!(out.status.success(), "{}", stderr(&out));

@@ -40,22 +40,51 @@ pub(super) fn resolve_sources(plan: &Plan) -> Result<BTreeMap<String, ResolvedSo
 }
 
 /// A source's files as the Slurm planner listed them for one shard (its buckets' records), so
-/// the shard's task need not walk the archive; `fanned`: whether the whole source is past the
-/// fan-out limit (its files' hashes are remembered by bucket).
+/// the shard's task need not walk the archive: each path relative to the pipeline's folder
+/// where it is below it (the task joins it to its own, as its walk would), else as matched;
+/// `fanned`: whether the whole source is past the fan-out limit (its files' hashes are
+/// remembered by bucket).
 #[derive(Debug, serde::Serialize, serde::Deserialize)]
 pub(super) struct Listed {
     pub(super) fanned: bool,
     pub(super) files: Vec<sources::MatchedFile>,
 }
 
-/// Per source, the files of `sources` (resolved) in `buckets`, as [`Listed`].
+impl Listed {
+    /// Whether the planner lists `spec`'s files: a source of one file per record (a folder, a
+    /// case or a record of several component files is walked by the task, as before).
+    pub(super) fn lists(spec: &SourceSpec) -> bool {
+        !spec.format.names_folders() && spec.format != RecordFormat::Case && spec.components.is_none()
+    }
+
+    /// The listed files, as found from `base` (the pipeline's folder), that are still files (a
+    /// file gone since, or no longer a file, is a record gone, as a walk would find); and how
+    /// many are gone.
+    pub(super) fn still_there(self, base: &Path) -> (Listed, usize) {
+        let listed = self.files.len();
+        let files: Vec<sources::MatchedFile> = self
+            .files
+            .into_iter()
+            .map(|f| sources::MatchedFile { path: base.join(&f.path), ..f })
+            .filter(|f| std::fs::metadata(&f.path).is_ok_and(|m| m.is_file()))
+            .collect();
+        let gone = listed - files.len();
+        (Listed { files, ..self }, gone)
+    }
+}
+
+/// Per source of `names` that the planner lists ([`Listed::lists`]), the files of `sources`
+/// (resolved from the pipeline's folder `base`) in `buckets`, as [`Listed`].
 pub(super) fn listing(
+    plan: &Plan,
     sources: &BTreeMap<String, ResolvedSource>,
     names: &BTreeSet<&str>,
     buckets: &BTreeSet<u8>,
 ) -> BTreeMap<String, Listed> {
+    let base = plan.file.base_dir();
     names
         .iter()
+        .filter(|name| plan.file.spec.inputs.get(**name).is_some_and(Listed::lists))
         .filter_map(|name| sources.get(*name).map(|s| (*name, s)))
         .map(|(name, source)| {
             let ids: Vec<String> = source.input.parts().iter().map(|p| partition_path(&p.partition)).collect();
@@ -65,7 +94,10 @@ pub(super) fn listing(
                 .iter()
                 .zip(&ids)
                 .filter(|(_, id)| buckets.contains(&fan_bucket(id)))
-                .map(|(p, _)| sources::MatchedFile { path: p.path.clone(), partition: p.partition.clone() })
+                .map(|(p, _)| sources::MatchedFile {
+                    path: p.path.strip_prefix(&base).unwrap_or(&p.path).to_path_buf(),
+                    partition: p.partition.clone(),
+                })
                 .collect();
             (name.to_string(), Listed { fanned: fans_out(ids.iter().map(String::as_str), fan_out_above()), files })
         })

@@ -592,14 +592,14 @@ fn submit_arrays(
                     InputRef::Stage { .. } => None,
                 })
                 .collect();
-            if !names.is_empty() {
-                for &shard in &only {
-                    let listed = listing(sources, &names, &run.buckets(shard as usize));
-                    let path = listing_path(run_dir, &name, shard as usize);
-                    std::fs::create_dir_all(path.parent().expect("a listing is in a folder"))?;
-                    std::fs::write(&path, serde_json::to_vec(&listed)?)
-                        .with_context(|| format!("writing `{}`", path.display()))?;
-                }
+            let write = |shard: u32| -> anyhow::Result<()> {
+                let listed = listing(plan, sources, &names, &run.buckets(shard as usize));
+                let path = listing_path(run_dir, &name, shard as usize);
+                std::fs::create_dir_all(path.parent().expect("a listing is in a folder"))?;
+                publish(&path, &serde_json::to_vec(&listed)?)
+            };
+            for &shard in &only {
+                write(shard).map_err(|e| cancel_all(client, &run, UserError::new(format!("{e:#}"))))?;
             }
         }
         let command = format!("{} slurm-task {} {name}", quote(shakeflow), quote(run_dir));
@@ -795,25 +795,29 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     // The sources this stage reads, of a closed bucketed stage only its buckets' records.
     let own_records = (bucketed && run.closed.contains(stage_name)).then_some(&buckets);
     // Their files as the planner listed them for this shard, where it did (not in an allocation).
+    let listing = listing_path(run_dir, stage_name, shard);
     let listed: Option<BTreeMap<String, Listed>> = match own_records {
-        Some(_) => match std::fs::read(listing_path(run_dir, stage_name, shard)) {
-            Ok(bytes) => Some(serde_json::from_slice(&bytes).context("reading the planner's listing")?),
+        Some(_) => match std::fs::read(&listing) {
+            Ok(bytes) => Some(serde_json::from_slice(&bytes).with_context(|| {
+                format!("the planner's listing `{}` is damaged; run again (a new run lists anew)", listing.display())
+            })?),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
-            Err(e) => return Err(anyhow!(e).context("reading the planner's listing")),
+            Err(e) => return Err(anyhow!(e).context(format!("reading the planner's listing `{}`", listing.display()))),
         },
         None => None,
     };
-    let listed = listed.map(|mut listed| {
-        // A file gone since is a record gone, as a walk of the archive would find.
-        let before: usize = listed.values().map(|l| l.files.len()).sum();
-        for source in listed.values_mut() {
-            source.files.retain(|f| std::fs::symlink_metadata(&f.path).is_ok());
-        }
-        let kept: usize = listed.values().map(|l| l.files.len()).sum();
-        eprintln!(
-            "{stage_name} shard {shard}: {kept} source file(s) as the planner listed them ({} gone since)",
-            before - kept
-        );
+    let listed = listed.map(|listed| {
+        let base = plan.file.base_dir();
+        let (mut kept, mut gone) = (0, 0);
+        let listed: BTreeMap<String, Listed> = listed
+            .into_iter()
+            .map(|(name, source)| {
+                let (source, missing) = source.still_there(&base);
+                (kept, gone) = (kept + source.files.len(), gone + missing);
+                (name, source)
+            })
+            .collect();
+        eprintln!("{stage_name} shard {shard}: {kept} source file(s) as the planner listed them ({gone} gone since)");
         listed
     });
     let sources = resolve_sources_of(&plan, Some(stage_name), own_records, listed.as_ref())?;
@@ -1155,12 +1159,12 @@ fn commit_manifests(
 }
 
 /// Removes a committed run's `results` (what was not moved into place: the files of `keep:
-/// false` stages) and `manifests`, shard folders in parallel: each removal mostly waits for the
+/// false` stages), `manifests` and `listings`, shard folders in parallel: each removal mostly waits for the
 /// file system's journal (≈ 1.5 ms an entry on a busy disk, 5 entries a unit), and waits overlap.
 fn remove_run_outputs(run_dir: &Path) {
     use rayon::prelude::*;
     let mut folders = Vec::new();
-    for folder in ["results", "manifests"] {
+    for folder in ["results", "manifests", "listings"] {
         let stages = std::fs::read_dir(run_dir.join(folder)).into_iter().flatten().flatten();
         folders.extend(stages.flat_map(|stage| std::fs::read_dir(stage.path()).into_iter().flatten().flatten()));
     }
@@ -1176,7 +1180,7 @@ fn remove_run_outputs(run_dir: &Path) {
         Ok(pool) => pool.install(remove),
         Err(_) => remove(),
     }
-    for folder in ["results", "manifests"] {
+    for folder in ["results", "manifests", "listings"] {
         let _ = std::fs::remove_dir_all(run_dir.join(folder));
     }
 }
