@@ -181,6 +181,7 @@ fn a_fanned_out_slurm_run_cuts_shards_by_bucket_reads_only_their_state_and_drops
     let listed: Vec<String> =
         task_log_lines(cluster.path(), "load shard").into_iter().filter(|l| l.contains("planner listed")).collect();
     assert_eq!(listed.len(), 2, "{listed:?}");
+    assert!(!reads.iter().any(|l| l.contains("planner listed")), "baseline reads no source: {reads:?}");
     assert!(
         listed.iter().all(|l| l.contains(": 1 source file(s) as the planner listed them (0 gone since)")),
         "{listed:?}"

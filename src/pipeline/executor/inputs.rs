@@ -73,8 +73,8 @@ impl Listed {
     }
 }
 
-/// Per source of `names` that the planner lists ([`Listed::lists`]), the files of `sources`
-/// (resolved from the pipeline's folder `base`) in `buckets`, as [`Listed`].
+/// Per source of `names` (sources the planner lists: [`Listed::lists`]), the files of `sources`
+/// (resolved from the pipeline's folder) in `buckets`, as [`Listed`].
 pub(super) fn listing(
     plan: &Plan,
     sources: &BTreeMap<String, ResolvedSource>,
@@ -84,7 +84,6 @@ pub(super) fn listing(
     let base = plan.file.base_dir();
     names
         .iter()
-        .filter(|name| plan.file.spec.inputs.get(**name).is_some_and(Listed::lists))
         .filter_map(|name| sources.get(*name).map(|s| (*name, s)))
         .map(|(name, source)| {
             let ids: Vec<String> = source.input.parts().iter().map(|p| partition_path(&p.partition)).collect();

@@ -581,17 +581,18 @@ fn submit_arrays(
             };
             dependencies.push(Dependency { on: array.clone(), kind });
         }
-        if run.closed.contains(&name) {
-            // Each shard's records of the sources this stage reads, listed here once: its task
-            // reads them instead of walking the archive.
-            let names: BTreeSet<&str> = stage
-                .inputs
-                .iter()
-                .filter_map(|i| match i {
-                    InputRef::Source(source) => Some(source.as_str()),
-                    InputRef::Stage { .. } => None,
-                })
-                .collect();
+        // Each shard's records of the sources this stage reads, listed here once: its task
+        // reads them instead of walking the archive.
+        let names: BTreeSet<&str> = stage
+            .inputs
+            .iter()
+            .filter_map(|i| match i {
+                InputRef::Source(source) => Some(source.as_str()),
+                InputRef::Stage { .. } => None,
+            })
+            .filter(|source| plan.file.spec.inputs.get(*source).is_some_and(Listed::lists))
+            .collect();
+        if run.closed.contains(&name) && !names.is_empty() {
             let write = |shard: u32| -> anyhow::Result<()> {
                 let listed = listing(plan, sources, &names, &run.buckets(shard as usize));
                 let path = listing_path(run_dir, &name, shard as usize);
