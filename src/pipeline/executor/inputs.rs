@@ -73,34 +73,34 @@ impl Listed {
     }
 }
 
-/// Per source of `names` (sources the planner lists: [`Listed::lists`]), the files of `sources`
-/// (resolved from the pipeline's folder) in `buckets`, as [`Listed`].
-pub(super) fn listing(
+/// For each shard of `shards`, per source of `names` (sources the planner lists:
+/// [`Listed::lists`]), the files of `sources` (resolved from the pipeline's folder) of that
+/// shard's buckets (`shard_of` a bucket), as [`Listed`]: each source gone through once.
+pub(super) fn listings(
     plan: &Plan,
     sources: &BTreeMap<String, ResolvedSource>,
     names: &BTreeSet<&str>,
-    buckets: &BTreeSet<u8>,
-) -> BTreeMap<String, Listed> {
+    shards: &BTreeSet<usize>,
+    shard_of: impl Fn(u8) -> usize,
+) -> BTreeMap<usize, BTreeMap<String, Listed>> {
     let base = plan.file.base_dir();
-    names
-        .iter()
-        .filter_map(|name| sources.get(*name).map(|s| (*name, s)))
-        .map(|(name, source)| {
-            let ids: Vec<String> = source.input.parts().iter().map(|p| partition_path(&p.partition)).collect();
-            let files = source
-                .input
-                .parts()
-                .iter()
-                .zip(&ids)
-                .filter(|(_, id)| buckets.contains(&fan_bucket(id)))
-                .map(|(p, _)| sources::MatchedFile {
-                    path: p.path.strip_prefix(&base).unwrap_or(&p.path).to_path_buf(),
-                    partition: p.partition.clone(),
-                })
-                .collect();
-            (name.to_string(), Listed { fanned: fans_out(ids.iter().map(String::as_str), fan_out_above()), files })
-        })
-        .collect()
+    let mut listed: BTreeMap<usize, BTreeMap<String, Listed>> = BTreeMap::new();
+    for (name, source) in names.iter().filter_map(|name| sources.get(*name).map(|s| (*name, s))) {
+        let ids: Vec<String> = source.input.parts().iter().map(|p| partition_path(&p.partition)).collect();
+        let fanned = fans_out(ids.iter().map(String::as_str), fan_out_above());
+        for &shard in shards {
+            listed.entry(shard).or_default().insert(name.to_string(), Listed { fanned, files: Vec::new() });
+        }
+        for (part, id) in source.input.parts().iter().zip(&ids) {
+            let Some(shard) = listed.get_mut(&shard_of(fan_bucket(id))) else { continue };
+            let file = sources::MatchedFile {
+                path: part.path.strip_prefix(&base).unwrap_or(&part.path).to_path_buf(),
+                partition: part.partition.clone(),
+            };
+            shard.get_mut(name).expect("every shard lists every source").files.push(file);
+        }
+    }
+    listed
 }
 
 /// [`resolve_sources`] of the sources `stage` reads only (all: None), and of them only the

@@ -41,7 +41,7 @@ use serde::{Deserialize, Serialize};
 use super::assess::{assess_stage, predict, Known, Prediction, RealDisk, StatusLine};
 use super::commit::{entry_from_outcomes, leave_out_not_kept, UnitOutcome, UnitRecord};
 use super::inputs::{
-    cached_files, listing, param_file_hashes, resolve_sources, resolve_sources_of, Listed, Produced, ProducedFile,
+    cached_files, listings, param_file_hashes, resolve_sources, resolve_sources_of, Listed, Produced, ProducedFile,
     ResolvedSource,
 };
 use super::local::execute;
@@ -593,14 +593,14 @@ fn submit_arrays(
             .filter(|source| plan.file.spec.inputs.get(*source).is_some_and(Listed::lists))
             .collect();
         if run.closed.contains(&name) && !names.is_empty() {
-            let write = |shard: u32| -> anyhow::Result<()> {
-                let listed = listing(plan, sources, &names, &run.buckets(shard as usize));
-                let path = listing_path(run_dir, &name, shard as usize);
+            let shards: BTreeSet<usize> = only.iter().map(|&s| s as usize).collect();
+            let write = |shard: usize, listed: &BTreeMap<String, Listed>| -> anyhow::Result<()> {
+                let path = listing_path(run_dir, &name, shard);
                 std::fs::create_dir_all(path.parent().expect("a listing is in a folder"))?;
-                publish(&path, &serde_json::to_vec(&listed)?)
+                publish(&path, &serde_json::to_vec(listed)?)
             };
-            for &shard in &only {
-                write(shard).map_err(|e| cancel_all(client, &run, UserError::new(format!("{e:#}"))))?;
+            for (shard, listed) in listings(plan, sources, &names, &shards, |bucket| run.shard_of(bucket)) {
+                write(shard, &listed).map_err(|e| cancel_all(client, &run, UserError::new(format!("{e:#}"))))?;
             }
         }
         let command = format!("{} slurm-task {} {name}", quote(shakeflow), quote(run_dir));
