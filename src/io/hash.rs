@@ -166,12 +166,12 @@ impl StatMemo {
         let Ok(listing) = std::fs::read_dir(&dir) else { return Ok(()) };
         for entry in listing.flatten() {
             let name = entry.file_name();
-            // Only the names this memo writes (two lower-case hex digits).
+            // Only the names this memo writes ([`bucket_file`](Self::bucket_file)'s).
             let bucket = name
                 .to_str()
                 .and_then(|n| n.strip_suffix(".json"))
-                .filter(|n| n.len() == 2 && n.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f')))
-                .and_then(|n| u8::from_str_radix(n, 16).ok());
+                .and_then(|n| u8::from_str_radix(n, 16).ok())
+                .filter(|&b| self.bucket_file(b).file_name() == Some(name.as_os_str()));
             if bucket.is_some_and(|b| !by_bucket.contains_key(&Some(b))) {
                 std::fs::remove_file(entry.path()).with_context(|| format!("removing `{}`", entry.path().display()))?;
             }
@@ -563,13 +563,18 @@ mod tests {
         assert_eq!(path_hash(&memo, &files[0], Some(0xa0)).unwrap(), "remembered");
         let root_bytes = std::fs::metadata(&file).unwrap().len();
         assert_eq!(memo.files_read(), (2, root_bytes + std::fs::metadata(&bucket_a).unwrap().len()));
-        // Unchanged entries are not written again; a bucket nothing was used of goes.
+        // Unchanged entries are not written again; a bucket nothing was used of goes, and no
+        // file of a name the memo does not write.
         let before = std::fs::read(&bucket_a).unwrap();
+        let foreign = dir.path().join("memo/hashes/B1.json");
+        std::fs::write(&foreign, "[]").unwrap();
         memo.hash(&files[2]).unwrap();
         memo.save().unwrap();
         assert_eq!(std::fs::read(&bucket_a).unwrap(), before);
         assert!(!dir.path().join("memo/hashes/b1.json").exists());
         assert!(dir.path().join("memo/hashes/0f.json").exists());
+        assert!(foreign.exists());
+        std::fs::remove_file(&foreign).unwrap();
         // Nothing of any bucket used: the folder goes too.
         StatMemo::load(&file, fan_folder).save().unwrap();
         assert!(!dir.path().join("memo/hashes").exists());

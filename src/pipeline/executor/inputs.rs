@@ -57,19 +57,30 @@ impl Listed {
         !spec.format.names_folders() && spec.format != RecordFormat::Case && spec.components.is_none()
     }
 
-    /// The listed files, as found from `base` (the pipeline's folder), that are still files (a
-    /// file gone since, or no longer a file, is a record gone, as a walk would find); and how
-    /// many are gone.
-    pub(super) fn still_there(self, base: &Path) -> (Listed, usize) {
-        let listed = self.files.len();
-        let files: Vec<sources::MatchedFile> = self
-            .files
-            .into_iter()
-            .map(|f| sources::MatchedFile { path: base.join(&f.path), ..f })
-            .filter(|f| std::fs::metadata(&f.path).is_ok_and(|m| m.is_file()))
-            .collect();
-        let gone = listed - files.len();
-        (Listed { files, ..self }, gone)
+    /// The listing saved in `file` (None: there is none), its files as found from `base` (the
+    /// pipeline's folder) that are still files (a file gone since, or no longer a file, is a
+    /// record gone, as a walk would find); and how many are kept and gone.
+    pub(super) fn read(file: &Path, base: &Path) -> anyhow::Result<Option<(BTreeMap<String, Listed>, usize, usize)>> {
+        use anyhow::Context;
+        let bytes = match std::fs::read(file) {
+            Ok(bytes) => bytes,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(e).with_context(|| format!("reading the planner's listing `{}`", file.display())),
+        };
+        let mut listed: BTreeMap<String, Listed> = serde_json::from_slice(&bytes).with_context(|| {
+            format!("the planner's listing `{}` is damaged; run again (a new run lists anew)", file.display())
+        })?;
+        let (mut kept, mut gone) = (0, 0);
+        for source in listed.values_mut() {
+            let before = source.files.len();
+            source.files = std::mem::take(&mut source.files)
+                .into_iter()
+                .map(|f| sources::MatchedFile { path: base.join(&f.path), ..f })
+                .filter(|f| std::fs::metadata(&f.path).is_ok_and(|m| m.is_file()))
+                .collect();
+            (kept, gone) = (kept + source.files.len(), gone + before - source.files.len());
+        }
+        Ok(Some((listed, kept, gone)))
     }
 }
 
@@ -120,11 +131,7 @@ pub(super) fn resolve_sources_of(
         .stages
         .values()
         .filter(|s| stage.is_none_or(|only| s.name == only))
-        .flat_map(|s| s.inputs.iter())
-        .filter_map(|i| match i {
-            InputRef::Source(name) => Some(name.as_str()),
-            InputRef::Stage { .. } => None,
-        })
+        .flat_map(super::source_inputs)
         .collect();
     let mut resolved = BTreeMap::new();
     // Sources may share files (one DAQ export split into floors): each file is read once. By

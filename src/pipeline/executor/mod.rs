@@ -329,3 +329,15 @@ fn upstream_stages(stage: &PlannedStage) -> BTreeSet<&str> {
         })
         .collect()
 }
+
+/// The sources `stage` reads.
+fn source_inputs(stage: &PlannedStage) -> BTreeSet<&str> {
+    stage
+        .inputs
+        .iter()
+        .filter_map(|i| match i {
+            InputRef::Source(name) => Some(name.as_str()),
+            InputRef::Stage { .. } => None,
+        })
+        .collect()
+}

@@ -46,7 +46,8 @@ use super::inputs::{
 };
 use super::local::execute;
 use super::{
-    forced_stages, selected_stages, upstream_stages, Backend, Opened, Rerun, RunOptions, RunSummary, UnitProblem,
+    forced_stages, selected_stages, source_inputs, upstream_stages, Backend, Opened, Rerun, RunOptions, RunSummary,
+    UnitProblem,
 };
 use crate::error::UserError;
 use crate::pipeline::layout::{fan_bucket, fan_out_above, fans_out, LEASE_FILE, LOCK_FILE, RUNS_DIR, STATE_DIR};
@@ -54,7 +55,7 @@ use crate::pipeline::lease::Lease;
 use crate::pipeline::lock::{LockFile, Wanted};
 use crate::pipeline::memo::TableMemo;
 use crate::pipeline::ownership;
-use crate::pipeline::plan::{InputRef, Plan};
+use crate::pipeline::plan::Plan;
 use crate::pipeline::progress::Reporter;
 use crate::pipeline::slurm::{ArrayJob, DepKind, Dependency, ExecutorOptions, Slurm, SubmittedArray};
 use crate::pipeline::spec::PipelineFile;
@@ -583,15 +584,8 @@ fn submit_arrays(
         }
         // Each shard's records of the sources this stage reads, listed here once: its task
         // reads them instead of walking the archive.
-        let names: BTreeSet<&str> = stage
-            .inputs
-            .iter()
-            .filter_map(|i| match i {
-                InputRef::Source(source) => Some(source.as_str()),
-                InputRef::Stage { .. } => None,
-            })
-            .filter(|source| plan.file.spec.inputs.get(*source).is_some_and(Listed::lists))
-            .collect();
+        let mut names = source_inputs(stage);
+        names.retain(|source| plan.file.spec.inputs.get(*source).is_some_and(Listed::lists));
         if run.closed.contains(&name) && !names.is_empty() {
             let shards: BTreeSet<usize> = only.iter().map(|&s| s as usize).collect();
             let write = |shard: usize, listed: &BTreeMap<String, Listed>| -> anyhow::Result<()> {
@@ -796,28 +790,11 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     // The sources this stage reads, of a closed bucketed stage only its buckets' records.
     let own_records = (bucketed && run.closed.contains(stage_name)).then_some(&buckets);
     // Their files as the planner listed them for this shard, where it did (not in an allocation).
-    let listing = listing_path(run_dir, stage_name, shard);
-    let listed: Option<BTreeMap<String, Listed>> = match own_records {
-        Some(_) => match std::fs::read(&listing) {
-            Ok(bytes) => Some(serde_json::from_slice(&bytes).with_context(|| {
-                format!("the planner's listing `{}` is damaged; run again (a new run lists anew)", listing.display())
-            })?),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => None,
-            Err(e) => return Err(anyhow!(e).context(format!("reading the planner's listing `{}`", listing.display()))),
-        },
+    let listed = match own_records {
+        Some(_) => Listed::read(&listing_path(run_dir, stage_name, shard), &plan.file.base_dir())?,
         None => None,
     };
-    let listed = listed.map(|listed| {
-        let base = plan.file.base_dir();
-        let (mut kept, mut gone) = (0, 0);
-        let listed: BTreeMap<String, Listed> = listed
-            .into_iter()
-            .map(|(name, source)| {
-                let (source, missing) = source.still_there(&base);
-                (kept, gone) = (kept + source.files.len(), gone + missing);
-                (name, source)
-            })
-            .collect();
+    let listed = listed.map(|(listed, kept, gone)| {
         eprintln!("{stage_name} shard {shard}: {kept} source file(s) as the planner listed them ({gone} gone since)");
         listed
     });
