@@ -6,8 +6,9 @@
 //!
 //! 1. The nominal cart predicts the camera's platform displacement and yaw and the
 //!    accelerometer's absolute X acceleration ([`evidence::Evidence`], noise-weighted).
-//!    With an `uncertainty` block the uncertain values are calibrated first, in rounds that
-//!    follow the disagreement each leaves past the records it looked at (`calibrate_nominal`).
+//!    With an `uncertainty` block the uncertain values are calibrated first, over horizons
+//!    that follow the agreement and stop where no values of the unchanged cart explain the
+//!    records (`calibrate_nominal`).
 //! 2. The disagreement is located as for rocking: clustered residuals beyond 4σ, first to last.
 //! 3. Predictability first: twins of the nominal cart (initial yaw and caster angles moved by a
 //!    probe in rad, friction coefficients by the same relative amount) show from when the model
@@ -454,28 +455,33 @@ fn cut_beyond_noise(before: f64, after: f64) -> f64 {
     }
 }
 
-/// Horizons of the calibration past the stated cart's first disagreement (s): a cart's
-/// sensitivity makes a longer one rugged, and each trial runs the cart that far.
-const CALIBRATION_HORIZONS_S: [f64; 3] = [1.0, 3.0, 6.0];
+/// The first horizon of the calibration past the stated cart's first disagreement, and each
+/// next one past where the calibrated cart still disagrees (s): a cart's sensitivity makes a
+/// longer one rugged, and each trial runs the cart that far.
+const CALIBRATION_STEP_S: f64 = 1.0;
 /// A calibration trial may cost this many times the stated cart's evaluations per sample.
 const CALIBRATION_BUDGET_FACTOR: f64 = 4.0;
-/// Rounds of the nominal calibration at most: each later one follows the disagreement its
-/// predecessor left past the records it calibrated on.
-const CALIBRATION_ROUNDS: usize = 4;
+/// Horizons of the nominal calibration at most.
+const CALIBRATION_HORIZONS: usize = 12;
 
 /// The uncertain parameters fitted with the nominal cart (priors of the stated sd) over the
-/// records up to a few seconds past the stated cart's first disagreement (none: the stated
-/// values, nothing to explain). Each trial is the cart from rest to the horizon only.
+/// records the calibrated cart can explain (none to explain: the stated values). Returns the
+/// calibration and, where it took more than one horizon, the first horizon's values.
 ///
-/// Some values show only late in a record (a kinetic friction once the cart rolls fast, the
-/// load once it swings hard): where the calibrated cart still disagrees with the records past
-/// the last horizon calibrated on, a next round fits the values again from there, over the
-/// horizons past that disagreement (the priors stay those of the stated values), and is kept if
-/// it fits the whole record better (its posterior, one whole run each) and no earlier record
-/// worse (its cart disagrees no earlier). Mis-stated rolling seed
-/// 4401: the `none` cases case_01 and case_08 were left disagreeing from 7.77 s and 24.15 s,
-/// past a calibration that stopped at 6.0 s; a second round explains both (misfit 1.08, 1.17).
-/// Returns the calibration and, where a later round was kept, the first round's values.
+/// The horizon follows the agreement: the first ends [`CALIBRATION_STEP_S`] past the stated
+/// cart's first disagreement; each next one the same past where the cart calibrated so far
+/// still disagrees with the records, fitted from the values before (the priors stay the stated
+/// values'; each trial is the cart from rest to the horizon only). A horizon is taken only if
+/// its calibrated cart agrees with the records through it; the first that does not ends the
+/// calibration with the values before it: what the records up to there show is a change that
+/// no values of the unchanged cart explain (a physics, or what the library lacks), and a fit
+/// over it would bend the values towards it.
+///
+/// Mis-stated rolling seed 4402 (docs/models/diagnosis.md): the fixed horizons of 1, 3 and 6 s
+/// past the stated cart's first disagreement (0.0 s in most cases) reached into lateral impacts
+/// at 4.1 and 5.4 s, and the impact bent the values so far that the calibrated cart disagreed
+/// from 0.03 s and 2.13 s; rounds past the last horizon could not undo it. Grown in steps of
+/// 1 s past the agreement, the calibration stops before each impact, and both are named.
 fn calibrate_nominal(
     stated: &RollingCase,
     evidence: &Evidence,
@@ -487,7 +493,6 @@ fn calibrate_nominal(
     let Some(window) = evidence.window(stated_track) else {
         return (Calibration::stated(stated.uncertain.clone()), None);
     };
-    let horizons = |from: f64| CALIBRATION_HORIZONS_S.map(|h| (from + h).min(stated.end_s()));
     let per_sample = stated_track.evaluations as f64 / stated.samples() as f64;
     let chi2 = |m: &RollingCase, until: f64| {
         let start = m.nominal_start();
@@ -496,43 +501,30 @@ fn calibrate_nominal(
         m.altered(&start, &Alteration::default(), m.t0_s, until, Some(allowance))
             .map_or(f64::INFINITY, |t| evidence.misfit_between(&t, f64::NEG_INFINITY, until).chi2)
     };
-    let mut calibrated = horizons(window.0);
-    let mut calibration = calibration::calibrate_model(stated, &stated.uncertain, None, &calibrated, false, &chi2);
-    let first_round = calibration.fitted.clone();
-    let mut moved_on = false;
-    // The whole record's posterior under a calibration's plain nominal cart, and where that cart
-    // disagrees with the records.
-    let judge = |c: &Calibration| {
-        let track = c.apply(stated).ok()?.nominal().ok()?;
-        Some((evidence.misfit(&track).chi2 + c.prior_chi2(), evidence.window(&track)))
-    };
-    let Some(mut current) = judge(&calibration) else { return (calibration, None) };
-    let mut runs = calibration.evaluations + 1;
-    for _ in 1..CALIBRATION_ROUNDS {
-        let last = calibrated[calibrated.len() - 1];
-        let Some(left) = current.1.filter(|w| w.0 > last && last < stated.end_s()) else { break };
-        calibrated = horizons(left.0);
-        let next = calibration::calibrate_model(
-            stated,
-            &stated.uncertain,
-            Some(&calibration.fitted),
-            &calibrated,
-            false,
-            &chi2,
-        );
+    let end = stated.end_s();
+    let mut taken = Calibration::stated(stated.uncertain.clone());
+    let mut until = (window.0 + CALIBRATION_STEP_S).min(end);
+    let mut runs = 0;
+    for _ in 0..CALIBRATION_HORIZONS {
+        let next = calibration::calibrate_model(stated, &stated.uncertain, Some(&taken.fitted), &[until], false, &chi2);
         runs += next.evaluations + 1;
-        // Kept only if the records before that disagreement stay explained (a round that bends
-        // the cart towards a physics beginning there parts from them earlier: mis-stated 4401
-        // case_03, a brake at 10.3 s whose second round disagreed from 0 s) and the whole
-        // record is fitted better.
-        let earlier = |j: &(f64, Option<(f64, f64)>)| j.1.is_some_and(|w| w.0 < left.0);
-        let Some(judged) = judge(&next).filter(|j| j.0 < current.0 && !earlier(j)) else { break };
-        moved_on = true;
-        let steps = [std::mem::take(&mut calibration.steps), next.steps.clone()].concat();
-        (calibration, current) = (Calibration { steps, ..next }, judged);
+        let Some(track) = next.apply(stated).ok().and_then(|m| m.nominal().ok()) else { break };
+        let left = evidence.window(&track);
+        let agrees = left.is_none_or(|w| w.0 > until);
+        // The first horizon is taken whatever it leaves: the stated values explain even less.
+        if !agrees && !taken.steps.is_empty() {
+            break;
+        }
+        let steps = [std::mem::take(&mut taken.steps), next.steps.clone()].concat();
+        taken = Calibration { steps, ..next };
+        match left {
+            Some(w) if agrees && until < end => until = (w.0 + CALIBRATION_STEP_S).min(end),
+            _ => break,
+        }
     }
-    calibration.evaluations = runs;
-    (calibration, moved_on.then_some(first_round))
+    taken.evaluations = runs;
+    let first = (taken.steps.len() > 1).then(|| taken.steps[0].1.clone());
+    (taken, first)
 }
 
 /// `effect` with `params` on the cart `m` from rest until `until_s` (the nominal cart until the
@@ -906,13 +898,12 @@ fn shortfall(c: &Candidate, base: &Candidate, settings: &Settings) -> String {
 mod tests {
     use super::*;
     use crate::diagnose::calibration::{uncertain_parameters, Spread};
+    use crate::physics::rolling::Brake;
 
     /// MC2 on a floor that barely rolls it for 8 s, then shakes it hard (4 m/s^2) to 12 s:
-    /// noise-free records of the cart whose initial yaw is 2° from the stated one (sd 1°, seen
-    /// at once) and whose wheels' kinetic rolling friction is 4 times the stated one (rel_sd
-    /// 2, seen only once the cart rolls fast, after 8 s). Returns the stated case and the true
-    /// `mu_k_roll`.
-    fn cart_misstated_late() -> (RollingCase, f64) {
+    /// noise-free records of `truth` (the stated cart, changed by `change`), with `block` for
+    /// the stated values' uncertainty.
+    fn records_of(truth: impl FnOnce(&mut RollingCase) -> Track, block: &[(&str, Spread)]) -> RollingCase {
         let (dt, n) = (0.005, 2400);
         let ax = gentle_then_strong_floor(n, 8.0);
         let ay = ax.iter().map(|a| 0.3 * a).collect();
@@ -920,10 +911,7 @@ mod tests {
             Options { yaw0_rad: 0.2, steer0_rad: [0.3, -0.2, 0.1, 0.4], method: METHOD, ..Options::default() };
         let mut case = test_cart("late", ax, ay, options);
         let stated = case.clone();
-        let mu_k = 4.0 * case.friction.roll.mu_k;
-        case.set_parameter("mu_k_roll", 0, mu_k).unwrap();
-        case.set_parameter("yaw0_deg", 0, stated.options.yaw0_rad.to_degrees() + 2.0).unwrap();
-        let truth = case.nominal().expect("the true cart runs");
+        let truth = truth(&mut case);
         let mut case = stated;
         let time_s: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
         case.accel = Some(Observed { time_s: time_s.clone(), value: truth.ax_abs_mps2.clone() });
@@ -935,33 +923,78 @@ mod tests {
             y_m: pick(&truth.y_m),
             yaw_rad: pick(&truth.yaw_rad),
         });
-        let block = [
-            ("yaw0_deg".to_string(), Spread { sd: Some(1.0), rel_sd: None }),
-            ("mu_k_roll".to_string(), Spread { sd: None, rel_sd: Some(2.0) }),
-        ];
+        let block: Vec<(String, Spread)> = block.iter().map(|(k, s)| (k.to_string(), *s)).collect();
         case.uncertain = uncertain_parameters(&case, &block).unwrap();
-        (case, mu_k)
+        case
     }
 
+    fn sd(v: f64) -> Spread {
+        Spread { sd: Some(v), rel_sd: None }
+    }
+
+    fn rel_sd(v: f64) -> Spread {
+        Spread { sd: None, rel_sd: Some(v) }
+    }
+
+    /// The initial yaw 2° from the stated one (sd 1°) shows at once; the wheels' kinetic rolling
+    /// friction, 4 times the stated one (rel_sd 2), only once the cart rolls fast, after 8 s.
     #[test]
-    fn a_value_seen_only_late_is_calibrated_by_a_round_that_follows_the_disagreement() {
-        let (case, mu_k) = cart_misstated_late();
+    fn a_value_seen_only_late_is_calibrated_by_a_horizon_that_follows_the_agreement() {
+        let mut mu_k = 0.0;
+        let case = records_of(
+            |c| {
+                mu_k = 4.0 * c.friction.roll.mu_k;
+                c.set_parameter("mu_k_roll", 0, mu_k).unwrap();
+                c.set_parameter("yaw0_deg", 0, c.options.yaw0_rad.to_degrees() + 2.0).unwrap();
+                c.nominal().expect("the true cart runs")
+            },
+            &[("yaw0_deg", sd(1.0)), ("mu_k_roll", rel_sd(2.0))],
+        );
         let evidence = Evidence::new(&case, 4.0);
         let stated = case.nominal().unwrap();
         let first = evidence.window(&stated).expect("the stated yaw shows at once").0;
-        assert!(first + CALIBRATION_HORIZONS_S[2] < 8.0, "the first round ends before the shaking: {first}");
-        let (calibration, first_round) = calibrate_nominal(&case, &evidence, &stated);
+        assert!(first + CALIBRATION_STEP_S < 8.0, "the first horizon ends before the shaking: {first}");
+        let (calibration, first_horizon) = calibrate_nominal(&case, &evidence, &stated);
         let run = |values: &[f64]| calibration::with_values(&case, &case.uncertain, values).unwrap().nominal().unwrap();
-        // A later round was kept ...
-        let first_round = first_round.expect("a round after the first is kept");
-        // ... after the first fitted the yaw and left the cart disagreeing once it rolls fast.
-        let left = evidence.window(&run(&first_round)).map(|w| w.0);
-        assert!(left.is_some_and(|t| t > first + CALIBRATION_HORIZONS_S[2]), "left by the first round: {left:?}");
-        // The later round, from there, finds the friction: the calibrated cart explains the records.
+        // The first horizon fitted the yaw and left the cart disagreeing once it rolls fast ...
+        let first_horizon = first_horizon.expect("a horizon after the first is taken");
+        let left = evidence.window(&run(&first_horizon)).map(|w| w.0);
+        assert!(left.is_some_and(|t| t > 7.5), "left by the first horizon: {left:?}");
+        // ... and the horizons that followed the agreement found the friction: the calibrated
+        // cart explains the records.
         let fitted = calibration.apply(&case).unwrap();
         assert!(evidence.window(&run(&calibration.fitted)).is_none(), "{}", calibration.describe());
         let off = (fitted.friction.roll.mu_k / mu_k - 1.0).abs();
         assert!(off < 0.1, "mu_k_roll {} for {mu_k}", fitted.friction.roll.mu_k);
+    }
+
+    /// The same cart, its yaw stated 2° off and its kinetic rolling friction stated right, with
+    /// a wheel locked at 8.5 s (as the hard shaking begins). No value of the unchanged cart
+    /// explains the records past the lock: the calibration stops before it, with the yaw fitted
+    /// and the friction not bent towards the drag (a horizon over the lock moves `mu_k_roll`
+    /// several sd up).
+    #[test]
+    fn the_calibration_stops_where_no_values_of_the_unchanged_cart_explain_the_records() {
+        let case = records_of(
+            |c| {
+                c.set_parameter("yaw0_deg", 0, c.options.yaw0_rad.to_degrees() + 2.0).unwrap();
+                let nominal = c.nominal().expect("the true cart runs");
+                let lock = Alteration { brake: Some(Brake { caster: 1, mu: 0.5 }), ..Alteration::default() };
+                c.altered(&nominal, &lock, 8.5, c.end_s(), None).expect("the locked cart runs")
+            },
+            &[("yaw0_deg", sd(1.0)), ("mu_k_roll", rel_sd(0.5))],
+        );
+        let evidence = Evidence::new(&case, 4.0);
+        let stated = case.nominal().unwrap();
+        let (calibration, _) = calibrate_nominal(&case, &evidence, &stated);
+        let taken = calibration.steps.last().expect("a horizon is taken").0;
+        assert!(taken < 9.0, "a horizon over the lock was taken: {:?}", calibration.steps);
+        let z: Vec<f64> = calibration.parameters.iter().zip(&calibration.fitted).map(|(p, v)| p.z(*v)).collect();
+        assert!((z[0] - 2.0).abs() < 0.1, "yaw0_deg {} sd from the stated (truth: 2)", z[0]);
+        assert!(z[1].abs() < 1.0, "mu_k_roll bent {} sd towards the drag", z[1]);
+        let track = calibration.apply(&case).unwrap().nominal().unwrap();
+        let left = evidence.window(&track).expect("the lock is left to explain").0;
+        assert!((8.4..9.0).contains(&left), "the calibrated cart disagrees from {left} s");
     }
 
     #[test]
