@@ -471,16 +471,19 @@ const CALIBRATION_HORIZONS: usize = 12;
 /// The horizon follows the agreement: the first ends [`CALIBRATION_STEP_S`] past the stated
 /// cart's first disagreement; each next one the same past where the cart calibrated so far
 /// still disagrees with the records, fitted from the values before (the priors stay the stated
-/// values'; each trial is the cart from rest to the horizon only). A horizon is taken only if
-/// its calibrated cart agrees with the records through it; the first that does not ends the
-/// calibration with the values before it: what the records up to there show is a change that
-/// no values of the unchanged cart explain (a physics, or what the library lacks), and a fit
-/// over it would bend the values towards it.
+/// values'; each trial is the cart from rest to the horizon only). A later horizon is taken
+/// only if its calibrated cart agrees with the records through it; the first that does not
+/// ends the calibration with the values before it: what the records up to there show is a
+/// change that no values of the unchanged cart explain (a physics, or what the library lacks),
+/// and a fit over it would bend the values towards it. The first horizon is taken whatever it
+/// leaves (the stated values explain even less), and then ends the calibration if its cart
+/// does not agree through it.
 ///
 /// Mis-stated rolling seed 4402 (docs/models/diagnosis.md): the fixed horizons of 1, 3 and 6 s
 /// past the stated cart's first disagreement (0.0 s in most cases) reached into lateral impacts
-/// at 4.1 and 5.4 s, and the impact bent the values so far that the calibrated cart disagreed
-/// from 0.03 s and 2.13 s; rounds past the last horizon could not undo it. Grown in steps of
+/// at 4.1 s (case_08) and 5.4 s (case_05), and each impact bent the values so far that the
+/// calibrated cart disagreed from 2.13 s and 0.03 s; rounds past the last horizon could not
+/// undo it. Grown in steps of
 /// 1 s past the agreement, the calibration stops before each impact, and both are named.
 fn calibrate_nominal(
     stated: &RollingCase,
@@ -505,14 +508,14 @@ fn calibrate_nominal(
     let mut taken = Calibration::stated(stated.uncertain.clone());
     let mut until = (window.0 + CALIBRATION_STEP_S).min(end);
     let mut runs = 0;
-    for _ in 0..CALIBRATION_HORIZONS {
+    for horizon in 0..CALIBRATION_HORIZONS {
         let next = calibration::calibrate_model(stated, &stated.uncertain, Some(&taken.fitted), &[until], false, &chi2);
         runs += next.evaluations + 1;
         let Some(track) = next.apply(stated).ok().and_then(|m| m.nominal().ok()) else { break };
         let left = evidence.window(&track);
         let agrees = left.is_none_or(|w| w.0 > until);
         // The first horizon is taken whatever it leaves: the stated values explain even less.
-        if !agrees && !taken.steps.is_empty() {
+        if !agrees && horizon > 0 {
             break;
         }
         let steps = [std::mem::take(&mut taken.steps), next.steps.clone()].concat();
@@ -546,8 +549,8 @@ fn with_effect(
     Some(track)
 }
 
-/// Horizons of the recalibration with a physics, past the window's start (s): the nominal
-/// calibration's, then the whole record.
+/// Horizons of the recalibration with a physics, past the window's start (s); its fits are then
+/// judged on the whole record ([`verdict::recalibrate`]).
 const JOINT_HORIZONS_S: [f64; 3] = [1.0, 3.0, 6.0];
 
 /// The uncertain parameters fitted again with a physics in place ([`verdict::recalibrate`]): each
@@ -590,9 +593,9 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
     }
     let evidence = Evidence::new(stated, settings.exceedance_sigma);
     let stated_track = stated.nominal()?;
-    // A later round may have bent the cart towards a physics that begins where it looked: the
-    // recalibration with a physics also starts from the first round's values.
-    let (calibration, first_round) = calibrate_nominal(stated, &evidence, &stated_track);
+    // A later horizon may have bent the cart towards a physics that begins just past it: the
+    // recalibration with a physics also starts from the first horizon's values.
+    let (calibration, first_horizon) = calibrate_nominal(stated, &evidence, &stated_track);
     let calibrated = calibration.apply(stated)?;
     let case = &calibrated;
     let moved = calibration.parameters.iter().zip(&calibration.fitted).any(|(p, v)| p.stated != *v);
@@ -714,7 +717,7 @@ pub fn diagnose(stated: &RollingCase, settings: &Settings) -> Result<RollingDiag
             let signature_chi2 = evidence.misfit_between(&baseline, from, until).chi2
                 - evidence.misfit_between(&fit.track, from, until).chi2;
             let (calibration, track, misfit, runs) = if signature_chi2 >= verdict::SIGNATURE_CHI2 {
-                recalibrate(stated, &calibration, first_round.as_deref(), *effect, &fit, &evidence, window, &baseline)
+                recalibrate(stated, &calibration, first_horizon.as_deref(), *effect, &fit, &evidence, window, &baseline)
             } else {
                 (calibration.clone(), fit.track.clone(), fit.misfit, 0)
             };
