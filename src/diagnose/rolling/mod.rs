@@ -483,8 +483,8 @@ const CALIBRATION_HORIZONS: usize = 12;
 /// past the stated cart's first disagreement (0.0 s in most cases) reached into lateral impacts
 /// at 4.1 s (case_08) and 5.4 s (case_05), and each impact bent the values so far that the
 /// calibrated cart disagreed from 2.13 s and 0.03 s; rounds past the last horizon could not
-/// undo it. Grown in steps of
-/// 1 s past the agreement, the calibration stops before each impact, and both are named.
+/// undo it. Grown in steps of 1 s past the agreement, the calibration stops before each impact,
+/// and both are named.
 fn calibrate_nominal(
     stated: &RollingCase,
     evidence: &Evidence,
@@ -904,8 +904,8 @@ mod tests {
     use crate::physics::rolling::Brake;
 
     /// MC2 on a floor that barely rolls it for 8 s, then shakes it hard (4 m/s^2) to 12 s:
-    /// noise-free records of `truth` (the stated cart, changed by `change`), with `block` for
-    /// the stated values' uncertainty.
+    /// noise-free records of the cart `truth` makes of the stated one (and runs), with `block`
+    /// for the stated values' uncertainty.
     fn records_of(truth: impl FnOnce(&mut RollingCase) -> Track, block: &[(&str, Spread)]) -> RollingCase {
         let (dt, n) = (0.005, 2400);
         let ax = gentle_then_strong_floor(n, 8.0);
