@@ -11,7 +11,8 @@
 //!     hashes.json                      HASH_MEMO: the stat/hash memo
 //!     hashes/<xx>.json                 HASH_MEMO_BUCKETS: the same, per bucket, for the records of
 //!                                      a source or stage past FAN_OUT_ABOVE first partition segments
-//!     slurm/<run>/                     RUNS_DIR: Slurm runs (run.json, listings/, results/, manifests/, logs/)
+//!     slurm/<run>/                     RUNS_DIR: Slurm runs (run.json, RUN_LISTINGS, RUN_RESULTS,
+//!                                      RUN_MANIFESTS, RUN_LOGS)
 //!   <stage>/                           a stage's folder (a command's: the output folder itself)
 //!     .shakeflow-stage                 STAGE_MARKER: whose folder it is
 //!     <output>/<key>=<value>/…/data.parquet   DATA_FILE, one record's table (`partition_path`)
@@ -43,6 +44,12 @@ pub const HASH_MEMO: &str = "hashes.json";
 pub const HASH_MEMO_BUCKETS: &str = "hashes";
 /// Where Slurm runs keep their folders, in [`STATE_DIR`].
 pub const RUNS_DIR: &str = "slurm";
+/// A Slurm run folder's parts: the tasks' results, their manifests, the planner's listing of
+/// each shard's source files, and the jobs' logs.
+pub const RUN_RESULTS: &str = "results";
+pub const RUN_MANIFESTS: &str = "manifests";
+pub const RUN_LISTINGS: &str = "listings";
+pub const RUN_LOGS: &str = "logs";
 /// The marker naming the stage (and its type) whose folder holds it.
 pub const STAGE_MARKER: &str = ".shakeflow-stage";
 /// One record's table, and its MCAP twin under `<stage>/mcap/<output>/`, apart from the

@@ -50,7 +50,10 @@ use super::{
     UnitProblem,
 };
 use crate::error::UserError;
-use crate::pipeline::layout::{fan_bucket, fan_out_above, fans_out, LEASE_FILE, LOCK_FILE, RUNS_DIR, STATE_DIR};
+use crate::pipeline::layout::{
+    fan_bucket, fan_out_above, fans_out, LEASE_FILE, LOCK_FILE, RUNS_DIR, RUN_LISTINGS, RUN_LOGS, RUN_MANIFESTS,
+    RUN_RESULTS, STATE_DIR,
+};
 use crate::pipeline::lease::Lease;
 use crate::pipeline::lock::{LockFile, Wanted};
 use crate::pipeline::memo::TableMemo;
@@ -295,7 +298,7 @@ fn save_hash_memo(reporter: &Reporter) {
 
 /// Where the planner lists the source files of shard `shard` of a closed stage.
 fn listing_path(run_dir: &Path, stage: &str, shard: usize) -> PathBuf {
-    run_dir.join("listings").join(stage).join(format!("{shard}.json"))
+    run_dir.join(RUN_LISTINGS).join(stage).join(format!("{shard}.json"))
 }
 
 /// A new run's id: `shakeflow-<pipeline file stem>-<clock>`, a Slurm job name.
@@ -456,7 +459,7 @@ fn run_in_allocation(opened: Opened<'_>, slurm: &SlurmOptions, reporter: &Report
         run.shards.insert(name.clone(), shards);
         run.tasks.insert(name, only);
     }
-    std::fs::create_dir_all(run_dir.join("logs"))?;
+    std::fs::create_dir_all(run_dir.join(RUN_LOGS))?;
     publish(&run_dir.join(RUN_FILE), &serde_json::to_vec_pretty(&run)?)?;
     reporter.line(&format!(
         "Slurm run `{id}` in allocation {}: {} step(s) at once, {} CPU(s) each",
@@ -524,7 +527,7 @@ fn run_steps(
                     stage.into(),
                     format!("--shard={shard}").into(),
                 ];
-                let log = run_dir.join("logs").join(format!("{id}_{stage}_{shard}.out"));
+                let log = run_dir.join(RUN_LOGS).join(format!("{id}_{stage}_{shard}.out"));
                 let ok = allocation.run_step(id, shakeflow, &args, &threads, &log).unwrap_or_else(|e| {
                     eprintln!("error: {e}");
                     false
@@ -605,7 +608,7 @@ fn submit_arrays(
             only: Some(only.clone()),
             dependencies,
             options: slurm.executor.clone(),
-            log_dir: run_dir.join("logs"),
+            log_dir: run_dir.join(RUN_LOGS),
         };
         let array = client.submit(&job, limits).map_err(|e| cancel_all(client, &run, e))?;
         let (stale, units) = stale_units[name.as_str()];
@@ -628,7 +631,7 @@ fn submit_arrays(
         only: None,
         dependencies: run.arrays.values().map(|a| Dependency { on: a.clone(), kind: DepKind::AfterAny }).collect(),
         options: ExecutorOptions { array_throttle: None, ..slurm.executor.clone() },
-        log_dir: run_dir.join("logs"),
+        log_dir: run_dir.join(RUN_LOGS),
     };
     let commit = client.submit(&commit, limits).map_err(|e| cancel_all(client, &run, e))?;
     run.commit = Some(commit);
@@ -673,7 +676,7 @@ fn wait(
                  and running again finishes the run once the dead job's lease is free (taken over a minute \
                  after its last heartbeat once Slurm no longer knows the job, else after 10 minutes, or \
                  `{}` deleted by you once you know the job is gone)",
-                runs_dir(output_dir).join(&run.id).join("logs").display(),
+                runs_dir(output_dir).join(&run.id).join(RUN_LOGS).display(),
                 output_dir.join(STATE_DIR).join(LEASE_FILE).display()
             ))
         })?;
@@ -729,7 +732,7 @@ fn upstream_produced(
                     if !counts && run.bucketed.contains(name) {
                         continue; // another shard's buckets, whose state this task did not read
                     }
-                    let path = run_dir.join("manifests").join(name).join(format!("{index}.json"));
+                    let path = run_dir.join(RUN_MANIFESTS).join(name).join(format!("{index}.json"));
                     let Ok(bytes) = std::fs::read(&path) else {
                         // Not submitted (all cached) or not finished: what is committed stands
                         // (so its records are not taken for gone).
@@ -838,7 +841,7 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     }
     let stale: Vec<&(crate::pipeline::work_units::Unit, String, Vec<String>)> =
         ours.iter().copied().filter(|(_, _, r)| !r.is_empty()).collect();
-    let results = run_dir.join("results").join(stage_name);
+    let results = run_dir.join(RUN_RESULTS).join(stage_name);
     std::fs::create_dir_all(&results)?;
     let tmp = results.join(format!("{shard}.tmp-{}", task_tag()));
     let done = results.join(shard.to_string());
@@ -886,7 +889,7 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
         vanished.retain(|id| run.shard_of(fan_bucket(id)) == shard);
     }
     let manifest = Manifest { records, vanished, upstream_tainted };
-    let manifests = run_dir.join("manifests").join(stage_name);
+    let manifests = run_dir.join(RUN_MANIFESTS).join(stage_name);
     std::fs::create_dir_all(&manifests)?;
     publish(&manifests.join(format!("{shard}.json")), &serde_json::to_vec(&manifest)?)?;
     eprintln!("{stage_name} shard {shard}: {} unit(s), {} ran, {failed} failed", ours.len(), stale.len());
@@ -909,7 +912,7 @@ fn drop_consumed(run_dir: &Path, run: &RunFile, plan: &Plan, stage: &str, shard:
         if plan.stages[upstream].keep || readers != 1 || !aligned(plan, run, stage, upstream) {
             continue;
         }
-        let results = run_dir.join("results").join(upstream).join(shard.to_string());
+        let results = run_dir.join(RUN_RESULTS).join(upstream).join(shard.to_string());
         if results.exists() {
             // Marked first: the commit then knows these files are gone on purpose.
             if let Err(e) = std::fs::write(dropped_marker(&results), b"") {
@@ -1036,7 +1039,7 @@ fn commit_manifests(
         let mut vanished = BTreeSet::new();
         let mut upstream_tainted = upstream_stages(stage).iter().any(|u| tainted.contains(*u));
         for (shard, ids) in shards.iter().enumerate() {
-            let path = run_dir.join("manifests").join(name).join(format!("{shard}.json"));
+            let path = run_dir.join(RUN_MANIFESTS).join(name).join(format!("{shard}.json"));
             match std::fs::read(&path) {
                 Ok(bytes) => {
                     let manifest: Manifest = serde_json::from_slice(&bytes)?;
@@ -1108,7 +1111,7 @@ fn commit_manifests(
         .filter(|s| !s.keep)
         .flat_map(|s| {
             let shards = run.shards.get(&s.name).map_or(0, Vec::len);
-            let results = run_dir.join("results").join(&s.name);
+            let results = run_dir.join(RUN_RESULTS).join(&s.name);
             (0..shards).map(move |i| results.join(i.to_string())).filter(|f| dropped_marker(f).exists())
         })
         .collect();
@@ -1137,12 +1140,14 @@ fn commit_manifests(
 }
 
 /// Removes a committed run's `results` (what was not moved into place: the files of `keep:
-/// false` stages), `manifests` and `listings`, shard folders in parallel: each removal mostly waits for the
-/// file system's journal (≈ 1.5 ms an entry on a busy disk, 5 entries a unit), and waits overlap.
+/// false` stages), `manifests` and `listings`, shard folders in parallel: each removal mostly
+/// waits for the file system's journal (≈ 1.5 ms an entry on a busy disk, 5 entries a unit), and
+/// waits overlap.
 fn remove_run_outputs(run_dir: &Path) {
     use rayon::prelude::*;
+    const REMOVED: [&str; 3] = [RUN_RESULTS, RUN_MANIFESTS, RUN_LISTINGS];
     let mut folders = Vec::new();
-    for folder in ["results", "manifests", "listings"] {
+    for folder in REMOVED {
         let stages = std::fs::read_dir(run_dir.join(folder)).into_iter().flatten().flatten();
         folders.extend(stages.flat_map(|stage| std::fs::read_dir(stage.path()).into_iter().flatten().flatten()));
     }
@@ -1158,7 +1163,7 @@ fn remove_run_outputs(run_dir: &Path) {
         Ok(pool) => pool.install(remove),
         Err(_) => remove(),
     }
-    for folder in ["results", "manifests", "listings"] {
+    for folder in REMOVED {
         let _ = std::fs::remove_dir_all(run_dir.join(folder));
     }
 }
@@ -1192,7 +1197,7 @@ pub fn progress(output_dir: &Path) -> Vec<String> {
             // Steps of one allocation: their manifests say how far it is.
             lines.push(format!("Slurm run `{}` in allocation {job}:", run.id));
             for (name, tasks) in &run.tasks {
-                let manifests = entry.path().join("manifests").join(name);
+                let manifests = entry.path().join(RUN_MANIFESTS).join(name);
                 let done = tasks.iter().filter(|t| manifests.join(format!("{t}.json")).exists()).count();
                 lines.push(format!("  {name:<18} {done} of {} shard(s) done", tasks.len()));
             }
@@ -1295,7 +1300,7 @@ mod tests {
             std::fs::create_dir_all(run_dir.join("manifests/load")).unwrap();
             std::fs::write(run_dir.join(format!("manifests/load/{shard}.json")), b"{}").unwrap();
         }
-        std::fs::create_dir_all(run_dir.join("logs")).unwrap();
+        std::fs::create_dir_all(run_dir.join(RUN_LOGS)).unwrap();
         std::fs::write(run_dir.join("logs/run_1_0.out"), b"log").unwrap();
         std::fs::write(run_dir.join(RUN_FILE), b"{}").unwrap();
         remove_run_outputs(run_dir);
@@ -1304,7 +1309,7 @@ mod tests {
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
             .collect();
         left.sort();
-        assert_eq!(left, ["logs", RUN_FILE]);
+        assert_eq!(left, [RUN_LOGS, RUN_FILE]);
         assert!(run_dir.join("logs/run_1_0.out").is_file());
     }
 }
