@@ -127,6 +127,35 @@ fn editing_the_equipment_file_reruns_what_reads_it() {
     assert!(log.contains("3 stage(s): 2 ran, 1 cached"), "{log}");
 }
 
+/// A summary reads every output of its stage: `run` makes one only for a stage that ran, and
+/// none under `--quiet` (a cached stage's, at 10⁴ tests, was most of a no-op rerun).
+#[test]
+fn a_results_line_is_printed_for_the_stages_that_ran_only() {
+    let project = project();
+    let root = project.path();
+    let quiet = shakeflow(&["run", "pipeline.yaml", "load", "-q"], root);
+    assert!(quiet.status.success() && stderr(&quiet).is_empty(), "{}", stderr(&quiet));
+    let first = shakeflow(&["run", "pipeline.yaml"], root);
+    let log = stderr(&first);
+    assert!(first.status.success(), "{log}");
+    assert!(log.contains("\n  rocking: overturned in 1 of 1 records"), "{log}");
+    assert!(log.contains("\n  fragility: "), "{log}");
+    let unit = root.join("unit.yaml");
+    let text = std::fs::read_to_string(&unit).unwrap().replace("B_m: 0.385", "B_m: 0.5");
+    std::fs::write(&unit, text).unwrap();
+    let second = shakeflow(&["run", "pipeline.yaml", "rocking"], root);
+    let log = stderr(&second);
+    assert!(second.status.success(), "{log}");
+    assert!(log.contains("\n  rocking: ") && !log.contains("\n  fragility: "), "{log}");
+    let cached = shakeflow(&["run", "pipeline.yaml"], root);
+    let log = stderr(&cached);
+    assert!(cached.status.success(), "{log}");
+    assert!(
+        log.contains("1 ran, 2 cached") && log.contains("\n  fragility: ") && !log.contains("\n  rocking: "),
+        "{log}"
+    );
+}
+
 /// Breaks the project, runs, and checks the failure is clear and changed nothing.
 fn fails_cleanly(break_it: impl FnOnce(&Path), expected: &[&str]) {
     let project = project();

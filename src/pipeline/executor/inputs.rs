@@ -313,11 +313,13 @@ pub(super) fn stage_inputs(
 /// The Parquet parts of one output among a stage's produced files.
 fn dataset_of(produced: &Produced, output: &str, label: &str) -> Vec<InputPart> {
     let prefix = format!("{output}/");
+    let in_folder = format!("/{DATA_FILE}");
+    // The output's files are the keys that start with its prefix: one run of the sorted map.
     produced
-        .iter()
-        .filter_map(|(relative, file)| {
-            let inner = relative.strip_prefix(&prefix)?;
-            if inner != DATA_FILE && !inner.ends_with(&format!("/{DATA_FILE}")) {
+        .range::<str, _>((std::ops::Bound::Included(prefix.as_str()), std::ops::Bound::Unbounded))
+        .map_while(|(relative, file)| relative.strip_prefix(&prefix).map(|inner| (relative, inner, file)))
+        .filter_map(|(relative, inner, file)| {
+            if inner != DATA_FILE && !inner.ends_with(&in_folder) {
                 return None;
             }
             // Labels (and so the readers' cache keys) are the same in either layout.
