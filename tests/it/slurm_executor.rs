@@ -288,6 +288,32 @@ fn a_stage_crossing_the_fan_out_limit_on_slurm_keeps_every_cached_record() {
 }
 
 #[test]
+fn a_record_gone_from_the_archive_goes_from_a_slurm_run_as_from_a_local_one() {
+    // Nothing else changed: every stage's only change is a unit gone, which no array task runs;
+    // the Slurm run still has to remove its files and state, fanned out or not.
+    for fan_out in ["1", "100"] {
+        let env = [("SHAKEFLOW_FAN_OUT_ABOVE", fan_out)];
+        let local = small_project();
+        let cluster = small_project();
+        for project in [&local, &cluster] {
+            let out = shakeflow_env(&["run", "pipeline.yaml"], project.path(), &env);
+            assert!(out.status.success(), "{}", stderr(&out));
+            std::fs::remove_dir_all(project.path().join("archive/FB-2")).unwrap();
+        }
+        let out = shakeflow_env(&["run", "pipeline.yaml"], local.path(), &env);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let out = slurm_run_env(cluster.path(), &["--wait"], &env);
+        let log = stderr(&out);
+        assert!(out.status.success(), "{log}");
+        let names = |root: &Path| artifacts_and_state(root).into_iter().map(|(name, _)| name).collect::<Vec<_>>();
+        assert!(!names(local.path()).iter().any(|n| n.contains("FB-2")), "fan-out above {fan_out}");
+        assert_eq!(names(local.path()), names(cluster.path()), "fan-out above {fan_out}: {log}");
+        assert_eq!(artifacts_and_state(local.path()), artifacts_and_state(cluster.path()), "fan-out above {fan_out}");
+        wait_for_commit(cluster.path());
+    }
+}
+
+#[test]
 fn a_failing_record_fails_its_unit_only_on_slurm() {
     let project = small_project();
     let root = project.path();

@@ -342,12 +342,13 @@ fn submit_run(
 }
 
 /// Per stage in run order, its shards cut from the predicted units, and those holding a stale
-/// unit (the shards to run); stages with none are left out. Decides which stages fan out and
+/// unit (the shards to run); stages with neither a stale unit nor one gone are left out. Decides which stages fan out and
 /// which are cut by bucket (`run.fanned`, `bucketed`, `ranges`, `closed`): a bucketed stage's
 /// shard i holds the units of buckets `ranges[i]`, consecutive ids otherwise. A bucketed stage
-/// with stale units also runs the shards holding a unit gone from its inputs: their task, which
-/// reads only its buckets of the state, is the one that sees it gone (a stage whose only change
-/// is a unit gone has no array, as before: the next run that has work for it removes it).
+/// also runs the shards holding a unit gone from its inputs: their task, which reads only its
+/// buckets of the state, is the one that sees it gone. Any other stage's task sees every unit
+/// gone: a stage whose only change is a unit gone runs its first shard (none of its units is
+/// stale: the task only says what is gone), so that the commit job removes it as a local run does.
 fn cut_shards(
     run: &mut RunFile,
     plan: &Plan,
@@ -367,7 +368,7 @@ fn cut_shards(
     run.ranges = bucket_ranges(lines.iter().filter(|l| run.bucketed.contains(&l.name)), per_task);
     lines
         .iter()
-        .filter(|l| selected.contains(&l.name) && !l.stale.is_empty())
+        .filter(|l| selected.contains(&l.name) && !(l.stale.is_empty() && l.vanished.is_empty()))
         .map(|line| {
             let stale: BTreeSet<&str> = line.stale.iter().map(|u| u.id.as_str()).collect();
             let (shards, only) = if run.bucketed.contains(&line.name) {
@@ -381,10 +382,17 @@ fn cut_shards(
                 only.extend(line.vanished.iter().map(|id| run.shard_of(fan_bucket(id)) as u32));
                 (shards, only)
             } else {
-                let shards: Vec<Vec<String>> = line.ids.chunks(per_task).map(<[String]>::to_vec).collect();
-                let only = (0..shards.len() as u32)
+                let mut shards: Vec<Vec<String>> = line.ids.chunks(per_task).map(<[String]>::to_vec).collect();
+                let mut only: BTreeSet<u32> = (0..shards.len() as u32)
                     .filter(|&i| shards[i as usize].iter().any(|id| stale.contains(id.as_str())))
                     .collect();
+                if only.is_empty() {
+                    // Only units gone (every one of them, when no shard is left).
+                    if shards.is_empty() {
+                        shards.push(Vec::new());
+                    }
+                    only.insert(0);
+                }
                 (shards, only)
             };
             (line.name.clone(), shards, only)
