@@ -24,7 +24,7 @@
 //!   commit job, or `srun` steps of one allocation).
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 mod assess;
 mod commit;
@@ -173,19 +173,23 @@ pub fn lock_path(plan: &Plan) -> PathBuf {
     plan.file.output_dir().join(LOCK_FILE)
 }
 
-/// What `run` would do, and why, without running anything; `notes` are what the user should
-/// know besides (a run in progress, an interrupted commit completed, orphaned folders).
-pub fn status(plan: &Plan, notes: &mut Vec<String>) -> Result<Vec<StatusLine>, UserError> {
-    let output_dir = plan.file.output_dir();
-    // A lease or an unfinished commit, not merely the hash memo (and its buckets) or finished Slurm runs' folders:
-    // `status` takes the lease only then, so a run starting meanwhile is not refused.
-    let in_progress = std::fs::read_dir(output_dir.join(STATE_DIR))
+/// Whether the state folder holds anything but the committed state, the hash memo (and its
+/// buckets) and Slurm runs' folders: a lease, or an unfinished commit. `status` takes the lease
+/// only then, so a run starting meanwhile is not refused.
+fn run_may_be_in_progress(state_dir: &Path) -> bool {
+    std::fs::read_dir(state_dir)
         .map(|d| {
             d.flatten()
                 .any(|e| ![HASH_MEMO, HASH_MEMO_BUCKETS, RUNS_DIR, STATE_FILES].iter().any(|n| e.file_name() == *n))
         })
-        .unwrap_or(false);
-    if in_progress {
+        .unwrap_or(false)
+}
+
+/// What `run` would do, and why, without running anything; `notes` are what the user should
+/// know besides (a run in progress, an interrupted commit completed, orphaned folders).
+pub fn status(plan: &Plan, notes: &mut Vec<String>) -> Result<Vec<StatusLine>, UserError> {
+    let output_dir = plan.file.output_dir();
+    if run_may_be_in_progress(&output_dir.join(STATE_DIR)) {
         // An interrupted commit is completed first, so the answer is about what is on disk now;
         // while a run holds the folder, the committed state is reported as it stands.
         match Lease::acquire(&output_dir) {
@@ -340,4 +344,24 @@ fn source_inputs(stage: &PlannedStage) -> BTreeSet<&str> {
             InputRef::Stage { .. } => None,
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::pipeline::layout::{HASH_MEMO, HASH_MEMO_BUCKETS, LEASE_FILE, RUNS_DIR, STATE_FILES};
+
+    #[test]
+    fn only_a_lease_or_an_unfinished_commit_is_a_run_in_progress_for_status() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let state = dir.path();
+        assert!(!super::run_may_be_in_progress(&state.join("absent")));
+        std::fs::write(state.join(HASH_MEMO), "{}").unwrap();
+        for folder in [HASH_MEMO_BUCKETS, RUNS_DIR, STATE_FILES] {
+            std::fs::create_dir(state.join(folder)).unwrap();
+        }
+        std::fs::write(state.join(HASH_MEMO_BUCKETS).join("3f.json"), "{}").unwrap();
+        assert!(!super::run_may_be_in_progress(state), "the memo, its buckets, Slurm runs and the state are not a run");
+        std::fs::write(state.join(LEASE_FILE), "").unwrap();
+        assert!(super::run_may_be_in_progress(state));
+    }
 }
