@@ -8,8 +8,9 @@ Prints, per executor: wall time, work units run, wall time per unit, files creat
 and lockfile, not shakeflow's state folder), their bytes, the state's size (the lockfile, now a
 root, and every stage's state file in `.shakeflow/state/`), the commit's time and the planning
 time (`run --dry-run`, on the empty output folder and on the committed state); for Slurm also
-array tasks, the per-task overhead over the local run, the commit job's time (Slurm's start/end,
-1 s resolution), the state each array task read (its own log line: the root and its stage's and
+array tasks, the per-task overhead over the local run, each task's phases (its log: reading the run
+and pipeline, the state, resolving sources and assessing, running, the manifest), the commit
+job's time (Slurm's start/end, 1 s resolution), the state each array task read (its own log line: the root and its stage's and
 upstream stages' state files), and whether both states (root and state files) are identical. The no-op
 reruns: the first after the run reads the files the memo does not hold yet, the next ones are
 what a user sees. Figures, not assertions: ARCHITECTURE.md's scale estimate uses them.
@@ -95,6 +96,29 @@ def task_reads(out: pathlib.Path, seen=frozenset(), what="state"):
     return reads
 
 
+TASK_PHASES = ["run and pipeline read", "state read", "sources resolved and units assessed", "units ran", "manifest written"]
+
+
+def task_phases(out: pathlib.Path, seen=frozenset()):
+    """Each array task's phases from its log (`<stage> shard N: <phase> (at S s, C s CPU)`), in the
+    logs not in `seen`: per phase, the wall seconds it took in each task (since the phase before),
+    and under "planning" each task's seconds before its units ran."""
+    took = {phase: [] for phase in TASK_PHASES + ["planning"]}
+    for log in task_logs(out) - set(seen):
+        at = dict.fromkeys(TASK_PHASES)
+        for m in re.finditer(r" shard \d+: (.*) \(at ([\d.]+) s, [\d.]+ s CPU\)", log.read_text(errors="replace")):
+            if m.group(1) in at:
+                at[m.group(1)] = float(m.group(2))
+        before = 0.0
+        for phase in TASK_PHASES:
+            if at[phase] is not None:
+                took[phase].append(at[phase] - before)
+                before = at[phase]
+        if at["sources resolved and units assessed"] is not None:
+            took["planning"].append(at["sources resolved and units assessed"])
+    return took
+
+
 def timed_run(cmd, cwd, env=None):
     """Runs cmd; returns (wall s, stderr lines with their arrival in s since the start, exit code)."""
     started = time.monotonic()
@@ -146,12 +170,19 @@ def main():
     if len(growth) > 1:
         print("\ngrowth with the archive (local executor):")
         print(f"{'tests':>6} {'units':>6} {'wall s':>8} {'plan s':>7} {'commit s':>9} {'no-op s':>8} {'ms/unit':>8} "
-              f"{'state KB/task':>14} {'memo KB':>8} {'memo KB/task':>13} {'most entries':>13} {'Slurm commit job s':>19}")
+              f"{'state KB/task':>14} {'memo KB':>8} {'memo KB/task':>13} {'most entries':>13} {'Slurm commit job s':>19} "
+              f"{'task plan s (mean/max)':>23}")
         for tests, r in growth:
             print(f"{tests:6d} {r['units']:6d} {r['wall']:8.2f} {r['plan_fresh']:7.2f} {r['commit']:9.2f} {r['noop']:8.2f} "
                   f"{1000 * r['noop'] / max(r['checked'], 1):8.3f} {r['state'] / 1e3:14.1f} {r['memo'] / 1e3:8.1f} "
                   f"{r['memo_task'][2] / 1e3 if 'memo_task' in r else float('nan'):13.1f} {r['most'][0]:13d} "
-                  f"{r.get('slurm_commit', float('nan')):19.0f}")
+                  f"{r.get('slurm_commit', float('nan')):19.0f} {task_plan(r):>23}")
+
+
+def task_plan(r):
+    """An array task's planning (everything before its units run), mean/max s, from its phases."""
+    mean, most = r.get("task_phases", {}).get("planning", (None, None))
+    return "-" if mean is None else f"{mean:.2f}/{most:.2f}"
 
 
 def make_archive(shakeflow: str, works: pathlib.Path, tests: int, generate_up_to: int) -> pathlib.Path:
@@ -286,6 +317,7 @@ def measure(a, tests):
             reads = task_reads(cluster / "out", seen)
             if reads:
                 report["local"].update(state=max(reads), state_mean=sum(reads) / len(reads), state_min=min(reads))
+            phases = task_phases(cluster / "out", seen)
             memo_reads = task_reads(cluster / "out", seen, "hash memo")
             if memo_reads:
                 report["local"].update(memo_task=(min(memo_reads), sum(memo_reads) / len(memo_reads), max(memo_reads)))
@@ -300,6 +332,7 @@ def measure(a, tests):
                 tasks=tasks,
                 submit=submit,
                 same=same,
+                phases=phases,
             )
         finally:
             if started_slurm:
@@ -324,7 +357,13 @@ def measure(a, tests):
             f"commit job (its log): committed at {committed:.2f} s, clean-up done at {cleaned:.2f} s, "
             f"{cpu:.2f} s CPU"
         )
+        phases = [(p, t) for p, t in s["phases"].items() if t]
+        print(
+            "an array task's phases in the forced rerun, wall s mean / max over its tasks: "
+            + "; ".join(f"{p} {sum(t) / len(t):.3f} / {max(t):.3f}" for p, t in phases)
+        )
         report["local"]["slurm_commit"] = s["commit"]
+        report["local"]["task_phases"] = {p: (sum(t) / len(t), max(t)) for p, t in phases}
     print("no-op reruns: " + ", ".join(f"{w:.2f} s" for w in noops) + f"; status {status_wall:.2f} s")
     print(f"planning (`run --dry-run`): {plan_fresh:.2f} s on the empty output folder, "
           f"{plan_committed:.2f} s on the committed state")

@@ -778,8 +778,10 @@ fn upstream_produced(
 /// `shakeflow slurm-task RUN_DIR STAGE`: one array task, its shard from `$SLURM_ARRAY_TASK_ID`.
 pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) -> anyhow::Result<bool> {
     crate::pipeline::failpoint::hit(&format!("slurm-task.{stage_name}.{shard}"))?;
+    let steps = Steps::start(format!("{stage_name} shard {shard}"));
     let run = read_run(run_dir)?;
     let plan = pipeline_plan(&run, registry)?;
+    steps.done("run and pipeline read");
     let stage = plan.stages.get(stage_name).ok_or_else(|| anyhow!("the pipeline has no stage `{stage_name}`"))?;
     let shards = run.shards.get(stage_name).ok_or_else(|| anyhow!("stage `{stage_name}` has no array in this run"))?;
     let mine: BTreeSet<&str> =
@@ -798,6 +800,7 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     }
     let (lock, read) = LockFile::read_stages(&output_dir.join(LOCK_FILE), &wanted)?;
     eprintln!("{stage_name} shard {shard}: read {} state file(s), {} bytes", read.files, read.bytes);
+    steps.done("state read");
     // The sources this stage reads, of a closed bucketed stage only its buckets' records.
     let own_records = (bucketed && run.closed.contains(stage_name)).then_some(&buckets);
     // Their files as the planner listed them for this shard, where it did (not in an allocation).
@@ -815,6 +818,7 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let rerun = Rerun { stages: forced_stages(&plan, &run.force), remake: run.remake.clone() };
     let state = Known { lock: &lock, sources: &sources, files: &files, rerun: &rerun, disk: &RealDisk::default() };
     let assessed = assess_stage(&plan, stage, &state, &produced)?;
+    steps.done("sources resolved and units assessed");
     let (memo_files, memo_bytes) = crate::io::hash::memo_files_read();
     eprintln!("{stage_name} shard {shard}: read {memo_files} hash memo file(s), {memo_bytes} bytes");
     // A unit nobody predicted (a partition no earlier output had) goes to the last shard, or
@@ -865,6 +869,7 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
         &indicatif::ProgressBar::hidden(),
         run.fanned.contains(stage_name),
     );
+    steps.done("units ran");
     if done.exists() {
         std::fs::remove_dir_all(&done)?; // an earlier attempt of this shard
     }
@@ -900,6 +905,7 @@ pub fn task(run_dir: &Path, stage_name: &str, shard: usize, registry: Registry) 
     let manifests = run_dir.join(RUN_MANIFESTS).join(stage_name);
     std::fs::create_dir_all(&manifests)?;
     publish(&manifests.join(format!("{shard}.json")), &serde_json::to_vec(&manifest)?)?;
+    steps.done("manifest written");
     eprintln!("{stage_name} shard {shard}: {} unit(s), {} ran, {failed} failed", ours.len(), stale.len());
     if failed == 0 && !upstream_tainted {
         drop_consumed(run_dir, &run, &plan, stage_name, shard);
@@ -940,19 +946,20 @@ fn dropped_marker(results: &Path) -> PathBuf {
     results.with_extension("dropped")
 }
 
-/// What the commit job spent, step by step, in its log: wall and CPU seconds since it started.
-/// Silent in an in-allocation run, whose process commits after its steps.
-struct Steps(Option<std::time::Instant>);
+/// What a job spent, step by step, in its log: `<who>: <step> (at S s, C s CPU)`, wall and CPU
+/// seconds since it started (`bench/scale.py` reads them). Silent in an in-allocation run,
+/// whose process commits after its steps.
+struct Steps(Option<(std::time::Instant, String)>);
 
 impl Steps {
-    fn start() -> Steps {
-        Steps(Some(std::time::Instant::now()))
+    fn start(who: impl Into<String>) -> Steps {
+        Steps(Some((std::time::Instant::now(), who.into())))
     }
 
     fn done(&self, what: &str) {
-        let Some(started) = self.0 else { return };
+        let Some((started, who)) = &self.0 else { return };
         eprintln!(
-            "commit job: {what} (at {:.3} s, {:.3} s CPU)",
+            "{who}: {what} (at {:.3} s, {:.3} s CPU)",
             started.elapsed().as_secs_f64(),
             crate::pipeline::progress::cpu_seconds()
         );
@@ -961,7 +968,7 @@ impl Steps {
 
 /// `shakeflow slurm-commit RUN_DIR`: folds every task's manifest and commits, under the lease.
 pub fn commit(run_dir: &Path, registry: Registry) -> anyhow::Result<()> {
-    let steps = Steps::start();
+    let steps = Steps::start("commit job");
     let run = read_run(run_dir)?;
     let plan = pipeline_plan(&run, registry)?;
     let output_dir = plan.file.output_dir();
