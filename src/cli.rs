@@ -317,10 +317,11 @@ pub fn main() -> anyhow::Result<ExitCode> {
                 started.elapsed().as_secs_f64(),
                 plan.file.output_dir().display()
             ));
-            // One line of results per stage that ran and has one (fragility, detections,
+            // One line of results per stage that ran units and has one (fragility, detections,
             // verdicts, …). A summary reads all the stage's committed outputs, so it is made only
-            // for what this run changed and is shown: not under `--quiet`, not for a cached stage
-            // (at 10⁴ tests, summaries of cached stages were 6 of a no-op's 8 s).
+            // where units ran and it is shown: not under `--quiet`, not for a cached stage (nor
+            // one whose only change was a record gone; at 10⁴ tests, summaries of cached stages
+            // were 6 of a no-op's 8 s).
             if !quiet {
                 for report in reports.iter().filter(|r| matches!(r.outcome, Outcome::Ran { .. })) {
                     let Some(stage) = plan.stages.get(&report.name) else { continue };

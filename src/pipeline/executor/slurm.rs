@@ -314,8 +314,8 @@ fn new_run_id(plan: &Plan) -> String {
 /// their sources' files listed from these).
 type Planned<'a> = (&'a Prediction, &'a BTreeMap<String, ResolvedSource>);
 
-/// Makes a run folder and submits the arrays of `lines`' stale units and the commit job; None
-/// (and no folder) when nothing is stale. The caller hands its lease to the run.
+/// Makes a run folder and submits the arrays of `lines`' stale units (and units gone) and the
+/// commit job; None (and no folder) when there are none. The caller hands its lease to the run.
 #[allow(clippy::too_many_arguments)]
 fn submit_run(
     plan: &Plan,
@@ -556,7 +556,8 @@ struct RunNaming<'a> {
     shakeflow: &'a Path,
 }
 
-/// Submits an array per stage with stale units and the commit job; None when nothing is stale.
+/// Submits an array per stage with stale units or units gone, and the commit job; None when
+/// there is neither.
 #[allow(clippy::too_many_arguments)]
 fn submit_arrays(
     plan: &Plan,
@@ -575,8 +576,8 @@ fn submit_arrays(
     let mut run = RunFile::new(id, plan, options, slurm, None)?;
     run.remake = prediction.remake.clone();
     let quote = |p: &Path| format!("'{}'", p.display().to_string().replace('\'', r"'\''"));
-    let stale_units: BTreeMap<&str, (usize, usize)> =
-        lines.iter().map(|l| (l.name.as_str(), (l.stale.len(), l.units))).collect();
+    let stale_units: BTreeMap<&str, (usize, usize, usize)> =
+        lines.iter().map(|l| (l.name.as_str(), (l.stale.len(), l.units, l.vanished.len()))).collect();
     for (name, shards, only) in cut_shards(&mut run, plan, lines, selected, per_task) {
         let stage = &plan.stages[&name];
         run.shards.insert(name.clone(), shards.clone());
@@ -619,9 +620,10 @@ fn submit_arrays(
             log_dir: run_dir.join(RUN_LOGS),
         };
         let array = client.submit(&job, limits).map_err(|e| cancel_all(client, &run, e))?;
-        let (stale, units) = stale_units[name.as_str()];
+        let (stale, units, gone) = stale_units[name.as_str()];
+        let gone = if gone > 0 { format!(", {gone} gone") } else { String::new() };
         reporter.line(&format!(
-            "{name:<18} submitted: {} of {} shard(s), {stale} stale unit(s) of {units} ({})",
+            "{name:<18} submitted: {} of {} shard(s), {stale} stale unit(s) of {units}{gone} ({})",
             only.len(),
             shards.len(),
             array.parts.iter().map(|p| p.job_id.to_string()).collect::<Vec<_>>().join(", ")
@@ -947,8 +949,8 @@ fn dropped_marker(results: &Path) -> PathBuf {
 }
 
 /// What a job spent, step by step, in its log: `<who>: <step> (at S s, C s CPU)`, wall and CPU
-/// seconds since it started (`bench/scale.py` reads them). Silent in an in-allocation run,
-/// whose process commits after its steps.
+/// seconds since it started (`bench/scale.py` reads them). `Steps(None)` is silent: the commit
+/// of an in-allocation run, whose process commits after its steps.
 struct Steps(Option<(std::time::Instant, String)>);
 
 impl Steps {
@@ -964,6 +966,30 @@ impl Steps {
             crate::pipeline::progress::cpu_seconds()
         );
     }
+}
+
+/// The units of stage `name` that its tasks saw gone, checked against what its tasks kept. One
+/// task owns each unit: one saying it is gone and another running or keeping it is a
+/// contradiction, and removing its files on that word could lose them: an error, nothing
+/// committed. Except where an upstream unit failed (`upstream_tainted`): a unit whose task
+/// failed, or never ran, is seen gone by the others then, and so is a unit whose upstream task
+/// did not finish, by a task that ran under `--keep-going`, while a shard not run keeps it; the
+/// stage is incomplete and keeps such a unit, as a local run keeps what a failed upstream unit
+/// left.
+fn gone_units(
+    name: &str,
+    records: &[UnitRecord],
+    vanished: BTreeSet<String>,
+    upstream_tainted: bool,
+) -> anyhow::Result<Vec<String>> {
+    let kept: BTreeSet<&str> =
+        records.iter().filter(|r| !matches!(r.outcome, UnitOutcome::Failed { .. })).map(|r| r.id.as_str()).collect();
+    if !upstream_tainted {
+        if let Some(both) = vanished.iter().find(|id| kept.contains(id.as_str())) {
+            bail!("stage `{name}`: {both} is both gone and kept by this run's tasks; nothing committed, run again");
+        }
+    }
+    Ok(vanished.into_iter().filter(|id| !kept.contains(id.as_str())).collect())
 }
 
 /// `shakeflow slurm-commit RUN_DIR`: folds every task's manifest and commits, under the lease.
@@ -1077,18 +1103,7 @@ fn commit_manifests(
                 Err(_) => records.extend(ids.iter().map(|id| UnitRecord::cached(id))),
             }
         }
-        let vanished: Vec<String> = vanished.into_iter().collect();
-        // One task owns each unit: one saying it is gone and another running or keeping it is
-        // a contradiction, and removing its files on that word could lose them. (A unit whose
-        // task failed, or never ran, is seen gone by the others when its upstream unit failed:
-        // the stage is incomplete then, and keeps it.)
-        let failed = |r: &&UnitRecord| matches!(r.outcome, UnitOutcome::Failed { .. });
-        if let Some(both) = records.iter().filter(|r| !failed(r)).find(|r| vanished.binary_search(&r.id).is_ok()) {
-            bail!(
-                "stage `{name}`: {} is both gone and kept by this run's tasks; nothing committed, run again",
-                both.id
-            );
-        }
+        let vanished = gone_units(name, &records, vanished, upstream_tainted)?;
         steps.done(&format!("{name}: {} manifest record(s) read", records.len()));
         let staging = transaction.new_path(plan.stage_path(name));
         let entry = lock.stages.get(name);
@@ -1278,7 +1293,17 @@ mod tests {
         assert!((200..=256).contains(&finest), "a bucket is the smallest shard: {finest}");
         assert!(bucket_ranges(std::iter::empty(), 10).is_empty());
         // A run's shard of a bucket is the range that holds it.
-        let run = RunFile {
+        let run = run_file(ranges.clone());
+        for (i, [first, end]) in ranges.iter().enumerate() {
+            assert_eq!(run.shard_of(*first as u8), i);
+            assert_eq!(run.shard_of((*end - 1) as u8), i);
+            assert_eq!(run.buckets(i).len(), usize::from(end - first));
+        }
+    }
+
+    /// A run file of nothing submitted yet, its buckets cut into `ranges`.
+    fn run_file(ranges: Vec<[u16; 2]>) -> RunFile {
+        RunFile {
             id: "r".into(),
             pipeline: PathBuf::from("p.yaml"),
             pipeline_hash: String::new(),
@@ -1294,14 +1319,53 @@ mod tests {
             remake: BTreeMap::new(),
             fanned: BTreeSet::new(),
             bucketed: BTreeSet::new(),
-            ranges: ranges.clone(),
+            ranges,
             closed: BTreeSet::new(),
-        };
-        for (i, [first, end]) in ranges.iter().enumerate() {
-            assert_eq!(run.shard_of(*first as u8), i);
-            assert_eq!(run.shard_of((*end - 1) as u8), i);
-            assert_eq!(run.buckets(i).len(), usize::from(end - first));
         }
+    }
+
+    #[test]
+    fn a_stage_with_units_gone_and_none_stale_runs_one_task_that_says_so() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let plan = super::super::test_support::plan(dir.path(), super::super::test_support::PIPELINE);
+        let selected: BTreeSet<String> = ["load", "baseline"].map(String::from).into();
+        let mut run = run_file(Vec::new());
+        let ids = || vec!["motion=A".to_string(), "motion=B".to_string()];
+        assert!(cut_shards(&mut run, &plan, &[line(ids())], &selected, 1).is_empty(), "nothing to do");
+        let gone = StatusLine { vanished: vec!["motion=C".into()], ..line(ids()) };
+        let all_gone = StatusLine { name: "baseline".into(), vanished: vec!["motion=C".into()], ..line(Vec::new()) };
+        let cut = cut_shards(&mut run, &plan, &[gone, all_gone], &selected, 1);
+        let shards = |ids: &[&[&str]]| {
+            ids.iter().map(|s| s.iter().map(|id| id.to_string()).collect()).collect::<Vec<Vec<String>>>()
+        };
+        assert_eq!(cut[0], ("load".into(), shards(&[&["motion=A"], &["motion=B"]]), BTreeSet::from([0])));
+        assert_eq!(
+            cut[1],
+            ("baseline".into(), shards(&[&[]]), BTreeSet::from([0])),
+            "every record gone: one empty shard"
+        );
+    }
+
+    #[test]
+    fn a_unit_seen_gone_and_kept_is_an_error_unless_an_upstream_unit_failed() {
+        let records = vec![
+            UnitRecord::cached("motion=A"),
+            UnitRecord {
+                outcome: UnitOutcome::Failed { reason: "its Slurm task (shard 1) did not finish".into() },
+                ..UnitRecord::cached("motion=B")
+            },
+        ];
+        let seen = |ids: &[&str]| ids.iter().map(|id| id.to_string()).collect::<BTreeSet<String>>();
+        // A failed unit seen gone by another task is not a contradiction (the fold keeps it:
+        // the stage is incomplete).
+        assert_eq!(
+            gone_units("s", &records, seen(&["motion=B", "motion=C"]), false).unwrap(),
+            ["motion=B", "motion=C"]
+        );
+        let both = gone_units("s", &records, seen(&["motion=A"]), false).unwrap_err();
+        assert!(format!("{both}").contains("motion=A is both gone and kept"), "{both}");
+        // Under a failed upstream unit the shard that kept it wins: the stage keeps it.
+        assert_eq!(gone_units("s", &records, seen(&["motion=A", "motion=C"]), true).unwrap(), ["motion=C"]);
     }
 
     #[test]
