@@ -276,15 +276,23 @@ fn a_stage_crossing_the_fan_out_limit_on_slurm_keeps_every_cached_record() {
     for project in [&local, &cluster] {
         write_daq_csv(&project.path().join("archive/FB-3/daq.csv"), 400, 200.0, 2.0);
     }
-    let out = shakeflow_env(&["run", "pipeline.yaml"], local.path(), &fan_out);
+    let log = local_and_slurm_runs_match(local.path(), cluster.path(), &fan_out);
+    assert_eq!(std::fs::read_dir(cluster.path().join("out/baseline/records")).unwrap().count(), 3, "{log}");
+}
+
+/// Runs `local` locally and `cluster` on the test Slurm (`--wait`), both with `env`, and checks
+/// that they end with the same files, byte for byte (their names compared first, for a failure
+/// one can read); returns the Slurm run's log.
+fn local_and_slurm_runs_match(local: &Path, cluster: &Path, env: &[(&str, &str)]) -> String {
+    let out = shakeflow_env(&["run", "pipeline.yaml"], local, env);
     assert!(out.status.success(), "{}", stderr(&out));
-    let out = slurm_run_env(cluster.path(), &["--wait"], &fan_out);
+    let out = slurm_run_env(cluster, &["--wait"], env);
     let log = stderr(&out);
     assert!(out.status.success(), "{log}");
     let names = |root: &Path| artifacts_and_state(root).into_iter().map(|(name, _)| name).collect::<Vec<_>>();
-    assert_eq!(names(local.path()), names(cluster.path()), "{log}");
-    assert_eq!(artifacts_and_state(local.path()), artifacts_and_state(cluster.path()));
-    assert_eq!(std::fs::read_dir(cluster.path().join("out/baseline/records")).unwrap().count(), 3, "{log}");
+    assert_eq!(names(local), names(cluster), "{log}");
+    assert_eq!(artifacts_and_state(local), artifacts_and_state(cluster), "{log}");
+    log
 }
 
 #[test]
@@ -300,15 +308,9 @@ fn a_record_gone_from_the_archive_goes_from_a_slurm_run_as_from_a_local_one() {
             assert!(out.status.success(), "{}", stderr(&out));
             std::fs::remove_dir_all(project.path().join("archive/FB-2")).unwrap();
         }
-        let out = shakeflow_env(&["run", "pipeline.yaml"], local.path(), &env);
-        assert!(out.status.success(), "{}", stderr(&out));
-        let out = slurm_run_env(cluster.path(), &["--wait"], &env);
-        let log = stderr(&out);
-        assert!(out.status.success(), "{log}");
-        let names = |root: &Path| artifacts_and_state(root).into_iter().map(|(name, _)| name).collect::<Vec<_>>();
-        assert!(!names(local.path()).iter().any(|n| n.contains("FB-2")), "fan-out above {fan_out}");
-        assert_eq!(names(local.path()), names(cluster.path()), "fan-out above {fan_out}: {log}");
-        assert_eq!(artifacts_and_state(local.path()), artifacts_and_state(cluster.path()), "fan-out above {fan_out}");
+        let log = local_and_slurm_runs_match(local.path(), cluster.path(), &env);
+        let files = artifacts_and_state(cluster.path());
+        assert!(!files.iter().any(|(name, _)| name.contains("FB-2")), "fan-out above {fan_out}: {log}");
         wait_for_commit(cluster.path());
     }
 }
