@@ -317,13 +317,13 @@ pub fn main() -> anyhow::Result<ExitCode> {
                 started.elapsed().as_secs_f64(),
                 plan.file.output_dir().display()
             ));
-            // One line of results per stage that ran units and has one (fragility, detections,
-            // verdicts, …). A summary reads all the stage's committed outputs, so it is made only
-            // where units ran and it is shown: not under `--quiet`, not for a cached stage (nor
-            // one whose only change was a record gone; at 10⁴ tests, summaries of cached stages
+            // One line of results per stage whose results changed and that has one (fragility,
+            // detections, verdicts, …): units ran or were removed. A summary reads all the
+            // stage's committed outputs, so it is made only then, and where it is shown: not
+            // under `--quiet`, not for a cached stage (at 10⁴ tests, summaries of cached stages
             // were 6 of a no-op's 8 s).
             if !quiet {
-                for report in reports.iter().filter(|r| matches!(r.outcome, Outcome::Ran { .. })) {
+                for report in reports.iter().filter(|r| matches!(r.outcome, Outcome::Ran { .. }) || r.gone > 0) {
                     let Some(stage) = plan.stages.get(&report.name) else { continue };
                     if let Some(line) = stage.stage.summary(&plan.stage_dir(&report.name)) {
                         reporter.line(&format!("  {}: {line}", report.name));

@@ -156,6 +156,29 @@ fn a_results_line_is_printed_for_the_stages_that_ran_only() {
     );
 }
 
+#[test]
+fn a_record_gone_is_said_and_its_stage_summarised_again() {
+    let dir = crate::tempdir::tempdir().unwrap();
+    let root = dir.path();
+    std::fs::create_dir(root.join("gm")).unwrap();
+    for record in ["Rinaldi228", "Rinaldi318"] {
+        std::fs::copy(ground_motion(&format!("{record}.AT2")), root.join(format!("gm/{record}.AT2"))).unwrap();
+    }
+    let pipeline = "version: 1\noutput_dir: out\ninputs:\n  gm:\n    format: at2\n    path: gm/{record}.AT2\n\
+         stages:\n  load:\n    type: load\n    inputs: [gm]\n  rocking:\n    type: simulate_toppling\n    \
+         inputs: [load]\n    params:\n      preset: PS2\n      figure: false\n";
+    std::fs::write(root.join("pipeline.yaml"), pipeline).unwrap();
+    let first = shakeflow(&["run", "pipeline.yaml"], root);
+    assert!(first.status.success(), "{}", stderr(&first));
+    assert!(stderr(&first).contains("  rocking: overturned in ") && stderr(&first).contains(" of 2 records"));
+    std::fs::remove_file(root.join("gm/Rinaldi318.AT2")).unwrap();
+    let second = shakeflow(&["run", "pipeline.yaml"], root);
+    let log = stderr(&second);
+    assert!(second.status.success(), "{log}");
+    assert!(log.contains("rocking            1 unit(s) removed: their records are gone from the inputs"), "{log}");
+    assert!(log.contains("2 stage(s): 0 ran, 2 cached") && log.contains(" of 1 records"), "{log}");
+}
+
 /// Breaks the project, runs, and checks the failure is clear and changed nothing.
 fn fails_cleanly(break_it: impl FnOnce(&Path), expected: &[&str]) {
     let project = project();

@@ -165,9 +165,10 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
         let committed = entry.map(|e| e.units.values().flat_map(|u| cached_files(u, &stage_dir)).collect());
         state.produced.insert(name.to_string(), committed.unwrap_or_default());
         let units = entry.map_or(0, |e| e.units.len());
-        state
-            .reports
-            .insert(name.to_string(), StageReport { name: name.into(), outcome: Outcome::Skipped, units, ran: 0 });
+        state.reports.insert(
+            name.to_string(),
+            StageReport { name: name.into(), outcome: Outcome::Skipped, units, ran: 0, gone: 0 },
+        );
         return Ok(());
     }
     let settled = env.settled.lock().expect("no poisoned lock").remove(name);
@@ -220,6 +221,11 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
         let layout = if fanned { "two-level folders" } else { "one folder" };
         env.reporter.line(&format!("{name:<18} {} cached file(s) moved to {layout}", folded.moved));
     }
+    // Removed only when the stage is complete (`entry_from_outcomes`).
+    let gone = if folded.complete { assessed.vanished.len() } else { 0 };
+    if gone > 0 {
+        env.reporter.line(&format!("{name:<18} {gone} unit(s) removed: their records are gone from the inputs"));
+    }
     if !stale.is_empty() {
         let written = folded.install.len();
         env.reporter.line(&format!(
@@ -252,7 +258,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
     };
     state.reports.insert(
         name.to_string(),
-        StageReport { name: name.into(), outcome, units: assessed.units.len(), ran: stale.len() },
+        StageReport { name: name.into(), outcome, units: assessed.units.len(), ran: stale.len(), gone },
     );
     Ok(())
 }

@@ -152,6 +152,8 @@ pub struct StageReport {
     pub outcome: Outcome,
     pub units: usize,
     pub ran: usize,
+    /// Units removed because their records are gone from the inputs.
+    pub gone: usize,
 }
 
 /// A unit that failed (or a record skipped by `on_error: skip`), and why.
