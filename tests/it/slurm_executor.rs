@@ -297,8 +297,8 @@ fn local_and_slurm_runs_match(local: &Path, cluster: &Path, env: &[(&str, &str)]
 
 #[test]
 fn a_record_gone_from_the_archive_goes_from_a_slurm_run_as_from_a_local_one() {
-    // Nothing else changed: every stage's only change is a unit gone, which no array task runs;
-    // the Slurm run still has to remove its files and state, fanned out or not.
+    // Nothing else changed: every stage's only change is a unit gone, and no unit is stale; the
+    // Slurm run still has to remove the gone unit's files and state, fanned out or not.
     for fan_out in ["1", "100"] {
         let env = [("SHAKEFLOW_FAN_OUT_ABOVE", fan_out)];
         let local = small_project();

@@ -127,8 +127,8 @@ fn editing_the_equipment_file_reruns_what_reads_it() {
     assert!(log.contains("3 stage(s): 2 ran, 1 cached"), "{log}");
 }
 
-/// A summary reads every output of its stage: `run` makes one only for a stage that ran, and
-/// none under `--quiet` (a cached stage's, at 10⁴ tests, was most of a no-op rerun).
+/// A summary reads every output of its stage: `run` makes one only for a stage whose results
+/// changed, and none under `--quiet` (a cached stage's, at 10⁴ tests, was most of a no-op rerun).
 #[test]
 fn a_results_line_is_printed_for_the_stages_that_ran_only() {
     let project = project();

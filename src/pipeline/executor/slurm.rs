@@ -342,13 +342,14 @@ fn submit_run(
 }
 
 /// Per stage in run order, its shards cut from the predicted units, and those holding a stale
-/// unit (the shards to run); stages with neither a stale unit nor one gone are left out. Decides which stages fan out and
-/// which are cut by bucket (`run.fanned`, `bucketed`, `ranges`, `closed`): a bucketed stage's
-/// shard i holds the units of buckets `ranges[i]`, consecutive ids otherwise. A bucketed stage
-/// also runs the shards holding a unit gone from its inputs: their task, which reads only its
-/// buckets of the state, is the one that sees it gone. Any other stage's task sees every unit
-/// gone: a stage whose only change is a unit gone runs its first shard (none of its units is
-/// stale: the task only says what is gone), so that the commit job removes it as a local run does.
+/// unit (the shards to run); stages with neither a stale unit nor one gone are left out.
+/// Decides which stages fan out and which are cut by bucket (`run.fanned`, `bucketed`,
+/// `ranges`, `closed`): a bucketed stage's shard i holds the units of buckets `ranges[i]`,
+/// consecutive ids otherwise. A bucketed stage also runs the shards holding a unit gone from
+/// its inputs: their task, which reads only its buckets of the state, is the one that sees it
+/// gone. Any other stage's task sees every unit gone: a stage whose only change is a unit gone
+/// runs its first shard (none of its units is stale: the task only says what is gone), so that
+/// the commit job removes it as a local run does.
 fn cut_shards(
     run: &mut RunFile,
     plan: &Plan,
