@@ -84,6 +84,8 @@ pub(super) struct Folded {
     pub(super) complete: bool,
     /// Files of cached units moved to the stage's layout (flat or two-level folders).
     pub(super) moved: usize,
+    /// Units of records gone from the inputs whose files and entries this fold removes.
+    pub(super) gone: usize,
 }
 
 /// Folds a stage's unit records into its new lockfile entry, the files to install and remove,
@@ -216,6 +218,7 @@ pub(super) fn entry_from_outcomes(
         let old = &entry.expect("vanished units come from the lockfile").units[id];
         if folded.complete {
             folded.remove.extend(old.files.keys().map(|gone| at(gone)));
+            folded.gone += 1;
         } else {
             new_entry.units.insert(id.clone(), old.clone());
         }

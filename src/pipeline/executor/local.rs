@@ -221,8 +221,7 @@ fn run_stage(env: &RunEnv<'_>, stage: &PlannedStage) -> anyhow::Result<()> {
         let layout = if fanned { "two-level folders" } else { "one folder" };
         env.reporter.line(&format!("{name:<18} {} cached file(s) moved to {layout}", folded.moved));
     }
-    // Removed only when the stage is complete (`entry_from_outcomes`).
-    let gone = if folded.complete { assessed.vanished.len() } else { 0 };
+    let gone = folded.gone;
     if gone > 0 {
         env.reporter.line(&format!("{name:<18} {gone} unit(s) removed: their records are gone from the inputs"));
     }

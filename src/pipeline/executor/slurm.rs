@@ -577,8 +577,7 @@ fn submit_arrays(
     let mut run = RunFile::new(id, plan, options, slurm, None)?;
     run.remake = prediction.remake.clone();
     let quote = |p: &Path| format!("'{}'", p.display().to_string().replace('\'', r"'\''"));
-    let stale_units: BTreeMap<&str, (usize, usize, usize)> =
-        lines.iter().map(|l| (l.name.as_str(), (l.stale.len(), l.units, l.vanished.len()))).collect();
+    let line_of: BTreeMap<&str, &StatusLine> = lines.iter().map(|l| (l.name.as_str(), l)).collect();
     for (name, shards, only) in cut_shards(&mut run, plan, lines, selected, per_task) {
         let stage = &plan.stages[&name];
         run.shards.insert(name.clone(), shards.clone());
@@ -621,12 +620,17 @@ fn submit_arrays(
             log_dir: run_dir.join(RUN_LOGS),
         };
         let array = client.submit(&job, limits).map_err(|e| cancel_all(client, &run, e))?;
-        let (stale, units, gone) = stale_units[name.as_str()];
-        let gone = if gone > 0 { format!(", {gone} gone") } else { String::new() };
+        let line = line_of[name.as_str()];
+        let gone = match line.vanished.len() {
+            0 => String::new(),
+            n => format!(", {n} gone"),
+        };
         reporter.line(&format!(
-            "{name:<18} submitted: {} of {} shard(s), {stale} stale unit(s) of {units}{gone} ({})",
+            "{name:<18} submitted: {} of {} shard(s), {} stale unit(s) of {}{gone} ({})",
             only.len(),
             shards.len(),
+            line.stale.len(),
+            line.units,
             array.parts.iter().map(|p| p.job_id.to_string()).collect::<Vec<_>>().join(", ")
         ));
         run.tasks.insert(name.clone(), only);
