@@ -217,7 +217,7 @@ impl<'a> Hybrid<4, 2> for Coupled<'a> {
         let (theta_ddot, base, sensor) = match self.regime {
             Regime::Rocking { side } => {
                 let (theta_ddot, base) = system.rocking(side, y, av);
-                let sensor = sensor_acceleration(block, side, [y[0], y[1], theta_ddot], self.sensor_height, base, av);
+                let sensor = sensor_acceleration(block, side, [y[0], y[1], theta_ddot], self.sensor, base, av);
                 (theta_ddot, base, sensor)
             }
             Regime::Rest | Regime::Overturned => {

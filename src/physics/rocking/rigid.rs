@@ -383,8 +383,8 @@ impl Hybrid<2, 6> for Toppling<'_> {
             Regime::Rest | Regime::Leaning { .. } | Regime::Overturned => (0.0, (ax, av)),
             Regime::Rocking { side } => {
                 let acc = self.on_side(side, self.segment(k)).theta_ddot(self.excitation.clock().time(k), y);
-                let h = self.options.sensor_height_m.unwrap_or(self.block.height_m);
-                (acc, sensor_acceleration(&self.block, side, [y[0], y[1], acc], h, ax, av))
+                let point = self.options.sensor_point(&self.block);
+                (acc, sensor_acceleration(&self.block, side, [y[0], y[1], acc], point, ax, av))
             }
         };
         self.response.record_motion(*y, theta_ddot, sensor, self.regime == Regime::Overturned, av);

@@ -404,7 +404,7 @@ impl<'a> Hybrid<4, 4> for Sliding<'a> {
         };
         let sensor = match regime {
             Regime::Rock { side } | Regime::SlideRock { side, .. } => {
-                sensor_acceleration(model.block, side, [y[0], y[1], theta_ddot], self.sensor_height, base, av)
+                sensor_acceleration(model.block, side, [y[0], y[1], theta_ddot], self.sensor, base, av)
             }
             _ => (base, av),
         };
