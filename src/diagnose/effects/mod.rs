@@ -20,6 +20,12 @@ pub trait Effect: Sync {
     fn discrete(&self) -> &'static [bool] {
         &[]
     }
+    /// True when the prediction is affine in the effect's continuous parameters (they change
+    /// what a sensor reads, not the motion): χ² is quadratic in them, and the fit solves them
+    /// exactly where its search lands.
+    fn affine(&self) -> bool {
+        false
+    }
     /// Plausible ranges, given the case and where the mismatch was found.
     fn bounds(&self, case: &Case, window: (f64, f64)) -> Vec<(f64, f64)>;
     /// Starting points covering the ranges.

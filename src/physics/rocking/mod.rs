@@ -867,7 +867,11 @@ mod tests {
             let (before, now, after) = (at(k - 1, s), at(k, s), at(k + 1, s));
             for (axis, reported) in [(0, r.sensor_ax_mps2[k]), (1, r.sensor_az_mps2[k])] {
                 let differenced = (before[axis] - 2.0 * now[axis] + after[axis]) / (dt * dt);
-                assert!((differenced - reported).abs() < 1e-3, "t {:.3} s axis {axis}: {differenced} vs {reported}", k as f64 * dt);
+                assert!(
+                    (differenced - reported).abs() < 1e-3,
+                    "t {:.3} s axis {axis}: {differenced} vs {reported}",
+                    k as f64 * dt
+                );
             }
             checked += 1;
         }
