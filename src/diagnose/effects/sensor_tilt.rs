@@ -16,6 +16,8 @@ pub struct SensorTilt;
 
 /// The lowest a top accelerometer is looked for, as a share of the unit's height.
 const LOWEST: f64 = 0.5;
+/// A mount point this close (m) to the top centre is said to be there.
+const MOUNT_TOLERANCE_M: f64 = 0.005;
 
 impl Effect for SensorTilt {
     fn name(&self) -> &'static str {
@@ -59,11 +61,17 @@ impl Effect for SensorTilt {
     fn explain(&self, case: &Case, params: &[f64]) -> String {
         let [offset, height] = [params[0], params[1]];
         let below = case.block.height_m - height;
+        let tilt = "the top accelerometer turns with the unit and senses g·sin θ as it tilts (about 1 m/s^2 at 6°), and g itself once the unit lies on its side";
+        // Within 5 mm of the top centre: where the equipment file says.
+        if below < MOUNT_TOLERANCE_M && offset.abs() < MOUNT_TOLERANCE_M {
+            return format!("{tilt}; it is where the equipment file says, at the top centre");
+        }
+        let side = if offset > 0.0 { "+" } else { "−" };
         format!(
-            "the top accelerometer turns with the unit and senses g·sin θ as it tilts (about 1 m/s^2 at 6°), and g itself once the unit lies on its side; it reads as if mounted {height:.2} m above the base ({}) and {} (the equipment file assumes the top centre)",
-            if below >= 0.005 { format!("{below:.2} m below the top") } else { "at the top".into() },
-            if offset.abs() >= 0.005 {
-                format!("{:.2} m off the centre line toward {}x", offset.abs(), if offset > 0.0 { "+" } else { "−" })
+            "{tilt}; it reads as if mounted {height:.2} m above the base ({}) and {} (the equipment file assumes the top centre)",
+            if below >= MOUNT_TOLERANCE_M { format!("{below:.2} m below the top") } else { "at the top".into() },
+            if offset.abs() >= MOUNT_TOLERANCE_M {
+                format!("{:.2} m off the centre line toward {side}x", offset.abs())
             } else {
                 "on the centre line".into()
             }
