@@ -22,7 +22,8 @@ pub trait Effect: Sync {
     }
     /// True when the prediction is affine in the effect's continuous parameters (they change
     /// what a sensor reads, not the motion): χ² is quadratic in them, and the fit solves them
-    /// exactly where its search lands.
+    /// exactly from the grid's points and after each move of the unit's values, instead of
+    /// searching them.
     fn affine(&self) -> bool {
         false
     }

@@ -6,9 +6,10 @@
 //! the equipment file assumes (a bracket on a side panel, a shelf below the top), and its point
 //! sets the kinematic part of what it reads (mis-stated seeds 3301 case_04 and 3303 case_04: a
 //! sensor 0.77–0.84 H high and 0.03–0.13 m off the centre line, which the top centre's tilt left
-//! `unexplained`).
+//! `unexplained`). Its parameters: the offset from the centre line (toward +x) and the depth
+//! below the top, so the point stays put on the unit while a joint search moves its height.
 
-use super::{linspace, product, Case, Effect, Prediction};
+use super::{Case, Effect, Prediction};
 use crate::physics::error::PhysicsError;
 use crate::physics::rocking::{EventKind, Options};
 
@@ -25,7 +26,7 @@ impl Effect for SensorTilt {
     }
 
     fn parameter_names(&self) -> &'static [&'static str] {
-        &["offset_m", "height_m"]
+        &["offset_m", "below_top_m"]
     }
 
     /// The mount point moves what the sensor reads, linearly (a rigid body's accelerations are
@@ -36,17 +37,20 @@ impl Effect for SensorTilt {
 
     fn bounds(&self, case: &Case, _: (f64, f64)) -> Vec<(f64, f64)> {
         let (b, h) = (case.block.half_base_m, case.block.height_m);
-        vec![(-b, b), (LOWEST * h, h)]
+        vec![(-b, b), (0.0, (1.0 - LOWEST) * h)]
     }
 
-    fn grid(&self, case: &Case, _: (f64, f64)) -> Vec<Vec<f64>> {
-        let (b, h) = (case.block.half_base_m, case.block.height_m);
-        product(&[linspace(-0.5 * b, 0.5 * b, 5), linspace(0.6 * h, h, 5)])
+    /// Where the equipment file says the sensor is, the top centre: the fit solves the point
+    /// from there ([`Effect::affine`]).
+    fn grid(&self, _: &Case, _: (f64, f64)) -> Vec<Vec<f64>> {
+        vec![vec![0.0, 0.0]]
     }
 
     fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, PhysicsError> {
-        let options =
-            Options { sensor_offset_m: params[0], sensor_height_m: Some(params[1]), ..case.nominal_options() };
+        // The depth below the top, not the height: the point stays where it is on the unit
+        // while a joint search moves the unit's height.
+        let height = case.block.height_m - params[1];
+        let options = Options { sensor_offset_m: params[0], sensor_height_m: Some(height), ..case.nominal_options() };
         let (response, mut prediction) = case.simulate(&case.block, &options)?;
         let g = case.block.g_mps2;
         prediction.top_ax_mps2 = (0..response.theta_rad.len())
@@ -59,8 +63,8 @@ impl Effect for SensorTilt {
     }
 
     fn explain(&self, case: &Case, params: &[f64]) -> String {
-        let [offset, height] = [params[0], params[1]];
-        let below = case.block.height_m - height;
+        let [offset, below] = [params[0], params[1]];
+        let height = case.block.height_m - below;
         let tilt = "the top accelerometer turns with the unit and senses g·sin θ as it tilts (about 1 m/s^2 at 6°), and g itself once the unit lies on its side";
         // Within 5 mm of the top centre: where the equipment file says.
         if below < MOUNT_TOLERANCE_M && offset.abs() < MOUNT_TOLERANCE_M {
