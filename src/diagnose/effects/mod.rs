@@ -21,9 +21,10 @@ pub trait Effect: Sync {
         &[]
     }
     /// True when the prediction is affine in the effect's continuous parameters (they change
-    /// what a sensor reads, not the motion): χ² is quadratic in them, and the fit solves them
-    /// exactly from the grid's points and after each move of the unit's values, instead of
-    /// searching them.
+    /// what a sensor reads, not the motion): χ² is then quadratic in them but for the small
+    /// share they have in the weights, and the fit holds them at the grid's point while it
+    /// searches the unit's values and solves them over the whole record, instead of searching
+    /// them.
     fn affine(&self) -> bool {
         false
     }

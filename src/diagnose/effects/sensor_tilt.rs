@@ -15,9 +15,14 @@ use crate::physics::rocking::{EventKind, Options};
 
 pub struct SensorTilt;
 
+/// Where the equipment file puts the sensor: its stated height, or the top.
+fn stated_height(case: &Case) -> f64 {
+    case.sensor_height_m.unwrap_or(case.block.height_m)
+}
+
 /// The lowest a top accelerometer is looked for, as a share of the unit's height.
 const LOWEST: f64 = 0.5;
-/// A mount point this close (m) to the top centre is said to be there.
+/// A mount point this close (m) to where the equipment file puts it is said to be there.
 const MOUNT_TOLERANCE_M: f64 = 0.005;
 
 impl Effect for SensorTilt {
@@ -47,9 +52,9 @@ impl Effect for SensorTilt {
     }
 
     fn predict(&self, case: &Case, params: &[f64]) -> Result<Prediction, PhysicsError> {
-        // The depth below the top, not the height: the point stays where it is on the unit
-        // while a joint search moves the unit's height.
-        let height = case.block.height_m - params[1];
+        // The depth below where the equipment file puts the sensor (the top), not the height:
+        // the point stays where it is on the unit while a joint search moves the unit's height.
+        let height = stated_height(case) - params[1];
         let options = Options { sensor_offset_m: params[0], sensor_height_m: Some(height), ..case.nominal_options() };
         let (response, mut prediction) = case.simulate(&case.block, &options)?;
         let g = case.block.g_mps2;
@@ -63,16 +68,20 @@ impl Effect for SensorTilt {
     }
 
     fn explain(&self, case: &Case, params: &[f64]) -> String {
-        let [offset, below] = [params[0], params[1]];
-        let height = case.block.height_m - below;
+        let [offset, depth] = [params[0], params[1]];
+        let stated = stated_height(case);
+        let height = stated - depth;
+        let below = case.block.height_m - height;
         let tilt = "the top accelerometer turns with the unit and senses g·sin θ as it tilts (about 1 m/s^2 at 6°), and g itself once the unit lies on its side";
-        // Within 5 mm of the top centre: where the equipment file says.
-        if below < MOUNT_TOLERANCE_M && offset.abs() < MOUNT_TOLERANCE_M {
-            return format!("{tilt}; it is where the equipment file says, at the top centre");
+        // Within 5 mm of where the equipment file puts it: there.
+        if depth < MOUNT_TOLERANCE_M && offset.abs() < MOUNT_TOLERANCE_M {
+            return format!(
+                "{tilt}; it is where the equipment file puts it, {stated:.2} m above the base on the centre line"
+            );
         }
         let side = if offset > 0.0 { "+" } else { "−" };
         format!(
-            "{tilt}; it reads as if mounted {height:.2} m above the base ({}) and {} (the equipment file assumes the top centre)",
+            "{tilt}; it reads as if mounted {height:.2} m above the base ({}) and {} (the equipment file puts it {stated:.2} m above the base on the centre line)",
             if below >= MOUNT_TOLERANCE_M { format!("{below:.2} m below the top") } else { "at the top".into() },
             if offset.abs() >= MOUNT_TOLERANCE_M {
                 format!("{:.2} m off the centre line toward {side}x", offset.abs())
