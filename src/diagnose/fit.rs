@@ -178,8 +178,7 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
     let scored: Vec<(f64, Vec<f64>)> = grid.into_par_iter().map(|p| (objective.chi2(&p, horizons[0].0), p)).collect();
     let mut order: Vec<usize> = (0..scored.len()).collect();
     order.sort_by(|&a, &b| scored[a].0.total_cmp(&scored[b].0).then(a.cmp(&b)));
-    let discrete = effect.discrete();
-    let free: Vec<usize> = (0..k).filter(|&i| !discrete.get(i).copied().unwrap_or(false)).collect();
+    let free = free_parameters(effect);
     // An affine effect's own parameters stay at the grid's point while the unit's values are
     // searched, and are solved over the whole record. Searched with the values, or solved over a
     // short horizon, where a few rocking cycles hardly constrain them, they stand in for the
@@ -266,10 +265,15 @@ pub fn solve_affine(
     window: (f64, f64),
     params: &[f64],
 ) -> Vec<f64> {
-    let axes: Vec<usize> = (0..params.len()).filter(|&i| !effect.discrete().get(i).copied().unwrap_or(false)).collect();
     let chi2 =
         |p: &[f64]| effect.predict(case, p).map_or(f64::INFINITY, |prediction| evidence.misfit(&prediction).chi2);
-    solve_quadratic(params, &axes, &effect.bounds(case, window), chi2)
+    solve_quadratic(params, &free_parameters(effect), &effect.bounds(case, window), chi2)
+}
+
+/// The indices of the effect's parameters that are not discrete.
+fn free_parameters(effect: &dyn Effect) -> Vec<usize> {
+    let discrete = effect.discrete();
+    (0..effect.parameter_names().len()).filter(|&i| !discrete.get(i).copied().unwrap_or(false)).collect()
 }
 
 /// Where `chi2`, (nearly) quadratic along `axes` of the point, is least, from `start`: one Newton step

@@ -498,10 +498,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
                     let solved = fit::solve_affine(*effect, &unit, &evidence, physics_window, &params);
                     let k = params.len();
                     evaluations += 4 + 2 * k + k * k.saturating_sub(1) / 2;
-                    let predict = |c: &Case| effect.predict(c, &solved);
-                    let Ok(p) = predict(&unit).and_then(|p| unit.with_sensitivity(&evidence, p, predict)) else {
-                        continue;
-                    };
+                    let Ok(p) = predicted_with_spread(*effect, &unit, &solved, &evidence) else { continue };
                     let m = evidence.misfit(&p);
                     if m.chi2 + values.prior_chi2() < misfit.chi2 + own.prior_chi2() {
                         (own, params, prediction, misfit) = (values, solved, p, m);
@@ -705,6 +702,17 @@ fn settled(
     }
 }
 
+/// The effect's prediction for `unit` over the whole record, with its chaotic sensitivity.
+fn predicted_with_spread(
+    effect: &dyn effects::Effect,
+    unit: &Case,
+    params: &[f64],
+    evidence: &Evidence,
+) -> Result<Prediction, PhysicsError> {
+    let predict = |c: &Case| effect.predict(c, params);
+    predict(unit).and_then(|p| unit.with_sensitivity(evidence, p, predict))
+}
+
 /// The uncertain parameters fitted again with a physics in place ([`verdict::recalibrate`]): the
 /// rocking model's prediction with its chaotic sensitivity (two runs) over the whole record.
 fn recalibrate(
@@ -731,9 +739,8 @@ fn recalibrate(
     let chi2 = |m: &Case, until: f64| {
         effect.predict(&m.until(until), &fit.params).map_or(f64::INFINITY, |p| evidence.misfit_until(&p, until).chi2)
     };
-    let predict = |c: &Case| effect.predict(c, &fit.params);
     let run_whole = |case: &Case| {
-        let prediction = predict(case).and_then(|p| case.with_sensitivity(evidence, p, predict)).ok()?;
+        let prediction = predicted_with_spread(effect, case, &fit.params, evidence).ok()?;
         let misfit = evidence.misfit(&prediction);
         Some((prediction, misfit))
     };

@@ -859,10 +859,10 @@ mod tests {
         };
         let mut checked = 0;
         for k in 1..n - 1 {
-            let s = r.theta_rad[k].signum();
             if r.theta_rad[k] == 0.0 {
                 continue;
             }
+            let s = r.theta_rad[k].signum();
             let near_impact = r.events.iter().any(|e| (e.time_s - k as f64 * dt).abs() < 3.0 * dt);
             if near_impact || r.theta_rad[k - 1].signum() != s || r.theta_rad[k + 1].signum() != s {
                 continue;
