@@ -188,7 +188,7 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
     // seconds of rocking make far narrower: from the optimum of 1.5 s, the next horizon's
     // misfit is flat around it and the search is lost (mis-stated seed 3303 case_08: H 0.01 m,
     // 0.55 sd, off the truth costs 1000 times the misfit 0.5 s after the first uplift, and a
-    // point in the valley at 1.5 s costs 300 times the truth's at 4 s). Its horizon grows in
+    // point in the valley at 1.5 s costs 330 times the truth's at 4 s). Its horizon grows in
     // steps short enough for each search to start inside the next valley.
     if effect.affine() && !joint.is_empty() {
         let end = case.t0_s + case.duration_s();

@@ -543,8 +543,9 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
         .collect();
     // The best nominal calibration found, by posterior over the whole record as the nominal
     // calibration judges it (its plain run: a chaotic spread that covers the records is not a
-    // calibration that explains them); one whose unit the records never leave beats one they
-    // do leave, whatever their posteriors (mis-stated seed 3303 case_05, nothing concealed: a
+    // calibration that explains them); one whose unit the records never leave (judged, as the
+    // mismatch itself is, on its prediction with its chaotic spread) beats one they do leave,
+    // whatever their posteriors (mis-stated seed 3303 case_05, nothing concealed: a
     // tilt's calibration with a lower χ² over the whole record, left from 23.9 s on, would have
     // replaced one the records agree with throughout).
     let better = fitted
