@@ -181,7 +181,6 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
     // uplift (a flexible mount) is searched with them from there too.
     if let Some(uplift) = case.first_uplift().filter(|u| !joint.is_empty() && *u > window.0 + HORIZONS[0].0) {
         horizons.extend(UPLIFT_HORIZONS.map(|(h, span, levels)| (uplift + h, span, levels)));
-        horizons.sort_by(|a, b| a.0.total_cmp(&b.0));
     }
     // An affine effect reads the block's rotation itself (a tilting sensor reads g sin θ), so
     // the records pin the unit's critical angle and frequency to a valley that a few more
@@ -193,8 +192,8 @@ pub fn fit(effect: &dyn Effect, case: &Case, evidence: &Evidence, window: (f64, 
     if effect.affine() && !joint.is_empty() {
         let end = case.t0_s + case.duration_s();
         horizons.extend(AFFINE_HORIZONS.iter().map(|h| (window.0 + h, 0.0, 0)).filter(|h| h.0 < end));
-        horizons.sort_by(|a, b| a.0.total_cmp(&b.0));
     }
+    horizons.sort_by(|a, b| a.0.total_cmp(&b.0));
     let grid: Vec<Vec<f64>> = effect.grid(case, window).into_iter().map(|p| [p, start.clone()].concat()).collect();
     let scored: Vec<(f64, Vec<f64>)> = grid.into_par_iter().map(|p| (objective.chi2(&p, horizons[0].0), p)).collect();
     let mut order: Vec<usize> = (0..scored.len()).collect();
@@ -479,7 +478,7 @@ mod tests {
         case.block = Block::new(Shape::Rectangular { b_m: 0.5, h_m: 1.5, f: 0.04 }, 100.0, 9.81).unwrap();
         let observed = flexibility().predict(&case, &truth).unwrap();
         assert!(observed.overturn.is_none() && observed.theta_rad.iter().any(|t| t.abs() > 0.02), "it rocks, standing");
-        let time_s: Vec<f64> = (0..observed.theta_rad.len()).map(|k| case.t0_s + k as f64 * case.dt_s).collect();
+        let time_s = case.time_s();
         case.accel = Some(Observed { time_s: time_s.clone(), value: observed.top_ax_mps2 });
         case.camera = Some(Observed { time_s, value: observed.theta_rad });
         case.block = stated_block;
@@ -494,7 +493,7 @@ mod tests {
         let truth = [0.1, 0.3];
         let mut case = rocking_case();
         let observed = tilt.predict(&case, &truth).unwrap();
-        let time_s: Vec<f64> = (0..observed.theta_rad.len()).map(|k| case.t0_s + k as f64 * case.dt_s).collect();
+        let time_s = case.time_s();
         case.accel = Some(Observed { time_s: time_s.clone(), value: observed.top_ax_mps2 });
         case.camera = Some(Observed { time_s, value: observed.theta_rad });
         let (evidence, nominal) = nominal_evidence(&case, &Settings::default()).unwrap();
@@ -521,7 +520,7 @@ mod tests {
             .collect();
         let observed = tilt.predict(&case, &[0.0, 0.0]).unwrap();
         assert!(observed.overturn.is_none(), "it stands");
-        let time_s: Vec<f64> = (0..observed.theta_rad.len()).map(|k| case.t0_s + k as f64 * case.dt_s).collect();
+        let time_s = case.time_s();
         case.accel = Some(Observed { time_s, value: observed.top_ax_mps2 });
         // The accelerometer only, its sensor at the top centre; the block stated 1 sd too
         // short, its centre of mass 0.7 sd low and its base 1.4 sd wide (mis-stated seed 3303
