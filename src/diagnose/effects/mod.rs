@@ -39,7 +39,18 @@ pub trait Effect: Sync {
     fn onset(&self, _params: &[f64], _prediction: &Prediction) -> Option<f64> {
         None
     }
+    /// How many standard deviations the effect's parameters lie from the value the nominal
+    /// model itself gives what they stand for, that value being as uncertain as the case's
+    /// uncertain values make it (None: the nominal model has no such value, or nothing about it
+    /// is uncertain). An effect within [`NOMINAL_SD`] of it is the nominal model within what the
+    /// user knows, however well it fits.
+    fn from_nominal_sd(&self, _case: &Case, _params: &[f64]) -> Option<f64> {
+        None
+    }
 }
+
+/// See [`Effect::from_nominal_sd`].
+pub const NOMINAL_SD: f64 = 3.0;
 
 pub fn library() -> &'static [&'static dyn Effect] {
     &[
