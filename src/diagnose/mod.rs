@@ -574,7 +574,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
     // knows, and only when the records show its own signature where it begins.
     let choice = verdict::choose(&mut candidates, true, |c: &Candidate| {
         c.prediction.overturn.is_some() == evidence.observed_overturn
-            && from_nominal_sd(stated, c).is_none_or(|z| z > effects::NOMINAL_SD)
+            && nominal_distance_sd(stated, c).is_none_or(|z| z > effects::NOMINAL_SD)
             && c.shows_signature()
             && c.bic < base_bic
             && c.rmse * settings.min_improvement <= base_rmse
@@ -648,11 +648,11 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
 }
 
 /// How far (sd) a candidate's physics lies from the nominal model's own value of what it
-/// stands for, on the unit as the candidate calibrates it ([`effects::Effect::from_nominal_sd`]).
-fn from_nominal_sd(stated: &Case, c: &Candidate) -> Option<f64> {
+/// stands for, on the unit as the candidate calibrates it ([`effects::Effect::nominal_distance_sd`]).
+fn nominal_distance_sd(stated: &Case, c: &Candidate) -> Option<f64> {
     let effect = effects::library().iter().find(|e| e.name() == c.effect)?;
     let params: Vec<f64> = c.params.iter().map(|p| p.1).collect();
-    effect.from_nominal_sd(&c.calibration.apply(stated).ok()?, &params)
+    effect.nominal_distance_sd(&c.calibration.apply(stated).ok()?, &params)
 }
 
 /// What the nominal model is called in a diagnosis.
@@ -817,7 +817,7 @@ fn explain(
             if evidence.observed_overturn { "stay standing" } else { "overturn" },
             if evidence.observed_overturn { "fall" } else { "standing" },
         ));
-    } else if let Some(z) = from_nominal_sd(case, best).filter(|z| *z <= effects::NOMINAL_SD) {
+    } else if let Some(z) = nominal_distance_sd(case, best).filter(|z| *z <= effects::NOMINAL_SD) {
         text.push_str(&format!(
             " None of the library's effects explains it: the best, {} ({}), differs from what the nominal model itself gives on the unit's values by {z:.2} sd of what the stated uncertainty leaves of that value (more than {} sd is needed): it is the nominal model within what is known of the unit, and what it fits it fits through the chaos of rocking, not as that physics. Look for what the library does not model there: a change the records show only through that chaos, a model error.",
             best.name(),

@@ -44,12 +44,12 @@ pub trait Effect: Sync {
     /// uncertain values make it (None: the nominal model has no such value, or nothing about it
     /// is uncertain). An effect within [`NOMINAL_SD`] of it is the nominal model within what the
     /// user knows, however well it fits.
-    fn from_nominal_sd(&self, _case: &Case, _params: &[f64]) -> Option<f64> {
+    fn nominal_distance_sd(&self, _case: &Case, _params: &[f64]) -> Option<f64> {
         None
     }
 }
 
-/// See [`Effect::from_nominal_sd`].
+/// See [`Effect::nominal_distance_sd`].
 pub const NOMINAL_SD: f64 = 3.0;
 
 pub fn library() -> &'static [&'static dyn Effect] {

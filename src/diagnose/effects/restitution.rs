@@ -45,7 +45,7 @@ impl Effect for Restitution {
     /// sd, central differences summed in quadrature): a coefficient the dimensions' uncertainty
     /// could give is no other contact (mis-stated seed 3301 case_07, a mass change: e = 0.784
     /// where Eq. 24 gives 0.785 on the same values, fitted only through the chaos it perturbs).
-    fn from_nominal_sd(&self, case: &Case, params: &[f64]) -> Option<f64> {
+    fn nominal_distance_sd(&self, case: &Case, params: &[f64]) -> Option<f64> {
         let eq24 = |p: &Uncertain, v: f64| -> Option<f64> {
             Some(calibration::with_values(case, std::slice::from_ref(p), &[v]).ok()?.block.restitution_eq24)
         };
@@ -78,13 +78,13 @@ mod tests {
         let mut case = rocking_case();
         let (b, h) = (0.5, 1.5);
         let eq24 = case.block.restitution_eq24;
-        assert_eq!(Restitution.from_nominal_sd(&case, &[0.5]), None, "nothing is uncertain");
+        assert_eq!(Restitution.nominal_distance_sd(&case, &[0.5]), None, "nothing is uncertain");
         // H uncertain by 2 cm: e = 1 − 1.5 B²/(B² + H²) moves by 3B²H/(B² + H²)² per metre of H.
         let sd_h = 0.02;
         case.uncertain = vec![Uncertain { key: "H_m".into(), index: None, stated: h, sd: sd_h, bounds: (1.4, 1.6) }];
         let sd_e = 3.0 * b * b * h / (b * b + h * h).powi(2) * sd_h;
         for shift in [0.0, 0.5, 4.0, -4.0] {
-            let z = Restitution.from_nominal_sd(&case, &[eq24 + shift * sd_e]).unwrap();
+            let z = Restitution.nominal_distance_sd(&case, &[eq24 + shift * sd_e]).unwrap();
             assert!((z - f64::abs(shift)).abs() < 1e-3 * f64::abs(shift).max(1.0), "{shift} sd: {z}");
         }
     }
