@@ -149,6 +149,33 @@ pub fn with_values<M: UnitModel>(model: &M, parameters: &[Uncertain], values: &[
     Ok(m)
 }
 
+/// The standard deviation the uncertain `parameters` give `value(model)`: each moved by its sd,
+/// central differences (one-sided where a step leaves what the model can take) summed in
+/// quadrature. None when nothing uncertain moves it (or the model takes no step).
+pub fn propagated_sd<M: UnitModel>(
+    model: &M,
+    parameters: &[Uncertain],
+    value: impl Fn(&M) -> Option<f64>,
+) -> Option<f64> {
+    let here = value(model)?;
+    let variance: f64 = parameters
+        .iter()
+        .filter(|p| model.constrains(&p.key))
+        .filter_map(|p| {
+            let v = model.parameter(&p.key, p.index.unwrap_or(0))?;
+            let at = |v: f64| value(&with_values(model, std::slice::from_ref(p), &[v]).ok()?);
+            let change = match (at(v + p.sd), at(v - p.sd)) {
+                (Some(up), Some(down)) => (up - down) / 2.0,
+                (Some(up), None) => up - here,
+                (None, Some(down)) => here - down,
+                (None, None) => return None,
+            };
+            Some(change * change)
+        })
+        .sum();
+    (variance > 0.0).then(|| variance.sqrt())
+}
+
 /// The priors' share of −2 log-posterior: Σ ((v − stated)/sd)².
 pub fn prior_chi2(parameters: &[Uncertain], values: &[f64]) -> f64 {
     parameters.iter().zip(values).map(|(p, &v)| p.z(v).powi(2)).sum()

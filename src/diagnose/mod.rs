@@ -16,8 +16,10 @@
 //!    signature is judged against the nominal model on its own values, and those compete as
 //!    the nominal calibration.
 //! 4. Candidates are ranked by BIC (noise-normalised squared residuals + k ln N); the best one is
-//!    accepted when it explains the disagreement (it cuts the window's misfit at least threefold
-//!    and its own residuals flag at most 12 % of the samples the baseline's flagged); otherwise the
+//!    accepted when it explains the disagreement (it cuts the window's misfit at least threefold,
+//!    its own residuals flag at most 12 % of the samples the baseline's flagged, it agrees on
+//!    whether the unit fell, the records show its signature) and is more than the nominal model
+//!    within what the user knows ([`effects::Effect::nominal_counterpart`]); otherwise the
 //!    verdict is `unexplained`, with the window — an honest answer rather than a forced one.
 //!
 //! Pure numerics: a [`Case`] in, a [`Diagnosis`] out; files are read and written elsewhere.
@@ -570,17 +572,20 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
     let flagged_before = candidates[0].flagged.max(1) as f64;
     // A model that has the unit fall when the records show it standing (or the reverse) is not
     // the explanation, however well its own chaotic spread covers the misfit. Only the best by
-    // BIC may be accepted, only when it is more than the nominal model within what the user
-    // knows, and only when the records show its own signature where it begins.
-    let choice = verdict::choose(&mut candidates, true, |c: &Candidate| {
+    // BIC may be accepted, and only when the records show its own signature where it begins.
+    let explains = |c: &Candidate| {
         c.prediction.overturn.is_some() == evidence.observed_overturn
-            && nominal_distance_sd(stated, c).is_none_or(|z| z > effects::NOMINAL_SD)
             && c.shows_signature()
             && c.bic < base_bic
             && c.rmse * settings.min_improvement <= base_rmse
             && (c.flagged as f64) <= settings.max_remaining_flagged * flagged_before
-    });
+    };
+    // ... and only when it is more than the nominal model within what the user knows: its
+    // distance (sd) when it is not.
+    let near_nominal = |c: &Candidate| nominal_distance_sd(stated, c).filter(|z| !(*z > effects::NOMINAL_SD));
+    let choice = verdict::choose(&mut candidates, true, |c: &Candidate| explains(c) && near_nominal(c).is_none());
     let accepted = choice.accepted;
+    let near_nominal = candidates.get(1).filter(|best| !accepted && explains(best)).and_then(near_nominal);
     let first_uplift = baseline.first(&[rocking::EventKind::Uplift]);
     let mut onset_at_first_uplift = None;
     let (verdict, model, window) = if accepted {
@@ -618,7 +623,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
     }
     let rmse_before = candidates[0].rmse;
     let rmse_after = if accepted { candidates[1].rmse } else { rmse_before };
-    let mut explanation = explain(case, &evidence, window, &candidates, accepted, settings);
+    let mut explanation = explain(case, &evidence, window, &candidates, accepted, near_nominal, settings);
     explanation.push_str(&choice.ambiguity(&candidates));
     if let Some(t) = onset_at_first_uplift {
         explanation.push_str(&format!(
@@ -648,11 +653,15 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
 }
 
 /// How far (sd) a candidate's physics lies from the nominal model's own value of what it
-/// stands for, on the unit as the candidate calibrates it ([`effects::Effect::nominal_distance_sd`]).
-fn nominal_distance_sd(stated: &Case, c: &Candidate) -> Option<f64> {
+/// stands for ([`effects::Effect::nominal_counterpart`]) on the unit as the candidate
+/// calibrates it, that value as uncertain as the uncertain values make it (`unit`: the stated
+/// unit, or any with the same uncertain parameters). None: no such value, or nothing uncertain.
+fn nominal_distance_sd(unit: &Case, c: &Candidate) -> Option<f64> {
     let effect = effects::library().iter().find(|e| e.name() == c.effect)?;
-    let params: Vec<f64> = c.params.iter().map(|p| p.1).collect();
-    effect.nominal_distance_sd(&c.calibration.apply(stated).ok()?, &params)
+    let own = c.calibration.apply(unit).ok()?;
+    let (i, nominal) = effect.nominal_counterpart(&own)?;
+    let sd = calibration::propagated_sd(&own, &own.uncertain, |m| Some(effect.nominal_counterpart(m)?.1))?;
+    Some((c.params.get(i)?.1 - nominal).abs() / sd)
 }
 
 /// What the nominal model is called in a diagnosis.
@@ -786,6 +795,7 @@ fn explain(
     window: (f64, f64),
     candidates: &[Candidate],
     accepted: bool,
+    near_nominal: Option<f64>,
     settings: &Settings,
 ) -> String {
     let base = &candidates[0];
@@ -809,6 +819,13 @@ fn explain(
             runner_up.map_or("the nominal model".to_string(), |r| r.effect.replace('_', " ")),
             runner_up.map_or(base.bic - best.bic, |r| r.bic - best.bic),
         ));
+    } else if let Some(z) = near_nominal {
+        text.push_str(&format!(
+            " None of the library's effects explains it: the best, {} ({}), passes every other test, but it lies {z:.2} sd from the value the nominal model itself gives on the unit as it calibrates it, that value as uncertain as the stated uncertainty of the unit's values makes it (more than {} sd is needed): it is the nominal model within what is known of the unit, fitting the records through the chaos so near a value perturbs, not as that physics. Look for what the library does not model there: a change the records show only through that chaos, a model error.",
+            best.name(),
+            best.sentence,
+            effects::NOMINAL_SD
+        ));
     } else if best.prediction.overturn.is_some() != evidence.observed_overturn {
         text.push_str(&format!(
             " None of the library's effects explains it: the closest fit, {} ({}), has the unit {} while the records show it {}. Look for what the library does not model there: a timing or gain problem of a sensor, a lateral impact, an out-of-plane motion.",
@@ -816,13 +833,6 @@ fn explain(
             best.sentence,
             if evidence.observed_overturn { "stay standing" } else { "overturn" },
             if evidence.observed_overturn { "fall" } else { "standing" },
-        ));
-    } else if let Some(z) = nominal_distance_sd(case, best).filter(|z| *z <= effects::NOMINAL_SD) {
-        text.push_str(&format!(
-            " None of the library's effects explains it: the best, {} ({}), differs from what the nominal model itself gives on the unit's values by {z:.2} sd of what the stated uncertainty leaves of that value (more than {} sd is needed): it is the nominal model within what is known of the unit, and what it fits it fits through the chaos of rocking, not as that physics. Look for what the library does not model there: a change the records show only through that chaos, a model error.",
-            best.name(),
-            best.sentence,
-            effects::NOMINAL_SD
         ));
     } else if !best.shows_signature() {
         text.push_str(&format!(
@@ -902,5 +912,28 @@ mod tests {
             }
         }
         assert!(rocked, "the block rocks before the horizon: the comparison checks something");
+    }
+
+    #[test]
+    fn a_coefficient_the_dimensions_uncertainty_could_give_is_eq_24_s_own() {
+        let mut case = rocking_case();
+        let eq24 = |c: &Case| Some(c.block.restitution_eq24);
+        assert_eq!(calibration::propagated_sd(&case, &case.uncertain, eq24), None, "nothing is uncertain");
+        // B and H uncertain (stated 0.48 and 1.45 m, the unit as calibrated 0.5 and 1.5 m): a
+        // centred rectangle's e = 1 − 1.5 B²/(B² + H²) moves by −3BH²/(B² + H²)² per metre of B
+        // and 3B²H/(B² + H²)² per metre of H, summed in quadrature.
+        let (b, h, sd_b, sd_h): (f64, f64, f64, f64) = (0.5, 1.5, 0.005, 0.02);
+        case.uncertain = vec![
+            Uncertain { key: "B_m".into(), index: None, stated: 0.48, sd: sd_b, bounds: (0.45, 0.51) },
+            Uncertain { key: "H_m".into(), index: None, stated: 1.45, sd: sd_h, bounds: (1.35, 1.55) },
+            Uncertain { key: "mass_kg".into(), index: None, stated: 100.0, sd: 10.0, bounds: (50.0, 150.0) },
+        ];
+        let d2 = (b * b + h * h).powi(2);
+        let expected = ((3.0 * b * h * h / d2 * sd_b).powi(2) + (3.0 * b * b * h / d2 * sd_h).powi(2)).sqrt();
+        let sd = calibration::propagated_sd(&case, &case.uncertain, eq24).unwrap();
+        assert!((sd / expected - 1.0).abs() < 1e-3, "sd {sd} against {expected}");
+        // Restitution's counterpart is Eq. 24 on the unit, its parameter e.
+        let restitution = effects::library().iter().find(|e| e.name() == "restitution").unwrap();
+        assert_eq!(restitution.nominal_counterpart(&case), Some((0, case.block.restitution_eq24)));
     }
 }

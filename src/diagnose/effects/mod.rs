@@ -39,17 +39,16 @@ pub trait Effect: Sync {
     fn onset(&self, _params: &[f64], _prediction: &Prediction) -> Option<f64> {
         None
     }
-    /// How many standard deviations the effect's parameters lie from the value the nominal
-    /// model itself gives what they stand for, that value being as uncertain as the case's
-    /// uncertain values make it (None: the nominal model has no such value, or nothing about it
-    /// is uncertain). An effect within [`NOMINAL_SD`] of it is the nominal model within what the
-    /// user knows, however well it fits.
-    fn nominal_distance_sd(&self, _case: &Case, _params: &[f64]) -> Option<f64> {
+    /// The parameter (its index) for which the nominal model itself has a value, and that value
+    /// on `case` (`restitution`'s e: Eq. 24); None when the effect has none. That value is as
+    /// uncertain as the case's uncertain values make it, and an effect within [`NOMINAL_SD`] of
+    /// its sd from it is the nominal model within what the user knows, however well it fits.
+    fn nominal_counterpart(&self, _case: &Case) -> Option<(usize, f64)> {
         None
     }
 }
 
-/// See [`Effect::nominal_distance_sd`].
+/// See [`Effect::nominal_counterpart`].
 pub const NOMINAL_SD: f64 = 3.0;
 
 pub fn library() -> &'static [&'static dyn Effect] {
