@@ -41,8 +41,9 @@ pub trait Effect: Sync {
     }
     /// The parameter (its index) for which the nominal model itself has a value, and that value
     /// on `case` (`restitution`'s e: Eq. 24); None when the effect has none. That value is as
-    /// uncertain as the case's uncertain values make it, and an effect within [`NOMINAL_SD`] of
-    /// its sd from it is the nominal model within what the user knows, however well it fits.
+    /// uncertain as the case's uncertain values make it: an effect whose parameter lies within
+    /// [`NOMINAL_SD`] standard deviations of it is the nominal model within what the user knows,
+    /// however well it fits.
     fn nominal_counterpart(&self, _case: &Case) -> Option<(usize, f64)> {
         None
     }
