@@ -553,15 +553,18 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
     let better = fitted
         .iter()
         .filter_map(|(c, own)| {
-            own.as_ref()
-                .map(|(p, m, plain)| (evidence.window(p).is_some(), plain + c.calibration.prior_chi2(), c, p, m))
+            own.as_ref().map(|(p, m, plain)| (evidence.window(p), plain + c.calibration.prior_chi2(), c, p, m))
         })
         .filter(|o| o.1 < plain_chi2 + calibration.prior_chi2())
-        .reduce(|a, b| if (b.0, b.1) < (a.0, a.1) { b } else { a });
-    if let Some((_, _, c, p, m)) = better {
-        (calibration, baseline, base_misfit) = (c.calibration.clone(), p.clone(), *m);
-    }
-    let Some(window) = evidence.window(&baseline) else {
+        .reduce(|a, b| if (b.0.is_some(), b.1) < (a.0.is_some(), a.1) { b } else { a });
+    let window = match better {
+        Some((window, _, c, p, m)) => {
+            (calibration, baseline, base_misfit) = (c.calibration.clone(), p.clone(), *m);
+            window
+        }
+        None => Some(first_window),
+    };
+    let Some(window) = window else {
         return Ok(settled(case, &evidence, baseline, calibration, price, noise));
     };
     let bic = base_misfit.chi2 + price(&calibration, 0);
