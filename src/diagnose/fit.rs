@@ -468,7 +468,7 @@ mod tests {
     /// what its equipment file states (f 0.04 against a stated 0.0, sd 0.03): noise-free top
     /// accelerometer and camera.
     fn flexibility() -> &'static dyn Effect {
-        *effects::library().iter().find(|e| e.name() == "flexibility").unwrap()
+        effects::named("flexibility").unwrap()
     }
 
     fn mounted_block_stated_low() -> (Case, Vec<f64>) {
@@ -489,7 +489,7 @@ mod tests {
 
     #[test]
     fn a_tilting_sensor_s_mount_point_is_solved_in_one_step_and_found_by_the_fit() {
-        let tilt = *effects::library().iter().find(|e| e.name() == "sensor_tilt").unwrap();
+        let tilt = effects::named("sensor_tilt").unwrap();
         let truth = [0.1, 0.3];
         let mut case = rocking_case();
         let observed = tilt.predict(&case, &truth).unwrap();
@@ -507,7 +507,7 @@ mod tests {
 
     #[test]
     fn a_tilting_sensor_on_a_block_stated_off_is_followed_to_the_block_s_dimensions() {
-        let tilt = *effects::library().iter().find(|e| e.name() == "sensor_tilt").unwrap();
+        let tilt = effects::named("sensor_tilt").unwrap();
         let mut case = rocking_case();
         // A decaying shake that rocks the block hard (θ up to 0.27 rad) without toppling it.
         let dt = case.dt_s;

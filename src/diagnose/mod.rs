@@ -597,8 +597,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
         // (the first uplift of a tilting sensor, the first impact, contact, slip, the moment of a
         // mass change), usually before its effect grows beyond the noise. A physics that acts all
         // along (a flexible mount) begins where the data first show it.
-        let effect =
-            effects::library().iter().find(|e| e.name() == best.effect).expect("candidates come from the library");
+        let effect = effects::named(best.effect).expect("candidates come from the library");
         let parameters: Vec<f64> = best.params.iter().map(|p| p.1).collect();
         let onset = effect.onset(&parameters, &best.prediction);
         // A change fitted at the first uplift is where the records could first show anything:
@@ -660,7 +659,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
 /// calibrates it, that value as uncertain as the uncertain values make it (`unit`: the stated
 /// unit, or any with the same uncertain parameters). None: no such value, or nothing uncertain.
 fn nominal_distance_sd(unit: &Case, c: &Candidate) -> Option<f64> {
-    let effect = effects::library().iter().find(|e| e.name() == c.effect)?;
+    let effect = effects::named(c.effect)?;
     let own = c.calibration.apply(unit).ok()?;
     let (i, nominal) = effect.nominal_counterpart(&own)?;
     let sd = calibration::propagated_sd(&own, &own.uncertain, |m| Some(effect.nominal_counterpart(m)?.1))?;
@@ -936,7 +935,7 @@ mod tests {
         let sd = calibration::propagated_sd(&case, &case.uncertain, eq24).unwrap();
         assert!((sd / expected - 1.0).abs() < 1e-3, "sd {sd} against {expected}");
         // Restitution's counterpart is Eq. 24 on the unit, its parameter e.
-        let restitution = effects::library().iter().find(|e| e.name() == "restitution").unwrap();
+        let restitution = effects::named("restitution").unwrap();
         assert_eq!(restitution.nominal_counterpart(&case), Some((0, case.block.restitution_eq24)));
     }
 }

@@ -63,6 +63,11 @@ pub fn library() -> &'static [&'static dyn Effect] {
     ]
 }
 
+/// The library's effect of that name (a candidate's `effect`).
+pub fn named(name: &str) -> Option<&'static dyn Effect> {
+    library().iter().copied().find(|e| e.name() == name)
+}
+
 /// `count` values from `lo` to `hi`, evenly spaced.
 pub fn linspace(lo: f64, hi: f64, count: usize) -> Vec<f64> {
     (0..count).map(|i| lo + (hi - lo) * i as f64 / (count.max(2) - 1) as f64).collect()
