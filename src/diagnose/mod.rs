@@ -364,9 +364,9 @@ impl Contracted for Case {
 /// An accepted change whose onset falls within this (s) of the calibrated model's first uplift
 /// happened where the records could first show anything: it is not called an event at that time.
 const FIRST_UPLIFT_S: f64 = 0.1;
-/// The first uplift an onset `o` comes at or before, where the records hold no evidence of the
-/// unit before it: within [`FIRST_UPLIFT_S`] of the calibrated model's (`baseline`), or no later
-/// than that of the unit the change makes (`changed`).
+/// The first uplift an onset `o` comes before or within [`FIRST_UPLIFT_S`] of, where the records
+/// hold little evidence of the unit before it: the calibrated model's (`baseline`, either side of
+/// it), or that of the unit the change makes (`changed`, any time before it).
 fn unseen_before(o: f64, baseline: Option<f64>, changed: Option<f64>) -> Option<f64> {
     baseline.filter(|u| (o - u).abs() <= FIRST_UPLIFT_S).or(changed.filter(|u| o <= u + FIRST_UPLIFT_S))
 }
@@ -658,7 +658,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
     explanation.push_str(&choice.ambiguity(&candidates));
     if let Some(t) = onset_at_first_uplift {
         explanation.push_str(&format!(
-            " Its fitted onset is at or before the first uplift ({t:.2} s), the first moment the records could show the change: they hold no evidence of the unchanged unit before it, so it holds from the start, or before {t:.2} s, rather than being an event at that time."
+            " Its fitted onset comes before or within 0.1 s of the first uplift ({t:.2} s), the first moment the records could show the change: they hold little evidence of the unchanged unit before it, so it holds from the start, or before {t:.2} s, rather than being an event at that time."
         ));
     }
     let accepted_calibration = if accepted { candidates[1].calibration.clone() } else { calibration };
@@ -953,6 +953,7 @@ mod tests {
         // Before the changed unit's first uplift, however long before; the baseline's later.
         assert_eq!(unseen_before(6.97, Some(7.4), Some(7.05)), Some(7.05));
         assert_eq!(unseen_before(3.0, None, Some(7.05)), Some(7.05));
+        assert_eq!(unseen_before(7.1, None, Some(7.05)), Some(7.05), "within 0.1 s past it");
         // Once either has rocked for longer, the records saw the unit before the change.
         assert_eq!(unseen_before(9.04, Some(7.08), Some(7.08)), None);
         assert_eq!(unseen_before(7.2, Some(7.4), Some(7.05)), None);
