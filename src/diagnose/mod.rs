@@ -11,8 +11,7 @@
 //!    past the window's start: zooming grids over its few parameters, then Nelder–Mead from the
 //!    best grid points ([`fit`]). With an `uncertainty` block the unit's values are calibrated
 //!    first ([`calibration`]); a physics is searched jointly with them from the values the
-//!    records support before it begins ([`clean_prefix`]) and from the stated ones (the better
-//!    kept, by a margin: [`STATED_START_CHI2`]), then recalibrated with it from those
+//!    records support before it begins ([`clean_prefix`]), then recalibrated with it from those
 //!    and from the whole record's calibration, which may have bent the unit to the physics. Its
 //!    signature is judged against the nominal model on its own values, and those compete as
 //!    the nominal calibration.
@@ -364,13 +363,6 @@ impl Contracted for Case {
 /// An accepted change whose onset falls within this (s) of the calibrated model's first uplift
 /// happened where the records could first show anything: it is not called an event at that time.
 const FIRST_UPLIFT_S: f64 = 0.1;
-/// The first uplift an onset `o` comes before or within [`FIRST_UPLIFT_S`] of, where the records
-/// hold little evidence of the unit before it: the calibrated model's (`baseline`, either side of
-/// it), or that of the unit the change makes (`changed`, any time before it).
-fn unseen_before(o: f64, baseline: Option<f64>, changed: Option<f64>) -> Option<f64> {
-    baseline.filter(|u| (o - u).abs() <= FIRST_UPLIFT_S).or(changed.filter(|u| o <= u + FIRST_UPLIFT_S))
-}
-
 /// Horizons of a calibration after the first moment the records can tell anything (s). Steps
 /// of 2–3 s while the block rocks: each longer horizon sharpens a chaotic unit's landscape, and
 /// a 4 → 10 s step lost the basin (mis-stated seed 3301 case_13: B_m and H_m stopped 0.8 sd
@@ -378,12 +370,6 @@ fn unseen_before(o: f64, baseline: Option<f64>, changed: Option<f64>) -> Option<
 /// 1 s, are there for [`clean_prefix`]: an obstacle is often struck within a second of the first
 /// uplift (seed 3301 case_03 at 1.15 s, case_05 at 0.82 s).
 const CALIBRATION_HORIZONS_S: [f64; 8] = [0.5, 1.0, 1.5, 3.0, 5.0, 7.0, 10.0, f64::INFINITY];
-/// How much better (χ²) a physics fitted from the stated values must be than the same physics
-/// fitted from the clean prefix to replace it: very strong evidence on Kass & Raftery's scale.
-/// Between two fits of nearly one optimum (mis-stated seed 3305 case_12: a tilting sensor, 0.02
-/// apart, its unit's values 10⁻⁵ apart) the clean prefix's stays: the signature of a chaotic
-/// unit can hang on such a hair.
-const STATED_START_CHI2: f64 = 10.0;
 /// Horizons of the recalibration with a physics, after the window's start (s).
 const JOINT_HORIZONS_S: [f64; 3] = [1.5, 4.0, f64::INFINITY];
 /// ... and after the unit's first uplift, where that comes later (s).
@@ -490,26 +476,10 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
     let joint: Vec<usize> =
         (0..calibration.parameters.len()).filter(|&i| case.constrains(&calibration.parameters[i].key)).collect();
     let joint_parameters: Vec<Uncertain> = joint.iter().map(|&i| calibration.parameters[i].clone()).collect();
-    // Each is also fitted from the stated values, from where the records leave the stated unit:
-    // the clean prefix is a calibration, and can absorb part of a physics (a restitution of 0.41
-    // read as a centre of mass 2 sd low: mis-stated seed 3306 case_06, whose restitution fitted
-    // from there stays at 0.997), while the stated values are what the user knows.
-    let stated_start = Calibration::stated(calibration.parameters.clone());
-    let stated_window = (stated_start.fitted != physics_calibration.fitted)
-        .then(|| nominal_window(stated, &evidence).ok().flatten())
-        .flatten();
     let fitted: Vec<(Candidate, Option<(Prediction, Misfit, f64)>)> = effects::library()
         .par_iter()
         .map(|effect| {
-            let from_stated = stated_window.map(|w| (fit::fit(*effect, stated, &evidence, w, &joint_parameters), w));
             let fit = fit::fit(*effect, physics_case, &evidence, physics_window, &joint_parameters);
-            let posterior = |f: &fit::Fit| f.misfit.chi2 + calibration::prior_chi2(&joint_parameters, &f.values);
-            let (fit, physics_calibration, physics_window, lost) = match from_stated {
-                Some((other, w)) if posterior(&other) < posterior(&fit) - STATED_START_CHI2 => {
-                    (other, &stated_start, w, fit.evaluations)
-                }
-                other => (fit, physics_calibration, physics_window, other.map_or(0, |o| o.0.evaluations)),
-            };
             let mut fitted_with = physics_calibration.clone();
             for (&i, &v) in joint.iter().zip(&fit.values) {
                 fitted_with.fitted[i] = v;
@@ -564,7 +534,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
                 flagged: evidence.flagged(&prediction),
                 sentence: effect.explain(&own.apply(stated).unwrap_or_else(|_| case.clone()), &params),
                 misfit,
-                evaluations: fit.evaluations + lost + evaluations + 2 * usize::from(own_nominal.is_some()),
+                evaluations: fit.evaluations + evaluations + 2 * usize::from(own_nominal.is_some()),
                 prediction,
                 signature_chi2: Some(signature_chi2),
                 calibration: own,
@@ -630,13 +600,14 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
         let effect = effects::named(best.effect).expect("candidates come from the library");
         let parameters: Vec<f64> = best.params.iter().map(|p| p.1).collect();
         let onset = effect.onset(&parameters, &best.prediction);
-        // A change fitted at the first uplift, or before the unit it makes first rocks, is where
-        // the records could first show anything: they hold no evidence of the unchanged unit
-        // before it (mis-stated seed 3301 case_07: a centre of mass stated 1.2 sd low, fitted as
-        // one that rises at 6.97 s, 0.11 s before the changed unit's first uplift at 7.08 s).
+        // A change fitted at the first uplift is where the records could first show anything:
+        // they hold no evidence of the unchanged unit before it.
         let fitted_onset = best.params.iter().any(|p| p.0 == "t0_s");
-        let rocks = best.prediction.first(&[rocking::EventKind::Uplift]);
-        onset_at_first_uplift = onset.filter(|_| fitted_onset).and_then(|o| unseen_before(o, first_uplift, rocks));
+        onset_at_first_uplift = onset
+            .filter(|_| fitted_onset)
+            .zip(first_uplift)
+            .filter(|(o, u)| (o - u).abs() <= FIRST_UPLIFT_S)
+            .map(|(_, u)| u);
         // Where the records leave the nominal model of the unit as this physics calibrates it:
         // the nominal calibration without the physics may have bent the unit to it, and leave
         // the records earlier.
@@ -658,7 +629,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
     explanation.push_str(&choice.ambiguity(&candidates));
     if let Some(t) = onset_at_first_uplift {
         explanation.push_str(&format!(
-            " Its fitted onset comes before or within 0.1 s of the first uplift ({t:.2} s), the first moment the records could show the change: they hold little evidence of the unchanged unit before it, so it holds from the start, or before {t:.2} s, rather than being an event at that time."
+            " Its fitted onset is the first uplift ({t:.2} s), the first moment the records could show the change: they hold no evidence of the unchanged unit before it, so it holds from the start, or before {t:.2} s, rather than being an event at that time."
         ));
     }
     let accepted_calibration = if accepted { candidates[1].calibration.clone() } else { calibration };
@@ -943,21 +914,6 @@ mod tests {
             }
         }
         assert!(rocked, "the block rocks before the horizon: the comparison checks something");
-    }
-
-    #[test]
-    fn a_change_before_the_changed_unit_first_rocks_is_not_an_event_at_that_time() {
-        // At the calibrated model's first uplift, either side of it.
-        assert_eq!(unseen_before(7.05, Some(7.1), None), Some(7.1));
-        assert_eq!(unseen_before(7.15, Some(7.1), Some(7.6)), Some(7.1));
-        // Before the changed unit's first uplift, however long before; the baseline's later.
-        assert_eq!(unseen_before(6.97, Some(7.4), Some(7.05)), Some(7.05));
-        assert_eq!(unseen_before(3.0, None, Some(7.05)), Some(7.05));
-        assert_eq!(unseen_before(7.1, None, Some(7.05)), Some(7.05), "within 0.1 s past it");
-        // Once either has rocked for longer, the records saw the unit before the change.
-        assert_eq!(unseen_before(9.04, Some(7.08), Some(7.08)), None);
-        assert_eq!(unseen_before(7.2, Some(7.4), Some(7.05)), None);
-        assert_eq!(unseen_before(7.0, None, None), None);
     }
 
     #[test]

@@ -50,7 +50,7 @@ super::declare_stage! {
     /// rolling: lateral_impact, mass_change, caster_brake, swivel_jam), fitted jointly with the nominal parameters the
     /// equipment file's `uncertainty` block says are known only roughly (calibrated first), ranked by BIC; `ambiguous`
     /// when two explain the records about equally well, or `unexplained`.
-    pub struct Diagnose: "diagnose", version 24,
+    pub struct Diagnose: "diagnose", version 23,
         reads Files(&[RecordFormat::Case]), params DiagnoseParams;
     outputs {
         /// per case: mismatch, verdict, window_start_s, window_end_s, rmse_before, rmse_after, explanation, candidates
