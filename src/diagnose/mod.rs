@@ -588,7 +588,8 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
     let near_nominal = |c: &Candidate| nominal_distance_sd(stated, c).filter(|z| !(*z > effects::NOMINAL_SD));
     let choice = verdict::choose(&mut candidates, true, |c: &Candidate| explains(c) && near_nominal(c).is_none());
     let accepted = choice.accepted;
-    let near_nominal = candidates.get(1).filter(|best| !accepted && explains(best)).and_then(near_nominal);
+    // The best's distance, for the explanation, when that alone kept it out.
+    let best_near_nominal_sd = candidates.get(1).filter(|best| !accepted && explains(best)).and_then(near_nominal);
     let first_uplift = baseline.first(&[rocking::EventKind::Uplift]);
     let mut onset_at_first_uplift = None;
     let (verdict, model, window) = if accepted {
@@ -625,7 +626,7 @@ pub fn diagnose(stated: &Case, settings: &Settings) -> Result<Diagnosis, Diagnos
     }
     let rmse_before = candidates[0].rmse;
     let rmse_after = if accepted { candidates[1].rmse } else { rmse_before };
-    let mut explanation = explain(case, &evidence, window, &candidates, accepted, near_nominal, settings);
+    let mut explanation = explain(case, &evidence, window, &candidates, accepted, best_near_nominal_sd, settings);
     explanation.push_str(&choice.ambiguity(&candidates));
     if let Some(t) = onset_at_first_uplift {
         explanation.push_str(&format!(
@@ -797,7 +798,7 @@ fn explain(
     window: (f64, f64),
     candidates: &[Candidate],
     accepted: bool,
-    near_nominal: Option<f64>,
+    near_nominal_sd: Option<f64>,
     settings: &Settings,
 ) -> String {
     let base = &candidates[0];
@@ -821,7 +822,7 @@ fn explain(
             runner_up.map_or("the nominal model".to_string(), |r| r.effect.replace('_', " ")),
             runner_up.map_or(base.bic - best.bic, |r| r.bic - best.bic),
         ));
-    } else if let Some(z) = near_nominal {
+    } else if let Some(z) = near_nominal_sd {
         text.push_str(&format!(
             " None of the library's effects explains it: the best, {} ({}), passes every other test, but it lies {z:.2} sd from the value the nominal model itself gives on the unit as it calibrates it, that value as uncertain as the stated uncertainty of the unit's values makes it (more than {} sd is needed): it is the nominal model within what is known of the unit, fitting the records through the chaos so near a value perturbs, not as that physics. Look for what the library does not model there: a change the records show only through that chaos, a model error.",
             best.name(),
