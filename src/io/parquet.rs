@@ -27,13 +27,31 @@ use crate::table::{Column, ColumnData, Table};
 const ARROW_SCHEMA_KEY: &str = "ARROW:schema";
 
 /// Writes `table` to `path` (atomically); returns the content hash of the file written.
+pub fn write_table(path: &Path, table: &Table) -> anyhow::Result<String> {
+    let mut hash = String::new();
+    atomic::write_file(path, |w| {
+        hash = encode(table, w)?;
+        Ok(())
+    })
+    .with_context(|| format!("writing Parquet `{}`", path.display()))?;
+    Ok(hash)
+}
+
+/// The bytes [`write_table`] writes for `table`, and their content hash, in memory.
+pub fn encode_table(table: &Table) -> anyhow::Result<(Vec<u8>, String)> {
+    let mut bytes = Vec::new();
+    let hash = encode(table, &mut bytes).context("encoding Parquet")?;
+    Ok((bytes, hash))
+}
+
+/// Encodes `table` as Parquet into `w`; returns the content hash of the bytes.
 ///
 /// Columns without nulls go straight to parquet's column writers rather than through an Arrow
 /// batch and `ArrowWriter`: that one gathers every value through an index list and buffers the
 /// row group before copying it out (2.3 % of the demo study's instructions). The bytes are the
 /// same (a test compares them): the same properties, the same Arrow schema embedded (units,
 /// descriptions), the same row groups, nullable columns through Arrow's own column writer.
-pub fn write_table(path: &Path, table: &Table) -> anyhow::Result<String> {
+fn encode<W: std::io::Write + Send>(table: &Table, w: W) -> anyhow::Result<String> {
     let schema = arrow_schema(table);
     let mut props = writer_properties(table, &schema)?;
     let descriptor = ArrowSchemaConverter::new().with_coerce_types(props.coerce_types()).convert(&schema)?;
@@ -41,34 +59,27 @@ pub fn write_table(path: &Path, table: &Table) -> anyhow::Result<String> {
     let rows_per_group = props.max_row_group_row_count().unwrap_or(usize::MAX).max(1);
     let has_nullable = table.columns.iter().any(|c| matches!(c.data, ColumnData::OptF64(_) | ColumnData::OptStr(_)));
     let schema = Arc::new(schema);
-    let mut hash = String::new();
-    atomic::write_file(path, |w| {
-        let mut writer =
-            SerializedFileWriter::new(HashingWriter::new(w), descriptor.root_schema_ptr(), Arc::new(props))?;
-        let arrow_columns = has_nullable.then(|| ArrowRowGroupWriterFactory::new(&writer, schema.clone()));
-        // Row groups of at most `rows_per_group` rows, as ArrowWriter cuts them; an empty table
-        // is a schema without row groups.
-        let (mut start, mut index) = (0, 0);
-        while start < table.num_rows() {
-            let rows = start..table.num_rows().min(start.saturating_add(rows_per_group));
-            let mut arrow_writers: Vec<Option<ArrowColumnWriter>> = match &arrow_columns {
-                Some(factory) => factory.create_column_writers(index)?.into_iter().map(Some).collect(),
-                None => Vec::new(),
-            };
-            let mut group = writer.next_row_group()?;
-            for (i, column) in table.columns.iter().enumerate() {
-                let arrow_writer = arrow_writers.get_mut(i).and_then(Option::take);
-                write_column(&mut group, arrow_writer, schema.field(i), &column.data, rows.clone())
-                    .with_context(|| format!("column `{}`", column.name))?;
-            }
-            group.close()?;
-            (start, index) = (rows.end, index + 1);
+    let mut writer = SerializedFileWriter::new(HashingWriter::new(w), descriptor.root_schema_ptr(), Arc::new(props))?;
+    let arrow_columns = has_nullable.then(|| ArrowRowGroupWriterFactory::new(&writer, schema.clone()));
+    // Row groups of at most `rows_per_group` rows, as ArrowWriter cuts them; an empty table
+    // is a schema without row groups.
+    let (mut start, mut index) = (0, 0);
+    while start < table.num_rows() {
+        let rows = start..table.num_rows().min(start.saturating_add(rows_per_group));
+        let mut arrow_writers: Vec<Option<ArrowColumnWriter>> = match &arrow_columns {
+            Some(factory) => factory.create_column_writers(index)?.into_iter().map(Some).collect(),
+            None => Vec::new(),
+        };
+        let mut group = writer.next_row_group()?;
+        for (i, column) in table.columns.iter().enumerate() {
+            let arrow_writer = arrow_writers.get_mut(i).and_then(Option::take);
+            write_column(&mut group, arrow_writer, schema.field(i), &column.data, rows.clone())
+                .with_context(|| format!("column `{}`", column.name))?;
         }
-        hash = writer.into_inner()?.finalize();
-        Ok(())
-    })
-    .with_context(|| format!("writing Parquet `{}`", path.display()))?;
-    Ok(hash)
+        group.close()?;
+        (start, index) = (rows.end, index + 1);
+    }
+    Ok(writer.into_inner()?.finalize())
 }
 
 fn writer_properties(table: &Table, schema: &Schema) -> anyhow::Result<WriterProperties> {
@@ -171,6 +182,11 @@ fn arrow_schema(table: &Table) -> Schema {
 pub fn read_table(path: &Path) -> anyhow::Result<Table> {
     // One read of the whole file: a File reader seeks and reads once per column chunk.
     let bytes = bytes::Bytes::from(std::fs::read(path).with_context(|| format!("cannot open `{}`", path.display()))?);
+    decode_table(bytes, path)
+}
+
+/// [`read_table`] of a file's bytes already in memory; `path` names it in errors.
+pub fn decode_table(bytes: bytes::Bytes, path: &Path) -> anyhow::Result<Table> {
     let builder = ParquetRecordBatchReaderBuilder::try_new(bytes)
         .with_context(|| format!("`{}` is not a readable Parquet file", path.display()))?;
     // One batch per row group: each column then arrives in one piece instead of 1024-row batches.

@@ -8,6 +8,16 @@
 //! bounded: tables beyond the budget are not kept (their readers decode the file), a table is
 //! let go once each stage reading it has taken it, and a stage's tables that were never taken
 //! (a reader selected other partitions) once every stage reading them has finished.
+//!
+//! An intermediate's files (`keep: false`) need not reach the disk at all: the commit removes
+//! them once the stages reading them are up to date, so a run that writes them only to remove
+//! them pays a file, its folders and their removal for nothing (on ext4, creating an inode is
+//! dearer than encoding the table: a fifth of the demo study's time). Such a file is kept here
+//! *unwritten*, as the bytes its stage encoded (their hash is the one the file would have), with
+//! its table; the commit writes the ones it installs after all (a reader failed, or was not
+//! selected) and lets the others go, and the run lets go of a stage's unwritten files as soon
+//! as every stage reading them is done (nothing else can read them). Unwritten files have a
+//! budget of their own: beyond it, files are written as before.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -17,9 +27,12 @@ use crate::table::{ColumnData, Table};
 
 /// Memory a run may spend on kept tables.
 pub const DEFAULT_BUDGET_BYTES: usize = 512 << 20;
+/// Memory a run may spend on unwritten files, besides its kept tables.
+pub const UNWRITTEN_BUDGET_BYTES: usize = 256 << 20;
 
 pub struct TableMemo {
     budget: usize,
+    unwritten_budget: usize,
     state: Mutex<Kept>,
 }
 
@@ -27,6 +40,9 @@ pub struct TableMemo {
 struct Kept {
     bytes: usize,
     tables: BTreeMap<PathBuf, Entry>,
+    unwritten_bytes: usize,
+    /// Files encoded but not written, by the path they would have.
+    unwritten: BTreeMap<PathBuf, bytes::Bytes>,
 }
 
 struct Entry {
@@ -37,8 +53,11 @@ struct Entry {
 }
 
 impl TableMemo {
+    /// A memo of `budget_bytes` for tables and as much again (at most
+    /// [`UNWRITTEN_BUDGET_BYTES`]) for unwritten files.
     pub fn new(budget_bytes: usize) -> Self {
-        TableMemo { budget: budget_bytes, state: Mutex::new(Kept::default()) }
+        let unwritten_budget = budget_bytes.min(UNWRITTEN_BUDGET_BYTES);
+        TableMemo { budget: budget_bytes, unwritten_budget, state: Mutex::new(Kept::default()) }
     }
 
     /// Keeps the table just written to `path` for `readers` stages, if the budget allows.
@@ -49,6 +68,68 @@ impl TableMemo {
             kept.bytes += bytes;
             kept.tables.insert(path.to_path_buf(), Entry { table: Arc::new(table), bytes, readers });
         }
+    }
+
+    /// Keeps the file `path` unwritten, as its `encoded` bytes, with its table for `readers`
+    /// stages, if both budgets allow; else hands both back (the caller writes the file).
+    pub fn keep_unwritten(
+        &self,
+        path: &Path,
+        table: Table,
+        encoded: Vec<u8>,
+        readers: usize,
+    ) -> Option<(Table, Vec<u8>)> {
+        let bytes = approximate_bytes(&table);
+        let mut kept = self.state.lock().expect("no panics while holding the lock");
+        let fits = kept.bytes + bytes <= self.budget && kept.unwritten_bytes + encoded.len() <= self.unwritten_budget;
+        if readers == 0 || !fits {
+            return Some((table, encoded));
+        }
+        kept.bytes += bytes;
+        kept.tables.insert(path.to_path_buf(), Entry { table: Arc::new(table), bytes, readers });
+        kept.unwritten_bytes += encoded.len();
+        let mut encoded = encoded;
+        encoded.shrink_to_fit();
+        kept.unwritten.insert(path.to_path_buf(), encoded.into());
+        None
+    }
+
+    /// The bytes of the unwritten file `path` (None: it was written, or let go).
+    pub fn unwritten(&self, path: &Path) -> Option<bytes::Bytes> {
+        self.state.lock().expect("no panics while holding the lock").unwritten.get(path).cloned()
+    }
+
+    /// Lets go of the unwritten files under `dir`: nothing will read or install them.
+    pub fn forget_unwritten(&self, dir: &Path) {
+        let mut kept = self.state.lock().expect("no panics while holding the lock");
+        let gone: Vec<PathBuf> = kept
+            .unwritten
+            .range(dir.to_path_buf()..)
+            .map(|(p, _)| p)
+            .take_while(|p| p.starts_with(dir))
+            .cloned()
+            .collect();
+        for path in gone {
+            let bytes = kept.unwritten.remove(&path).expect("listed just above");
+            kept.unwritten_bytes -= bytes.len();
+        }
+    }
+
+    /// Writes the unwritten files that `wanted` names (atomically, their folders made) and lets
+    /// go of all of them.
+    pub fn write_unwritten(&self, wanted: impl Fn(&Path) -> bool) -> anyhow::Result<()> {
+        let unwritten = {
+            let mut kept = self.state.lock().expect("no panics while holding the lock");
+            kept.unwritten_bytes = 0;
+            std::mem::take(&mut kept.unwritten)
+        };
+        for (path, bytes) in unwritten.iter().filter(|(path, _)| wanted(path)) {
+            if let Some(dir) = path.parent() {
+                std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("cannot create `{}`: {e}", dir.display()))?;
+            }
+            crate::io::atomic::write_file(path, |w| Ok(std::io::Write::write_all(w, bytes)?))?;
+        }
+        Ok(())
     }
 
     /// The table kept for `path`, let go after its last reader took it; None when it was not
@@ -118,5 +199,32 @@ mod tests {
         memo.release(path("s1"));
         assert!(memo.take(path("s1/b")).is_none(), "released with its stage's folder");
         assert_eq!(*memo.take(path("s2/c")).unwrap(), table(150));
+    }
+
+    #[test]
+    fn unwritten_files_stay_within_their_budget_until_written_or_forgotten() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let (a, b, c) = (dir.path().join("s1/x=1/data"), dir.path().join("s1/x=2/data"), dir.path().join("s2/data"));
+        let memo = TableMemo { unwritten_budget: 10, ..TableMemo::new(8 * 1000) };
+        assert!(memo.keep_unwritten(&a, table(10), vec![1; 6], 1).is_none());
+        // Over the files' budget: both handed back, nothing kept (the caller writes the file).
+        let (back, bytes) = memo.keep_unwritten(&b, table(20), vec![2; 6], 1).expect("over budget");
+        assert_eq!((back, bytes), (table(20), vec![2; 6]));
+        assert!(memo.take(&b).is_none() && memo.unwritten(&b).is_none());
+        // No reader: nothing to keep it for.
+        assert!(memo.keep_unwritten(&c, table(1), vec![3], 0).is_some());
+        assert!(memo.keep_unwritten(&c, table(1), vec![3; 4], 1).is_none());
+        // Its table is taken once, its bytes stay readable (a stage reading a part twice).
+        assert_eq!(*memo.take(&a).unwrap(), table(10));
+        assert_eq!(memo.unwritten(&a).as_deref(), Some(&[1u8; 6][..]));
+        memo.forget_unwritten(&dir.path().join("s2"));
+        assert!(memo.unwritten(&c).is_none(), "forgotten with its stage's folder");
+        assert!(memo.unwritten(&a).is_some(), "another stage's file stays");
+        // The freed bytes are free again; the commit writes only what it installs.
+        assert!(memo.keep_unwritten(&b, table(20), vec![2; 4], 1).is_none());
+        memo.write_unwritten(|p| p == a.as_path()).unwrap();
+        assert_eq!(std::fs::read(&a).unwrap(), [1; 6], "written, its folders made");
+        assert!(!b.exists() && !b.parent().unwrap().exists(), "not wanted: never written");
+        assert!(memo.unwritten(&a).is_none() && memo.unwritten(&b).is_none(), "all let go");
     }
 }

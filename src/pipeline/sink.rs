@@ -6,7 +6,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-use anyhow::{anyhow, bail};
+use anyhow::{anyhow, bail, Context};
 
 use super::info::{OutputInfo, OutputKind, StageInfo};
 use super::layout::{fan_folder, partition_path, Partition, DATA_FILE, LOCK_FILE, MCAP_DIR, MCAP_FILE, STAGE_MARKER};
@@ -52,6 +52,8 @@ pub struct OutputSink {
     /// Where tables stay in memory for the stages that read them next, and how many stages
     /// those are (none: nobody reads them this run).
     memo: Option<(Arc<TableMemo>, usize)>,
+    /// Whether the memo may keep the stage's Parquet files unwritten (an intermediate's).
+    unwritten: bool,
     /// What the tables written so far flag ([`FLAGS_KEY`]), as `reason (file:line)`.
     flags: Mutex<Vec<String>>,
     /// Whether records go in two-level folders (`layout::placed`): the stage has more records
@@ -87,6 +89,7 @@ impl OutputSink {
             mcap: params.get("mcap").and_then(|v| v.as_bool()).unwrap_or(false),
             hashes: Mutex::new(KnownHashes::new()),
             memo: None,
+            unwritten: false,
             flags: Mutex::new(Vec::new()),
             fanned: false,
         }
@@ -98,9 +101,12 @@ impl OutputSink {
         self
     }
 
-    /// Keeps every table written in `memo` too, for the `readers` stages that read them next.
-    pub fn keeping_tables_in(mut self, memo: Arc<TableMemo>, readers: usize) -> Self {
+    /// Keeps every table written in `memo` too, for the `readers` stages that read them next;
+    /// `unwritten`: the stage is an intermediate, whose Parquet files the memo may keep
+    /// unwritten (`TableMemo::keep_unwritten`).
+    pub fn keeping_tables_in(mut self, memo: Arc<TableMemo>, readers: usize, unwritten: bool) -> Self {
         self.memo = Some((memo, readers));
+        self.unwritten = unwritten;
         self
     }
 
@@ -144,7 +150,6 @@ impl OutputSink {
             false => relative.clone(),
         };
         let dir = self.root.join(output).join(&folder);
-        std::fs::create_dir_all(&dir).map_err(|e| anyhow!("cannot create `{}`: {e}", dir.display()))?;
         table.metadata.extend(self.provenance.clone());
         table.metadata.insert("shakeflow.output".into(), output.into());
         table.metadata.insert("shakeflow.partition".into(), relative.clone());
@@ -152,9 +157,30 @@ impl OutputSink {
             self.flags.lock().expect("no panics while holding the lock").extend(describe_flags(flags));
         }
         let path = dir.join(DATA_FILE);
-        let hash = parquet::write_table(&path, &table)?;
+        let mcap = info.kind == OutputKind::TimeSeries && self.mcap;
+        let create_dir =
+            || std::fs::create_dir_all(&dir).map_err(|e| anyhow!("cannot create `{}`: {e}", dir.display()));
+        let hash = match self.memo.as_ref().filter(|_| self.unwritten && !mcap) {
+            // An intermediate's file: kept unwritten if the memo can hold it, else written.
+            Some((memo, readers)) => {
+                let (encoded, hash) = parquet::encode_table(&table).with_context(|| format!("`{}`", path.display()))?;
+                let Some((kept, encoded)) = memo.keep_unwritten(&path, table, encoded, *readers) else {
+                    self.hashes.lock().expect("no panics while holding the lock").insert(path, hash);
+                    self.progress.inc(1);
+                    return Ok(());
+                };
+                table = kept;
+                create_dir()?;
+                crate::io::atomic::write_file(&path, |w| Ok(std::io::Write::write_all(w, &encoded)?))?;
+                hash
+            }
+            None => {
+                create_dir()?;
+                parquet::write_table(&path, &table)?
+            }
+        };
         self.hashes.lock().expect("no panics while holding the lock").insert(path.clone(), hash);
-        if info.kind == OutputKind::TimeSeries && self.mcap {
+        if mcap {
             let topic = if relative.is_empty() {
                 format!("/{}/{output}", self.stage_name)
             } else {
@@ -295,4 +321,63 @@ pub fn output_hash(stage_dir: &Path, output: &str, known: &KnownHashes) -> anyho
     }
     let (mcap_hash, mcap_files) = hash::hash_dir_known(&mcap_dir, known)?;
     Ok((hash::hash_bytes(format!("{parquet_hash}\n{mcap_hash}").as_bytes()), parquet_files + mcap_files))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::info::{InputKind, OutputInfo};
+    use crate::pipeline::memo::TableMemo;
+    use crate::pipeline::stage::{InputPart, StageContext};
+    use crate::table::Column;
+
+    static INFO: StageInfo = StageInfo {
+        name: "t",
+        version: 1,
+        summary: "",
+        inputs: InputKind::Datasets,
+        outputs: &[OutputInfo { name: "records", description: "", kind: OutputKind::TimeSeries }],
+        params: &[],
+    };
+
+    fn sink(root: &Path) -> OutputSink {
+        let params = Default::default();
+        OutputSink::new(root, "s", &INFO, &params, &BTreeMap::new(), indicatif::ProgressBar::hidden())
+    }
+
+    #[test]
+    fn an_intermediate_kept_unwritten_has_its_files_hash_and_reads_as_its_table() {
+        let dir = crate::tempdir::tempdir().unwrap();
+        let mut table = Table::new();
+        table.push(Column::f64("time_s", "s", "time", vec![0.0, 0.005, 0.01]));
+        let partition: Partition = vec![("motion".to_string(), "FB-1".to_string())];
+        let written = sink(&dir.path().join("written"));
+        written.write("records", &partition, table.clone()).unwrap();
+        let memo = Arc::new(TableMemo::new(1 << 20));
+        let unwritten = sink(&dir.path().join("unwritten")).keeping_tables_in(memo.clone(), 1, true);
+        unwritten.write("records", &partition, table).unwrap();
+        let path = |side: &str| dir.path().join(side).join("records/motion=FB-1").join(DATA_FILE);
+        assert!(!dir.path().join("unwritten").exists(), "no file, no folder");
+        let file = std::fs::read(path("written")).unwrap();
+        assert_eq!(memo.unwritten(&path("unwritten")).unwrap(), file, "the file's bytes");
+        let hash = |sink: OutputSink, side: &str| sink.into_hashes().get(&path(side)).cloned();
+        assert_eq!(hash(written, "written"), Some(hash::hash_bytes(&file)));
+        assert_eq!(hash(unwritten, "unwritten"), Some(hash::hash_bytes(&file)));
+        // Read twice by one stage: the kept table, then the bytes, each the file's table.
+        let reader = sink(&dir.path().join("reader"));
+        let params = Default::default();
+        let ctx = StageContext {
+            stage_name: "r",
+            params: &params,
+            inputs: &[],
+            sink: &reader,
+            base_dir: dir.path(),
+            memo: Some(&memo),
+        };
+        let part = InputPart { partition, path: path("unwritten"), label: String::new(), hash: String::new() };
+        let from_file = parquet::read_table(&path("written")).unwrap();
+        assert_eq!(*ctx.read_table(&part).unwrap(), from_file);
+        assert!(memo.take(&part.path).is_none(), "taken by its one reader");
+        assert_eq!(*ctx.read_table(&part).unwrap(), from_file);
+    }
 }

@@ -87,10 +87,14 @@ pub struct StageContext<'a> {
 
 impl StageContext<'_> {
     /// The table of a Parquet input part: kept in memory by the stage that wrote it this run,
-    /// or else read from its file (the same table either way).
+    /// or else read from its file, or from the bytes of a file kept unwritten (the same table
+    /// each way).
     pub fn read_table(&self, part: &InputPart) -> anyhow::Result<Arc<Table>> {
-        match self.memo.and_then(|memo| memo.take(&part.path)) {
-            Some(table) => Ok(table),
+        if let Some(table) = self.memo.and_then(|memo| memo.take(&part.path)) {
+            return Ok(table);
+        }
+        match self.memo.and_then(|memo| memo.unwritten(&part.path)) {
+            Some(bytes) => Ok(Arc::new(crate::io::parquet::decode_table(bytes, &part.path)?)),
             None => Ok(Arc::new(crate::io::parquet::read_table(&part.path)?)),
         }
     }

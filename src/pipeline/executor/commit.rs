@@ -392,14 +392,10 @@ pub(super) fn leave_out_not_kept<'e>(
     remove: &mut BTreeSet<String>,
     disk: &dyn Disk,
 ) {
-    let done = |name: &str| selected.contains(name) && !tainted.contains(name);
     let not_kept = plan
         .stages
         .values()
-        .filter(|s| !s.keep && done(&s.name))
-        .filter(|s| {
-            plan.stages.values().filter(|r| upstream_stages(r).contains(s.name.as_str())).all(|r| done(&r.name))
-        })
+        .filter(|s| left_out(plan, selected, tainted, s))
         .filter_map(|s| entries(&s.name).map(|entry| (s, entry)))
         .flat_map(|(s, entry)| {
             entry
@@ -415,6 +411,20 @@ pub(super) fn leave_out_not_kept<'e>(
             remove.insert(path);
         }
     }
+}
+
+/// Whether the commit leaves out the files of `stage`: it is `keep: false` and ran in full, as
+/// did every stage reading it (`selected` and not `tainted`; cached counts: it is up to date).
+pub(super) fn left_out(
+    plan: &Plan,
+    selected: &BTreeSet<String>,
+    tainted: &BTreeSet<String>,
+    stage: &PlannedStage,
+) -> bool {
+    let done = |name: &str| selected.contains(name) && !tainted.contains(name);
+    !stage.keep
+        && done(&stage.name)
+        && plan.stages.values().filter(|r| upstream_stages(r).contains(stage.name.as_str())).all(|r| done(&r.name))
 }
 
 /// What a run commits: the new entries of the stages that ran, and the entries of the output

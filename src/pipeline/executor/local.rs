@@ -4,7 +4,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::mem::take;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -12,7 +12,9 @@ use anyhow::anyhow;
 use rayon::prelude::*;
 
 use super::assess::{assess_stage, predict, AssessedStage, Known};
-use super::commit::{commit, entry_from_outcomes, leave_out_not_kept, relative, Changes, UnitOutcome, UnitRecord};
+use super::commit::{
+    commit, entry_from_outcomes, leave_out_not_kept, left_out, relative, Changes, UnitOutcome, UnitRecord,
+};
 use super::inputs::{cached_files, Produced};
 use super::{upstream_stages, Backend, Opened, Outcome, RunSummary, StageReport, UnitProblem};
 use crate::io::hash;
@@ -119,7 +121,11 @@ fn spawn_stage<'s, 'a: 's>(
             let left = state.readers_left.get_mut(upstream).expect("every upstream stage has readers");
             *left -= 1;
             if *left == 0 {
-                env.memo.release(&env.transaction.new_path(env.plan.stage_path(upstream)));
+                let dir = env.transaction.new_path(env.plan.stage_path(upstream));
+                env.memo.release(&dir);
+                if left_out(env.plan, env.selected, &state.tainted, &env.plan.stages[upstream]) {
+                    env.memo.forget_unwritten(&dir);
+                }
             }
         }
         for dependent in dependents.get(stage.name.as_str()).into_iter().flatten() {
@@ -294,7 +300,7 @@ pub(super) fn execute(
                 OutputSink::new(dir, &stage.name, info, &stage.params, &unit.hashes, indicatif::ProgressBar::hidden())
                     .fanned_out(fanned);
             if readers > 0 {
-                sink = sink.keeping_tables_in(memo.clone(), readers);
+                sink = sink.keeping_tables_in(memo.clone(), readers, !stage.keep);
             }
             let ctx = StageContext {
                 stage_name: &stage.name,
@@ -364,6 +370,13 @@ impl Backend for Local {
         let (install, remove) = (&mut state.install, &mut state.remove);
         let entries = |name: &str| state.entries.get(name).or_else(|| lock.stages.get(name));
         leave_out_not_kept(plan, selected, &state.tainted, &entries, install, remove, &opened.disk);
+        // The intermediates' files the commit installs after all (a reader failed or was not
+        // selected) are written now; the others never are.
+        let staged: BTreeSet<PathBuf> = state.install.iter().map(|entry| transaction.new_path(entry)).collect();
+        if let Err(e) = env.memo.write_unwritten(|path| staged.contains(path)) {
+            transaction.abort();
+            return Err(e);
+        }
         let changes = Changes { entries: &state.entries, install: &state.install, remove: &state.remove };
         if let Some(error) = fatal {
             // A stage could not be planned (a bad select, two records with one partition): what
