@@ -327,14 +327,8 @@ pub type KnownHashes = HashMap<PathBuf, String>;
 
 /// Hash of a directory tree: names and contents of all its files, order-independent of the disk.
 pub fn hash_dir(dir: &Path) -> anyhow::Result<(String, usize)> {
-    hash_dir_known(dir, &KnownHashes::new())
-}
-
-/// [`hash_dir`], taking the hashes of files in `known` from there.
-pub fn hash_dir_known(dir: &Path, known: &KnownHashes) -> anyhow::Result<(String, usize)> {
     let files = list_files(dir)?;
-    let paths: Vec<PathBuf> = files.iter().map(|f| dir.join(f)).collect();
-    let hashes = hash_files_known(&paths, known)?;
+    let hashes: Vec<String> = files.par_iter().map(|f| hash_file(&dir.join(f))).collect::<anyhow::Result<_>>()?;
     let mut combined = String::new();
     for (file, hash) in files.iter().zip(&hashes) {
         combined.push_str(file);
@@ -354,11 +348,6 @@ pub fn hash_path(path: &Path, bucket: Option<u8>) -> anyhow::Result<String> {
         (Ok(meta), Some(memo)) => memo.hash_with(path, &meta, bucket),
         _ => hash_file(path),
     }
-}
-
-/// Hashes many files in parallel, keeping their order; those in `known` are not read.
-pub fn hash_files_known(paths: &[PathBuf], known: &KnownHashes) -> anyhow::Result<Vec<String>> {
-    paths.par_iter().map(|p| known.get(p).map_or_else(|| hash_file(p), |h| Ok(h.clone()))).collect()
 }
 
 /// A writer that hashes what passes through it, for files written front to back.

@@ -305,24 +305,6 @@ fn split_by(table: &Table, key: &str) -> anyhow::Result<Vec<(String, Table)>> {
     Ok(groups.into_iter().map(|(k, rows)| (k, table.select_rows(&rows))).collect())
 }
 
-/// Hash and file count of one output of a stage: its Parquet tree plus its MCAP twin tree. Files
-/// in `known` are not read again.
-pub fn output_hash(stage_dir: &Path, output: &str, known: &KnownHashes) -> anyhow::Result<(String, usize)> {
-    let page = stage_dir.join(output);
-    if page.is_file() {
-        // A page output: one file at the stage folder's root.
-        let known_hash = known.get(&page).cloned();
-        return Ok((known_hash.map_or_else(|| hash::hash_file(&page), Ok)?, 1));
-    }
-    let (parquet_hash, parquet_files) = hash::hash_dir_known(&stage_dir.join(output), known)?;
-    let mcap_dir = stage_dir.join(MCAP_DIR).join(output);
-    if !mcap_dir.is_dir() {
-        return Ok((parquet_hash, parquet_files));
-    }
-    let (mcap_hash, mcap_files) = hash::hash_dir_known(&mcap_dir, known)?;
-    Ok((hash::hash_bytes(format!("{parquet_hash}\n{mcap_hash}").as_bytes()), parquet_files + mcap_files))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
