@@ -11,7 +11,8 @@
 //!    `journal.tmp` is renamed to `journal`. **That rename is the commit point**: before it,
 //!    the transaction never happened; after it, it has;
 //! 4. roll forward, each step idempotent: each entry `<root>/<e>` moves to `old/<e>`, then
-//!    `new/<e>` to `<root>/<e>`; each new state file moves to `<root>/.shakeflow/state/`; the
+//!    `new/<e>` to `<root>/<e>` (an entry is a file, or a folder the root lacks, installed whole:
+//!    `gathered`); each new state file moves to `<root>/.shakeflow/state/`; the
 //!    lockfile moves to `<root>/shakeflow.lock`; the state files only the old lockfile named are
 //!    removed;
 //! 5. the journal is removed, then the transaction folder with the old outputs in it.
@@ -107,10 +108,11 @@ impl Transaction {
             self.abort();
             return Err(link_refused(&link, "nothing was changed").into());
         }
+        let install = gathered(&self.root, &self.dir.join("new"), install);
         let prepared = (|| -> anyhow::Result<()> {
             let mut journal = Journal {
                 version: JOURNAL_FORMAT,
-                install: install.to_vec(),
+                install: install.clone(),
                 remove: remove.to_vec(),
                 lockfile: lock.is_some(),
                 state: Vec::new(),
@@ -183,6 +185,69 @@ fn unique() -> u128 {
 
 fn exists(path: &Path) -> bool {
     fs::symlink_metadata(path).is_ok()
+}
+
+/// `install` with each folder of `new` that the root lacks and whose whole tree is being
+/// installed named once, as one entry: one rename, where file by file it would be a folder made
+/// in the root for every folder of the tree and a rename for every file (a first run's commit of
+/// the demo study made 88 folders; on ext4 a folder costs a quarter of a millisecond). The root
+/// ends the same either way: a folder is gathered only if its tree in `new` holds exactly the
+/// entries installed under it, and no empty folder.
+fn gathered(root: &Path, new: &Path, install: &[String]) -> Vec<String> {
+    let mut entries: Vec<&str> = install.iter().map(String::as_str).collect();
+    entries.sort_unstable();
+    let mut out = Vec::with_capacity(entries.len());
+    gather_under("", &entries, root, new, &mut out);
+    out
+}
+
+/// [`gathered`] of `entries`, all below the folder `prefix` (relative to the root, "" for it).
+fn gather_under(prefix: &str, entries: &[&str], root: &Path, new: &Path, out: &mut Vec<String>) {
+    let mut rest = entries;
+    while let Some(first) = rest.first() {
+        let below = &first[prefix.len()..];
+        let Some(slash) = below.find('/') else {
+            out.push(first.to_string()); // a file at this level
+            rest = &rest[1..];
+            continue;
+        };
+        let folder = &first[..prefix.len() + slash + 1]; // with its trailing `/`
+        let count = rest.iter().take_while(|e| e.starts_with(folder)).count();
+        let (group, after) = rest.split_at(count);
+        let name = folder.trim_end_matches('/');
+        let whole = !exists(&root.join(name))
+            && tree_files(&new.join(name)).is_some_and(|files| {
+                files.len() == group.len() && files.iter().zip(group).all(|(f, e)| *f == e[folder.len()..])
+            });
+        if whole {
+            out.push(name.to_string());
+        } else {
+            gather_under(folder, group, root, new, out);
+        }
+        rest = after;
+    }
+}
+
+/// The files (links count as files) below `dir`, relative and sorted as `gathered` sorts its
+/// entries; None if it holds an empty folder or cannot be read.
+fn tree_files(dir: &Path) -> Option<Vec<String>> {
+    fn walk(dir: &Path, prefix: &str, out: &mut Vec<String>) -> Option<()> {
+        let before = out.len();
+        for entry in fs::read_dir(dir).ok()? {
+            let entry = entry.ok()?;
+            let name = entry.file_name().into_string().ok()?;
+            if entry.file_type().ok()?.is_dir() {
+                walk(&entry.path(), &format!("{prefix}{name}/"), out)?;
+            } else {
+                out.push(format!("{prefix}{name}"));
+            }
+        }
+        (out.len() > before).then_some(())
+    }
+    let mut out = Vec::new();
+    walk(dir, "", &mut out)?;
+    out.sort_unstable();
+    Some(out)
 }
 
 /// Steps 4–5 of the protocol; safe to repeat after a crash at any point of them.
@@ -411,6 +476,53 @@ mod tests {
         let lock = LockFile::empty();
         txn.commit(&["a".into(), "b".into()], &["gone".into()], Some((&lock, &lock))).unwrap();
         assert_eq!(tree(root.path()), ["a/new", "b/new", "keep/k", "shakeflow.lock"]);
+    }
+
+    #[test]
+    fn a_folder_the_root_lacks_is_installed_whole_only_when_all_of_it_is() {
+        let (root, new) = (crate::tempdir::tempdir().unwrap(), crate::tempdir::tempdir().unwrap());
+        fs::create_dir_all(root.path().join("s/records")).unwrap();
+        let files = [
+            "s/records/m=1/data.parquet",
+            "s/records/m=2/data.parquet",
+            "t/.marker",
+            "t/records/m=1/data.parquet",
+            "t/records/m=2/data.parquet",
+            "u/status/data.parquet",
+            "u/records/m=1/data.parquet",
+            "v/empty/",
+            "v/records/data.parquet",
+            "w.html",
+        ];
+        for file in files {
+            let path = new.path().join(file);
+            if file.ends_with('/') {
+                fs::create_dir_all(path).unwrap();
+            } else {
+                fs::create_dir_all(path.parent().unwrap()).unwrap();
+                fs::write(path, file).unwrap();
+            }
+        }
+        let install: Vec<String> = files
+            .iter()
+            .filter(|f| !f.ends_with('/') && **f != "u/status/data.parquet")
+            .map(|f| f.to_string())
+            .collect();
+        assert_eq!(
+            gathered(root.path(), new.path(), &install),
+            [
+                // The root has `s/records`: its new records are new folders of it.
+                "s/records/m=1",
+                "s/records/m=2",
+                // All of `t`, its hidden file too.
+                "t",
+                // `u/status` is not installed: `u` is not gathered, `u/records` is.
+                "u/records",
+                // An empty folder is not installed file by file: nor is it here.
+                "v/records",
+                "w.html",
+            ]
+        );
     }
 
     #[test]

@@ -118,6 +118,56 @@ fn a_run_killed_at_any_step_of_its_commit_ends_as_a_clean_run_does() {
 }
 
 #[test]
+fn a_first_run_killed_at_any_step_of_its_commit_ends_as_a_clean_first_run_does() {
+    let clean = small_project_with_twins();
+    run_ok(clean.path());
+    let expected = tree(&clean.path().join("out"));
+
+    let traced = small_project_with_twins();
+    let out = shakeflow_env(&["run", "pipeline.yaml"], traced.path(), &[("SHAKEFLOW_FAILPOINT", "trace")]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let points: Vec<String> =
+        stderr(&out).lines().filter_map(|l| l.strip_prefix("failpoint: ")).map(String::from).collect();
+    // The output folder has no stage folder yet: each stage's folder moves in whole.
+    let moved_in: Vec<&str> = points.iter().filter_map(|p| p.strip_prefix("commit.moved_in.")).collect();
+    assert_eq!(moved_in, ["baseline", "load"], "{points:?}");
+    let commit_point = points.iter().position(|p| p == "commit.committed").unwrap();
+    for (i, point) in points.iter().enumerate() {
+        let project = small_project_with_twins();
+        let root = project.path();
+        let killed = shakeflow_env(&["run", "pipeline.yaml"], root, &[("SHAKEFLOW_FAILPOINT", point)]);
+        assert_eq!(killed.status.signal(), Some(9), "not killed at `{point}`: {}", stderr(&killed));
+        let after_crash = status_lines(root);
+        if i < commit_point {
+            assert!(
+                after_crash.last().unwrap().starts_with("2 of 2 stage(s) stale"),
+                "killed at `{point}`: {after_crash:?}"
+            );
+            let left: Vec<_> =
+                tree(&root.join("out")).into_iter().filter(|(n, _)| !n.starts_with(".shakeflow")).collect();
+            assert!(
+                left.is_empty(),
+                "killed at `{point}` (before the commit point), outputs appeared: {:?}",
+                names(&left)
+            );
+        } else {
+            assert!(
+                after_crash.last().unwrap().starts_with("0 of 2 stage(s) stale"),
+                "killed at `{point}` (after the commit point), status says: {after_crash:?}"
+            );
+        }
+        run_ok(root);
+        let got = tree(&root.join("out"));
+        assert!(
+            got == expected,
+            "killed at `{point}`, then rerun: the folder differs from a clean first run's\n got: {:?}\nwant: {:?}",
+            names(&got),
+            names(&expected)
+        );
+    }
+}
+
+#[test]
 fn a_full_disk_at_the_lockfile_changes_nothing_and_says_so() {
     let project = small_project();
     let root = project.path();
