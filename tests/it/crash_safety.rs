@@ -22,9 +22,52 @@ fn tree(dir: &Path) -> Vec<(String, Option<Vec<u8>>)> {
         }
     }
     let mut out = Vec::new();
-    walk(dir, dir, &mut out);
+    if dir.exists() {
+        walk(dir, dir, &mut out);
+    }
     out.sort();
     out
+}
+
+type Tree = Vec<(String, Option<Vec<u8>>)>;
+
+/// Kills `shakeflow run` in `root` at the failpoint `point`; checks that `status` still says
+/// `pending` and the outputs are still `before` (`.shakeflow` aside) when the commit point was
+/// not passed, that nothing is stale when it was; then reruns and checks that the output folder
+/// is `expected`, what a clean run leaves.
+fn kill_then_rerun(
+    root: &Path,
+    point: &str,
+    passed_commit_point: bool,
+    pending: &[String],
+    before: &Tree,
+    expected: &Tree,
+) {
+    let killed = shakeflow_env(&["run", "pipeline.yaml"], root, &[("SHAKEFLOW_FAILPOINT", point)]);
+    assert_eq!(killed.status.signal(), Some(9), "not killed at `{point}`: {}", stderr(&killed));
+    let after_crash = status_lines(root);
+    if passed_commit_point {
+        assert!(
+            after_crash.last().unwrap().starts_with("0 of 2 stage(s) stale"),
+            "killed at `{point}` (after the commit point), status says: {after_crash:?}"
+        );
+    } else {
+        assert_eq!(after_crash, pending, "killed at `{point}` (before the commit point), status lies");
+        let outputs =
+            |tree: &Tree| -> Tree { tree.iter().filter(|(n, _)| !n.starts_with(".shakeflow")).cloned().collect() };
+        assert!(
+            outputs(&tree(&root.join("out"))) == outputs(before),
+            "killed at `{point}` (before the commit point), the old outputs changed"
+        );
+    }
+    run_ok(root);
+    let got = tree(&root.join("out"));
+    assert!(
+        got == *expected,
+        "killed at `{point}`, then rerun: the folder differs from a clean run's\n got: {:?}\nwant: {:?}",
+        names(&got),
+        names(expected)
+    );
 }
 
 fn names(tree: &[(String, Option<Vec<u8>>)]) -> Vec<&str> {
@@ -90,30 +133,7 @@ fn a_run_killed_at_any_step_of_its_commit_ends_as_a_clean_run_does() {
         let pending = status_lines(root);
         assert!(pending.iter().any(|l| l.contains("stale")), "{pending:?}");
 
-        let killed = shakeflow_env(&["run", "pipeline.yaml"], root, &[("SHAKEFLOW_FAILPOINT", point)]);
-        assert_eq!(killed.status.signal(), Some(9), "not killed at `{point}`: {}", stderr(&killed));
-
-        let after_crash = status_lines(root);
-        if i < commit_point {
-            assert_eq!(after_crash, pending, "killed at `{point}` (before the commit point), status lies");
-            let now: Vec<_> =
-                tree(&root.join("out")).into_iter().filter(|(n, _)| !n.starts_with(".shakeflow")).collect();
-            let was: Vec<_> = before.iter().filter(|(n, _)| !n.starts_with(".shakeflow")).cloned().collect();
-            assert!(now == was, "killed at `{point}` (before the commit point), the old outputs changed");
-        } else {
-            assert!(
-                after_crash.last().unwrap().starts_with("0 of 2 stage(s) stale"),
-                "killed at `{point}` (after the commit point), status says: {after_crash:?}"
-            );
-        }
-        run_ok(root);
-        let got = tree(&root.join("out"));
-        assert!(
-            got == expected,
-            "killed at `{point}`, then rerun: the folder differs from a clean run's\n got: {:?}\nwant: {:?}",
-            names(&got),
-            names(&expected)
-        );
+        kill_then_rerun(root, point, i >= commit_point, &pending, &before, &expected);
     }
 }
 
@@ -135,35 +155,9 @@ fn a_first_run_killed_at_any_step_of_its_commit_ends_as_a_clean_first_run_does()
     for (i, point) in points.iter().enumerate() {
         let project = small_project_with_twins();
         let root = project.path();
-        let killed = shakeflow_env(&["run", "pipeline.yaml"], root, &[("SHAKEFLOW_FAILPOINT", point)]);
-        assert_eq!(killed.status.signal(), Some(9), "not killed at `{point}`: {}", stderr(&killed));
-        let after_crash = status_lines(root);
-        if i < commit_point {
-            assert!(
-                after_crash.last().unwrap().starts_with("2 of 2 stage(s) stale"),
-                "killed at `{point}`: {after_crash:?}"
-            );
-            let left: Vec<_> =
-                tree(&root.join("out")).into_iter().filter(|(n, _)| !n.starts_with(".shakeflow")).collect();
-            assert!(
-                left.is_empty(),
-                "killed at `{point}` (before the commit point), outputs appeared: {:?}",
-                names(&left)
-            );
-        } else {
-            assert!(
-                after_crash.last().unwrap().starts_with("0 of 2 stage(s) stale"),
-                "killed at `{point}` (after the commit point), status says: {after_crash:?}"
-            );
-        }
-        run_ok(root);
-        let got = tree(&root.join("out"));
-        assert!(
-            got == expected,
-            "killed at `{point}`, then rerun: the folder differs from a clean first run's\n got: {:?}\nwant: {:?}",
-            names(&got),
-            names(&expected)
-        );
+        let pending = status_lines(root);
+        assert!(pending.last().unwrap().starts_with("2 of 2 stage(s) stale"), "{pending:?}");
+        kill_then_rerun(root, point, i >= commit_point, &pending, &Vec::new(), &expected);
     }
 }
 
