@@ -11,8 +11,8 @@
 //!    `journal.tmp` is renamed to `journal`. **That rename is the commit point**: before it,
 //!    the transaction never happened; after it, it has;
 //! 4. roll forward, each step idempotent: each entry `<root>/<e>` moves to `old/<e>`, then
-//!    `new/<e>` to `<root>/<e>` (an entry is a file, or a folder the root lacks, installed whole:
-//!    `gathered`); each new state file moves to `<root>/.shakeflow/state/`; the
+//!    `new/<e>` to `<root>/<e>` (an entry is a file, or a folder the root lacked, installed whole:
+//!    `gathered`; should the root have gained it since, its files go in one by one); each new state file moves to `<root>/.shakeflow/state/`; the
 //!    lockfile moves to `<root>/shakeflow.lock`; the state files only the old lockfile named are
 //!    removed;
 //! 5. the journal is removed, then the transaction folder with the old outputs in it.
@@ -192,7 +192,8 @@ fn exists(path: &Path) -> bool {
 /// in the root for every folder of the tree and a rename for every file (a first run's commit of
 /// the demo study made 88 folders; on ext4 a folder costs a quarter of a millisecond). The root
 /// ends the same either way: a folder is gathered only if its tree in `new` holds exactly the
-/// entries installed under it, and no empty folder.
+/// entries installed under it, and no empty folder; and one the root has gained by the time it is
+/// installed takes the folder's files one by one (`roll_forward`).
 fn gathered(root: &Path, new: &Path, install: &[String]) -> Vec<String> {
     let mut entries: Vec<&str> = install.iter().map(String::as_str).collect();
     entries.sort_unstable();
@@ -214,7 +215,7 @@ fn gather_under(prefix: &str, entries: &[&str], root: &Path, new: &Path, out: &m
         let folder = &first[..prefix.len() + slash + 1]; // with its trailing `/`
         let count = rest.iter().take_while(|e| e.starts_with(folder)).count();
         let (group, after) = rest.split_at(count);
-        let name = folder.trim_end_matches('/');
+        let name = folder.strip_suffix('/').unwrap_or(folder);
         let whole = !exists(&root.join(name))
             && tree_files(&new.join(name)).is_some_and(|files| {
                 files.len() == group.len() && files.iter().zip(group).all(|(f, e)| *f == e[folder.len()..])
@@ -259,9 +260,8 @@ fn roll_forward(root: &Path, dir: &Path) -> anyhow::Result<()> {
         bail!("the commit journal `{}` has format {}", dir.join(JOURNAL).display(), journal.version);
     }
     let states: Vec<String> = journal.state.iter().chain(&journal.retire).map(|n| state_entry(n)).collect();
+    let state = "a committed run's results are not all in place yet: they are, at the next run once the link is gone";
     if let Some(link) = link_on_the_way(root, journal.install.iter().chain(&journal.remove).chain(&states)) {
-        let state =
-            "a committed run's results are not all in place yet: they are, at the next run once the link is gone";
         return Err(link_refused(&link, state).into());
     }
     // Made by the first entry moved aside (most commits of new records move none).
@@ -286,7 +286,35 @@ fn roll_forward(root: &Path, dir: &Path) -> anyhow::Result<()> {
         failpoint::hit(&format!("commit.moved_aside.{entry}"))?;
         Ok(())
     };
+    // The entries to install: a folder the root has gained since it was gathered (it lacked it
+    // then) takes the folder's files one by one, as the commit would have named them, so that
+    // what else it holds stays.
+    let mut entries: Vec<String> = Vec::with_capacity(journal.install.len());
     for entry in &journal.install {
+        let new = dir.join("new").join(entry);
+        let is_dir = |path: &Path| fs::symlink_metadata(path).is_ok_and(|m| m.is_dir());
+        let target = root.join(entry);
+        if is_dir(&new) && exists(&target) {
+            if fs::symlink_metadata(&target).is_ok_and(|m| m.is_symlink()) {
+                return Err(link_refused(&target, state).into());
+            }
+            if !is_dir(&target) {
+                bail!(
+                    "`{}` is a file where a committed run installs a folder of its results; move the file away and rerun: the commit completes then",
+                    target.display()
+                );
+            }
+            let files = tree_files(&new).unwrap_or_default();
+            let files: Vec<String> = files.iter().map(|f| format!("{entry}/{f}")).collect();
+            if let Some(link) = link_on_the_way(root, files.iter()) {
+                return Err(link_refused(&link, state).into());
+            }
+            entries.extend(files);
+        } else {
+            entries.push(entry.clone());
+        }
+    }
+    for entry in &entries {
         let new = dir.join("new").join(entry);
         if !exists(&new) {
             continue; // installed before a crash
@@ -469,13 +497,55 @@ mod tests {
         }
         let lease = Lease::acquire(root.path()).unwrap();
         let txn = Transaction::begin(&lease).unwrap();
-        for entry in ["a", "b"] {
+        for (entry, file) in [("a", "old"), ("a", "new"), ("b", "new")] {
             fs::create_dir_all(txn.new_path(entry)).unwrap();
-            fs::write(txn.new_path(entry).join("new"), entry).unwrap();
+            fs::write(txn.new_path(entry).join(file), format!("{entry}/{file} made anew")).unwrap();
         }
         let lock = LockFile::empty();
-        txn.commit(&["a".into(), "b".into()], &["gone".into()], Some((&lock, &lock))).unwrap();
-        assert_eq!(tree(root.path()), ["a/new", "b/new", "keep/k", "shakeflow.lock"]);
+        let install = ["a/new".into(), "a/old".into(), "b/new".into()];
+        txn.commit(&install, &["gone".into()], Some((&lock, &lock))).unwrap();
+        assert_eq!(tree(root.path()), ["a/new", "a/old", "b/new", "keep/k", "shakeflow.lock"]);
+        assert_eq!(fs::read_to_string(root.path().join("a/old")).unwrap(), "a/old made anew");
+    }
+
+    #[test]
+    fn a_folder_the_root_gains_after_its_commit_point_takes_the_new_files_and_keeps_its_own() {
+        let root = crate::tempdir::tempdir().unwrap();
+        let lease = Lease::acquire(root.path()).unwrap();
+        let txn = Transaction::begin(&lease).unwrap();
+        fs::create_dir_all(txn.new_path("s/records")).unwrap();
+        fs::write(txn.new_path("s/records/data"), "new").unwrap();
+        let dir = txn.dir.clone();
+        let journal = Journal {
+            version: 1,
+            install: vec!["s".into()], // gathered: the root lacked `s`
+            remove: vec![],
+            lockfile: false,
+            state: vec![],
+            retire: vec![],
+        };
+        fs::write(dir.join(JOURNAL), serde_json::to_vec(&journal).unwrap()).unwrap();
+        std::mem::forget(txn);
+        // A crash at the commit point; `s` appears before the next lease holder rolls forward.
+        fs::create_dir_all(root.path().join("s/records")).unwrap();
+        fs::write(root.path().join("s/notes.txt"), "mine").unwrap();
+        fs::write(root.path().join("s/records/data"), "stale").unwrap();
+        roll_forward(root.path(), &dir).unwrap();
+        assert_eq!(fs::read_to_string(root.path().join("s/notes.txt")).unwrap(), "mine", "not ours: it stays");
+        assert_eq!(fs::read_to_string(root.path().join("s/records/data")).unwrap(), "new", "ours: replaced");
+        // A link where a gathered folder goes is refused, as on the way to a file.
+        let txn = Transaction::begin(&lease).unwrap();
+        fs::create_dir_all(txn.new_path("t")).unwrap();
+        fs::write(txn.new_path("t/data"), "new").unwrap();
+        let dir = txn.dir.clone();
+        let journal = Journal { install: vec!["t".into()], ..journal };
+        fs::write(dir.join(JOURNAL), serde_json::to_vec(&journal).unwrap()).unwrap();
+        std::mem::forget(txn);
+        let elsewhere = crate::tempdir::tempdir().unwrap();
+        std::os::unix::fs::symlink(elsewhere.path(), root.path().join("t")).unwrap();
+        let err = roll_forward(root.path(), &dir).unwrap_err();
+        assert!(format!("{err:#}").contains("is a symbolic link"), "{err:#}");
+        assert!(elsewhere.path().read_dir().unwrap().next().is_none(), "nothing written through the link");
     }
 
     #[test]
