@@ -356,10 +356,20 @@ mod tests {
             base_dir: dir.path(),
             memo: Some(&memo),
         };
-        let part = InputPart { partition, path: path("unwritten"), label: String::new(), hash: String::new() };
+        let part = InputPart {
+            partition: partition.clone(),
+            path: path("unwritten"),
+            label: String::new(),
+            hash: String::new(),
+        };
         let from_file = parquet::read_table(&path("written")).unwrap();
         assert_eq!(*ctx.read_table(&part).unwrap(), from_file);
         assert!(memo.take(&part.path).is_none(), "taken by its one reader");
         assert_eq!(*ctx.read_table(&part).unwrap(), from_file);
+        // Past the memo's budgets the file is written after all, the same bytes.
+        let full = sink(&dir.path().join("full")).keeping_tables_in(Arc::new(TableMemo::new(0)), 1, true);
+        full.write("records", &partition, from_file).unwrap();
+        assert_eq!(std::fs::read(path("full")).unwrap(), file);
+        assert_eq!(hash(full, "full"), Some(hash::hash_bytes(&file)));
     }
 }

@@ -115,6 +115,8 @@ fn spawn_stage<'s, 'a: 's>(
             let mut state = env.state.lock().expect("no poisoned lock");
             state.fatal.get_or_insert(error);
             state.stop = true;
+            // Not done: the intermediates it reads stay (`commit::left_out`).
+            state.tainted.insert(stage.name.clone());
         }
         let mut state = env.state.lock().expect("no poisoned lock");
         for upstream in upstream_stages(stage) {
