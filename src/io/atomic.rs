@@ -25,6 +25,11 @@ where
     write_then_rename(path, false, fill)
 }
 
+/// [`write_file`] of bytes already in memory.
+pub fn write_bytes(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    write_file(path, |w| Ok(w.write_all(bytes)?))
+}
+
 /// [`write_file`], forced to disk before the rename: for the lockfile, the run's commit point.
 pub fn write_file_durable<F>(path: &Path, fill: F) -> anyhow::Result<()>
 where

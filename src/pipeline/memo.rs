@@ -133,7 +133,7 @@ impl TableMemo {
             if let Some(dir) = path.parent() {
                 std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("cannot create `{}`: {e}", dir.display()))?;
             }
-            crate::io::atomic::write_file(path, |w| Ok(std::io::Write::write_all(w, bytes)?))?;
+            crate::io::atomic::write_bytes(path, bytes)?;
         }
         Ok(())
     }

@@ -31,7 +31,7 @@ pub fn write_marker(dir: &Path, stage: &str, stage_type: &str) -> anyhow::Result
     std::fs::create_dir_all(dir)?;
     let marker = StageMarker { stage: stage.into(), stage_type: stage_type.into() };
     let body = serde_json::to_vec_pretty(&marker)?;
-    crate::io::atomic::write_file(&dir.join(STAGE_MARKER), |w| Ok(std::io::Write::write_all(w, &body)?))
+    crate::io::atomic::write_bytes(&dir.join(STAGE_MARKER), &body)
 }
 
 pub fn read_marker(dir: &Path) -> Option<StageMarker> {

@@ -171,7 +171,7 @@ impl OutputSink {
                 };
                 table = kept;
                 create_dir()?;
-                crate::io::atomic::write_file(&path, |w| Ok(std::io::Write::write_all(w, &encoded)?))?;
+                crate::io::atomic::write_bytes(&path, &encoded)?;
                 hash
             }
             None => {
@@ -232,10 +232,7 @@ impl OutputSink {
 
     /// Writes `bytes` to `path` (temp file and rename) and records its hash.
     fn write_hashed(&self, path: PathBuf, bytes: &[u8]) -> anyhow::Result<()> {
-        crate::io::atomic::write_file(&path, |w| {
-            std::io::Write::write_all(w, bytes)?;
-            Ok(())
-        })?;
+        crate::io::atomic::write_bytes(&path, bytes)?;
         self.hashes.lock().expect("no panics while holding the lock").insert(path, hash::hash_bytes(bytes));
         Ok(())
     }
