@@ -292,13 +292,14 @@ fn roll_forward(root: &Path, dir: &Path) -> anyhow::Result<()> {
     let mut entries: Vec<String> = Vec::with_capacity(journal.install.len());
     for entry in &journal.install {
         let new = dir.join("new").join(entry);
-        let is_dir = |path: &Path| fs::symlink_metadata(path).is_ok_and(|m| m.is_dir());
         let target = root.join(entry);
-        if is_dir(&new) && exists(&target) {
-            if fs::symlink_metadata(&target).is_ok_and(|m| m.is_symlink()) {
+        let gained =
+            fs::symlink_metadata(&target).ok().filter(|_| fs::symlink_metadata(&new).is_ok_and(|m| m.is_dir()));
+        if let Some(gained) = gained {
+            if gained.is_symlink() {
                 return Err(link_refused(&target, state).into());
             }
-            if !is_dir(&target) {
+            if !gained.is_dir() {
                 bail!(
                     "`{}` is a file where a committed run installs a folder of its results; move the file away and rerun: the commit completes then",
                     target.display()

@@ -4,7 +4,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::mem::take;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -374,8 +374,11 @@ impl Backend for Local {
         leave_out_not_kept(plan, selected, &state.tainted, &entries, install, remove, &opened.disk);
         // The intermediates' files the commit installs after all (a reader failed or was not
         // selected) are written now; the others never are.
-        let staged: BTreeSet<PathBuf> = state.install.iter().map(|entry| transaction.new_path(entry)).collect();
-        if let Err(e) = env.memo.write_unwritten(|path| staged.contains(path)) {
+        let staging = transaction.new_path("");
+        let installed = |path: &Path| {
+            path.strip_prefix(&staging).ok().and_then(Path::to_str).is_some_and(|entry| state.install.contains(entry))
+        };
+        if let Err(e) = env.memo.write_unwritten(installed) {
             transaction.abort();
             return Err(e);
         }
