@@ -12,13 +12,14 @@
 //! An intermediate's files (`keep: false`) need not reach the disk at all: the commit removes
 //! them once the stages reading them are up to date, so a run that writes them only to remove
 //! them pays a file, its folders and their removal for nothing (on ext4, creating an inode is
-//! dearer than encoding the table: 30 % of the demo study's CPU went to ext4's inode allocation). Such a file is kept here
-//! *unwritten*, as the bytes its stage encoded (their hash is the one the file would have), with
-//! its table; the commit writes the ones it installs after all (a reader failed, or was not
-//! selected) and lets the others go. The run lets go of a stage's unwritten files as soon as
-//! every stage reading them is done, when the commit will leave them out. Unwritten files have a
-//! budget of their own: a file whose bytes or table the budgets cannot hold is written as before
-//! (as are an intermediate's MCAP twins and figures, and its stage folder).
+//! dearer than encoding the table: 30 % of the demo study's CPU went to ext4's inode
+//! allocation). Such a file is kept here *unwritten*, as the bytes its stage encoded (their hash
+//! is the one the file would have), with its table; the commit writes the ones it installs
+//! after all (a reader failed, or was not selected) and lets the others go. The run lets go of a
+//! stage's unwritten files as soon as every stage reading them is done, when the commit will
+//! leave them out. Unwritten files have a budget of their own: a file whose bytes or table the
+//! budgets cannot hold is written as before (as are an intermediate's MCAP twins and figures,
+//! and its stage folder).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

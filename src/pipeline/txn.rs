@@ -12,9 +12,9 @@
 //!    the transaction never happened; after it, it has;
 //! 4. roll forward, each step idempotent: each entry `<root>/<e>` moves to `old/<e>`, then
 //!    `new/<e>` to `<root>/<e>` (an entry is a file, or a folder the root lacked, installed whole:
-//!    `gathered`; should the root have gained it since, its files go in one by one); each new state file moves to `<root>/.shakeflow/state/`; the
-//!    lockfile moves to `<root>/shakeflow.lock`; the state files only the old lockfile named are
-//!    removed;
+//!    `gathered`; should the root have gained it since, its files go in one by one); each new
+//!    state file moves to `<root>/.shakeflow/state/`; the lockfile moves to
+//!    `<root>/shakeflow.lock`; the state files only the old lockfile named are removed;
 //! 5. the journal is removed, then the transaction folder with the old outputs in it.
 //!
 //! Whoever next takes the lease [`recover`]s first: a transaction with a journal is rolled forward
